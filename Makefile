@@ -1,0 +1,53 @@
+# The Makefile is the user interface. Every target depends on the virtual
+# environment, which is built from pyproject.toml on first use (and rebuilt
+# when pyproject.toml changes).
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+SCENARIO ?= scenarios/paper.toml
+STRICT ?= 0
+export STRICT
+
+.PHONY: all demo synth sim verify report test lint bench clean distclean
+
+all: demo
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[dev]"
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+demo: $(STAMP)
+	$(PY) -m verify demo $(SCENARIO)
+
+synth: $(STAMP)
+	$(PY) -m synthesis synth $(SCENARIO)
+
+sim: $(STAMP)
+	$(PY) -m generated sim $(SCENARIO)
+
+verify: $(STAMP)
+	$(PY) -m verify check $(SCENARIO)
+
+report: $(STAMP)
+	$(PY) -m verify report $(SCENARIO)
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check symbolic synthesis generated verify tests
+	$(VENV)/bin/ruff format --check symbolic synthesis generated verify tests
+
+test: lint
+	$(PY) -m pytest
+
+bench: $(STAMP)
+	$(PY) -m verify bench
+
+clean:
+	rm -rf out generated/build .pytest_cache
+
+distclean: clean
+	rm -rf $(VENV)

@@ -1,0 +1,1 @@
+"""Symbolic layer: scenario files, follower models and the CasADi closed loop."""

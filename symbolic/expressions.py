@@ -1,0 +1,276 @@
+"""Whitelist parser for expressions of time in scenario files.
+
+Operator inputs ``u0``, biases ``f_i`` and piecewise health ``g_i(t)`` are
+written as text such as ``"4*sin(2*t) + 1"``. The text is parsed with
+:mod:`ast` and walked node by node; only numbers, the name ``t``, the constant
+``pi``, the operators ``+ - * / **`` and the functions listed in
+:data:`FUNCTIONS` are accepted. Nothing is ever passed to ``eval``, ``exec``
+or ``sympify``. A parsed :class:`Expr` is evaluated with a *backend*: CasADi
+(symbolic, for the closed loop) or numpy (for the independent reference).
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from symbolic.errors import ExpressionError
+
+#: accepted function names and their arity
+FUNCTIONS: dict[str, tuple[int, ...]] = {
+    "sin": (1,),
+    "cos": (1,),
+    "tan": (1,),
+    "exp": (1,),
+    "log": (1,),
+    "sqrt": (1,),
+    "abs": (1,),
+    "tanh": (1,),
+    "atan2": (2,),
+    "min": (2,),
+    "max": (2,),
+    "step": (1,),  # Heaviside: 1 for x >= 0, else 0
+    "sat": (1,),  # clip to [-1, 1]
+}
+CONSTANTS = {"pi": math.pi}
+_BINOPS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
+MAX_LENGTH = 500
+MAX_DEPTH = 40
+
+
+@dataclass(frozen=True)
+class Expr:
+    """A parsed expression of ``t`` (an immutable tree of tuples).
+
+    ``node`` is one of ``("num", value)``, ``("t",)``, ``("neg", a)``,
+    ``("bin", op, a, b)`` or ``("call", name, args)``.
+    """
+
+    text: str
+    node: tuple
+
+    def casadi(self, t: Any) -> Any:
+        """Evaluate with CasADi operations on a symbol or number ``t``."""
+        return _eval(self.node, t, _CASADI)
+
+    def numpy(self, t: Any) -> Any:
+        """Evaluate with numpy on a float or array ``t``."""
+        return _eval(self.node, np.asarray(t, dtype=float), _NUMPY)
+
+    def breakpoints(self) -> tuple[float, ...]:
+        """Times where a ``step``/``sat``/``abs``/``min``/``max`` argument affine in t crosses zero.
+
+        Used to split an integration at known discontinuities.
+        """
+        out: list[float] = []
+        _collect_breaks(self.node, out)
+        return tuple(sorted(set(out)))
+
+    def is_constant(self) -> bool:
+        return not _mentions_t(self.node)
+
+
+def parse_expression(text: Any, *, where: str = "expression") -> Expr:
+    """Parse ``text`` into an :class:`Expr` through the whitelist.
+
+    Parameters
+    ----------
+    text : str or number
+        The expression; a bare number is accepted as a constant.
+    where : str
+        ``"file: key"`` used in error messages.
+
+    Raises
+    ------
+    ExpressionError
+        Naming ``where`` and the offending token.
+    """
+    if isinstance(text, bool):
+        raise ExpressionError(f"{where}: a boolean is not an expression of t (expected e.g. '2*cos(t)')")
+    if isinstance(text, int | float):
+        if not math.isfinite(float(text)):
+            raise ExpressionError(f"{where}: non-finite number {text!r} (expected a finite value)")
+        return Expr(repr(float(text)), ("num", float(text)))
+    if not isinstance(text, str):
+        raise ExpressionError(f"{where}: {type(text).__name__} is not an expression (expected a string such as '2*cos(t)')")
+    if len(text) > MAX_LENGTH:
+        raise ExpressionError(f"{where}: expression longer than {MAX_LENGTH} characters")
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except SyntaxError as exc:
+        raise ExpressionError(f"{where}: cannot parse {text!r}: {exc.msg} (expected an expression of t such as '2*cos(t)')") from None
+    node = _convert(tree.body, text, where, 0)
+    return Expr(text.strip(), node)
+
+
+def _reject(where: str, text: str, token: str) -> ExpressionError:
+    allowed = ", ".join(sorted(FUNCTIONS))
+    return ExpressionError(
+        f"{where}: {text!r}: token {token!r} is not allowed "
+        f"(allowed: numbers, t, pi, + - * / **, and {allowed})"
+    )
+
+
+def _convert(n: ast.AST, text: str, where: str, depth: int) -> tuple:
+    if depth > MAX_DEPTH:
+        raise ExpressionError(f"{where}: expression nested deeper than {MAX_DEPTH} levels")
+    d = depth + 1
+    if isinstance(n, ast.Constant):
+        if isinstance(n.value, bool) or not isinstance(n.value, int | float):
+            raise _reject(where, text, repr(n.value))
+        v = float(n.value)
+        if not math.isfinite(v):
+            raise ExpressionError(f"{where}: {text!r}: non-finite number")
+        return ("num", v)
+    if isinstance(n, ast.Name):
+        if n.id == "t":
+            return ("t",)
+        if n.id in CONSTANTS:
+            return ("num", CONSTANTS[n.id])
+        raise _reject(where, text, n.id)
+    if isinstance(n, ast.UnaryOp) and isinstance(n.op, ast.USub | ast.UAdd):
+        inner = _convert(n.operand, text, where, d)
+        return ("neg", inner) if isinstance(n.op, ast.USub) else inner
+    if isinstance(n, ast.BinOp) and type(n.op) in _BINOPS:
+        return ("bin", _BINOPS[type(n.op)], _convert(n.left, text, where, d), _convert(n.right, text, where, d))
+    if isinstance(n, ast.Call):
+        if not isinstance(n.func, ast.Name):
+            raise _reject(where, text, ast.unparse(n.func))
+        name = n.func.id
+        if name not in FUNCTIONS:
+            raise _reject(where, text, name)
+        if n.keywords:
+            raise _reject(where, text, n.keywords[0].arg or "**")
+        if len(n.args) not in FUNCTIONS[name]:
+            raise ExpressionError(
+                f"{where}: {text!r}: {name} takes {FUNCTIONS[name][0]} argument(s), got {len(n.args)}"
+            )
+        return ("call", name, tuple(_convert(a, text, where, d) for a in n.args))
+    token = type(n).__name__
+    if isinstance(n, ast.Attribute):
+        token = "." + n.attr
+    elif isinstance(n, ast.Lambda):
+        token = "lambda"
+    elif isinstance(n, ast.BinOp | ast.UnaryOp):
+        token = type(n.op).__name__
+    return _raise(_reject(where, text, token))
+
+
+def _raise(exc: Exception):
+    raise exc
+
+
+def _mentions_t(node: tuple) -> bool:
+    kind = node[0]
+    if kind == "t":
+        return True
+    if kind == "num":
+        return False
+    if kind == "neg":
+        return _mentions_t(node[1])
+    if kind == "bin":
+        return _mentions_t(node[2]) or _mentions_t(node[3])
+    return any(_mentions_t(a) for a in node[2])
+
+
+class _Backend:
+    def __init__(self, **ops: Any) -> None:
+        self.__dict__.update(ops)
+
+
+_CASADI = _Backend(
+    sin=ca.sin,
+    cos=ca.cos,
+    tan=ca.tan,
+    exp=ca.exp,
+    log=ca.log,
+    sqrt=ca.sqrt,
+    abs=ca.fabs,
+    tanh=ca.tanh,
+    atan2=ca.atan2,
+    min=ca.fmin,
+    max=ca.fmax,
+    step=lambda x: ca.if_else(x >= 0, 1.0, 0.0),
+    sat=lambda x: ca.fmin(ca.fmax(x, -1.0), 1.0),
+)
+_NUMPY = _Backend(
+    sin=np.sin,
+    cos=np.cos,
+    tan=np.tan,
+    exp=np.exp,
+    log=np.log,
+    sqrt=np.sqrt,
+    abs=np.abs,
+    tanh=np.tanh,
+    atan2=np.arctan2,
+    min=np.minimum,
+    max=np.maximum,
+    step=lambda x: np.where(np.asarray(x) >= 0, 1.0, 0.0),
+    sat=lambda x: np.clip(x, -1.0, 1.0),
+)
+
+
+def _eval(node: tuple, t: Any, be: _Backend) -> Any:
+    kind = node[0]
+    if kind == "num":
+        return node[1] + 0 * t if be is _NUMPY else node[1]
+    if kind == "t":
+        return t
+    if kind == "neg":
+        return -_eval(node[1], t, be)
+    if kind == "bin":
+        a, b = _eval(node[2], t, be), _eval(node[3], t, be)
+        op = node[1]
+        if op == "+":
+            return a + b
+        if op == "-":
+            return a - b
+        if op == "*":
+            return a * b
+        if op == "/":
+            return a / b
+        return a**b
+    args = [_eval(a, t, be) for a in node[2]]
+    return getattr(be, node[1])(*args)
+
+
+def _collect_breaks(node: tuple, out: list[float]) -> None:
+    kind = node[0]
+    if kind in ("num", "t"):
+        return
+    if kind == "neg":
+        _collect_breaks(node[1], out)
+        return
+    if kind == "bin":
+        _collect_breaks(node[2], out)
+        _collect_breaks(node[3], out)
+        return
+    name, args = node[1], node[2]
+    for a in args:
+        _collect_breaks(a, out)
+    if name in ("step", "sat", "abs", "min", "max"):
+        cand = [a for a in args] if name != "min" and name != "max" else [("bin", "-", args[0], args[1])]
+        for a in cand:
+            root = _affine_root(a)
+            if root is not None and root > 0:
+                out.append(root)
+
+
+def _affine_root(node: tuple) -> float | None:
+    """Zero of ``node`` if it is affine in t (checked at three points), else None."""
+    try:
+        with np.errstate(all="ignore"):
+            f0, f1, f2 = (float(_eval(node, np.asarray(x), _NUMPY)) for x in (0.0, 1.0, 2.0))
+    except (ValueError, ZeroDivisionError, OverflowError):
+        return None
+    slope = f1 - f0
+    if not all(map(math.isfinite, (f0, f1, f2))) or abs(slope) < 1e-14:
+        return None
+    if abs((f2 - f1) - slope) > 1e-9 * max(1.0, abs(slope)):
+        return None
+    return -f0 / slope

@@ -1,0 +1,11 @@
+"""Follower model library. Importing this package registers every shipped model.
+
+Adding a model is one small file that calls :func:`register` with a
+:class:`ModelSpec` (its Lagrangian), plus one import line below.
+"""
+
+from symbolic.models import two_link  # noqa: F401  (registers)
+from symbolic.models.base import REGISTRY, ELModel, ModelSpec, register
+from symbolic.models.derive import build_model
+
+__all__ = ["REGISTRY", "ELModel", "ModelSpec", "build_model", "register"]

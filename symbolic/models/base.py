@@ -1,0 +1,88 @@
+"""Euler–Lagrange follower models, eq. (2): M(p) p̈ + C(p, ṗ) ṗ + G(p) = g u + f.
+
+A model is declared by its Lagrangian (kinetic and potential energy, in sympy)
+in one small file under ``symbolic/models/`` that registers a
+:class:`ModelSpec`. :func:`build_model` derives M, C (Christoffel symbols of the
+first kind) and G with sympy, checks Property 1 and Property 2, and returns an
+:class:`ELModel` carrying CasADi functions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+
+#: name -> spec; filled by the model modules on import of ``symbolic.models``
+REGISTRY: dict[str, ModelSpec] = {}
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """Declaration of one follower model.
+
+    Attributes
+    ----------
+    name : str
+        Registry key used by scenario files (``followers[i].model``).
+    n : int
+        Number of generalised coordinates.
+    defaults : Mapping[str, float]
+        Every parameter with its default; scenario files may override any of
+        them and no other key.
+    lagrangian : callable
+        ``lagrangian(params: dict[str, sympy.Symbol | float]) -> (T, V, p, q)``:
+        kinetic energy, potential energy, coordinate symbols and velocity
+        symbols (sympy).
+    description : str
+        One line for the README and summaries.
+    """
+
+    name: str
+    n: int
+    defaults: Mapping[str, float]
+    lagrangian: Callable[[Mapping[str, Any]], tuple[Any, Any, Any, Any]]
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class ELModel:
+    """A derived Euler–Lagrange model with CasADi functions.
+
+    Attributes
+    ----------
+    name, n, params :
+        As in the spec, ``params`` with every value filled in.
+    M : casadi.Function
+        ``p -> M(p)`` (n×n), Property 1: symmetric positive definite.
+    C : casadi.Function
+        ``(p, q) -> C(p, q)`` (n×n), Christoffel form, Property 2 holds.
+    G : casadi.Function
+        ``p -> G(p)`` (n).
+    M_bounds : tuple[float, float]
+        (inf λ_min(M), sup λ_max(M)) over the configuration space, as needed
+        by Theorem 2's bounds (estimated on a dense grid when not closed form).
+    sympy_M, sympy_C, sympy_G, sympy_p, sympy_q :
+        The sympy expressions and symbols they came from.
+    """
+
+    name: str
+    n: int
+    params: Mapping[str, float]
+    M: ca.Function
+    C: ca.Function
+    G: ca.Function
+    M_bounds: tuple[float, float]
+    sympy_M: Any = field(repr=False, default=None)
+    sympy_C: Any = field(repr=False, default=None)
+    sympy_G: Any = field(repr=False, default=None)
+    sympy_p: Any = field(repr=False, default=None)
+    sympy_q: Any = field(repr=False, default=None)
+
+
+def register(spec: ModelSpec) -> ModelSpec:
+    """Add ``spec`` to :data:`REGISTRY` (one call per model file)."""
+    REGISTRY[spec.name] = spec
+    return spec

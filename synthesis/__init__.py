@@ -1,0 +1,1 @@
+"""Certified synthesis: assumptions, Lemma 3, LMIs (15)–(16), gains and their certificate."""
