@@ -91,19 +91,25 @@ def parse_expression(text: Any, *, where: str = "expression") -> Expr:
         Naming ``where`` and the offending token.
     """
     if isinstance(text, bool):
-        raise ExpressionError(f"{where}: a boolean is not an expression of t (expected e.g. '2*cos(t)')")
+        raise ExpressionError(
+            f"{where}: a boolean is not an expression of t (expected e.g. '2*cos(t)')"
+        )
     if isinstance(text, int | float):
         if not math.isfinite(float(text)):
             raise ExpressionError(f"{where}: non-finite number {text!r} (expected a finite value)")
         return Expr(repr(float(text)), ("num", float(text)))
     if not isinstance(text, str):
-        raise ExpressionError(f"{where}: {type(text).__name__} is not an expression (expected a string such as '2*cos(t)')")
+        raise ExpressionError(
+            f"{where}: {type(text).__name__} is not an expression (expected a string such as '2*cos(t)')"
+        )
     if len(text) > MAX_LENGTH:
         raise ExpressionError(f"{where}: expression longer than {MAX_LENGTH} characters")
     try:
         tree = ast.parse(text.strip(), mode="eval")
     except SyntaxError as exc:
-        raise ExpressionError(f"{where}: cannot parse {text!r}: {exc.msg} (expected an expression of t such as '2*cos(t)')") from None
+        raise ExpressionError(
+            f"{where}: cannot parse {text!r}: {exc.msg} (expected an expression of t such as '2*cos(t)')"
+        ) from None
     node = _convert(tree.body, text, where, 0)
     return Expr(text.strip(), node)
 
@@ -137,7 +143,12 @@ def _convert(n: ast.AST, text: str, where: str, depth: int) -> tuple:
         inner = _convert(n.operand, text, where, d)
         return ("neg", inner) if isinstance(n.op, ast.USub) else inner
     if isinstance(n, ast.BinOp) and type(n.op) in _BINOPS:
-        return ("bin", _BINOPS[type(n.op)], _convert(n.left, text, where, d), _convert(n.right, text, where, d))
+        return (
+            "bin",
+            _BINOPS[type(n.op)],
+            _convert(n.left, text, where, d),
+            _convert(n.right, text, where, d),
+        )
     if isinstance(n, ast.Call):
         if not isinstance(n.func, ast.Name):
             raise _reject(where, text, ast.unparse(n.func))
@@ -254,7 +265,11 @@ def _collect_breaks(node: tuple, out: list[float]) -> None:
     for a in args:
         _collect_breaks(a, out)
     if name in ("step", "sat", "abs", "min", "max"):
-        cand = [a for a in args] if name != "min" and name != "max" else [("bin", "-", args[0], args[1])]
+        cand = (
+            [a for a in args]
+            if name != "min" and name != "max"
+            else [("bin", "-", args[0], args[1])]
+        )
         for a in cand:
             root = _affine_root(a)
             if root is not None and root > 0:

@@ -215,7 +215,18 @@ class Scenario:
 
 
 # --------------------------------------------------------------------------- schema
-_TOP = {"name", "description", "leader", "graph", "followers", "observer", "controller", "options", "initial", "integration"}
+_TOP = {
+    "name",
+    "description",
+    "leader",
+    "graph",
+    "followers",
+    "observer",
+    "controller",
+    "options",
+    "initial",
+    "integration",
+}
 _LEADER = {"A0", "B0", "C0", "eta0", "u0", "u0_csv", "alpha"}
 _GRAPH = {"adjacency", "pinning"}
 _FOLLOWER = {"model", "params", "p0", "q0", "b0", "g", "f", "d"}
@@ -224,7 +235,16 @@ _OBSERVER = {
     "lambda_bar1", "delta1", "delta2", "delta1_hat", "delta2_hat", "margin",
 }  # fmt: skip
 _CONTROLLER = {"Lambda", "k1", "k2", "gamma", "sigma", "ghat_ref", "g_min"}
-_OPTIONS = {"sign", "sign_width", "ghat_law", "feedforward", "ablation", "derivatives", "filter_bandwidth", "tau_threshold"}
+_OPTIONS = {
+    "sign",
+    "sign_width",
+    "ghat_law",
+    "feedforward",
+    "ablation",
+    "derivatives",
+    "filter_bandwidth",
+    "tau_threshold",
+}
 _INITIAL = {"eta", "mu", "theta_hat", "ghat", "start"}
 _INTEGRATION = {"method", "rtol", "atol", "horizon", "output_step", "fixed_step", "max_steps"}
 
@@ -239,12 +259,18 @@ class _Ctx:
         return ScenarioError(self.file, key, problem, expected)
 
     # -- structure
-    def table(self, obj: Any, key: str, allowed: set[str], required: set[str] = frozenset()) -> dict:
+    def table(
+        self, obj: Any, key: str, allowed: set[str], required: set[str] = frozenset()
+    ) -> dict:
         if not isinstance(obj, dict):
             raise self.err(key, f"is a {type(obj).__name__}", "a table")
         for k in obj:
             if k not in allowed:
-                raise self.err(f"{key}.{k}" if key else k, "unknown key", "one of " + ", ".join(sorted(allowed)))
+                raise self.err(
+                    f"{key}.{k}" if key else k,
+                    "unknown key",
+                    "one of " + ", ".join(sorted(allowed)),
+                )
         for k in required:
             if k not in obj:
                 raise self.err(f"{key}.{k}" if key else k, "missing", "a value")
@@ -268,17 +294,25 @@ class _Ctx:
             raise self.err(key, "is not a list of rows", f"a matrix of shape {_shape_txt(shape)}")
         ncols = {len(r) for r in v}
         if len(ncols) != 1:
-            raise self.err(key, "rows have different lengths", f"a matrix of shape {_shape_txt(shape)}")
-        arr = np.array([[self.number(x, f"{key}[{i}][{j}]") for j, x in enumerate(r)] for i, r in enumerate(v)])
+            raise self.err(
+                key, "rows have different lengths", f"a matrix of shape {_shape_txt(shape)}"
+            )
+        arr = np.array(
+            [[self.number(x, f"{key}[{i}][{j}]") for j, x in enumerate(r)] for i, r in enumerate(v)]
+        )
         for ax, want in enumerate(shape):
             if want is not None and arr.shape[ax] != want:
-                raise self.err(key, f"has shape {arr.shape[0]}x{arr.shape[1]}", f"shape {_shape_txt(shape)}")
+                raise self.err(
+                    key, f"has shape {arr.shape[0]}x{arr.shape[1]}", f"shape {_shape_txt(shape)}"
+                )
         arr.setflags(write=False)
         return arr
 
     def vector(self, v: Any, key: str, length: int | None, **kw: bool) -> np.ndarray:
         if not isinstance(v, list):
-            raise self.err(key, f"{v!r} is not a list", f"a list of {length if length else 'some'} numbers")
+            raise self.err(
+                key, f"{v!r} is not a list", f"a list of {length if length else 'some'} numbers"
+            )
         if length is not None and len(v) != length:
             raise self.err(key, f"has {len(v)} entries", f"{length} entries")
         arr = np.array([self.number(x, f"{key}[{i}]", **kw) for i, x in enumerate(v)])
@@ -299,7 +333,9 @@ class _Ctx:
             arr = np.full((N, n), self.number(v, key, **kw))
         else:
             if len(v) != N:
-                raise self.err(key, f"has {len(v)} entries", f"a scalar or {N} entries (one per follower)")
+                raise self.err(
+                    key, f"has {len(v)} entries", f"a scalar or {N} entries (one per follower)"
+                )
             rows = []
             for i, x in enumerate(v):
                 if isinstance(x, list):
@@ -325,8 +361,15 @@ class _Ctx:
             return parse_expression(v, where=f"{self.file}: {key}")
         except ExpressionError:
             raise
-        except (ValueError, TypeError, RecursionError, MemoryError) as exc:  # defensive: never a traceback
-            raise self.err(key, f"cannot parse expression ({type(exc).__name__})", "an expression of t") from None
+        except (
+            ValueError,
+            TypeError,
+            RecursionError,
+            MemoryError,
+        ) as exc:  # defensive: never a traceback
+            raise self.err(
+                key, f"cannot parse expression ({type(exc).__name__})", "an expression of t"
+            ) from None
 
 
 def _shape_txt(shape: tuple[int | None, int | None]) -> str:
@@ -363,7 +406,9 @@ def load_scenario(path: str | Path) -> Scenario:
     try:
         raw = path.read_bytes()
     except OSError as exc:
-        raise ctx.err("(file)", f"cannot be read: {exc.strerror}", "an existing TOML file") from None
+        raise ctx.err(
+            "(file)", f"cannot be read: {exc.strerror}", "an existing TOML file"
+        ) from None
     try:
         data = tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError:
@@ -396,19 +441,29 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     A0 = ctx.matrix(L["A0"], "leader.A0", (None, None))
     m = A0.shape[0]
     if A0.shape[1] != m:
-        raise ctx.err("leader.A0", f"has shape {A0.shape[0]}x{A0.shape[1]}", "a square matrix m x m")
+        raise ctx.err(
+            "leader.A0", f"has shape {A0.shape[0]}x{A0.shape[1]}", "a square matrix m x m"
+        )
     B0 = ctx.matrix(L["B0"], "leader.B0", (m, None))
     C0 = ctx.matrix(L["C0"], "leader.C0", (None, m))
     p, n = B0.shape[1], C0.shape[0]
     eta0 = ctx.vector(L.get("eta0", [0.0] * m), "leader.eta0", m)
     alpha = ctx.number(L["alpha"], "leader.alpha", positive=True)
     if ("u0" in L) == ("u0_csv" in L):
-        raise ctx.err("leader.u0", "give exactly one of u0 and u0_csv", "u0 = [expressions of t] or u0_csv = 'file.csv'")
+        raise ctx.err(
+            "leader.u0",
+            "give exactly one of u0 and u0_csv",
+            "u0 = [expressions of t] or u0_csv = 'file.csv'",
+        )
     u0: tuple[Expr, ...] | None = None
     trace: np.ndarray | None = None
     if "u0" in L:
         if not isinstance(L["u0"], list) or len(L["u0"]) != p:
-            raise ctx.err("leader.u0", f"has {len(L['u0']) if isinstance(L['u0'], list) else 'no list of'} entries", f"a list of {p} expressions (p = columns of B0)")
+            raise ctx.err(
+                "leader.u0",
+                f"has {len(L['u0']) if isinstance(L['u0'], list) else 'no list of'} entries",
+                f"a list of {p} expressions (p = columns of B0)",
+            )
         u0 = tuple(ctx.expr(e, f"leader.u0[{k}]") for k, e in enumerate(L["u0"]))
     else:
         trace = _load_trace(ctx, path, L["u0_csv"], p)
@@ -418,7 +473,9 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     Aadj = ctx.matrix(G["adjacency"], "graph.adjacency", (None, None))
     N = Aadj.shape[0]
     if Aadj.shape[1] != N:
-        raise ctx.err("graph.adjacency", f"has shape {Aadj.shape[0]}x{Aadj.shape[1]}", "a square N x N matrix")
+        raise ctx.err(
+            "graph.adjacency", f"has shape {Aadj.shape[0]}x{Aadj.shape[1]}", "a square N x N matrix"
+        )
     if np.any(np.diag(Aadj) != 0):
         raise ctx.err("graph.adjacency", "has a non-zero diagonal (self-loop)", "a_ii = 0")
     pin = ctx.vector(G["pinning"], "graph.pinning", N, nonneg=True)
@@ -435,46 +492,80 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
         rtol=ctx.number(I.get("rtol", 1e-6), "integration.rtol", positive=True),
         atol=ctx.number(I.get("atol", 1e-8), "integration.atol", positive=True),
         horizon=ctx.number(I.get("horizon", 20.0), "integration.horizon", positive=True),
-        output_step=ctx.number(I.get("output_step", 0.01), "integration.output_step", positive=True),
+        output_step=ctx.number(
+            I.get("output_step", 0.01), "integration.output_step", positive=True
+        ),
         fixed_step=ctx.number(I.get("fixed_step", 1e-3), "integration.fixed_step", positive=True),
-        max_steps=int(ctx.number(I.get("max_steps", 200000), "integration.max_steps", positive=True)),
+        max_steps=int(
+            ctx.number(I.get("max_steps", 200000), "integration.max_steps", positive=True)
+        ),
     )
     if integ.output_step > integ.horizon:
-        raise ctx.err("integration.output_step", f"{integ.output_step} exceeds the horizon {integ.horizon}", "output_step <= horizon")
+        raise ctx.err(
+            "integration.output_step",
+            f"{integ.output_step} exceeds the horizon {integ.horizon}",
+            "output_step <= horizon",
+        )
     tgrid = np.linspace(0.0, integ.horizon, 4001)
 
     # ---- followers
     F = data["followers"]
     if not isinstance(F, list) or not all(isinstance(x, dict) for x in F):
-        raise ctx.err("followers", "is not an array of tables", "[[followers]] tables, one per follower")
+        raise ctx.err(
+            "followers", "is not an array of tables", "[[followers]] tables, one per follower"
+        )
     if len(F) != N:
-        raise ctx.err("followers", f"has {len(F)} followers but graph.adjacency is {N}x{N}", "one [[followers]] table per row of the adjacency matrix")
+        raise ctx.err(
+            "followers",
+            f"has {len(F)} followers but graph.adjacency is {N}x{N}",
+            "one [[followers]] table per row of the adjacency matrix",
+        )
     followers = []
     for i, fo in enumerate(F):
         key = f"followers[{i + 1}]"
         ctx.table(fo, key, _FOLLOWER, {"model", "p0", "b0"})
         model = fo["model"]
         if model not in REGISTRY:
-            raise ctx.err(f"{key}.model", f"{model!r} is not a known model", "one of " + ", ".join(sorted(REGISTRY)))
+            raise ctx.err(
+                f"{key}.model",
+                f"{model!r} is not a known model",
+                "one of " + ", ".join(sorted(REGISTRY)),
+            )
         spec = REGISTRY[model]
         if spec.n != n:
-            raise ctx.err(f"{key}.model", f"{model!r} has n = {spec.n} coordinates but C0 has {n} rows", f"a model with n = {n}")
+            raise ctx.err(
+                f"{key}.model",
+                f"{model!r} has n = {spec.n} coordinates but C0 has {n} rows",
+                f"a model with n = {n}",
+            )
         prm = ctx.table(fo.get("params", {}), f"{key}.params", set(spec.defaults))
-        params = {k: ctx.number(prm.get(k, v), f"{key}.params.{k}") for k, v in spec.defaults.items()}
+        params = {
+            k: ctx.number(prm.get(k, v), f"{key}.params.{k}") for k, v in spec.defaults.items()
+        }
         health = _health(ctx, fo.get("g", 1.0), f"{key}.g", tgrid)
         f_raw = fo.get("f", [0.0] * n)
         if not isinstance(f_raw, list) or len(f_raw) != n:
-            raise ctx.err(f"{key}.f", "wrong number of components", f"a list of {n} expressions of t")
+            raise ctx.err(
+                f"{key}.f", "wrong number of components", f"a list of {n} expressions of t"
+            )
         f = tuple(ctx.expr(e, f"{key}.f[{r}]") for r, e in enumerate(f_raw))
         fvals = np.array([np.broadcast_to(e.numpy(tgrid), tgrid.shape) for e in f])
         if not np.all(np.isfinite(fvals)):
-            raise ctx.err(f"{key}.f", "is not finite somewhere on [0, horizon]", "a bounded disturbance (Assumption 3)")
+            raise ctx.err(
+                f"{key}.f",
+                "is not finite somewhere on [0, horizon]",
+                "a bounded disturbance (Assumption 3)",
+            )
         if "d" in fo:
             d = ctx.vector(fo["d"], f"{key}.d", n, nonneg=True)
             worst = np.abs(fvals).max(axis=1)
             if np.any(worst > d * (1 + 1e-9)):
                 r = int(np.argmax(worst - d))
-                raise ctx.err(f"{key}.d", f"|f[{r}]| reaches {worst[r]:.4g} > d = {d[r]:.4g}", "d_ir >= sup |f_ir(t)| (Assumption 3)")
+                raise ctx.err(
+                    f"{key}.d",
+                    f"|f[{r}]| reaches {worst[r]:.4g} > d = {d[r]:.4g}",
+                    "d_ir >= sup |f_ir(t)| (Assumption 3)",
+                )
         else:
             d = _freeze(np.abs(fvals).max(axis=1))
         followers.append(
@@ -514,17 +605,31 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
         margin=ctx.number(O.get("margin", 0.05), "observer.margin", nonneg=True),
     )
     if obs.delta1_hat >= obs.delta1:
-        raise ctx.err("observer.delta1_hat", f"{obs.delta1_hat} >= delta1 = {obs.delta1}", "0 < delta1_hat < delta1")
+        raise ctx.err(
+            "observer.delta1_hat",
+            f"{obs.delta1_hat} >= delta1 = {obs.delta1}",
+            "0 < delta1_hat < delta1",
+        )
     if obs.delta2_hat >= obs.delta2:
-        raise ctx.err("observer.delta2_hat", f"{obs.delta2_hat} >= delta2 = {obs.delta2}", "0 < delta2_hat < delta2")
+        raise ctx.err(
+            "observer.delta2_hat",
+            f"{obs.delta2_hat} >= delta2 = {obs.delta2}",
+            "0 < delta2_hat < delta2",
+        )
     if np.any(obs.phi0 <= obs.phi_min):
-        raise ctx.err("observer.phi0", "phi0 must exceed phi_min", f"phi0 > phi_min = {obs.phi_min}")
+        raise ctx.err(
+            "observer.phi0", "phi0 must exceed phi_min", f"phi0 > phi_min = {obs.phi_min}"
+        )
 
     # ---- controller
     Cc = ctx.table(data.get("controller", {}), "controller", _CONTROLLER)
     for k in _CONTROLLER:
         if Cc.get(k) == SYNTH:
-            raise ctx.err(f"controller.{k}", "cannot be synthesised (the paper gives no design procedure for it)", "a number")
+            raise ctx.err(
+                f"controller.{k}",
+                "cannot be synthesised (the paper gives no design procedure for it)",
+                "a number",
+            )
     ctrl = Controller(
         Lambda=ctx.per_agent_comp(Cc.get("Lambda", 40.0), "controller.Lambda", N, n, positive=True),
         k1=ctx.per_agent_comp(Cc.get("k1", 20.0), "controller.k1", N, n, positive=True),
@@ -546,13 +651,23 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
         feedforward=ctx.boolean(Op.get("feedforward", True), "options.feedforward"),
         ablation=ctx.boolean(Op.get("ablation", False), "options.ablation"),
         derivatives=ctx.choice(Op.get("derivatives", "oracle"), "options.derivatives", DERIVATIVES),
-        filter_bandwidth=ctx.number(Op.get("filter_bandwidth", 50.0), "options.filter_bandwidth", positive=True),
-        tau_threshold=ctx.number(Op.get("tau_threshold", 1e-3), "options.tau_threshold", positive=True),
+        filter_bandwidth=ctx.number(
+            Op.get("filter_bandwidth", 50.0), "options.filter_bandwidth", positive=True
+        ),
+        tau_threshold=ctx.number(
+            Op.get("tau_threshold", 1e-3), "options.tau_threshold", positive=True
+        ),
     )
     if "sigma" in opts.ghat_law and np.any(ctrl.sigma <= 0):
-        raise ctx.err("controller.sigma", f"ghat_law {opts.ghat_law!r} needs sigma > 0", "sigma > 0")
+        raise ctx.err(
+            "controller.sigma", f"ghat_law {opts.ghat_law!r} needs sigma > 0", "sigma > 0"
+        )
     if opts.sign == "exact" and integ.method != "fixed":
-        raise ctx.err("options.sign", "'exact' makes variable-step integrators chatter and fail", "sign = 'tanh' or 'sat', or integration.method = 'fixed'")
+        raise ctx.err(
+            "options.sign",
+            "'exact' makes variable-step integrators chatter and fail",
+            "sign = 'tanh' or 'sat', or integration.method = 'fixed'",
+        )
 
     # ---- initial estimator states
     In = ctx.table(data.get("initial", {}), "initial", _INITIAL)
@@ -592,14 +707,23 @@ def _health(ctx: _Ctx, v: Any, key: str, tgrid: np.ndarray) -> Health:
     """g_i(t): constant, table [[t_start, value], ...] or expression; checked in (0, 1]."""
     if isinstance(v, list):
         if not v or not all(isinstance(r, list) and len(r) == 2 for r in v):
-            raise ctx.err(key, "is not a table of [t_start, value] pairs", "e.g. [[0.0, 1.0], [5.0, 0.6]]")
-        rows = [(ctx.number(a, f"{key}[{k}][0]", nonneg=True), ctx.number(b, f"{key}[{k}][1]")) for k, (a, b) in enumerate(v)]
+            raise ctx.err(
+                key, "is not a table of [t_start, value] pairs", "e.g. [[0.0, 1.0], [5.0, 0.6]]"
+            )
+        rows = [
+            (ctx.number(a, f"{key}[{k}][0]", nonneg=True), ctx.number(b, f"{key}[{k}][1]"))
+            for k, (a, b) in enumerate(v)
+        ]
         if rows[0][0] != 0.0:
             raise ctx.err(f"{key}[0][0]", f"first segment starts at {rows[0][0]}", "0.0")
         if any(b[0] <= a[0] for a, b in zip(rows, rows[1:], strict=False)):
-            raise ctx.err(key, "segment start times are not increasing", "strictly increasing t_start")
+            raise ctx.err(
+                key, "segment start times are not increasing", "strictly increasing t_start"
+            )
         vals = [b for _, b in rows]
-        text = repr(vals[0]) + "".join(f" + ({b - a!r})*step(t - {t0!r})" for (t0, b), a in zip(rows[1:], vals, strict=False))
+        text = repr(vals[0]) + "".join(
+            f" + ({b - a!r})*step(t - {t0!r})" for (t0, b), a in zip(rows[1:], vals, strict=False)
+        )
         expr = ctx.expr(text, key)
         breaks = tuple(t0 for t0, _ in rows[1:])
         lo, hi = min(vals), max(vals)
@@ -616,7 +740,9 @@ def _health(ctx: _Ctx, v: Any, key: str, tgrid: np.ndarray) -> Health:
         breaks = bks
     if not (lo > 0.0 and hi <= 1.0):
         bad = lo if lo <= 0 else hi
-        raise ctx.err(key, f"actuator health reaches {bad:.4g}, outside (0, 1]", "0 < g_i <= 1 (1 = healthy)")
+        raise ctx.err(
+            key, f"actuator health reaches {bad:.4g}, outside (0, 1]", "0 < g_i <= 1 (1 = healthy)"
+        )
     return Health(expr=expr, breakpoints=breaks, minimum=lo)
 
 
@@ -633,11 +759,19 @@ def _load_trace(ctx: _Ctx, scen_path: Path, rel: Any, p: int) -> np.ndarray:
     if rows and not _is_float(rows[0][0]):
         rows = rows[1:]  # header
     if len(rows) < 2:
-        raise ctx.err(key, f"{fpath} has fewer than two data rows", "columns t, u0_1..u0_p with at least two rows")
+        raise ctx.err(
+            key,
+            f"{fpath} has fewer than two data rows",
+            "columns t, u0_1..u0_p with at least two rows",
+        )
     data = []
     for k, r in enumerate(rows):
         if len(r) != 1 + p:
-            raise ctx.err(key, f"{fpath} row {k + 1} has {len(r)} columns", f"{1 + p} columns: t and {p} inputs")
+            raise ctx.err(
+                key,
+                f"{fpath} row {k + 1} has {len(r)} columns",
+                f"{1 + p} columns: t and {p} inputs",
+            )
         try:
             vals = [float(x) for x in r]
         except ValueError:
@@ -648,7 +782,9 @@ def _load_trace(ctx: _Ctx, scen_path: Path, rel: Any, p: int) -> np.ndarray:
     arr = np.array(data)
     if np.any(np.diff(arr[:, 0]) <= 0):
         k = int(np.argmax(np.diff(arr[:, 0]) <= 0)) + 2
-        raise ctx.err(key, f"{fpath}: time is not strictly increasing at row {k}", "a trace monotone in time")
+        raise ctx.err(
+            key, f"{fpath}: time is not strictly increasing at row {k}", "a trace monotone in time"
+        )
     return _freeze(arr)
 
 

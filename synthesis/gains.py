@@ -137,7 +137,9 @@ def load_gains(path: str | Path) -> Gains:
     try:
         d = json.loads(path.read_text())
     except OSError as exc:
-        raise SynthesisError(f"{path}: cannot be read ({exc.strerror}); run make synth first") from None
+        raise SynthesisError(
+            f"{path}: cannot be read ({exc.strerror}); run make synth first"
+        ) from None
     except json.JSONDecodeError as exc:
         raise SynthesisError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
     return gains_from_dict(d, source=str(path))

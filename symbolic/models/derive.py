@@ -27,7 +27,9 @@ def euler_lagrange_matrices(T: sp.Expr, V: sp.Expr, p: list[sp.Symbol], q: list[
         for j in range(n):
             C[k, j] = sp.simplify(
                 sum(
-                    sp.Rational(1, 2) * (sp.diff(M[k, j], p[i]) + sp.diff(M[k, i], p[j]) - sp.diff(M[i, j], p[k])) * q[i]
+                    sp.Rational(1, 2)
+                    * (sp.diff(M[k, j], p[i]) + sp.diff(M[k, i], p[j]) - sp.diff(M[i, j], p[k]))
+                    * q[i]
                     for i in range(n)
                 )
             )
@@ -35,46 +37,84 @@ def euler_lagrange_matrices(T: sp.Expr, V: sp.Expr, p: list[sp.Symbol], q: list[
     return M, C, G
 
 
-def check_properties(M: sp.Matrix, C: sp.Matrix, p: list[sp.Symbol], q: list[sp.Symbol], name: str) -> None:
+def check_properties(
+    M: sp.Matrix, C: sp.Matrix, p: list[sp.Symbol], q: list[sp.Symbol], name: str
+) -> None:
     """Property 1 (M symmetric, positive definite) and Property 2 (Ṁ − 2C skew), symbolically.
 
     Positive definiteness is checked by Sylvester's criterion on the leading
     minors, simplified; a minor that sympy cannot decide is checked on a grid.
     """
     if sp.simplify(M - M.T) != sp.zeros(*M.shape):
-        raise ScenarioError("model", name, "Property 1 fails: M is not symmetric", "a symmetric inertia matrix")
+        raise ScenarioError(
+            "model", name, "Property 1 fails: M is not symmetric", "a symmetric inertia matrix"
+        )
     n = M.shape[0]
     for k in range(1, n + 1):
         minor = sp.simplify(M[:k, :k].det())
         pos = sp.ask(sp.Q.positive(minor)) if minor.free_symbols else bool(minor > 0)
         if pos is False:
-            raise ScenarioError("model", name, f"Property 1 fails: leading minor {k} of M is not positive", "M positive definite")
+            raise ScenarioError(
+                "model",
+                name,
+                f"Property 1 fails: leading minor {k} of M is not positive",
+                "M positive definite",
+            )
         if pos is None:
             f = sp.lambdify(p, minor, "numpy")
             rng = np.random.default_rng(0)
             samples = [float(f(*rng.uniform(-np.pi, np.pi, len(p)))) for _ in range(200)]
             if min(samples) <= 0:
-                raise ScenarioError("model", name, f"Property 1 fails: leading minor {k} of M reaches {min(samples):.3g}", "M positive definite")
+                raise ScenarioError(
+                    "model",
+                    name,
+                    f"Property 1 fails: leading minor {k} of M reaches {min(samples):.3g}",
+                    "M positive definite",
+                )
     Mdot = sp.zeros(n, n)
     for i in range(n):
         for j in range(n):
             Mdot[i, j] = sum(sp.diff(M[i, j], p[k]) * q[k] for k in range(n))
     S = sp.simplify(Mdot - 2 * C)
     if sp.simplify(S + S.T) != sp.zeros(n, n):
-        raise ScenarioError("model", name, "Property 2 fails: Mdot - 2C is not skew-symmetric", "C from Christoffel symbols")
+        raise ScenarioError(
+            "model",
+            name,
+            "Property 2 fails: Mdot - 2C is not skew-symmetric",
+            "C from Christoffel symbols",
+        )
 
 
-def _to_casadi(exprs: sp.Matrix, syms: list[list[sp.Symbol]], names: list[str], fname: str) -> ca.Function:
+def _to_casadi(
+    exprs: sp.Matrix, syms: list[list[sp.Symbol]], names: list[str], fname: str
+) -> ca.Function:
     cs_syms = [ca.SX.sym(nm, len(s)) for nm, s in zip(names, syms, strict=True)]
     flat = [s for group in syms for s in group]
     flat_cs = [cs_syms[g][k] for g, group in enumerate(syms) for k in range(len(group))]
-    f = sp.lambdify(flat, exprs, modules=[{"sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "exp": ca.exp, "sqrt": ca.sqrt, "ImmutableDenseMatrix": _mat, "MutableDenseMatrix": _mat}, "math"])
+    f = sp.lambdify(
+        flat,
+        exprs,
+        modules=[
+            {
+                "sin": ca.sin,
+                "cos": ca.cos,
+                "tan": ca.tan,
+                "exp": ca.exp,
+                "sqrt": ca.sqrt,
+                "ImmutableDenseMatrix": _mat,
+                "MutableDenseMatrix": _mat,
+            },
+            "math",
+        ],
+    )
     out = f(*flat_cs)
     return ca.Function(fname, cs_syms, [ca.SX(out)], names, [fname])
 
 
 def _mat(rows):  # sympy Matrix -> CasADi SX via nested lists
-    return ca.vertcat(*[ca.horzcat(*[ca.SX(x) if not isinstance(x, ca.SX) else x for x in r]) for r in rows])
+    return ca.vertcat(
+        *[ca.horzcat(*[ca.SX(x) if not isinstance(x, ca.SX) else x for x in r]) for r in rows]
+    )
 
 
 def _mass_bounds(M: sp.Matrix, p: list[sp.Symbol]) -> tuple[float, float]:
@@ -123,6 +163,8 @@ def build_model(name: str, params: Mapping[str, float] | None = None) -> ELModel
     full = dict(spec.defaults)
     for k, v in (params or {}).items():
         if k not in full:
-            raise ScenarioError("model", f"{name}.{k}", "unknown parameter", "one of " + ", ".join(sorted(full)))
+            raise ScenarioError(
+                "model", f"{name}.{k}", "unknown parameter", "one of " + ", ".join(sorted(full))
+            )
         full[k] = float(v)
     return _build_cached(name, tuple(sorted(full.items())))

@@ -10,11 +10,17 @@ from symbolic.models.base import ModelSpec, register
 def _lagrangian(prm):
     p1, p2 = sp.symbols("p1 p2", real=True)
     q1, q2 = sp.symbols("q1 q2", real=True)
-    m1, m2, r1, r2, J1, J2, g0 = (sp.nsimplify(prm[k]) for k in ("m1", "m2", "r1", "r2", "J1", "J2", "g0"))
+    m1, m2, r1, r2, J1, J2, g0 = (
+        sp.nsimplify(prm[k]) for k in ("m1", "m2", "r1", "r2", "J1", "J2", "g0")
+    )
     # point masses at the link ends plus rotor inertias J1 (on q1) and J2 (on q1 + q2):
     # this reproduces the closed forms of paper-spec section 3 exactly
     T = sp.Rational(1, 2) * (m1 + m2) * r1**2 * q1**2
-    T += sp.Rational(1, 2) * m2 * (r2**2 * (q1 + q2) ** 2 + 2 * r1 * r2 * sp.cos(p2) * q1 * (q1 + q2))
+    T += (
+        sp.Rational(1, 2)
+        * m2
+        * (r2**2 * (q1 + q2) ** 2 + 2 * r1 * r2 * sp.cos(p2) * q1 * (q1 + q2))
+    )
     T += sp.Rational(1, 2) * J1 * q1**2 + sp.Rational(1, 2) * J2 * q2**2
     V = g0 * ((m1 + m2) * r1 * sp.sin(p1) + m2 * r2 * sp.sin(p1 + p2))
     return T, V, [p1, p2], [q1, q2]
