@@ -44,7 +44,7 @@ test: lint
 	$(PY) -m pytest
 
 bench: $(STAMP)
-	$(PY) -m verify bench
+	$(PY) -m generated.bench
 
 clean:
 	rm -rf out generated/build .pytest_cache
