@@ -1,16 +1,43 @@
-"""The closed loop of the paper as one CasADi model (interface; implemented per issue 4).
+"""The closed loop of the paper as one CasADi model (paper-spec sections 1–7).
 
 Data flow: Scenario + Gains -> :func:`build_closed_loop` -> :class:`ClosedLoop`,
 which the ``generated/`` stage turns into C and integrates.
+
+Assembly (``assembly="map"``, the default): every block local to a follower
+(UIO, observer, formation, derivative filters, controller, adaptive laws,
+dynamics) is one SX Function of that agent's own inputs, applied to all agents
+with ``Function.map``; the coupling through the graph is a sparse matrix product
+(:func:`symbolic.network.coupling`). The number of instructions of the closed-loop
+Function therefore does not depend on N. ``assembly="flat"`` calls the same
+per-agent Function once per agent in one SX expression, for comparison.
+
+State vector: ``x = (η0, s_1, …, s_N)`` with agent block
+``s_i = (μ_i, η_i, φ_i, p_i, q_i, θ̂_i, ĝ_i[, w_i, z_i])`` (``w``, ``z``: the
+derivative filters of the ``filtered`` option). :class:`StateLayout` maps names to
+slices and back.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import casadi as ca
 import numpy as np
+
+from symbolic.adaptive import adaptive_function
+from symbolic.controller import controller_function
+from symbolic.derivatives import filter_function, filter_sizes, flow_jets
+from symbolic.errors import ScenarioError, SynthesisError
+from symbolic.formation import formation_function
+from symbolic.leader import leader_function
+from symbolic.models import build_model
+from symbolic.network import ASSEMBLIES, GraphMatrices, apply_agents, coupling, graph_matrices
+from symbolic.observer import ObserverGains, observer_function
+from symbolic.scenario import Scenario
+from symbolic.uio import uio_matrices
+
+AGENT_STATES = ("mu", "eta", "phi", "p", "q", "thetahat", "ghat", "w", "z")
 
 
 @dataclass(frozen=True)
@@ -19,11 +46,55 @@ class StateLayout:
 
     ``slices["eta0"]`` is the leader's state; per agent i (0-based):
     ``slices[("mu", i)]``, ``("eta", i)``, ``("phi", i)``, ``("p", i)``, ``("q", i)``,
-    ``("thetahat", i)``, ``("ghat", i)`` and, with filtered derivatives, the filter states.
+    ``("thetahat", i)``, ``("ghat", i)`` and, with filtered derivatives, the filter states
+    ``("w", i)`` (2m: filtered η̇_i and its derivative) and ``("z", i)`` (3n: filtered b_i,
+    ḃ_i, b̈_i).
+
+    Attributes
+    ----------
+    slices : dict
+        Name -> slice of x.
+    nx : int
+        Length of x.
+    m, N : int
+        Leader state size and number of agents.
+    agent_offsets : dict
+        Name -> slice inside one agent block (same for every agent).
+    agent_size : int
+        Length of one agent block.
     """
 
     slices: dict[Any, slice]
     nx: int
+    m: int = 0
+    N: int = 0
+    agent_offsets: dict[str, slice] = field(default_factory=dict)
+    agent_size: int = 0
+
+    def get(self, x: np.ndarray, name: str, i: int | None = None) -> np.ndarray:
+        """The part of ``x`` (1-D, or 2-D with time along axis 0) named ``name`` (agent ``i``)."""
+        x = np.asarray(x)
+        sl = self.slices[name] if i is None else self.slices[(name, i)]
+        return x[..., sl]
+
+    def unpack(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """``{"eta0": (m,), "mu": (N, m), "p": (N, n), ...}`` from a flat state ``x``."""
+        x = np.asarray(x, dtype=float).reshape(-1)
+        blocks = x[self.m :].reshape(self.N, self.agent_size)
+        out = {"eta0": x[: self.m].copy()}
+        for name, sl in self.agent_offsets.items():
+            out[name] = blocks[:, sl].copy()
+        return out
+
+    def pack(self, parts: dict[str, np.ndarray]) -> np.ndarray:
+        """Inverse of :meth:`unpack`; every name of the layout must be present."""
+        x = np.zeros(self.nx)
+        x[: self.m] = np.asarray(parts["eta0"], dtype=float).reshape(-1)
+        blocks = np.zeros((self.N, self.agent_size))
+        for name, sl in self.agent_offsets.items():
+            blocks[:, sl] = np.asarray(parts[name], dtype=float).reshape(self.N, -1)
+        x[self.m :] = blocks.reshape(-1)
+        return x
 
 
 @dataclass(frozen=True)
@@ -48,6 +119,10 @@ class ClosedLoop:
         Consistent initial accelerations for the DAE.
     breakpoints : tuple of float
         Known discontinuity times in (0, horizon).
+    assembly : str
+        ``"map"`` or ``"flat"``.
+    blocks : dict
+        The per-agent and leader Functions the loop is assembled from.
     """
 
     layout: StateLayout
@@ -58,3 +133,402 @@ class ClosedLoop:
     x0: np.ndarray
     z0: np.ndarray
     breakpoints: tuple[float, ...]
+    assembly: str = "map"
+    blocks: dict[str, ca.Function] = field(default_factory=dict, repr=False)
+
+
+# ----------------------------------------------------------------------------- helpers
+def _agent_offsets(m: int, n: int, filtered: bool) -> tuple[dict[str, slice], int]:
+    sizes = [("mu", m), ("eta", m), ("phi", 1), ("p", n), ("q", n), ("thetahat", n), ("ghat", 1)]
+    if filtered:
+        nw, nz = filter_sizes(m, n)
+        sizes += [("w", nw), ("z", nz)]
+    off, k = {}, 0
+    for name, s in sizes:
+        off[name] = slice(k, k + s)
+        k += s
+    return off, k
+
+
+def make_layout(m: int, n: int, N: int, filtered: bool) -> StateLayout:
+    """The state layout for leader size m, n coordinates, N agents."""
+    off, na = _agent_offsets(m, n, filtered)
+    slices: dict[Any, slice] = {"eta0": slice(0, m)}
+    for i in range(N):
+        base = m + i * na
+        for name, sl in off.items():
+            slices[(name, i)] = slice(base + sl.start, base + sl.stop)
+    return StateLayout(
+        slices=slices, nx=m + N * na, m=m, N=N, agent_offsets=off, agent_size=na
+    )
+
+
+def _param_layout(n: int) -> tuple[dict[str, slice], int]:
+    sizes = [
+        ("obs", 2),  # (α1 + ᾱ1, φ_min): input of the observer Function
+        ("Lambda", n),
+        ("k1", n),
+        ("k2", 1),
+        ("gamma", 1),
+        ("sigma", 1),
+        ("ghat_ref", 1),
+        ("b0", n),
+        ("d", n),
+    ]
+    off, k = {}, 0
+    for name, s in sizes:
+        off[name] = slice(k, k + s)
+        k += s
+    return off, k
+
+
+def _param_matrix(sc: Scenario) -> np.ndarray:
+    """Per-agent numbers as columns (constants of the mapped Function's inputs)."""
+    off, npar = _param_layout(sc.n)
+    P = np.zeros((npar, sc.N))
+    o, c = sc.observer, sc.controller
+    for i, fo in enumerate(sc.followers):
+        P[off["obs"], i] = (o.alpha1[i] + o.alpha1_bar[i], o.phi_min)
+        P[off["Lambda"], i] = c.Lambda[i]
+        P[off["k1"], i] = c.k1[i]
+        P[off["k2"], i] = c.k2[i]
+        P[off["gamma"], i] = c.gamma[i]
+        P[off["sigma"], i] = c.sigma[i]
+        P[off["ghat_ref"], i] = c.ghat_ref[i]
+        P[off["b0"], i] = fo.b0
+        P[off["d"], i] = fo.d
+    return P
+
+
+def _fault_function(sc: Scenario) -> tuple[ca.Function, list[int]]:
+    """Distinct fault expressions g_i(t), f_ir(t) evaluated once; index list to (1+n)×N.
+
+    Followers sharing an expression share its evaluation, so with identical
+    faults the graph size does not grow with N.
+    """
+    t = ca.SX.sym("t")
+    texts: dict[str, int] = {}
+    vals: list[ca.SX] = []
+    idx: list[int] = []
+    for fo in sc.followers:
+        for e in (fo.g.expr, *fo.f):
+            if e.text not in texts:
+                texts[e.text] = len(vals)
+                vals.append(ca.SX(e.casadi(t)))
+            idx.append(texts[e.text])
+    return ca.Function("faults", [t], [ca.vertcat(*vals)], ["t"], ["values"]), idx
+
+
+def _observer_gains(sc: Scenario, gains: Any) -> ObserverGains:
+    L = sc.leader
+    for name, a, b in (("A0", gains.A0, L.A0), ("B0", gains.B0, L.B0), ("C0", gains.C0, L.C0)):
+        a = np.atleast_2d(np.asarray(a, dtype=float))
+        if a.shape != b.shape or not np.allclose(a, b, rtol=1e-12, atol=1e-12):
+            raise SynthesisError(
+                f"gains.{name} differs from the scenario's leader.{name}; re-run make synth"
+            )
+    uio = uio_matrices(L.A0, L.B0, L.C0, np.atleast_2d(gains.Theta))
+    Q = np.atleast_2d(np.asarray(gains.Q, dtype=float)).reshape(L.p, L.m)
+    return ObserverGains(
+        A0=np.asarray(L.A0), B0=np.asarray(L.B0), Q=Q,
+        lambda1=float(gains.lambda1), lambda2=float(gains.lambda2), uio=uio,
+    )  # fmt: skip
+
+
+# ----------------------------------------------------------------------------- per agent
+def agent_function(sc: Scenario, og: ObserverGains, model_index: int) -> ca.Function:
+    """Everything local to one follower as one SX Function.
+
+    Inputs ``s`` (agent block), ``psi``, ``dpsi``, ``ddpsi`` (ψ_i and, for the oracle,
+    its first two time derivatives), ``gf`` = (g_i(t), f_i(t)), ``a`` (acceleration,
+    used only by the DAE residual) and ``prm`` (per-agent numbers).
+    Outputs ``sdot`` (ODE), ``sdot_dae`` (q̇ = a), ``res`` (DAE residual) and diagnostics.
+    """
+    fo = sc.followers[model_index]
+    model = build_model(fo.model, fo.params)
+    m, n = sc.m, sc.n
+    opts = sc.options
+    filtered = opts.derivatives == "filtered"
+    off, na = _agent_offsets(m, n, filtered)
+    poff, npar = _param_layout(n)
+    s = ca.SX.sym("s", na)
+    psi, dpsi, ddpsi = (ca.SX.sym(k, n) for k in ("psi", "dpsi", "ddpsi"))
+    gf = ca.SX.sym("gf", 1 + n)
+    a = ca.SX.sym("a", n)
+    prm = ca.SX.sym("prm", npar)
+    P = {k: prm[sl] for k, sl in poff.items()}
+    S = {k: s[sl] for k, sl in off.items()}
+    g, f = gf[0], gf[1:]
+
+    obs = observer_function(og)
+    so = ca.vertcat(S["mu"], S["eta"], S["phi"])
+    sodot, v, ehat = obs(so, psi, P["obs"])  # eqs. (7), (9)
+    etadot = sodot[m : 2 * m]
+    form = formation_function(m, n, opts.tau_threshold)
+    extra = []
+    if filtered:
+        filt = filter_function(m, n, opts.filter_bandwidth)
+        b = form(etadot, ca.SX.zeros(m), ca.SX.zeros(m), P["b0"])[0]
+        wdot, zdot, etaddot, bdot, bddot = filt(S["w"], S["z"], etadot, b)
+        eta3dot = ca.SX.zeros(m)
+        extra = [wdot, zdot]
+    else:
+        D1, D2 = flow_jets(obs)
+        ddso = D1(so, psi, P["obs"], sodot, dpsi)
+        dddso = D2(so, psi, P["obs"], sodot, dpsi, ddso, ddpsi)
+        etaddot, eta3dot = ddso[m : 2 * m], dddso[m : 2 * m]
+        b, bdot, bddot = form(etadot, etaddot, eta3dot, P["b0"])  # section 7
+    bdot_c, bddot_c = (bdot, bddot) if opts.feedforward else (0 * bdot, 0 * bddot)
+
+    ctrl = controller_function(
+        model, sc.leader.C0, sign=opts.sign, sign_width=opts.sign_width, ablation=opts.ablation
+    )
+    et, etdot, chi, Psi, u = ctrl(
+        S["p"], S["q"], S["eta"], etadot, etaddot, b, bdot_c, bddot_c,
+        S["thetahat"], S["ghat"], P["Lambda"], P["k1"],
+    )  # fmt: skip  # eqs. (28)-(29), (42)
+    adap = adaptive_function(n, opts.ghat_law, sc.controller.g_min)
+    thd, ghd = adap(chi, Psi, S["thetahat"], S["ghat"], P["k2"], P["gamma"], P["sigma"],
+                    P["ghat_ref"])  # fmt: skip  # eq. (30)
+
+    M, Cm, G = model.M(S["p"]), model.C(S["p"], S["q"]), model.G(S["p"])
+    force = g * u + f - Cm @ S["q"] - G  # eq. (2): M p̈ = g u + f − C q − G
+    qdot = ca.solve(M, force)
+    res = M @ a - force  # DAE residual M a + C q + G − g u − f
+    head = [sodot, S["q"]]
+    tail = [thd, ghd, *extra]
+    sdot = ca.vertcat(*head, qdot, *tail)
+    sdot_dae = ca.vertcat(*head, a, *tail)
+    gam = P["gamma"]
+    V2 = (
+        0.5 * ca.bilin(M, chi, chi)
+        + 0.5 * ca.sumsqr(S["thetahat"] - P["d"])
+        + g / (2 * gam) * (S["ghat"] - 1 / g) ** 2
+    )  # eq. (32), ĝ term weighted g/(2γ)
+    names_out = ["sdot", "sdot_dae", "res", "et", "etdot", "chi", "Psi", "u", "b", "bdot",
+                 "bddot", "ehat", "v", "etadot", "etaddot", "eta3dot", "qdot", "V2"]  # fmt: skip
+    outs = [sdot, sdot_dae, res, et, etdot, chi, Psi, u, b, bdot, bddot, ehat, v, etadot,
+            etaddot, eta3dot, qdot, V2]  # fmt: skip
+    return ca.Function(
+        f"agent_{fo.model}",
+        [s, psi, dpsi, ddpsi, gf, a, prm],
+        outs,
+        ["s", "psi", "dpsi", "ddpsi", "gf", "a", "prm"],
+        names_out,
+    )
+
+
+# ----------------------------------------------------------------------------- assembly
+def _groups(sc: Scenario) -> list[list[int]]:
+    """Agents grouped by (model, parameters): one per-agent Function per group."""
+    keys: dict[tuple, list[int]] = {}
+    for i, fo in enumerate(sc.followers):
+        keys.setdefault((fo.model, tuple(sorted(fo.params.items()))), []).append(i)
+    return list(keys.values())
+
+
+def _network(sc: Scenario, gains: Any, assembly: str, t: Any, x: Any, a: Any) -> dict[str, Any]:
+    """Symbolic evaluation of the whole network at (t, x) (and accelerations a)."""
+    m, n, N = sc.m, sc.n, sc.N
+    filtered = sc.options.derivatives == "filtered"
+    lay = make_layout(m, n, N, filtered)
+    gm: GraphMatrices = graph_matrices(sc.graph, np.diag(np.atleast_2d(gains.H)))
+    og = _observer_gains(sc, gains)
+    P = ca.DM(_param_matrix(sc))
+    poff, _ = _param_layout(n)
+    ffun, fidx = _fault_function(sc)
+    GF = ca.reshape(ffun(t)[fidx], 1 + n, N)
+    lead = leader_function(sc.leader)
+    eta0dot, eta0ddot, y0, y0dot, y0ddot, u0, u0dot = lead(t, x[:m])
+    eta0 = x[:m]
+    X = ca.reshape(x[m:], lay.agent_size, N)
+    E = X[lay.agent_offsets["eta"], :]
+    SO = X[: 2 * m + 1, :]  # (μ, η, φ) of every agent
+    psi = coupling(sc.leader.C0, E, y0, gm)  # eq. (6): ψ_i from neighbours' estimates and y0
+    if filtered:
+        dpsi = ddpsi = ca.DM.zeros(n, N)
+    else:
+        # oracle passes over the network: η̇ of all agents -> ψ̇ -> η̈ of all agents -> ψ̈
+        obs = observer_function(og)
+        D1, _ = flow_jets(obs)
+        Pobs = P[poff["obs"], :]
+        SOd = apply_agents(obs, N, [SO, psi, Pobs], assembly)[0]
+        dpsi = coupling(sc.leader.C0, SOd[m : 2 * m, :], y0dot, gm)
+        SOdd = apply_agents(D1, N, [SO, psi, Pobs, SOd, dpsi], assembly)[0]
+        ddpsi = coupling(sc.leader.C0, SOdd[m : 2 * m, :], y0ddot, gm)
+    A = ca.reshape(a, n, N)
+    groups = _groups(sc)
+    outs: list[Any] | None = None
+    args = [X, psi, dpsi, ddpsi, GF, A, P]
+    funs = {}
+    if len(groups) == 1:
+        f = agent_function(sc, og, 0)
+        funs["agent"] = f
+        outs = apply_agents(f, N, args, assembly)
+    else:
+        parts, order = [], []
+        for grp in groups:
+            f = agent_function(sc, og, grp[0])
+            funs[f"agent_{grp[0]}"] = f
+            parts.append(apply_agents(f, len(grp), [arg[:, grp] for arg in args], assembly))
+            order += grp
+        inv = list(np.argsort(order))
+        outs = [ca.horzcat(*[p[k] for p in parts])[:, inv] for k in range(len(parts[0]))]
+        f = funs[next(iter(funs))]
+    named = dict(zip(f.name_out(), outs, strict=True))
+    named.update(
+        eta0=eta0, eta0dot=eta0dot, eta0ddot=eta0ddot, y0=y0, y0dot=y0dot, u0=u0, u0dot=u0dot,
+        psi=psi, X=X, E=E, GF=GF, gm=gm, lay=lay, funs=funs, lead=lead,
+    )  # fmt: skip
+    return named
+
+
+def build_closed_loop(scenario: Scenario, gains: Any, *, assembly: str = "map") -> ClosedLoop:
+    """Build the closed loop of ``scenario`` with ``gains``.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        A validated scenario (:func:`symbolic.scenario.load_scenario`).
+    gains : Gains
+        Synthesised (or hand-made) gains (:class:`synthesis.gains.Gains`).
+    assembly : {"map", "flat"}
+        ``map`` (default): per-agent Functions applied with ``Function.map`` (MX graph,
+        size independent of N); ``flat``: one SX expression with one copy per agent.
+
+    Returns
+    -------
+    ClosedLoop
+
+    Raises
+    ------
+    ScenarioError
+        Unknown assembly, or a scenario the closed loop cannot represent.
+    SynthesisError
+        Gains designed for other leader matrices.
+    """
+    if assembly not in ASSEMBLIES:
+        raise ScenarioError(
+            "build_closed_loop", "assembly", f"{assembly!r} is unknown", "'map' or 'flat'"
+        )
+    sc = scenario
+    m, n, N = sc.m, sc.n, sc.N
+    filtered = sc.options.derivatives == "filtered"
+    lay = make_layout(m, n, N, filtered)
+    Sym = ca.MX if assembly == "map" else ca.SX
+    t, x, a = Sym.sym("t"), Sym.sym("x", lay.nx), Sym.sym("z", n * N)
+    net = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N))
+    xdot = ca.vertcat(net["eta0dot"], ca.vec(net["sdot"]))  # eq. (3) and every agent
+    net_dae = _network(sc, gains, assembly, t, x, a)
+    xdot_dae = ca.vertcat(net_dae["eta0dot"], ca.vec(net_dae["sdot_dae"]))
+    alg = ca.vec(net_dae["res"])
+    e0 = Sym(0, 1)
+    ode = ca.Function("ode", [t, x], [xdot], ["t", "x"], ["xdot"])
+    ode_dyn = ca.Function(
+        "ode_dyn", [t, x, e0, e0, e0], [xdot, e0, e0, e0], ca.dyn_in(), ca.dyn_out()
+    )
+    dae_dyn = ca.Function(
+        "dae_dyn", [t, x, a, e0, e0], [xdot_dae, alg, e0, e0], ca.dyn_in(), ca.dyn_out()
+    )
+    outputs = _outputs_function(sc, gains, net, t, x, a)
+    x0 = initial_state(sc, lay, outputs)
+    qdd0 = np.array(outputs(0.0, x0)[outputs.name_out().index("qdot")]).T.reshape(-1)
+    blocks = dict(net["funs"])
+    blocks["leader"] = net["lead"]
+    return ClosedLoop(
+        layout=lay, ode=ode, ode_dyn=ode_dyn, dae_dyn=dae_dyn, outputs=outputs, x0=x0,
+        z0=qdd0, breakpoints=sc.breakpoints(), assembly=assembly, blocks=blocks,
+    )  # fmt: skip
+
+
+def _outputs_function(sc: Scenario, gains: Any, net: dict, t: Any, x: Any, a: Any) -> ca.Function:
+    """Named outputs of (t, x); per-agent quantities as N×k matrices (row i = agent i)."""
+    gm: GraphMatrices = net["gm"]
+    lay: StateLayout = net["lay"]
+    X, E, eta0 = net["X"], net["E"], net["eta0"]
+    ehat = net["ehat"]
+    h = ca.DM(gm.h.reshape(1, -1))
+    ebar = E - ca.mtimes(eta0, h)  # ē_ηi = η_i − h_i η0
+    e_eta = coupling(None, E, eta0, gm)  # true neighbourhood error, eq. (6)
+    etilde = ehat - e_eta  # UIO error, eq. (8)
+    Tinv = ca.DM(np.linalg.inv(np.atleast_2d(gains.T)))
+    Om = ca.DM(np.atleast_2d(gains.Omega))
+    z = ca.DM(np.diag(np.atleast_2d(gains.Z)).reshape(-1, 1))
+    phi = X[lay.agent_offsets["phi"], :]
+    eps = ca.mtimes(ehat, ca.DM(ca.Sparsity.diag(gm.N), gm.h.tolist()))  # ε_η = (H ⊗ I) ê_η
+    abar = ca.DM((sc.observer.alpha1_bar).reshape(-1, 1))
+    lbar = ca.DM(gm.l_bar.reshape(-1, 1))
+    lam2 = float(gains.lambda2)
+    V1 = (
+        ca.mtimes(ca.sum1(eps * ca.mtimes(Tinv, eps)), z)
+        + 2 * lam2 * ca.sum1(lbar * z * phi.T / abar)
+        + float(gains.k1) * ca.sum2(ca.sum1(etilde * ca.mtimes(Om, etilde)))
+    )  # eq. (17)
+    GF = net["GF"]
+    items = {
+        "et": net["et"].T,
+        "etdot": net["etdot"].T,
+        "chi": net["chi"].T,
+        "u": net["u"].T,
+        "Psi": net["Psi"].T,
+        "b": net["b"].T,
+        "bdot": net["bdot"].T,
+        "bddot": net["bddot"].T,
+        "ehat": ehat.T,
+        "ebar": ebar.T,
+        "etilde": etilde.T,
+        "e_eta": e_eta.T,
+        "psi": net["psi"].T,
+        "v": net["v"].T,
+        "etadot": net["etadot"].T,
+        "etaddot": net["etaddot"].T,
+        "eta3dot": net["eta3dot"].T,
+        "qdot": net["qdot"].T,
+        "V1": V1,
+        "V2": net["V2"].T,
+        "thetahat": X[lay.agent_offsets["thetahat"], :].T,
+        "ghat": X[lay.agent_offsets["ghat"], :].T,
+        "phi": phi.T,
+        "g": GF[0, :].T,
+        "f": GF[1:, :].T,
+        "eta0": eta0.T,
+        "y0": net["y0"].T,
+        "u0": net["u0"].T,
+        "track": (X[lay.agent_offsets["p"], :] - ca.repmat(net["y0"], 1, sc.N) - net["b"]).T,
+    }
+    return ca.Function("outputs", [t, x], list(items.values()), ["t", "x"], list(items))
+
+
+def initial_state(sc: Scenario, lay: StateLayout, outputs: ca.Function) -> np.ndarray:
+    """x(0) from the scenario.
+
+    Leader η0(0), μ_i(0), η_i(0), φ_i(0), q_i(0), θ̂_i(0), ĝ_i(0) as given. ``initial.start``:
+    ``given`` uses Table 2's p_i(0); ``formation`` puts p_i(0) at C0 η_i(0) + b_i(0)
+    (q_i(0) stays as given). Filter states start at the current signal with zero
+    derivatives: w1 = η̇_i(0), z1 = b_i(0).
+    """
+    m, n, N = sc.m, sc.n, sc.N
+    parts = {
+        "eta0": sc.leader.eta0,
+        "mu": sc.initial.mu,
+        "eta": sc.initial.eta,
+        "phi": sc.observer.phi0.reshape(N, 1),
+        "p": np.array([fo.p0 for fo in sc.followers]),
+        "q": np.array([fo.q0 for fo in sc.followers]),
+        "thetahat": sc.initial.theta_hat,
+        "ghat": sc.initial.ghat.reshape(N, 1),
+    }
+    filtered = "w" in lay.agent_offsets
+    if filtered:
+        parts["w"] = np.zeros((N, 2 * m))
+        parts["z"] = np.zeros((N, 3 * n))
+    x0 = lay.pack(parts)
+    o = dict(zip(outputs.name_out(), outputs(0.0, x0), strict=True))
+    etadot = np.array(o["etadot"])
+    b = np.array(o["b"])
+    if sc.initial.start == "formation":
+        parts["p"] = sc.initial.eta @ np.asarray(sc.leader.C0).T + b
+    if filtered:
+        parts["w"][:, :m] = etadot
+        parts["z"][:, :n] = b
+    return lay.pack(parts)

@@ -59,19 +59,23 @@ class Expr:
         return _eval(self.node, t, _CASADI)
 
     def numpy(self, t: Any) -> Any:
-        """Evaluate with numpy on a float or array ``t``."""
-        return _eval(self.node, np.asarray(t, dtype=float), _NUMPY)
+        """Evaluate with numpy on a float or array ``t`` (overflow gives inf/nan, no warning)."""
+        with np.errstate(all="ignore"):
+            return _eval(self.node, np.asarray(t, dtype=float), _NUMPY)
 
     def breakpoints(self) -> tuple[float, ...]:
-        """Times where a ``step``/``sat``/``abs``/``min``/``max`` argument affine in t crosses zero.
+        """Times t > 0 where the expression jumps or kinks, when the location is affine in t.
 
-        Used to split an integration at known discontinuities.
+        ``step(x)`` and ``abs(x)`` at x = 0, ``sat(x)`` at x = ±1, ``min``/``max``
+        where the arguments cross. Used to split an integration at known
+        discontinuities; a non-affine argument contributes nothing.
         """
         out: list[float] = []
         _collect_breaks(self.node, out)
         return tuple(sorted(set(out)))
 
     def is_constant(self) -> bool:
+        """True when the expression does not mention ``t``."""
         return not _mentions_t(self.node)
 
 
@@ -103,21 +107,33 @@ def parse_expression(text: Any, *, where: str = "expression") -> Expr:
             f"{where}: {type(text).__name__} is not an expression (expected a string such as '2*cos(t)')"
         )
     if len(text) > MAX_LENGTH:
-        raise ExpressionError(f"{where}: expression longer than {MAX_LENGTH} characters")
+        raise ExpressionError(
+            f"{where}: expression longer than {MAX_LENGTH} characters (expected a short formula)"
+        )
     try:
         tree = ast.parse(text.strip(), mode="eval")
     except SyntaxError as exc:
         raise ExpressionError(
-            f"{where}: cannot parse {text!r}: {exc.msg} (expected an expression of t such as '2*cos(t)')"
+            f"{where}: cannot parse {_short(text)}: {exc.msg} "
+            "(expected an expression of t such as '2*cos(t)')"
+        ) from None
+    except (ValueError, RecursionError, MemoryError):  # e.g. a NUL byte, absurd nesting
+        raise ExpressionError(
+            f"{where}: cannot parse {_short(text)} (expected an expression of t such as '2*cos(t)')"
         ) from None
     node = _convert(tree.body, text, where, 0)
     return Expr(text.strip(), node)
 
 
+def _short(text: str) -> str:
+    """``repr`` of the expression text, shortened so a message stays one readable line."""
+    return repr(text if len(text) <= 80 else text[:77] + "...")
+
+
 def _reject(where: str, text: str, token: str) -> ExpressionError:
     allowed = ", ".join(sorted(FUNCTIONS))
     return ExpressionError(
-        f"{where}: {text!r}: token {token!r} is not allowed "
+        f"{where}: {_short(text)}: token {token!r} is not allowed "
         f"(allowed: numbers, t, pi, + - * / **, and {allowed})"
     )
 
@@ -129,9 +145,15 @@ def _convert(n: ast.AST, text: str, where: str, depth: int) -> tuple:
     if isinstance(n, ast.Constant):
         if isinstance(n.value, bool) or not isinstance(n.value, int | float):
             raise _reject(where, text, repr(n.value))
-        v = float(n.value)
+        try:
+            v = float(n.value)
+        except OverflowError:  # an integer literal beyond the float range
+            v = math.inf
         if not math.isfinite(v):
-            raise ExpressionError(f"{where}: {text!r}: non-finite number")
+            raise ExpressionError(
+                f"{where}: {_short(text)}: number {_snippet(text, n)!r} is too large "
+                "(expected a finite float)"
+            )
         return ("num", v)
     if isinstance(n, ast.Name):
         if n.id == "t":
@@ -151,7 +173,7 @@ def _convert(n: ast.AST, text: str, where: str, depth: int) -> tuple:
         )
     if isinstance(n, ast.Call):
         if not isinstance(n.func, ast.Name):
-            raise _reject(where, text, ast.unparse(n.func))
+            raise _reject(where, text, _token(n.func, text))
         name = n.func.id
         if name not in FUNCTIONS:
             raise _reject(where, text, name)
@@ -159,21 +181,39 @@ def _convert(n: ast.AST, text: str, where: str, depth: int) -> tuple:
             raise _reject(where, text, n.keywords[0].arg or "**")
         if len(n.args) not in FUNCTIONS[name]:
             raise ExpressionError(
-                f"{where}: {text!r}: {name} takes {FUNCTIONS[name][0]} argument(s), got {len(n.args)}"
+                f"{where}: {_short(text)}: {name} takes {FUNCTIONS[name][0]} argument(s), "
+                f"got {len(n.args)} (expected e.g. {name}({', '.join(['t'] * FUNCTIONS[name][0])}))"
             )
         return ("call", name, tuple(_convert(a, text, where, d) for a in n.args))
-    token = type(n).__name__
+    raise _reject(where, text, _token(n, text))
+
+
+_OP_TEXT = {
+    ast.Mod: "%", ast.FloorDiv: "//", ast.MatMult: "@", ast.LShift: "<<", ast.RShift: ">>",
+    ast.BitOr: "|", ast.BitXor: "^", ast.BitAnd: "&", ast.Not: "not", ast.Invert: "~",
+}  # fmt: skip
+_NODE_TEXT = {
+    ast.Lambda: "lambda", ast.ListComp: "comprehension", ast.SetComp: "comprehension",
+    ast.DictComp: "comprehension", ast.GeneratorExp: "comprehension", ast.IfExp: "if-else",
+    ast.Compare: "comparison", ast.BoolOp: "and/or", ast.Subscript: "subscript [...]",
+    ast.NamedExpr: ":=", ast.Starred: "*", ast.JoinedStr: "f-string",
+}  # fmt: skip
+
+
+def _token(n: ast.AST, text: str) -> str:
+    """A short name for a rejected node: the operator or construct, never the whole text."""
     if isinstance(n, ast.Attribute):
-        token = "." + n.attr
-    elif isinstance(n, ast.Lambda):
-        token = "lambda"
-    elif isinstance(n, ast.BinOp | ast.UnaryOp):
-        token = type(n.op).__name__
-    return _raise(_reject(where, text, token))
+        return "." + n.attr
+    if isinstance(n, ast.BinOp | ast.UnaryOp):
+        return _OP_TEXT.get(type(n.op), type(n.op).__name__)
+    if type(n) in _NODE_TEXT:
+        return _NODE_TEXT[type(n)]
+    return _snippet(text, n) or type(n).__name__
 
 
-def _raise(exc: Exception):
-    raise exc
+def _snippet(text: str, n: ast.AST) -> str:
+    seg = ast.get_source_segment(text.strip(), n) or ""
+    return seg if len(seg) <= 30 else seg[:27] + "..."
 
 
 def _mentions_t(node: tuple) -> bool:
@@ -264,16 +304,18 @@ def _collect_breaks(node: tuple, out: list[float]) -> None:
     name, args = node[1], node[2]
     for a in args:
         _collect_breaks(a, out)
-    if name in ("step", "sat", "abs", "min", "max"):
-        cand = (
-            [a for a in args]
-            if name != "min" and name != "max"
-            else [("bin", "-", args[0], args[1])]
-        )
-        for a in cand:
-            root = _affine_root(a)
-            if root is not None and root > 0:
-                out.append(root)
+    if name in ("step", "abs"):  # jump / kink where the argument is 0
+        cand = [args[0]]
+    elif name == "sat":  # kinks where the argument is -1 and +1
+        cand = [("bin", "-", args[0], ("num", 1.0)), ("bin", "+", args[0], ("num", 1.0))]
+    elif name in ("min", "max"):  # kink where the arguments cross
+        cand = [("bin", "-", args[0], args[1])]
+    else:
+        cand = []
+    for a in cand:
+        root = _affine_root(a)
+        if root is not None and root > 0:
+            out.append(root)
 
 
 def _affine_root(node: tuple) -> float | None:

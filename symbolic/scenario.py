@@ -14,11 +14,13 @@ import hashlib
 import math
 import tomllib
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from symbolic.errors import ExpressionError, ScenarioError
 from symbolic.expressions import Expr, parse_expression
@@ -29,6 +31,9 @@ GHAT_LAWS = ("paper", "sigma", "projection", "sigma+projection")
 DERIVATIVES = ("oracle", "filtered")
 METHODS = ("cvodes", "idas", "fixed")
 START_MODES = ("given", "formation")
+MAX_TABLE_ROWS = 1000  # rows of a piecewise g_i table
+MAX_TRACE_ROWS = 1_000_000  # rows of a CSV operator trace
+MAX_OUTPUT_ROWS = 1e7  # horizon / output_step: beyond this no trajectory file is sensible
 
 
 # --------------------------------------------------------------------------- types
@@ -279,10 +284,13 @@ class _Ctx:
     # -- numbers
     def number(self, v: Any, key: str, *, positive: bool = False, nonneg: bool = False) -> float:
         if isinstance(v, bool) or not isinstance(v, int | float):
-            raise self.err(key, f"{v!r} is not a number", "a finite number")
-        x = float(v)
+            raise self.err(key, f"{_brief(v)} is not a number", "a finite number")
+        try:
+            x = float(v)
+        except OverflowError:  # TOML integers are unbounded in tomllib
+            x = math.inf
         if not math.isfinite(x):
-            raise self.err(key, f"{v!r} is not finite", "a finite number")
+            raise self.err(key, f"{_brief(v)} is not finite", "a finite number")
         if positive and x <= 0:
             raise self.err(key, f"{x} is not positive", "a value > 0")
         if nonneg and x < 0:
@@ -297,6 +305,8 @@ class _Ctx:
             raise self.err(
                 key, "rows have different lengths", f"a matrix of shape {_shape_txt(shape)}"
             )
+        if 0 in ncols:
+            raise self.err(key, "has empty rows", f"a matrix of shape {_shape_txt(shape)}")
         arr = np.array(
             [[self.number(x, f"{key}[{i}][{j}]") for j, x in enumerate(r)] for i, r in enumerate(v)]
         )
@@ -311,7 +321,9 @@ class _Ctx:
     def vector(self, v: Any, key: str, length: int | None, **kw: bool) -> np.ndarray:
         if not isinstance(v, list):
             raise self.err(
-                key, f"{v!r} is not a list", f"a list of {length if length else 'some'} numbers"
+                key,
+                f"{_brief(v)} is not a list",
+                f"a list of {length if length else 'some'} numbers",
             )
         if length is not None and len(v) != length:
             raise self.err(key, f"has {len(v)} entries", f"{length} entries")
@@ -347,13 +359,13 @@ class _Ctx:
         return arr
 
     def choice(self, v: Any, key: str, options: tuple[str, ...]) -> str:
-        if v not in options:
-            raise self.err(key, f"{v!r} is not allowed", "one of " + ", ".join(options))
+        if not isinstance(v, str) or v not in options:
+            raise self.err(key, f"{_brief(v)} is not allowed", "one of " + ", ".join(options))
         return v
 
     def boolean(self, v: Any, key: str) -> bool:
         if not isinstance(v, bool):
-            raise self.err(key, f"{v!r} is not a boolean", "true or false")
+            raise self.err(key, f"{_brief(v)} is not a boolean", "true or false")
         return v
 
     def expr(self, v: Any, key: str) -> Expr:
@@ -370,6 +382,12 @@ class _Ctx:
             raise self.err(
                 key, f"cannot parse expression ({type(exc).__name__})", "an expression of t"
             ) from None
+
+
+def _brief(v: Any) -> str:
+    """``repr`` of a user value, shortened so the message stays one readable line."""
+    r = repr(v)
+    return r if len(r) <= 60 else r[:57] + "..."
 
 
 def _shape_txt(shape: tuple[int | None, int | None]) -> str:
@@ -426,17 +444,29 @@ def load_scenario(path: str | Path) -> Scenario:
 
 
 def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
-    from symbolic.models import REGISTRY
-
     ctx.table(data, "", _TOP, {"leader", "graph", "followers"})
     name = data.get("name", path.stem)
-    if not isinstance(name, str) or not name or not all(c.isalnum() or c in "-_." for c in name):
-        raise ctx.err("name", f"{name!r} is not a plain name", "letters, digits, '-', '_' or '.'")
+    if (
+        not isinstance(name, str)
+        or not name
+        or name.startswith(".")
+        or len(name) > 100
+        or not all(c.isascii() and (c.isalnum() or c in "-_.") for c in name)
+    ):
+        raise ctx.err(
+            "name",
+            f"{_brief(name)} is not a plain name (it names the output folder out/<name>/)",
+            "ASCII letters, digits, '-', '_' or '.', not starting with '.'",
+        )
     desc = data.get("description", "")
     if not isinstance(desc, str):
         raise ctx.err("description", "is not a string", "a string")
 
-    # ---- leader
+    # ---- integration first: u0, g_i and f_i are checked over [0, horizon]
+    integ = _integration(ctx, data.get("integration", {}))
+    tgrid = np.linspace(0.0, integ.horizon, 4001)
+
+    # ---- leader, eq. (3)
     L = ctx.table(data["leader"], "leader", _LEADER, {"A0", "B0", "C0", "alpha"})
     A0 = ctx.matrix(L["A0"], "leader.A0", (None, None))
     m = A0.shape[0]
@@ -458,17 +488,31 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     u0: tuple[Expr, ...] | None = None
     trace: np.ndarray | None = None
     if "u0" in L:
-        if not isinstance(L["u0"], list) or len(L["u0"]) != p:
+        u0_raw = L["u0"]
+        if not isinstance(u0_raw, list) or len(u0_raw) != p:
+            got = f"has {len(u0_raw)} entries" if isinstance(u0_raw, list) else "is not a list"
+            raise ctx.err("leader.u0", got, f"a list of {p} expressions of t (p = columns of B0)")
+        u0 = tuple(ctx.expr(e, f"leader.u0[{k}]") for k, e in enumerate(u0_raw))
+        ts = np.unique(np.concatenate([_times(e, tgrid) for e in u0]))
+        u_peak = _sup(lambda t: np.sqrt(sum(_sample(e, t) ** 2 for e in u0)), ts)
+        if not math.isfinite(u_peak):
             raise ctx.err(
-                "leader.u0",
-                f"has {len(L['u0']) if isinstance(L['u0'], list) else 'no list of'} entries",
-                f"a list of {p} expressions (p = columns of B0)",
+                "leader.u0", "is not finite somewhere on [0, horizon]", "a bounded operator input"
             )
-        u0 = tuple(ctx.expr(e, f"leader.u0[{k}]") for k, e in enumerate(L["u0"]))
+        where_u = "leader.u0"
     else:
-        trace = _load_trace(ctx, path, L["u0_csv"], p)
+        trace = _load_trace(ctx, path, L["u0_csv"], p, integ.horizon)
+        # piecewise linear: the norm peaks at a sample (convexity)
+        u_peak = float(np.sqrt((trace[:, 1:] ** 2).sum(axis=1)).max())
+        where_u = "leader.u0_csv"
+    if u_peak > alpha * (1 + 1e-9):
+        raise ctx.err(
+            "leader.alpha",
+            f"{where_u} reaches ||u0|| = {u_peak:.6g} > alpha = {alpha:.6g}",
+            "alpha >= sup ||u0(t)|| on [0, horizon] (the bound the followers design for)",
+        )
 
-    # ---- graph
+    # ---- graph (section 1)
     G = ctx.table(data["graph"], "graph", _GRAPH, {"adjacency", "pinning"})
     Aadj = ctx.matrix(G["adjacency"], "graph.adjacency", (None, None))
     N = Aadj.shape[0]
@@ -485,30 +529,7 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
         raise ctx.err("graph", f"follower(s) {names} cannot be reached from the leader (Assumption 1)",
                       "a directed spanning tree rooted at the leader: add a pinning a_i0 > 0 or an edge a_ij != 0 from a reachable agent")  # fmt: skip
 
-    # ---- integration (needed to check g_i and f_i over the horizon)
-    I = ctx.table(data.get("integration", {}), "integration", _INTEGRATION)
-    integ = Integration(
-        method=ctx.choice(I.get("method", "cvodes"), "integration.method", METHODS),
-        rtol=ctx.number(I.get("rtol", 1e-6), "integration.rtol", positive=True),
-        atol=ctx.number(I.get("atol", 1e-8), "integration.atol", positive=True),
-        horizon=ctx.number(I.get("horizon", 20.0), "integration.horizon", positive=True),
-        output_step=ctx.number(
-            I.get("output_step", 0.01), "integration.output_step", positive=True
-        ),
-        fixed_step=ctx.number(I.get("fixed_step", 1e-3), "integration.fixed_step", positive=True),
-        max_steps=int(
-            ctx.number(I.get("max_steps", 200000), "integration.max_steps", positive=True)
-        ),
-    )
-    if integ.output_step > integ.horizon:
-        raise ctx.err(
-            "integration.output_step",
-            f"{integ.output_step} exceeds the horizon {integ.horizon}",
-            "output_step <= horizon",
-        )
-    tgrid = np.linspace(0.0, integ.horizon, 4001)
-
-    # ---- followers
+    # ---- followers, eq. (2)
     F = data["followers"]
     if not isinstance(F, list) or not all(isinstance(x, dict) for x in F):
         raise ctx.err(
@@ -520,73 +541,18 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
             f"has {len(F)} followers but graph.adjacency is {N}x{N}",
             "one [[followers]] table per row of the adjacency matrix",
         )
-    followers = []
-    for i, fo in enumerate(F):
-        key = f"followers[{i + 1}]"
-        ctx.table(fo, key, _FOLLOWER, {"model", "p0", "b0"})
-        model = fo["model"]
-        if model not in REGISTRY:
-            raise ctx.err(
-                f"{key}.model",
-                f"{model!r} is not a known model",
-                "one of " + ", ".join(sorted(REGISTRY)),
-            )
-        spec = REGISTRY[model]
-        if spec.n != n:
-            raise ctx.err(
-                f"{key}.model",
-                f"{model!r} has n = {spec.n} coordinates but C0 has {n} rows",
-                f"a model with n = {n}",
-            )
-        prm = ctx.table(fo.get("params", {}), f"{key}.params", set(spec.defaults))
-        params = {
-            k: ctx.number(prm.get(k, v), f"{key}.params.{k}") for k, v in spec.defaults.items()
-        }
-        health = _health(ctx, fo.get("g", 1.0), f"{key}.g", tgrid)
-        f_raw = fo.get("f", [0.0] * n)
-        if not isinstance(f_raw, list) or len(f_raw) != n:
-            raise ctx.err(
-                f"{key}.f", "wrong number of components", f"a list of {n} expressions of t"
-            )
-        f = tuple(ctx.expr(e, f"{key}.f[{r}]") for r, e in enumerate(f_raw))
-        fvals = np.array([np.broadcast_to(e.numpy(tgrid), tgrid.shape) for e in f])
-        if not np.all(np.isfinite(fvals)):
-            raise ctx.err(
-                f"{key}.f",
-                "is not finite somewhere on [0, horizon]",
-                "a bounded disturbance (Assumption 3)",
-            )
-        if "d" in fo:
-            d = ctx.vector(fo["d"], f"{key}.d", n, nonneg=True)
-            worst = np.abs(fvals).max(axis=1)
-            if np.any(worst > d * (1 + 1e-9)):
-                r = int(np.argmax(worst - d))
-                raise ctx.err(
-                    f"{key}.d",
-                    f"|f[{r}]| reaches {worst[r]:.4g} > d = {d[r]:.4g}",
-                    "d_ir >= sup |f_ir(t)| (Assumption 3)",
-                )
-        else:
-            d = _freeze(np.abs(fvals).max(axis=1))
-        followers.append(
-            Follower(
-                model=model,
-                params=params,
-                p0=ctx.vector(fo["p0"], f"{key}.p0", n),
-                q0=ctx.vector(fo.get("q0", [0.0] * n), f"{key}.q0", n),
-                b0=ctx.vector(fo["b0"], f"{key}.b0", n),
-                g=health,
-                f=f,
-                d=d,
-            )
-        )
+    followers = tuple(_follower(ctx, fo, i, n, tgrid) for i, fo in enumerate(F))
 
     # ---- observer
     O = ctx.table(data.get("observer", {}), "observer", _OBSERVER)
 
-    def gain(key: str, default: Any, conv):  # noqa: ANN001
+    def gain(key: str, default: Any, conv: Callable[[Any, str], Any]) -> Any:
         v = O.get(key, default)
-        return None if v == SYNTH else conv(v, f"observer.{key}")
+        if v == SYNTH:
+            return None
+        if isinstance(v, str):
+            raise ctx.err(f"observer.{key}", f"{_brief(v)} is not a value", f"a value or {SYNTH!r}")
+        return conv(v, f"observer.{key}")
 
     obs = Observer(
         lambda1=gain("lambda1", SYNTH, lambda v, k: ctx.number(v, k, positive=True)),
@@ -641,6 +607,7 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     )
     if not ctrl.g_min <= 1.0:
         raise ctx.err("controller.g_min", f"{ctrl.g_min} is outside (0, 1]", "0 < g_min <= 1")
+    worst_g = min(fo.g.minimum for fo in followers)
 
     # ---- options
     Op = ctx.table(data.get("options", {}), "options", _OPTIONS)
@@ -661,6 +628,13 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     if "sigma" in opts.ghat_law and np.any(ctrl.sigma <= 0):
         raise ctx.err(
             "controller.sigma", f"ghat_law {opts.ghat_law!r} needs sigma > 0", "sigma > 0"
+        )
+    if "projection" in opts.ghat_law and worst_g < ctrl.g_min * (1 - 1e-12):
+        raise ctx.err(
+            "controller.g_min",
+            f"{ctrl.g_min:g} exceeds the smallest actuator health {worst_g:.4g}, so the "
+            f"projection of ghat onto [1, 1/g_min] excludes 1/g",
+            f"g_min <= {worst_g:.4g}, or ghat_law without projection",
         )
     if opts.sign == "exact" and integ.method != "fixed":
         raise ctx.err(
@@ -686,12 +660,126 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
         description=desc,
         leader=Leader(A0=A0, B0=B0, C0=C0, eta0=eta0, u0=u0, u0_trace=trace, alpha=alpha),
         graph=Graph(adjacency=Aadj, pinning=pin),
-        followers=tuple(followers),
+        followers=followers,
         observer=obs,
         controller=ctrl,
         options=opts,
         initial=init,
         integration=integ,
+    )
+
+
+def _integration(ctx: _Ctx, raw: Any) -> Integration:
+    """The [integration] table."""
+    I = ctx.table(raw, "integration", _INTEGRATION)
+    max_steps = ctx.number(I.get("max_steps", 200000), "integration.max_steps", positive=True)
+    if max_steps != int(max_steps) or max_steps > 1e12:
+        raise ctx.err(
+            "integration.max_steps", f"{max_steps!r} is not a whole number", "an integer <= 1e12"
+        )
+    integ = Integration(
+        method=ctx.choice(I.get("method", "cvodes"), "integration.method", METHODS),
+        rtol=ctx.number(I.get("rtol", 1e-6), "integration.rtol", positive=True),
+        atol=ctx.number(I.get("atol", 1e-8), "integration.atol", positive=True),
+        horizon=ctx.number(I.get("horizon", 20.0), "integration.horizon", positive=True),
+        output_step=ctx.number(
+            I.get("output_step", 0.01), "integration.output_step", positive=True
+        ),
+        fixed_step=ctx.number(I.get("fixed_step", 1e-3), "integration.fixed_step", positive=True),
+        max_steps=int(max_steps),
+    )
+    if integ.rtol >= 1.0:
+        raise ctx.err("integration.rtol", f"{integ.rtol} >= 1", "a relative tolerance < 1")
+    if integ.output_step > integ.horizon:
+        raise ctx.err(
+            "integration.output_step",
+            f"{integ.output_step} exceeds the horizon {integ.horizon}",
+            "output_step <= horizon",
+        )
+    if integ.horizon / integ.output_step > MAX_OUTPUT_ROWS:
+        raise ctx.err(
+            "integration.output_step",
+            f"horizon / output_step = {integ.horizon / integ.output_step:.3g} output rows",
+            f"at most {MAX_OUTPUT_ROWS:.0e} rows (a larger output_step or a shorter horizon)",
+        )
+    if integ.fixed_step > integ.horizon:
+        raise ctx.err(
+            "integration.fixed_step",
+            f"{integ.fixed_step} exceeds the horizon {integ.horizon}",
+            "fixed_step <= horizon",
+        )
+    return integ
+
+
+def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Follower:
+    """One [[followers]] table (0-based ``i``; messages say ``followers[i+1]``)."""
+    from symbolic.models import REGISTRY
+
+    key = f"followers[{i + 1}]"
+    ctx.table(fo, key, _FOLLOWER, {"model", "p0", "b0"})
+    model = fo["model"]
+    if not isinstance(model, str) or model not in REGISTRY:
+        raise ctx.err(
+            f"{key}.model",
+            f"{model!r} is not a known model",
+            "one of " + ", ".join(sorted(REGISTRY)),
+        )
+    spec = REGISTRY[model]
+    if spec.n != n:
+        raise ctx.err(
+            f"{key}.model",
+            f"{model!r} has n = {spec.n} coordinates but leader.C0 has {n} rows",
+            f"a model with n = {n}, or a C0 with {spec.n} rows",
+        )
+    prm = ctx.table(fo.get("params", {}), f"{key}.params", set(spec.defaults))
+    params = {
+        k: ctx.number(
+            prm.get(k, v),
+            f"{key}.params.{k}",
+            positive=k not in spec.nonnegative,
+            nonneg=k in spec.nonnegative,
+        )
+        for k, v in spec.defaults.items()
+    }
+    health = _health(ctx, fo.get("g", 1.0), f"{key}.g", tgrid)
+    f_raw = fo.get("f", 0.0)
+    if not isinstance(f_raw, list):
+        f_raw = [f_raw] * n  # one expression for every component
+    if len(f_raw) != n:
+        raise ctx.err(
+            f"{key}.f",
+            f"has {len(f_raw)} components",
+            f"one expression of t, or a list of {n} (one per coordinate)",
+        )
+    f = tuple(ctx.expr(e, f"{key}.f[{r}]") for r, e in enumerate(f_raw))
+    worst = np.array([_sup(lambda t, e=e: np.abs(_sample(e, t)), _times(e, tgrid)) for e in f])
+    for r, w in enumerate(worst):
+        if not math.isfinite(w):
+            raise ctx.err(
+                f"{key}.f[{r}]",
+                "is not finite somewhere on [0, horizon]",
+                "a bounded disturbance (Assumption 3)",
+            )
+    if "d" in fo:
+        d = ctx.vector(fo["d"], f"{key}.d", n, nonneg=True)
+        if np.any(worst > d * (1 + 1e-9)):
+            r = int(np.argmax(worst - d))
+            raise ctx.err(
+                f"{key}.d",
+                f"|f[{r}]| reaches {worst[r]:.4g} > d = {d[r]:.4g}",
+                "d_ir >= sup |f_ir(t)| (Assumption 3)",
+            )
+    else:
+        d = _freeze(worst)
+    return Follower(
+        model=model,
+        params=params,
+        p0=ctx.vector(fo["p0"], f"{key}.p0", n),
+        q0=ctx.vector(fo.get("q0", [0.0] * n), f"{key}.q0", n),
+        b0=ctx.vector(fo["b0"], f"{key}.b0", n),
+        g=health,
+        f=f,
+        d=d,
     )
 
 
@@ -703,6 +791,52 @@ def _rows(ctx: _Ctx, v: Any, key: str, N: int, k: int, **kw: bool) -> np.ndarray
     return ctx.per_agent_comp(v, key, N, k, **kw)
 
 
+def _times(e: Expr, tgrid: np.ndarray) -> np.ndarray:
+    """``tgrid`` plus both sides of the known breakpoints of ``e`` (so a step is not missed)."""
+    H = tgrid[-1]
+    extra = [x for b in e.breakpoints() if 0.0 <= b <= H for x in (b, b - 1e-9, b + 1e-9)]
+    ts = np.concatenate([tgrid, np.array(extra, dtype=float)])
+    return np.unique(ts[(ts >= 0.0) & (ts <= H)])
+
+
+def _sample(e: Expr, ts: np.ndarray) -> np.ndarray:
+    """``e`` evaluated on the times ``ts`` as a float array of the same shape."""
+    return np.array(np.broadcast_to(e.numpy(ts), ts.shape), dtype=float)
+
+
+def _sup(fun: Callable[[np.ndarray], np.ndarray], ts: np.ndarray) -> float:
+    """sup of ``fun`` over [ts[0], ts[-1]]: the sampled maximum, refined near its top peaks.
+
+    Sampling alone under-estimates a supremum between grid points; a bound such
+    as d_ir or alpha must not, so each near-maximal local peak is refined with a
+    bounded scalar search. Returns nan when ``fun`` is not finite on ``ts``.
+    """
+    v = fun(ts)
+    if not np.all(np.isfinite(v)):
+        return math.nan
+    top = float(v.max())
+    if float(v.min()) == top:  # constant: nothing to refine
+        return top
+    # strict local peaks of the samples (one side may tie), the highest few
+    left = np.concatenate([[-np.inf], v[:-1]])
+    right = np.concatenate([v[1:], [-np.inf]])
+    peaks = np.flatnonzero((v >= left) & (v >= right) & ((v > left) | (v > right)))
+    tol = 1e-3 * max(1.0, abs(top))
+    peaks = peaks[v[peaks] >= top - tol]
+    for k in peaks[np.argsort(-v[peaks])][:5]:
+        lo, hi = ts[max(k - 1, 0)], ts[min(k + 1, len(ts) - 1)]
+        if hi > lo:
+            res = minimize_scalar(
+                lambda x: -float(fun(np.array([x]))[0]),
+                bounds=(lo, hi),
+                method="bounded",
+                options={"xatol": 1e-12 * max(1.0, hi)},
+            )
+            if math.isfinite(res.fun):
+                top = max(top, -float(res.fun))
+    return top
+
+
 def _health(ctx: _Ctx, v: Any, key: str, tgrid: np.ndarray) -> Health:
     """g_i(t): constant, table [[t_start, value], ...] or expression; checked in (0, 1]."""
     if isinstance(v, list):
@@ -710,80 +844,123 @@ def _health(ctx: _Ctx, v: Any, key: str, tgrid: np.ndarray) -> Health:
             raise ctx.err(
                 key, "is not a table of [t_start, value] pairs", "e.g. [[0.0, 1.0], [5.0, 0.6]]"
             )
+        if len(v) > MAX_TABLE_ROWS:
+            raise ctx.err(key, f"has {len(v)} rows", f"at most {MAX_TABLE_ROWS} rows")
         rows = [
             (ctx.number(a, f"{key}[{k}][0]", nonneg=True), ctx.number(b, f"{key}[{k}][1]"))
             for k, (a, b) in enumerate(v)
         ]
         if rows[0][0] != 0.0:
             raise ctx.err(f"{key}[0][0]", f"first segment starts at {rows[0][0]}", "0.0")
-        if any(b[0] <= a[0] for a, b in zip(rows, rows[1:], strict=False)):
-            raise ctx.err(
-                key, "segment start times are not increasing", "strictly increasing t_start"
-            )
+        for k in range(1, len(rows)):
+            if rows[k][0] <= rows[k - 1][0]:
+                raise ctx.err(
+                    f"{key}[{k}][0]",
+                    f"t_start {rows[k][0]} does not follow {rows[k - 1][0]}",
+                    "strictly increasing t_start",
+                )
+        for k, (_, b) in enumerate(rows):
+            if not 0.0 < b <= 1.0:
+                raise ctx.err(
+                    f"{key}[{k}][1]",
+                    f"actuator health {b:.4g} is outside (0, 1]",
+                    "0 < g_i <= 1 (1 = healthy)",
+                )
         vals = [b for _, b in rows]
+        # g(t) = g_0 + Σ_k (g_k − g_{k−1}) step(t − t_k), built as a node tree (no text parsing)
+        terms = [("num", vals[0])] + [
+            ("bin", "*", ("num", b - a), ("call", "step", (("bin", "-", ("t",), ("num", t0)),)))
+            for (t0, b), a in zip(rows[1:], vals, strict=False)
+        ]
         text = repr(vals[0]) + "".join(
             f" + ({b - a!r})*step(t - {t0!r})" for (t0, b), a in zip(rows[1:], vals, strict=False)
         )
-        expr = ctx.expr(text, key)
+        expr = Expr(text, _balanced_sum(terms))
         breaks = tuple(t0 for t0, _ in rows[1:])
-        lo, hi = min(vals), max(vals)
+        lo = min(vals)
     else:
         expr = ctx.expr(v, key)
-        vals_t = np.broadcast_to(expr.numpy(tgrid), tgrid.shape)
-        bks = expr.breakpoints()
-        extra = np.array([x for b in bks for x in (b, b - 1e-9, b + 1e-9)]) if bks else np.zeros(0)
-        if extra.size:
-            vals_t = np.concatenate([vals_t, np.broadcast_to(expr.numpy(extra), extra.shape)])
-        if not np.all(np.isfinite(vals_t)):
+        ts = _times(expr, tgrid)
+        lo = -_sup(lambda t: -_sample(expr, t), ts)
+        hi = _sup(lambda t: _sample(expr, t), ts)
+        if not (math.isfinite(lo) and math.isfinite(hi)):
             raise ctx.err(key, "is not finite somewhere on [0, horizon]", "a value in (0, 1]")
-        lo, hi = float(vals_t.min()), float(vals_t.max())
-        breaks = bks
-    if not (lo > 0.0 and hi <= 1.0):
-        bad = lo if lo <= 0 else hi
-        raise ctx.err(
-            key, f"actuator health reaches {bad:.4g}, outside (0, 1]", "0 < g_i <= 1 (1 = healthy)"
-        )
-    return Health(expr=expr, breakpoints=breaks, minimum=lo)
+        if not (lo > 0.0 and hi <= 1.0 + 1e-12):
+            bad = lo if lo <= 0 else hi
+            raise ctx.err(
+                key,
+                f"actuator health reaches {bad:.4g}, outside (0, 1]",
+                "0 < g_i <= 1 (1 = healthy)",
+            )
+        breaks = expr.breakpoints()
+    return Health(expr=expr, breakpoints=breaks, minimum=float(lo))
 
 
-def _load_trace(ctx: _Ctx, scen_path: Path, rel: Any, p: int) -> np.ndarray:
+def _balanced_sum(terms: list[tuple]) -> tuple:
+    """A sum as a balanced tree, so long tables stay shallow for the recursive evaluators."""
+    if len(terms) == 1:
+        return terms[0]
+    mid = len(terms) // 2
+    return ("bin", "+", _balanced_sum(terms[:mid]), _balanced_sum(terms[mid:]))
+
+
+def _load_trace(ctx: _Ctx, scen_path: Path, rel: Any, p: int, horizon: float) -> np.ndarray:
+    """Recorded operator commands: CSV with columns t, u0_1..u0_p (see docs/scenario-format.md).
+
+    An optional header line and ``#`` comment lines are skipped. Time must be
+    strictly increasing and cover [0, horizon]; u0 is linear between rows.
+    """
     key = "leader.u0_csv"
-    if not isinstance(rel, str):
+    if not isinstance(rel, str) or not rel.strip():
         raise ctx.err(key, "is not a path", "a CSV path relative to the scenario file")
-    fpath = (scen_path.parent / rel).resolve()
     try:
-        with fpath.open(newline="") as fh:
-            rows = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+        fpath = (scen_path.parent / rel).resolve()
+        rows: list[tuple[int, list[str]]] = []
+        with fpath.open(newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            for r in reader:
+                if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#"):
+                    rows.append((reader.line_num, r))
+                if len(rows) > MAX_TRACE_ROWS:
+                    raise ctx.err(
+                        key, f"{rel} has more than {MAX_TRACE_ROWS} rows", "a shorter trace"
+                    )
     except OSError as exc:
-        raise ctx.err(key, f"cannot read {fpath}: {exc.strerror}", "an existing CSV file") from None
-    if rows and not _is_float(rows[0][0]):
+        raise ctx.err(key, f"cannot read {rel}: {exc.strerror}", "an existing CSV file") from None
+    except (UnicodeDecodeError, csv.Error, ValueError) as exc:  # binary file, NUL byte, bad path
+        raise ctx.err(
+            key, f"{rel} is not a readable CSV text file ({type(exc).__name__})", "UTF-8 CSV text"
+        ) from None
+    if rows and not _is_float(rows[0][1][0]):
         rows = rows[1:]  # header
     if len(rows) < 2:
         raise ctx.err(
-            key,
-            f"{fpath} has fewer than two data rows",
-            "columns t, u0_1..u0_p with at least two rows",
+            key, f"{rel} has fewer than two data rows", "columns t, u0_1..u0_p, two rows or more"
         )
     data = []
-    for k, r in enumerate(rows):
+    for line, r in rows:
         if len(r) != 1 + p:
             raise ctx.err(
-                key,
-                f"{fpath} row {k + 1} has {len(r)} columns",
-                f"{1 + p} columns: t and {p} inputs",
+                key, f"{rel} line {line} has {len(r)} columns", f"{1 + p} columns: t and {p} inputs"
             )
-        try:
-            vals = [float(x) for x in r]
-        except ValueError:
-            raise ctx.err(key, f"{fpath} row {k + 1} is not numeric", "numbers") from None
+        if not all(_is_float(x) for x in r):
+            raise ctx.err(key, f"{rel} line {line} is not numeric", "numbers")
+        vals = [float(x) for x in r]
         if not all(map(math.isfinite, vals)):
-            raise ctx.err(key, f"{fpath} row {k + 1} is not finite", "finite numbers")
+            raise ctx.err(key, f"{rel} line {line} is not finite", "finite numbers")
+        if data and vals[0] <= data[-1][0]:
+            raise ctx.err(
+                key,
+                f"{rel} line {line}: time {vals[0]:g} does not increase (previous {data[-1][0]:g})",
+                "a trace strictly increasing in time",
+            )
         data.append(vals)
     arr = np.array(data)
-    if np.any(np.diff(arr[:, 0]) <= 0):
-        k = int(np.argmax(np.diff(arr[:, 0]) <= 0)) + 2
+    if arr[0, 0] > 0.0 or arr[-1, 0] < horizon:
         raise ctx.err(
-            key, f"{fpath}: time is not strictly increasing at row {k}", "a trace monotone in time"
+            key,
+            f"{rel} covers [{arr[0, 0]:g}, {arr[-1, 0]:g}] but the horizon is [0, {horizon:g}]",
+            "a trace covering [0, integration.horizon] (or a shorter horizon)",
         )
     return _freeze(arr)
 
@@ -791,7 +968,7 @@ def _load_trace(ctx: _Ctx, scen_path: Path, rel: Any, p: int) -> np.ndarray:
 def _is_float(s: str) -> bool:
     try:
         float(s)
-    except ValueError:
+    except (ValueError, OverflowError):
         return False
     return True
 

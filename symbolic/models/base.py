@@ -38,6 +38,9 @@ class ModelSpec:
         symbols (sympy).
     description : str
         One line for the README and summaries.
+    nonnegative : frozenset[str]
+        Parameters that may be zero (e.g. gravity ``g0``); every other
+        parameter must be strictly positive (checked when a scenario loads).
     """
 
     name: str
@@ -45,6 +48,7 @@ class ModelSpec:
     defaults: Mapping[str, float]
     lagrangian: Callable[[Mapping[str, Any]], tuple[Any, Any, Any, Any]]
     description: str = ""
+    nonnegative: frozenset[str] = frozenset()
 
 
 @dataclass(frozen=True)
@@ -63,7 +67,11 @@ class ELModel:
         ``p -> G(p)`` (n).
     M_bounds : tuple[float, float]
         (inf λ_min(M), sup λ_max(M)) over the configuration space, as needed
-        by Theorem 2's bounds (estimated on a dense grid when not closed form).
+        by Theorem 2's bounds (exact when M is constant; otherwise a dense grid
+        over one period refined by a bounded local search).
+    checks : Mapping[str, str]
+        How Property 1 and Property 2 were established (``"exact"`` or
+        ``"sampled"`` with the reason), for summaries and reports.
     sympy_M, sympy_C, sympy_G, sympy_p, sympy_q :
         The sympy expressions and symbols they came from.
     """
@@ -75,6 +83,7 @@ class ELModel:
     C: ca.Function
     G: ca.Function
     M_bounds: tuple[float, float]
+    checks: Mapping[str, str] = field(default_factory=dict)
     sympy_M: Any = field(repr=False, default=None)
     sympy_C: Any = field(repr=False, default=None)
     sympy_G: Any = field(repr=False, default=None)

@@ -8,6 +8,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 import sympy as sp
+from scipy.optimize import minimize
 
 from symbolic.errors import ScenarioError
 from symbolic.models.base import REGISTRY, ELModel, ModelSpec
@@ -39,50 +40,84 @@ def euler_lagrange_matrices(T: sp.Expr, V: sp.Expr, p: list[sp.Symbol], q: list[
 
 def check_properties(
     M: sp.Matrix, C: sp.Matrix, p: list[sp.Symbol], q: list[sp.Symbol], name: str
-) -> None:
+) -> dict[str, str]:
     """Property 1 (M symmetric, positive definite) and Property 2 (Ṁ − 2C skew), symbolically.
 
-    Positive definiteness is checked by Sylvester's criterion on the leading
-    minors, simplified; a minor that sympy cannot decide is checked on a grid.
+    Positive definiteness uses Sylvester's criterion on the simplified leading
+    minors: a constant minor is decided exactly; a minor of one angle is
+    minimised exactly over one period with :func:`sympy.minimum`; anything
+    else falls back to a dense grid (reported as ``"sampled"``). Property 2
+    must simplify to the zero matrix exactly.
+
+    Returns
+    -------
+    dict
+        ``{"property1": "exact" | "sampled (...)", "property2": "exact"}``.
+
+    Raises
+    ------
+    ScenarioError
+        Naming the model and the failed property.
     """
     if sp.simplify(M - M.T) != sp.zeros(*M.shape):
         raise ScenarioError(
             "model", name, "Property 1 fails: M is not symmetric", "a symmetric inertia matrix"
         )
     n = M.shape[0]
+    how1 = "exact"
     for k in range(1, n + 1):
         minor = sp.simplify(M[:k, :k].det())
-        pos = sp.ask(sp.Q.positive(minor)) if minor.free_symbols else bool(minor > 0)
-        if pos is False:
+        low, exact = _minimum(minor, p)
+        if not exact:
+            how1 = f"sampled (leading minor {k} depends on several coordinates)"
+        if not low > 0:
             raise ScenarioError(
                 "model",
                 name,
-                f"Property 1 fails: leading minor {k} of M is not positive",
-                "M positive definite",
+                f"Property 1 fails: leading minor {k} of M reaches {float(low):.6g}",
+                "M positive definite (check the mass and inertia parameters)",
             )
-        if pos is None:
-            f = sp.lambdify(p, minor, "numpy")
-            rng = np.random.default_rng(0)
-            samples = [float(f(*rng.uniform(-np.pi, np.pi, len(p)))) for _ in range(200)]
-            if min(samples) <= 0:
-                raise ScenarioError(
-                    "model",
-                    name,
-                    f"Property 1 fails: leading minor {k} of M reaches {min(samples):.3g}",
-                    "M positive definite",
-                )
+    # Property 2: Ṁ − 2C skew-symmetric, i.e. S + Sᵀ = 0 exactly
     Mdot = sp.zeros(n, n)
     for i in range(n):
         for j in range(n):
             Mdot[i, j] = sum(sp.diff(M[i, j], p[k]) * q[k] for k in range(n))
     S = sp.simplify(Mdot - 2 * C)
-    if sp.simplify(S + S.T) != sp.zeros(n, n):
+    if not sp.simplify(S + S.T).is_zero_matrix:
         raise ScenarioError(
             "model",
             name,
             "Property 2 fails: Mdot - 2C is not skew-symmetric",
             "C from Christoffel symbols",
         )
+    return {"property1": how1, "property2": "exact"}
+
+
+def _minimum(expr: sp.Expr, p: list[sp.Symbol]) -> tuple[float, bool]:
+    """Infimum of ``expr`` over the coordinates and whether it is exact."""
+    deps = [s for s in p if s in expr.free_symbols]
+    if not deps:
+        return float(expr), True
+    if len(deps) == 1 and _periodic_in(expr, deps):
+        try:
+            low = sp.minimum(expr, deps[0], sp.Interval(-sp.pi, sp.pi))
+            if low.is_number and low.is_finite:
+                return float(low), True
+        except (NotImplementedError, ValueError, TypeError):  # sympy gave up: sample instead
+            pass
+    f = sp.lambdify(deps, expr, "numpy")
+    grid = np.linspace(-np.pi, np.pi, 721 if len(deps) == 1 else 61)
+    pts = np.array(np.meshgrid(*[grid] * len(deps))).reshape(len(deps), -1)
+    return float(np.min(np.broadcast_to(f(*pts), pts.shape[1:]))), False
+
+
+def _periodic_in(expr: sp.Expr, syms: list[sp.Symbol]) -> bool:
+    """True when every symbol in ``syms`` enters ``expr`` only through sin/cos (2π-periodic)."""
+    probe = expr.replace(
+        lambda e: isinstance(e, sp.sin | sp.cos) and e.free_symbols & set(syms),
+        lambda e: sp.Dummy(),
+    )
+    return not (probe.free_symbols & set(syms))
 
 
 def _to_casadi(
@@ -117,20 +152,39 @@ def _mat(rows):  # sympy Matrix -> CasADi SX via nested lists
     )
 
 
-def _mass_bounds(M: sp.Matrix, p: list[sp.Symbol]) -> tuple[float, float]:
-    """inf λ_min(M) and sup λ_max(M) over joint angles, on a dense grid of each coordinate M depends on."""
+def _mass_bounds(M: sp.Matrix, p: list[sp.Symbol], name: str) -> tuple[float, float]:
+    """inf λ_min(M) and sup λ_max(M) over the configuration space (Theorem 2 needs both).
+
+    Exact when M is constant. When M depends on angles only (through sin/cos),
+    a grid over one period is refined by a bounded local search from the best
+    grid point. Any other dependence has no finite configuration box to search,
+    so it is refused.
+    """
     deps = [s for s in p if s in M.free_symbols]
-    f = sp.lambdify(p, M, "numpy")
     if not deps:
-        ev = np.linalg.eigvalsh(np.array(f(*([0.0] * len(p))), dtype=float))
+        ev = np.linalg.eigvalsh(np.array(M.evalf(), dtype=float))
         return float(ev[0]), float(ev[-1])
-    grid = np.linspace(-np.pi, np.pi, 721 if len(deps) == 1 else 121)
-    lo, hi = np.inf, -np.inf
-    for pt in np.array(np.meshgrid(*[grid] * len(deps))).reshape(len(deps), -1).T:
-        vals = dict(zip(deps, pt, strict=True))
-        ev = np.linalg.eigvalsh(np.array(f(*[vals.get(s, 0.0) for s in p]), dtype=float))
-        lo, hi = min(lo, ev[0]), max(hi, ev[-1])
-    return float(lo), float(hi)
+    if not all(_periodic_in(e, deps) for e in M):
+        raise ScenarioError(
+            "model",
+            name,
+            "M depends on a coordinate other than through sin/cos; M_bounds cannot be searched",
+            "an inertia matrix periodic in the coordinates it depends on",
+        )
+    f = sp.lambdify(deps, M, "numpy")
+
+    def eig(x: np.ndarray) -> np.ndarray:
+        return np.linalg.eigvalsh(np.array(f(*x), dtype=float))
+
+    grid = np.linspace(-np.pi, np.pi, 721 if len(deps) == 1 else 121 if len(deps) == 2 else 25)
+    pts = np.array(np.meshgrid(*[grid] * len(deps))).reshape(len(deps), -1).T
+    evs = np.array([eig(x) for x in pts])
+    box = [(-np.pi, np.pi)] * len(deps)
+    x_lo = minimize(lambda x: eig(x)[0], pts[np.argmin(evs[:, 0])], bounds=box)
+    x_hi = minimize(lambda x: -eig(x)[-1], pts[np.argmax(evs[:, -1])], bounds=box)
+    lo = min(float(evs[:, 0].min()), float(x_lo.fun))
+    hi = max(float(evs[:, -1].max()), float(-x_hi.fun))
+    return lo, hi
 
 
 @lru_cache(maxsize=64)
@@ -139,12 +193,13 @@ def _build_cached(name: str, items: tuple[tuple[str, float], ...]) -> ELModel:
     params = dict(items)
     T, V, p, q = spec.lagrangian(params)
     M, C, G = euler_lagrange_matrices(T, V, p, q)
-    check_properties(M, C, p, q, name)
+    checks = check_properties(M, C, p, q, name)
     Mf = _to_casadi(M, [p], ["p"], "M")
     Cf = _to_casadi(C, [p, q], ["p", "q"], "C")
     Gf = _to_casadi(G, [p], ["p"], "G")
     return ELModel(
-        name=name, n=spec.n, params=params, M=Mf, C=Cf, G=Gf, M_bounds=_mass_bounds(M, p),
+        name=name, n=spec.n, params=params, M=Mf, C=Cf, G=Gf, M_bounds=_mass_bounds(M, p, name),
+        checks=checks,
         sympy_M=M, sympy_C=C, sympy_G=G, sympy_p=p, sympy_q=q,
     )  # fmt: skip
 

@@ -33,5 +33,6 @@ SPEC = register(
         defaults={"m1": 0.5, "m2": 1.5, "r1": 1.0, "r2": 0.8, "J1": 5.0, "J2": 5.0, "g0": 9.81},
         lagrangian=_lagrangian,
         description="planar two-link arm of the paper's section 4 (M, C, G as printed)",
+        nonnegative=frozenset({"g0", "J1", "J2"}),  # g0 = 0: horizontal plane; J = 0: no rotors
     )
 )

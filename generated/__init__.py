@@ -1,0 +1,20 @@
+"""Generated-C simulation of the closed loop: CasADi codegen, gcc, cache, CVODES/IDAS/fixed step.
+
+Stages (each a function in :mod:`generated.api`): load scenario -> synthesize ->
+build (symbolic closed loop, C code generation, compile, cached under
+``generated/build/<sha256>/``) -> simulate -> trajectory as a pandas DataFrame.
+``python -m generated sim SCENARIO`` (``make sim``) runs them all and writes
+``out/<name>/trajectory.csv`` and ``meta.json``.
+"""
+
+from generated.codegen import CodegenSettings, Library, build_library
+from generated.integrate import IntegratorSettings, Trajectory, integrate
+
+__all__ = [
+    "CodegenSettings",
+    "IntegratorSettings",
+    "Library",
+    "Trajectory",
+    "build_library",
+    "integrate",
+]

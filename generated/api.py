@@ -1,0 +1,602 @@
+"""The simulation pipeline as functions: the command line and a notebook share them.
+
+::
+
+    from generated import api
+    sc = api.load("scenarios/paper.toml")                      # or overrides={...}
+    gains, ginfo = api.ensure_gains(sc)                        # synthesis if needed
+    built = api.build(sc, gains)                               # closed loop -> C -> .so
+    traj = api.simulate(built, sc)                             # CVODES / IDAS / fixed
+    df = api.trajectory_frame(built, sc, traj)                 # pandas DataFrame
+
+or all at once, writing ``out/<name>/trajectory.csv`` and ``meta.json``::
+
+    result = api.run("scenarios/paper.toml")
+    result = api.run("scenarios/paper.toml", overrides={"options.ablation": True})
+    # -> out/paper-ablation/ (eq. (42): u_i = Ψ_i, no ĝ_i)
+
+A scenario with overrides is a distinct scenario: its name gets a suffix
+(``paper-ablation``; ``variant=`` chooses it) and its SHA-256 is that of the file
+plus the overrides, so its gains, library and outputs never mix with the base run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import json
+import math
+import re
+import sys
+import time
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import pandas as pd
+
+from generated.codegen import CodegenSettings, Library, build_library, check_dyn_signature, renamed
+from generated.integrate import IntegratorSettings, Trajectory, integrate, output_grid
+from symbolic.artifacts import OUT_ROOT, atomic_write_text, sha256_file
+from symbolic.errors import BuildError, IntegrationError, ScenarioError, SynthesisError
+from symbolic.scenario import Scenario, load_scenario
+
+ODE_NAME, DAE_NAME, OUT_NAME = "cl_ode", "cl_dae", "cl_out"
+
+
+# --------------------------------------------------------------------------- scenario
+def parse_override(text: str) -> tuple[str, Any]:
+    """``"options.ablation=true"`` -> ``("options.ablation", True)`` (value read as TOML).
+
+    A value that is not valid TOML is taken as a string (``integration.method=fixed``).
+    """
+    if "=" not in text:
+        raise ScenarioError("--set", text, "is not KEY=VALUE", "e.g. options.ablation=true")
+    key, _, val = text.partition("=")
+    key, val = key.strip(), val.strip()
+    try:
+        value = tomllib.loads(f"v = {val}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = val
+    return key, value
+
+
+def _set_path(data: dict, file: str, key: str, value: Any) -> None:
+    """Set a dotted key (``options.ablation``, ``followers[2].g``; 1-based) in the raw TOML."""
+    parts = key.split(".")
+    node: Any = data
+    for k, part in enumerate(parts):
+        m = re.fullmatch(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?", part)
+        if not m:
+            raise ScenarioError(file, key, "is not a dotted key", "e.g. options.ablation")
+        name, index = m.group(1), m.group(2)
+        last = k == len(parts) - 1 and index is None
+        if last:
+            node[name] = value
+            return
+        if name not in node:
+            node[name] = {}
+        node = node[name]
+        if index is not None:
+            i = int(index)
+            if not isinstance(node, list) or not 1 <= i <= len(node):
+                raise ScenarioError(file, key, f"index {i} is out of range", "a 1-based index")
+            if k == len(parts) - 1:
+                node[i - 1] = value
+                return
+            node = node[i - 1]
+        if not isinstance(node, dict):
+            raise ScenarioError(file, key, f"{part} is not a table", "a key into a table")
+
+
+def _variant_label(overrides: Mapping[str, Any]) -> str:
+    parts = []
+    for k, v in overrides.items():
+        leaf = re.sub(r"\[\d+\]", "", k.split(".")[-1])
+        parts.append(leaf if v is True else f"{leaf}-{v}")
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", "-".join(parts)).strip("-") or "variant"
+
+
+def load(
+    path: str | Path,
+    overrides: Mapping[str, Any] | None = None,
+    variant: str | None = None,
+) -> Scenario:
+    """Load and validate a scenario, optionally with overrides of its fields.
+
+    Parameters
+    ----------
+    path : str or Path
+        The scenario TOML file.
+    overrides : mapping, optional
+        Dotted keys as in the file (``{"options.ablation": True}``,
+        ``{"integration.method": "fixed"}``, ``{"followers[2].g": 0.5}``). The result
+        is validated exactly like a file.
+    variant : str, optional
+        Name suffix of the overridden scenario (default: made from the keys, e.g.
+        ``ablation``); the scenario is then called ``<name>-<variant>``.
+
+    Returns
+    -------
+    Scenario
+        With overrides, ``sha256`` is the SHA-256 of the file's hash and the overrides.
+    """
+    sc = load_scenario(path)
+    if not overrides:
+        return sc
+    from symbolic import scenario as scmod
+
+    raw = Path(path).read_bytes()
+    data = tomllib.loads(raw.decode("utf-8"))
+    for k, v in overrides.items():
+        _set_path(data, str(path), k, v)
+    canon = json.dumps({k: overrides[k] for k in sorted(overrides)}, sort_keys=True, default=str)
+    sha = hashlib.sha256((sc.sha256 + "\n" + canon).encode()).hexdigest()
+    # the loader's own validation, on the modified table
+    out = scmod._build(scmod._Ctx(str(path)), data, Path(path), sha)
+    label = variant or _variant_label(overrides)
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", label):
+        raise ScenarioError(
+            str(path), "variant", f"{label!r} is not a plain name", "[A-Za-z0-9_.-]"
+        )
+    return dataclasses.replace(out, name=f"{sc.name}-{label}", sha256=sha)
+
+
+# --------------------------------------------------------------------------- synthesis
+@dataclass(frozen=True)
+class GainsInfo:
+    """Where the gains came from: ``path``, ``sha256`` of gains.json, ``reused``, ``seconds``."""
+
+    path: Path
+    sha256: str
+    reused: bool
+    seconds: float
+
+
+def ensure_gains(sc: Scenario, out_root: str | Path | None = None):
+    """Read ``out/<name>/gains.json`` if it belongs to this scenario, else synthesize and write it.
+
+    Returns
+    -------
+    (Gains, GainsInfo)
+    """
+    from synthesis.gains import load_gains, save_gains
+
+    path = Path(out_root or OUT_ROOT) / sc.name / "gains.json"
+    t0 = time.perf_counter()
+    if path.is_file():
+        try:
+            stored = json.loads(path.read_text()).get("scenario_sha256")
+        except (OSError, json.JSONDecodeError):
+            stored = None
+        if stored == sc.sha256:
+            gains = load_gains(path)
+            return gains, GainsInfo(path, sha256_file(path), True, time.perf_counter() - t0)
+    try:
+        from synthesis import synthesize
+    except ImportError:
+        raise SynthesisError(
+            f"{path}: missing or stale and synthesis.synthesize is not available (run make synth)"
+        ) from None
+    gains = synthesize(sc)
+    if gains.info.get("scenario_sha256") != sc.sha256:  # variants carry their own hash
+        gains = dataclasses.replace(gains, info={**gains.info, "scenario_sha256": sc.sha256})
+    save_gains(gains, path)
+    return gains, GainsInfo(path, sha256_file(path), False, time.perf_counter() - t0)
+
+
+# --------------------------------------------------------------------------- build
+@dataclass(frozen=True)
+class Built:
+    """A closed loop compiled for one method.
+
+    Attributes
+    ----------
+    closed_loop : symbolic.closed_loop.ClosedLoop
+    library : Library
+    dyn : casadi.Function
+        The compiled integrator-form right-hand side (ODE, or DAE for ``idas``).
+    outputs : casadi.Function
+        The compiled ``(t, x) -> named outputs``.
+    form : str
+        ``"ode"`` or ``"dae"``.
+    timings : dict
+        ``symbolic_build``, ``codegen``, ``compile`` seconds.
+    """
+
+    closed_loop: Any
+    library: Library
+    dyn: ca.Function
+    outputs: ca.Function
+    form: str
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def build(
+    sc: Scenario,
+    gains: Any,
+    method: str | None = None,
+    settings: CodegenSettings | None = None,
+    closed_loop: Any = None,
+) -> Built:
+    """Symbolic closed loop -> C -> shared library (cached) -> loaded Functions.
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+    method : str, optional
+        ``cvodes``/``fixed`` build the ODE form, ``idas`` the DAE form (default:
+        the scenario's method).
+    settings : CodegenSettings, optional
+    closed_loop : ClosedLoop, optional
+        A prebuilt closed loop (skips ``build_closed_loop``).
+    """
+    settings = settings or CodegenSettings()
+    method = method or sc.integration.method
+    t0 = time.perf_counter()
+    if closed_loop is None:
+        from symbolic.closed_loop import build_closed_loop
+
+        closed_loop = build_closed_loop(sc, gains)
+    return build_from_closed_loop(closed_loop, method, settings, t_symbolic_start=t0)
+
+
+def build_from_closed_loop(
+    cl: Any,
+    method: str,
+    settings: CodegenSettings | None = None,
+    *,
+    t_symbolic_start: float | None = None,
+) -> Built:
+    """Compile an existing :class:`~symbolic.closed_loop.ClosedLoop` for ``method``."""
+    settings = settings or CodegenSettings()
+    t0 = time.perf_counter() if t_symbolic_start is None else t_symbolic_start
+    form = "dae" if method == "idas" else "ode"
+    src, name = (cl.dae_dyn, DAE_NAME) if form == "dae" else (cl.ode_dyn, ODE_NAME)
+    check_dyn_signature(src, f"closed loop {form}_dyn")
+    dyn = renamed(src, name, expand=settings.expand)
+    outs = renamed(cl.outputs, OUT_NAME, expand=settings.expand)
+    t_sym = time.perf_counter() - t0
+    lib = build_library([dyn, outs], settings, with_derivatives=[name])
+    timings = {
+        "symbolic_build": t_sym,
+        "codegen": lib.codegen_seconds,
+        "compile": lib.compile_seconds,
+    }
+    return Built(cl, lib, lib.function(name), lib.function(OUT_NAME), form, timings)
+
+
+# --------------------------------------------------------------------------- simulate
+def integrator_settings(
+    sc: Scenario, method: str | None = None, codegen: CodegenSettings | None = None
+) -> IntegratorSettings:
+    """The scenario's integration settings (tolerances, steps) with the codegen linear algebra."""
+    ig = sc.integration
+    cg = codegen or CodegenSettings()
+    lin = cg.integrator_options()
+    return IntegratorSettings(
+        method=method or ig.method,
+        rtol=ig.rtol,
+        atol=ig.atol,
+        max_steps=ig.max_steps,
+        fixed_step=ig.fixed_step,
+        newton_scheme=lin["newton_scheme"],
+        linear_solver=cg.linear_solver,
+    )
+
+
+def simulate(
+    built: Built,
+    sc: Scenario,
+    settings: IntegratorSettings | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> Trajectory:
+    """Integrate the compiled closed loop over the scenario's horizon (split at breakpoints).
+
+    Returns an incomplete :class:`Trajectory` on an integrator failure (see
+    :func:`generated.integrate.integrate`).
+    """
+    s = settings or integrator_settings(sc)
+    if (s.method == "idas") != (built.form == "dae"):
+        raise IntegrationError(
+            f"method {s.method!r} needs the {'DAE' if s.method == 'idas' else 'ODE'} build "
+            f"(this one is {built.form}): call build(..., method={s.method!r})"
+        )
+    cl = built.closed_loop
+    t_out = output_grid(sc.integration.horizon, sc.integration.output_step)
+    bps = set(sc.breakpoints()) | {float(b) for b in getattr(cl, "breakpoints", ())}
+    z0 = np.asarray(cl.z0, dtype=float) if built.form == "dae" else None
+    return integrate(
+        built.dyn,
+        np.asarray(cl.x0, dtype=float),
+        t_out,
+        s,
+        breakpoints=sorted(bps),
+        z0=z0,
+        progress=progress,
+    )
+
+
+# --------------------------------------------------------------------------- outputs
+def column_names(sc: Scenario) -> list[str]:
+    """The CSV columns, in order (agents and components 1-based)."""
+    m, n, N = sc.m, sc.n, sc.N
+    cols = ["t"] + [f"eta0_{k}" for k in range(1, m + 1)]
+    for i in range(1, N + 1):
+        cols += [f"p{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"q{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"eta{i}_{k}" for k in range(1, m + 1)]
+        cols += [f"mu{i}_{k}" for k in range(1, m + 1)]
+        cols += [f"phi{i}"]
+        cols += [f"thetahat{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"ghat{i}"]
+        cols += [f"u{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"b{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"et{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"eeta{i}_{k}" for k in range(1, m + 1)]
+        cols += [f"chi{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"V2_{i}"]
+    return [*cols, "V1"]
+
+
+#: CSV prefix -> candidate names of the closed loop's outputs (first match wins)
+_OUTPUT_ALIASES = {
+    "u": ("u",),
+    "b": ("b",),
+    "et": ("e_t", "et"),
+    "eeta": ("ebar", "e_eta_bar", "eeta"),
+    "chi": ("chi",),
+    "V2": ("V2",),
+    "V1": ("V1",),
+}
+
+
+def evaluate_outputs(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:
+    """All named outputs at every output time: ``name -> array (K, rows, cols)``."""
+    K = len(traj.t)
+    f = built.outputs
+    if K == 0:
+        return {nm: np.zeros((0, *f.size_out(j))) for j, nm in enumerate(f.name_out())}
+    res = f.map(K)(traj.t.reshape(1, -1), traj.x.T)
+    res = res if isinstance(res, list | tuple) else [res]
+    out = {}
+    for j, nm in enumerate(f.name_out()):
+        r, c = f.size_out(j)
+        a = np.array(ca.DM(res[j]).full(), dtype=float)  # r x (c*K), time blocks side by side
+        out[nm] = a.reshape(r, K, c).transpose(1, 0, 2)
+    return out
+
+
+def _agent_rows(arr: np.ndarray, N: int, width: int, name: str) -> np.ndarray:
+    """A per-agent output (K, N, width): row i = agent i (the closed loop's convention)."""
+    if arr.shape[1:] != (N, width):
+        raise BuildError(
+            f"closed loop output {name!r} is {arr.shape[1]}x{arr.shape[2]} per time, "
+            f"expected {N}x{width} (one row per agent)"
+        )
+    return arr
+
+
+def trajectory_frame(built: Built, sc: Scenario, traj: Trajectory) -> pd.DataFrame:
+    """The trajectory as a DataFrame with exactly the columns of :func:`column_names`."""
+    cl = built.closed_loop
+    sl = cl.layout.slices
+    outs = evaluate_outputs(built, traj)
+
+    def out(prefix: str) -> tuple[str, np.ndarray]:
+        for nm in _OUTPUT_ALIASES[prefix]:
+            if nm in outs:
+                return nm, outs[nm]
+        raise BuildError(
+            f"closed loop outputs lack {prefix!r} (looked for {', '.join(_OUTPUT_ALIASES[prefix])}; "
+            f"it has {', '.join(outs)})"
+        )
+
+    N, n, m = sc.N, sc.n, sc.m
+    X = traj.x
+    K = len(traj.t)
+    blocks: list[np.ndarray] = [traj.t.reshape(-1, 1), X[:, sl["eta0"]]]
+    named = {}
+    for key, width in (("u", n), ("b", n), ("et", n), ("eeta", m), ("chi", n), ("V2", 1)):
+        nm, arr = out(key)
+        named[key] = _agent_rows(arr, N, width, nm)
+    for i in range(N):
+        for key in ("p", "q", "eta", "mu", "phi", "thetahat", "ghat"):
+            blocks.append(X[:, sl[(key, i)]])
+        for key in ("u", "b", "et", "eeta", "chi", "V2"):
+            blocks.append(named[key][:, i, :])
+    nm, v1 = out("V1")
+    if v1.shape[1:] != (1, 1):
+        raise BuildError(f"closed loop output {nm!r} is not a scalar")
+    blocks.append(v1.reshape(K, 1))
+    data = np.hstack(blocks)
+    cols = column_names(sc)
+    if data.shape[1] != len(cols):
+        raise BuildError(
+            f"trajectory has {data.shape[1]} columns, expected {len(cols)} (check the state layout)"
+        )
+    return pd.DataFrame(data, columns=cols)
+
+
+def csv_text(df: pd.DataFrame) -> str:
+    """Deterministic CSV: header, then ``repr`` of every float (shortest round-trip form)."""
+    buf = io.StringIO()
+    buf.write(",".join(df.columns) + "\n")
+    for row in df.to_numpy(dtype=float).tolist():
+        buf.write(",".join(map(repr, row)) + "\n")
+    return buf.getvalue()
+
+
+# --------------------------------------------------------------------------- progress
+class ProgressBar:
+    """A one-line progress bar on stderr, shown only once a run has lasted more than a second."""
+
+    def __init__(self, label: str, horizon: float, stream: Any = None, delay: float = 1.0):
+        self.label, self.horizon, self.delay = label, horizon, delay
+        self.stream = stream if stream is not None else sys.stderr
+        self.t0 = time.perf_counter()
+        self.shown = False
+        self._last = -math.inf
+
+    def __call__(self, t: float) -> None:
+        now = time.perf_counter()
+        el = now - self.t0
+        if el < self.delay or now - self._last < 0.1:
+            return
+        self._last = now
+        frac = min(max(t / self.horizon, 0.0), 1.0) if self.horizon > 0 else 1.0
+        bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
+        self.stream.write(
+            f"\r{self.label} [{bar}] {100 * frac:5.1f}%  t = {t:.2f}/{self.horizon:g} s  {el:.1f} s"
+        )
+        self.stream.flush()
+        self.shown = True
+
+    def close(self) -> None:
+        if self.shown:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+# --------------------------------------------------------------------------- whole run
+@dataclass(frozen=True)
+class RunResult:
+    """What :func:`run` produced: the frame, the trajectory, the files and ``meta``."""
+
+    frame: pd.DataFrame
+    trajectory: Trajectory
+    csv_path: Path
+    meta_path: Path
+    meta: dict[str, Any]
+
+
+def run(
+    path: str | Path,
+    *,
+    overrides: Mapping[str, Any] | None = None,
+    variant: str | None = None,
+    method: str | None = None,
+    codegen: CodegenSettings | None = None,
+    out_root: str | Path | None = None,
+    progress: bool = True,
+    raise_on_failure: bool = True,
+) -> RunResult:
+    """Load, synthesize if needed, build if needed, integrate, and write trajectory.csv + meta.json.
+
+    Parameters
+    ----------
+    path : str or Path
+        Scenario file.
+    overrides, variant
+        See :func:`load` (e.g. ``{"options.ablation": True}`` -> ``out/<name>-ablation/``).
+    method : str, optional
+        Overrides ``integration.method`` for this run without renaming the output.
+    codegen : CodegenSettings, optional
+    out_root : str or Path, optional
+        Default ``out/`` (``$HITL_OUT``).
+    progress : bool
+        Progress bar on stderr for runs longer than a second.
+    raise_on_failure : bool
+        After writing an incomplete trajectory, raise :class:`IntegrationError`.
+
+    Returns
+    -------
+    RunResult
+    """
+    codegen = codegen or CodegenSettings()
+    t_all = time.perf_counter()
+    t0 = time.perf_counter()
+    sc = load(path, overrides, variant)
+    t_load = time.perf_counter() - t0
+    method = method or sc.integration.method
+    if sc.options.sign == "exact" and method != "fixed":
+        raise ScenarioError(
+            sc.path, "options.sign", "'exact' makes variable-step integrators chatter and fail",
+            "method 'fixed'",
+        )  # fmt: skip
+    root = Path(out_root or OUT_ROOT)
+    gains, ginfo = ensure_gains(sc, root)
+    built = build(sc, gains, method, codegen)
+    s = integrator_settings(sc, method, codegen)
+    bar = ProgressBar(f"sim {sc.name} ({method})", sc.integration.horizon) if progress else None
+    try:
+        traj = simulate(built, sc, s, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    t0 = time.perf_counter()
+    df = trajectory_frame(built, sc, traj)
+    t_outputs = time.perf_counter() - t0
+    folder = root / sc.name
+    folder.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    csv_path = atomic_write_text(folder / "trajectory.csv", csv_text(df))
+    t_write = time.perf_counter() - t0
+    st = traj.stats
+    meta = {
+        "scenario": sc.name,
+        "scenario_path": str(sc.path),
+        "scenario_sha256": sc.sha256,
+        "overrides": {k: v for k, v in (overrides or {}).items()},
+        "gains_path": str(ginfo.path),
+        "gains_sha256": ginfo.sha256,
+        "gains_reused": ginfo.reused,
+        "method": method,
+        "form": built.form,
+        "rtol": s.rtol,
+        "atol": s.atol,
+        "max_steps": s.max_steps,
+        "fixed_step": s.fixed_step if method == "fixed" else None,
+        "newton_scheme": s.newton_scheme,
+        "linear_solver": s.linear_solver,
+        "horizon": sc.integration.horizon,
+        "output_step": sc.integration.output_step,
+        "breakpoints": sorted(set(sc.breakpoints()) | set(built.closed_loop.breakpoints)),
+        "rows": len(df),
+        "complete": traj.complete,
+        "t_reached": traj.t_reached,
+        "message": traj.message,
+        "steps": st.get("steps"),
+        "rhs_evals": st.get("rhs_evals"),
+        "stats": st,
+        "library": {
+            "key": built.library.key,
+            "path": str(built.library.path),
+            "source": str(built.library.source),
+            "source_bytes": built.library.source_bytes,
+            "cache_hit": built.library.cache_hit,
+            "cflags": list(codegen.cflags),
+            "compiler": codegen.compiler,
+            "jacobian": codegen.jacobian,
+            "casadi": ca.__version__,
+        },
+        "cache_hit": built.library.cache_hit,
+        "wall_seconds": {
+            "load": t_load,
+            "synthesis": ginfo.seconds,
+            **built.timings,
+            "integration": st.get("wall_seconds"),
+            "outputs": t_outputs,
+            "write": t_write,
+            "total": time.perf_counter() - t_all,
+        },
+    }
+    meta_path = atomic_write_text(folder / "meta.json", json.dumps(meta, indent=2, default=_json))
+    result = RunResult(df, traj, csv_path, meta_path, meta)
+    if raise_on_failure:
+        traj.raise_if_incomplete()
+    return result
+
+
+def _json(o: Any) -> Any:
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)

@@ -1,0 +1,388 @@
+"""CasADi C code generation, gcc compilation and a content-addressed build cache.
+
+One :class:`CodegenSettings` holds every option that shapes the generated code and
+the compiled library (acados-style: one place). :func:`build_library` turns CasADi
+Functions into a shared library under ``<build root>/<sha256>/`` where the key is
+the SHA-256 of everything that produced it: the generated C text, the compiler's
+path and version, the flags, the CasADi version and the settings. An unchanged
+model is never rebuilt; a changed one gets a new key, so it is never served stale.
+A library is built in a temporary folder and renamed into place, so a cache entry
+is either complete or absent.
+
+Facts this module relies on (measured with CasADi 3.8.2): an external Function used
+as an integrator's DAE must have exactly the inputs (t, x, z, p, u) and outputs
+(ode, alg, quad, zero), and the same library must contain ``jac_<name>`` generated
+with ``f.jacobian()``.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+
+from symbolic.errors import BuildError
+
+#: default cache root (gitignored); ``HITL_BUILD_DIR`` overrides it
+DEFAULT_BUILD_ROOT = Path(__file__).resolve().parent / "build"
+JACOBIAN_STRATEGIES = ("sparse", "gmres")
+SOURCE_NAME = "model.c"
+LIBRARY_NAME = "model.so"
+MANIFEST_NAME = "manifest.json"
+
+
+@dataclass(frozen=True)
+class CodegenSettings:
+    """Every option of code generation, compilation and the integrators' linear algebra.
+
+    Attributes
+    ----------
+    compiler : str
+        C compiler executable (``gcc``; ``cc``/``clang`` work too).
+    optimization : str
+        Optimisation flag. ``-O1`` is the default: ``-O0`` compiles 3–4× faster on
+        large files but the right-hand side then runs slower.
+    extra_cflags : tuple of str
+        Appended after the fixed flags ``-shared -fPIC``.
+    jacobian : str
+        ``"sparse"``: ``jac_<name>`` from ``f.jacobian()`` (CasADi's sparse CCS pattern)
+        with a direct sparse linear solver; ``"gmres"``: additionally
+        ``fwd1_<name>`` (``f.forward(1)``, Jacobian-vector products) and the
+        integrators' iterative ``newton_scheme = "gmres"`` (no factorisation, for
+        large N).
+    linear_solver : str
+        Direct sparse linear solver of CVODES/IDAS and of the fixed-step method
+        (a CasADi Linsol plugin: ``csparse``, ``qr``, ``ldl``, ``lapacklu`` (dense)).
+    expand : bool
+        Expand MX Functions to SX before generating code (flat, faster C).
+    build_root : str or None
+        Cache root; ``None`` = ``$HITL_BUILD_DIR`` or ``generated/build``.
+    timeout : float
+        Seconds allowed for one compilation.
+    codegen_options : tuple of (str, value) pairs
+        Options for :class:`casadi.CodeGenerator`.
+    """
+
+    compiler: str = "gcc"
+    optimization: str = "-O1"
+    extra_cflags: tuple[str, ...] = ()
+    jacobian: str = "sparse"
+    linear_solver: str = "csparse"
+    expand: bool = True
+    build_root: str | None = None
+    timeout: float = 900.0
+    codegen_options: tuple[tuple[str, Any], ...] = field(default=(("with_header", False),))
+
+    def __post_init__(self) -> None:
+        if self.jacobian not in JACOBIAN_STRATEGIES:
+            raise BuildError(
+                f"CodegenSettings.jacobian: {self.jacobian!r} is not allowed "
+                f"(expected one of {', '.join(JACOBIAN_STRATEGIES)})"
+            )
+        if not ca.has_linsol(self.linear_solver):
+            raise BuildError(
+                f"CodegenSettings.linear_solver: {self.linear_solver!r} is not a CasADi "
+                "linear solver plugin (expected csparse, qr, ldl or lapacklu)"
+            )
+
+    @property
+    def cflags(self) -> tuple[str, ...]:
+        """The complete compiler flags, in order."""
+        return ("-shared", "-fPIC", self.optimization, *self.extra_cflags)
+
+    def root(self) -> Path:
+        """The cache root folder."""
+        if self.build_root is not None:
+            return Path(self.build_root)
+        env = os.environ.get("HITL_BUILD_DIR")
+        return Path(env) if env else DEFAULT_BUILD_ROOT
+
+    def integrator_options(self) -> dict[str, Any]:
+        """The CVODES/IDAS options that follow from the Jacobian strategy."""
+        if self.jacobian == "gmres":
+            return {"newton_scheme": "gmres"}
+        return {"newton_scheme": "direct", "linear_solver": self.linear_solver}
+
+    def key_fields(self) -> dict[str, Any]:
+        """The settings that enter the cache key (the build root does not)."""
+        d = asdict(self)
+        d.pop("build_root")
+        d.pop("timeout")
+        d["codegen_options"] = [list(p) for p in self.codegen_options]
+        return d
+
+
+@dataclass(frozen=True)
+class Library:
+    """A compiled shared library and how it was obtained.
+
+    Attributes
+    ----------
+    key : str
+        SHA-256 cache key (the folder name).
+    folder, source, path : Path
+        The cache folder, the generated C file and the shared library.
+    names : tuple of str
+        Functions in the library (with their ``jac_``/``fwd1_`` companions).
+    cache_hit : bool
+        True when the library was reused, not compiled.
+    codegen_seconds, compile_seconds : float
+        Wall time of C generation and of compilation (0 on a cache hit).
+    source_bytes : int
+        Size of the generated C.
+    """
+
+    key: str
+    folder: Path
+    source: Path
+    path: Path
+    names: tuple[str, ...]
+    cache_hit: bool
+    codegen_seconds: float
+    compile_seconds: float
+    source_bytes: int
+
+    def function(self, name: str) -> ca.Function:
+        """Load ``name`` from the library with :func:`casadi.external`."""
+        if name not in self.names:
+            raise BuildError(
+                f"library {self.path}: no function {name!r} (it has {', '.join(self.names)})"
+            )
+        return ca.external(name, str(self.path))
+
+
+# --------------------------------------------------------------------------- helpers
+@functools.lru_cache(maxsize=8)
+def compiler_identity(compiler: str) -> str:
+    """Resolved path and first ``--version`` line of ``compiler`` (part of the cache key).
+
+    Raises
+    ------
+    BuildError
+        If the compiler is not found.
+    """
+    path = shutil.which(compiler)
+    if path is None:
+        raise BuildError(
+            f"CodegenSettings.compiler: {compiler!r} not found on PATH (install gcc or set compiler)"
+        )
+    try:
+        out = subprocess.run(
+            [path, "--version"], capture_output=True, text=True, timeout=60, check=False
+        )
+    except OSError as exc:
+        raise BuildError(f"CodegenSettings.compiler: {path} cannot run ({exc.strerror})") from None
+    first = (out.stdout or out.stderr).splitlines()
+    return f"{os.path.realpath(path)} | {first[0] if first else 'unknown version'}"
+
+
+def renamed(f: ca.Function, name: str, *, expand: bool = True) -> ca.Function:
+    """``f`` under a new name with the same inputs/outputs (SX when possible)."""
+    fs = f if f.is_a("SXFunction") else (_expanded(f) if expand else None)
+    if fs is not None:
+        args = fs.sx_in()
+        return ca.Function(name, args, fs.call(args), fs.name_in(), fs.name_out())
+    args = f.mx_in()
+    return ca.Function(name, args, f.call(args), f.name_in(), f.name_out())
+
+
+def _expanded(f: ca.Function) -> ca.Function | None:
+    try:
+        return f.expand()
+    except RuntimeError:  # e.g. calls an external or a Linsol: keep MX
+        return None
+
+
+def check_dyn_signature(f: ca.Function, what: str) -> None:
+    """Raise :class:`BuildError` unless ``f`` has the integrator signature ``dyn_in -> dyn_out``."""
+    if list(f.name_in()) != list(ca.dyn_in()) or list(f.name_out()) != list(ca.dyn_out()):
+        raise BuildError(
+            f"{what}: has inputs ({', '.join(f.name_in())}) and outputs "
+            f"({', '.join(f.name_out())}); expected ({', '.join(ca.dyn_in())}) -> "
+            f"({', '.join(ca.dyn_out())}) (build it with ca.dyn_in()/ca.dyn_out())"
+        )
+
+
+def generate_source(
+    functions: Sequence[ca.Function],
+    settings: CodegenSettings,
+    with_derivatives: Sequence[str] = (),
+) -> tuple[str, tuple[str, ...]]:
+    """C source of ``functions`` plus, for the names in ``with_derivatives``, their Jacobians.
+
+    Parameters
+    ----------
+    functions : sequence of casadi.Function
+        Named functions to put in the library.
+    settings : CodegenSettings
+    with_derivatives : sequence of str
+        Names whose ``jac_<name>`` (``f.jacobian()``) and, with ``jacobian="gmres"``,
+        ``fwd1_<name>`` (``f.forward(1)``) are generated as well.
+
+    Returns
+    -------
+    (str, tuple of str)
+        The C text and the names of all functions in it.
+    """
+    cg = ca.CodeGenerator(SOURCE_NAME, dict(settings.codegen_options))
+    names: list[str] = []
+    seen: set[str] = set()
+    for f in functions:
+        if f.name() in seen:
+            raise BuildError(f"generate_source: two functions are named {f.name()!r}")
+        seen.add(f.name())
+        cg.add(f)
+        names.append(f.name())
+        if f.name() in with_derivatives:
+            jac = f.jacobian()  # named jac_<name>, as the integrator plugins look it up
+            cg.add(jac)
+            names.append(jac.name())
+            if settings.jacobian == "gmres":
+                fwd = f.forward(1)
+                cg.add(fwd)
+                names.append(fwd.name())
+    missing = set(with_derivatives) - seen
+    if missing:
+        raise BuildError(f"generate_source: with_derivatives names unknown {sorted(missing)}")
+    return cg.dump(), tuple(names)
+
+
+def cache_key(source: str, settings: CodegenSettings) -> str:
+    """SHA-256 of everything that produced a library."""
+    ident = {
+        "source_sha256": hashlib.sha256(source.encode()).hexdigest(),
+        "compiler": compiler_identity(settings.compiler),
+        "cflags": list(settings.cflags),
+        "casadi": ca.__version__,
+        "settings": settings.key_fields(),
+    }
+    blob = json.dumps(ident, sort_keys=True, default=str).encode()
+    return hashlib.sha256(blob).hexdigest()
+
+
+def compile_source(source: str, settings: CodegenSettings, folder: Path) -> float:
+    """Write ``source`` to ``folder/model.c`` and compile ``folder/model.so``.
+
+    Returns
+    -------
+    float
+        Compile wall time in seconds.
+
+    Raises
+    ------
+    BuildError
+        With the compiler's first error lines and the source path.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    src = folder / SOURCE_NAME
+    src.write_text(source)
+    cmd = [settings.compiler, *settings.cflags, str(src), "-o", str(folder / LIBRARY_NAME), "-lm"]
+    t0 = time.perf_counter()
+    try:
+        res = subprocess.run(
+            cmd, capture_output=True, text=True, timeout=settings.timeout, check=False
+        )
+    except FileNotFoundError:
+        raise BuildError(
+            f"CodegenSettings.compiler: {settings.compiler!r} not found (install gcc or set compiler)"
+        ) from None
+    except subprocess.TimeoutExpired:
+        raise BuildError(
+            f"compiling {src} took longer than {settings.timeout:.0f} s "
+            "(raise CodegenSettings.timeout or use optimization='-O0')"
+        ) from None
+    if res.returncode != 0:
+        lines = [ln for ln in res.stderr.splitlines() if "error" in ln.lower()] or (
+            res.stderr.splitlines() or [f"exit status {res.returncode}"]
+        )
+        raise BuildError(f"compiling {src} failed: " + " | ".join(lines[:3]))
+    return time.perf_counter() - t0
+
+
+def build_library(
+    functions: Sequence[ca.Function],
+    settings: CodegenSettings | None = None,
+    with_derivatives: Sequence[str] = (),
+) -> Library:
+    """Generate, compile (or reuse from the cache) and describe a shared library.
+
+    Parameters
+    ----------
+    functions : sequence of casadi.Function
+        Functions to compile, under their own names.
+    settings : CodegenSettings, optional
+    with_derivatives : sequence of str
+        Names that also get ``jac_<name>`` (and ``fwd1_<name>`` with ``jacobian="gmres"``).
+
+    Returns
+    -------
+    Library
+
+    Raises
+    ------
+    BuildError
+        Compiler missing, compilation failed (first error lines and the source path;
+        the failed source is kept under ``<root>/failed/<key>/``), or bad settings.
+    """
+    settings = settings or CodegenSettings()
+    t0 = time.perf_counter()
+    source, names = generate_source(functions, settings, with_derivatives)
+    t_codegen = time.perf_counter() - t0
+    key = cache_key(source, settings)
+    root = settings.root()
+    folder = root / key
+    manifest = folder / MANIFEST_NAME
+    if manifest.is_file() and (folder / LIBRARY_NAME).is_file():
+        return Library(
+            key, folder, folder / SOURCE_NAME, folder / LIBRARY_NAME, names, True, t_codegen, 0.0,
+            len(source),
+        )  # fmt: skip
+    root.mkdir(parents=True, exist_ok=True)
+    if folder.exists():  # an incomplete entry (no manifest) is never trusted
+        shutil.rmtree(folder, ignore_errors=True)
+    tmp = Path(tempfile.mkdtemp(dir=root, prefix=f".tmp-{key[:12]}-"))
+    try:
+        try:
+            t_compile = compile_source(source, settings, tmp)
+        except BuildError as exc:
+            failed = root / "failed" / key
+            shutil.rmtree(failed, ignore_errors=True)
+            failed.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(tmp, failed)
+            raise BuildError(str(exc).replace(str(tmp), str(failed))) from None
+        info = {
+            "key": key,
+            "names": list(names),
+            "compiler": compiler_identity(settings.compiler),
+            "cflags": list(settings.cflags),
+            "casadi": ca.__version__,
+            "settings": settings.key_fields(),
+            "source_bytes": len(source),
+            "compile_seconds": t_compile,
+        }
+        # the manifest is written last: its presence marks a complete entry
+        (tmp / MANIFEST_NAME).write_text(json.dumps(info, indent=2, sort_keys=True, default=str))
+        try:
+            os.rename(tmp, folder)
+        except OSError:
+            if not (folder / MANIFEST_NAME).is_file():  # not a concurrent identical build
+                raise
+            shutil.rmtree(tmp, ignore_errors=True)
+    finally:
+        if tmp.exists() and tmp != folder:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return Library(
+        key, folder, folder / SOURCE_NAME, folder / LIBRARY_NAME, names, False, t_codegen,
+        t_compile, len(source),
+    )  # fmt: skip

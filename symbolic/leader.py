@@ -1,0 +1,51 @@
+"""The human-in-the-loop leader, eq. (3): η̇0 = A0 η0 + B0 u0(t), y0 = C0 η0."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from symbolic.scenario import Leader
+
+
+def operator_input(leader: Leader, t: ca.SX) -> ca.SX:
+    """The operator's command u0(t) as a CasADi expression of ``t`` (p×1).
+
+    From the scenario's expressions, or from its CSV trace through a linear
+    ``ca.interpolant``; outside the trace's time range the end values are held
+    (t is clamped), so the command stays bounded.
+    """
+    if leader.u0 is not None:
+        return ca.vertcat(*[ca.SX(e.casadi(t)) if e.is_constant() else e.casadi(t) for e in leader.u0])
+    tr = np.asarray(leader.u0_trace)
+    tc = ca.fmin(ca.fmax(t, float(tr[0, 0])), float(tr[-1, 0]))
+    # one interpolant per input: linear in t, the trace's own knots
+    return ca.vertcat(
+        *[
+            ca.interpolant(f"u0_{k}", "linear", [tr[:, 0]], tr[:, 1 + k])(tc)
+            for k in range(tr.shape[1] - 1)
+        ]
+    )
+
+
+def leader_function(leader: Leader) -> ca.Function:
+    """The leader as a Function of ``(t, eta0)``.
+
+    Outputs ``eta0dot`` (eq. (3)), ``eta0ddot`` (= A0 η̇0 + B0 u̇0, needed by the
+    oracle derivatives), ``y0``, ``y0dot``, ``y0ddot``, ``u0`` and ``u0dot``
+    (u̇0 = ∂u0/∂t by AD; piecewise constant for a CSV trace).
+    """
+    A0, B0, C0 = (ca.DM(leader.A0), ca.DM(leader.B0), ca.DM(leader.C0))
+    t = ca.SX.sym("t")
+    eta0 = ca.SX.sym("eta0", leader.m)
+    u0 = operator_input(leader, t)
+    u0dot = ca.jtimes(u0, t, ca.SX(1.0))
+    eta0dot = A0 @ eta0 + B0 @ u0  # eq. (3)
+    eta0ddot = A0 @ eta0dot + B0 @ u0dot
+    return ca.Function(
+        "leader",
+        [t, eta0],
+        [eta0dot, eta0ddot, C0 @ eta0, C0 @ eta0dot, C0 @ eta0ddot, u0, u0dot],
+        ["t", "eta0"],
+        ["eta0dot", "eta0ddot", "y0", "y0dot", "y0ddot", "u0", "u0dot"],
+    )

@@ -1,0 +1,186 @@
+"""The follower network: graph matrices, the gauge of signed graphs, and agent-wise assembly.
+
+The coupling between agents is linear (paper-spec section 1): with the columns
+``E = [η_1 … η_N]`` (m×N), the neighbourhood error is
+``e_η = E L_Bᵀ − η0 (a0 ∘ h)ᵀ`` and its measured output is
+``ψ = C0 E L_Bᵀ − y0 (a0 ∘ h)ᵀ``. Both are one sparse matrix product, so the
+expression graph does not grow with N. Everything local to an agent is one
+CasADi Function applied to all agents with ``Function.map`` (``assembly="map"``)
+or, for comparison, called once per agent (``assembly="flat"``).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from symbolic.errors import ScenarioError
+from symbolic.scenario import Graph
+
+ASSEMBLIES = ("map", "flat")
+
+
+@dataclass(frozen=True)
+class GraphMatrices:
+    """Numerical graph data used by the closed loop.
+
+    Attributes
+    ----------
+    A : ndarray
+        N×N adjacency, ``A[i, j] = a_ij`` (signed allowed).
+    a0 : ndarray
+        N pinning gains ``a_i0``.
+    h : ndarray
+        N gauge signs ``h_i = ±1`` (all +1 on cooperative graphs).
+    L_B : ndarray
+        N×N, ``L + B`` with ``D = diag(Σ_j |a_ij|)``, ``L = D − A``.
+    l_bar : ndarray
+        N, the diagonal ``l̄_ii = Σ_j |a_ij| + a_i0`` of ``L̄ = H L_B H``.
+    """
+
+    A: np.ndarray
+    a0: np.ndarray
+    h: np.ndarray
+    L_B: np.ndarray
+    l_bar: np.ndarray
+
+    @property
+    def N(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def a0h(self) -> np.ndarray:
+        """``a_i0 h_i``: the weight of the leader's output in ψ_i."""
+        return self.a0 * self.h
+
+    def LBt_sparse(self) -> ca.DM:
+        """``L_Bᵀ`` as a sparse CasADi matrix (structural zeros dropped)."""
+        return _sparse(self.L_B.T)
+
+    def a0h_sparse(self) -> ca.DM:
+        """``(a0 ∘ h)ᵀ`` as a sparse 1×N CasADi row."""
+        return _sparse(self.a0h.reshape(1, -1))
+
+
+def _sparse(a: np.ndarray) -> ca.DM:
+    cols, rows = np.nonzero(a.T)  # column-major order, as CasADi stores nonzeros
+    sp = ca.Sparsity.triplet(a.shape[0], a.shape[1], rows.tolist(), cols.tolist())
+    return ca.DM(sp, a[rows, cols].tolist() if rows.size else [])
+
+
+def gauge(adjacency: np.ndarray) -> np.ndarray:
+    """Gauge ``h`` of a structurally balanced signed graph (Remark 2, paper-spec section 1).
+
+    Two-colours the undirected support of the graph so that ``a_ij h_i h_j ≥ 0``
+    on every edge; component roots get ``h = +1``.
+
+    Parameters
+    ----------
+    adjacency : ndarray
+        N×N signed adjacency.
+
+    Returns
+    -------
+    ndarray
+        N signs ±1 (all +1 for a cooperative graph).
+
+    Raises
+    ------
+    ScenarioError
+        If the graph is not structurally balanced.
+    """
+    A = np.asarray(adjacency, dtype=float)
+    N = A.shape[0]
+    h = np.zeros(N)
+    for root in range(N):
+        if h[root] != 0:
+            continue
+        h[root] = 1.0
+        queue = deque([root])
+        while queue:
+            i = queue.popleft()
+            for j in np.nonzero((A[i] != 0) | (A[:, i] != 0))[0]:
+                for w in (A[i, j], A[j, i]):
+                    if w == 0:
+                        continue
+                    want = h[i] * np.sign(w)
+                    if h[j] == 0:
+                        h[j] = want
+                        queue.append(j)
+                    elif h[j] != want:
+                        raise ScenarioError(
+                            "graph",
+                            "adjacency",
+                            f"signed graph is not structurally balanced (edge {i + 1}-{j + 1})",
+                            "two groups with positive edges inside and negative edges between",
+                        )
+    return h
+
+
+def graph_matrices(graph: Graph, h: np.ndarray | None = None) -> GraphMatrices:
+    """Build :class:`GraphMatrices` from a scenario graph.
+
+    Parameters
+    ----------
+    graph : Graph
+        The scenario's graph.
+    h : ndarray, optional
+        Gauge signs (e.g. ``gains.h``); computed with :func:`gauge` when omitted.
+    """
+    A = np.asarray(graph.adjacency, dtype=float)
+    a0 = np.asarray(graph.pinning, dtype=float)
+    if h is None:
+        h = gauge(A)
+    h = np.asarray(h, dtype=float).reshape(-1)
+    if h.shape != a0.shape or not np.all(np.abs(h) == 1.0):
+        raise ScenarioError("gains", "H", f"gauge has entries {h}", f"{len(a0)} signs +1/-1")
+    D = np.diag(np.abs(A).sum(axis=1))
+    L_B = D - A + np.diag(a0)
+    return GraphMatrices(A=A, a0=a0, h=h, L_B=L_B, l_bar=np.diag(L_B).copy())
+
+
+def coupling(C0: np.ndarray | None, X: Any, leader: Any, gm: GraphMatrices) -> Any:
+    """``C0 X L_Bᵀ − leader (a0 ∘ h)ᵀ``: neighbourhood sums for all agents at once.
+
+    With ``X = E`` (columns η_i) and ``leader = y0`` this is ψ (the measured
+    neighbourhood output of eq. (6)); with ``C0 = None`` and ``leader = η0`` it
+    is the (uncomputable) neighbourhood state error e_η.
+    """
+    CX = X if C0 is None else ca.mtimes(ca.DM(C0), X)
+    return ca.mtimes(CX, gm.LBt_sparse()) - ca.mtimes(leader, gm.a0h_sparse())
+
+
+def apply_agents(fun: ca.Function, N: int, args: Sequence[Any], assembly: str) -> list[Any]:
+    """Apply a per-agent Function to the columns of ``args`` for all N agents.
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        Per-agent function; every input is a column vector.
+    N : int
+        Number of agents.
+    args : sequence
+        One matrix per input with N columns (column i belongs to agent i).
+    assembly : {"map", "flat"}
+        ``map``: one ``Function.map`` call (graph size independent of N);
+        ``flat``: one call per agent, concatenated.
+
+    Returns
+    -------
+    list
+        One matrix per output, N columns.
+    """
+    if assembly == "map":
+        res = fun.map(N)(*args)
+        return [res] if fun.n_out() == 1 else list(res)
+    if assembly != "flat":
+        raise ScenarioError("options", "assembly", f"{assembly!r} is unknown", "'map' or 'flat'")
+    cols = [fun(*[a[:, i] for a in args]) for i in range(N)]
+    if fun.n_out() == 1:
+        cols = [[c] for c in cols]
+    return [ca.horzcat(*[c[k] for c in cols]) for k in range(fun.n_out())]

@@ -1,0 +1,65 @@
+"""Unknown-input observer of the neighbourhood error, eqs. (6)–(8) (paper-spec section 4).
+
+Sign reconstruction (the extraction lost the minus signs; see docs/closed-loop.md):
+``Γ = B0[(C0B0)ᵀ(C0B0)]⁻¹(C0B0)ᵀ``, ``Φ = I − ΓC0`` (so ``ΦB0 = 0``),
+``μ̇ = (ΦA0 − ΘC0) μ + [Θ(I − C0Γ) + ΦA0Γ] ψ``, ``ê = μ + Γψ``; then the error
+``ẽ = ê − e_η`` obeys ``ẽ̇ = (ΦA0 − ΘC0) ẽ`` for any unknown input.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+
+@dataclass(frozen=True)
+class UIOMatrices:
+    """Constant matrices of the UIO.
+
+    Attributes
+    ----------
+    Gamma, Phi : ndarray
+        m×n and m×m, eq. (7).
+    F : ndarray
+        m×m error matrix ``ΦA0 − ΘC0`` (Hurwitz by LMI (16)).
+    K : ndarray
+        m×n input matrix of ψ, ``Θ(I − C0Γ) + ΦA0Γ``.
+    """
+
+    Gamma: np.ndarray
+    Phi: np.ndarray
+    F: np.ndarray
+    K: np.ndarray
+
+
+def uio_matrices(
+    A0: np.ndarray, B0: np.ndarray, C0: np.ndarray, Theta: np.ndarray
+) -> UIOMatrices:
+    """Γ, Φ and the two system matrices of the UIO, eqs. (7)–(8).
+
+    Parameters
+    ----------
+    A0, B0, C0 : ndarray
+        Leader matrices (m×m, m×p, n×m).
+    Theta : ndarray
+        m×n observer gain.
+    """
+    A0, B0, C0, Theta = (np.asarray(a, dtype=float) for a in (A0, B0, C0, Theta))
+    CB = C0 @ B0
+    Gamma = B0 @ np.linalg.solve(CB.T @ CB, CB.T)  # eq. (7), sign reconstructed
+    Phi = np.eye(A0.shape[0]) - Gamma @ C0  # eq. (7): Φ B0 = 0
+    F = Phi @ A0 - Theta @ C0  # eq. (8)
+    K = Theta @ (np.eye(C0.shape[0]) - C0 @ Gamma) + Phi @ A0 @ Gamma  # eq. (7)
+    return UIOMatrices(Gamma=Gamma, Phi=Phi, F=F, K=K)
+
+
+def uio_function(mats: UIOMatrices) -> ca.Function:
+    """One agent's UIO as a Function ``(mu, psi) -> (mudot, ehat)``, eq. (7)."""
+    m, n = mats.Gamma.shape
+    mu = ca.SX.sym("mu", m)
+    psi = ca.SX.sym("psi", n)
+    mudot = ca.DM(mats.F) @ mu + ca.DM(mats.K) @ psi  # eq. (7)
+    ehat = mu + ca.DM(mats.Gamma) @ psi  # eq. (7)
+    return ca.Function("uio", [mu, psi], [mudot, ehat], ["mu", "psi"], ["mudot", "ehat"])

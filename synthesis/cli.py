@@ -1,0 +1,87 @@
+"""Command line: ``synth SCENARIO [--strict] [--out FILE]`` and ``certify GAINS [--strict]``.
+
+Exit codes: 0 ok (warnings about given gains go to stderr), 2 on failure with one
+line on stderr (via :func:`symbolic.errors.run_cli`). ``STRICT=1`` in the
+environment has the effect of ``--strict``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from symbolic.artifacts import out_dir
+from symbolic.errors import SynthesisError, ToolkitError
+from symbolic.scenario import load_scenario
+from synthesis.api import synthesize
+from synthesis.certificate import certify
+from synthesis.gains import load_gains, save_gains
+
+
+class _UsageError(ToolkitError):
+    """Bad command line."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2, no usage dump
+        raise _UsageError(f"synthesis: {message} (usage: python -m synthesis synth|certify PATH)")
+
+
+def _strict(flag: bool) -> bool:
+    return flag or os.environ.get("STRICT", "0").strip() not in ("", "0")
+
+
+def main(argv: list[str]) -> int:
+    """Entry point; returns the exit status (errors are raised as ToolkitError)."""
+    ap = _Parser(prog="python -m synthesis", description=__doc__)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    s = sub.add_parser("synth", help="synthesise and certify gains for a scenario")
+    s.add_argument("scenario")
+    s.add_argument("--strict", action="store_true", help="warnings about given gains fail")
+    s.add_argument("--out", default=None, help="output file (default out/<name>/gains.json)")
+    c = sub.add_parser("certify", help="re-check a gains.json from its numbers alone")
+    c.add_argument("gains")
+    c.add_argument("--strict", action="store_true", help="warnings about given gains fail")
+    args = ap.parse_args(argv)
+    strict = _strict(args.strict)
+
+    if args.cmd == "synth":
+        scen = load_scenario(args.scenario)
+        g = synthesize(scen, strict=strict)
+        path = Path(args.out) if args.out else out_dir(scen.name) / "gains.json"
+        save_gains(g, path)
+        cert = g.certificate
+        for wline in cert["warnings"]:
+            print(f"warning: {wline}", file=sys.stderr)
+        nchk = len(cert["checks"])
+        npass = sum(ch["passed"] for ch in cert["checks"])
+        print(
+            f"{path}: w = {g.w:.6g} ({g.info['lemma3']['used']} Z), lambda1 = {g.lambda1:.6g}, "
+            f"lambda2 = {g.lambda2:.6g}, Q = {g.Q.ravel().round(6).tolist()}, k1 = {g.k1:.6g}; "
+            f"certificate {npass}/{nchk} checks pass, {len(cert['warnings'])} warning(s); "
+            f"solver {g.info['solver']}"
+        )
+        return 0
+
+    g = load_gains(args.gains)
+    try:
+        cert = certify(g)
+    except (ValueError, IndexError, TypeError, ArithmeticError) as exc:
+        raise SynthesisError(
+            f"{args.gains}: certify cannot evaluate the numbers ({type(exc).__name__}: {exc})"
+        ) from None
+    if cert["failures"]:
+        raise SynthesisError(f"{args.gains}: certificate fails: " + "; ".join(cert["failures"]))
+    if strict and cert["warnings"]:
+        raise SynthesisError(
+            f"{args.gains}: certificate (strict) fails: " + "; ".join(cert["warnings"])
+        )
+    for wline in cert["warnings"]:
+        print(f"warning: {wline}", file=sys.stderr)
+    print(
+        f"{args.gains}: {len(cert['checks'])} checks pass"
+        + (f", {len(cert['warnings'])} warning(s) about given gains" if cert["warnings"] else "")
+    )
+    return 0

@@ -1,0 +1,391 @@
+"""The symbolic closed loop against independent truth (issue 4 acceptance list).
+
+Truth used here: a plainly written numpy implementation (verify/reference.py),
+central differences of the simulated trajectory (in the test only), the exact
+cancellation identity of eq. (29), analytic filter responses, and graph sizes.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from symbolic.adaptive import projection
+from symbolic.closed_loop import build_closed_loop
+from symbolic.derivatives import filter_function
+from symbolic.errors import ScenarioError
+from symbolic.formation import formation_offset
+from symbolic.models import build_model
+from symbolic.network import gauge
+from symbolic.scenario import load_scenario
+from verify.reference import Reference, hand_gains
+
+PAPER = "scenarios/paper.toml"
+
+
+def _fmt(v) -> str:
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, np.ndarray):
+        v = v.tolist()
+    if isinstance(v, list):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+    return repr(float(v))
+
+
+def write_scenario(tmp_path, adjacency, pinning, *, models=None, options=None, controller=None,
+                   observer=None, initial=None, faults=None, u0=None, name="t") -> object:  # fmt: skip
+    """A two-link (or mixed-model) scenario on an arbitrary graph, written as TOML and loaded."""
+    A = np.asarray(adjacency, dtype=float)
+    N = A.shape[0]
+    rng = np.random.default_rng(N)
+    lines = [f'name = "{name}"', "[leader]", "A0 = [[0.0, 1.0], [0.0, 0.0]]", "B0 = [[0.0], [1.0]]",
+             "C0 = [[1.0, 1.0], [2.0, 2.0]]", "eta0 = [0.3, -0.2]", "alpha = 2.0"]  # fmt: skip
+    if u0 is None:
+        lines.append('u0 = ["2*cos(t)"]')
+    else:
+        lines.append(u0)
+    lines += ["[graph]", f"adjacency = {_fmt(A)}", f"pinning = {_fmt(np.asarray(pinning))}"]
+    for i in range(N):
+        model = (models or ["two_link"])[i % len(models or ["two_link"])]
+        g, f = (faults or ("0.95", ["4*sin(2*t) + 1", "3*cos(t)"]))
+        lines += ["[[followers]]", f'model = "{model}"', f"p0 = {_fmt(rng.uniform(-2, 2, 2))}",
+                  f"q0 = {_fmt(rng.uniform(-1, 1, 2))}", f"b0 = {_fmt(rng.uniform(-4, 4, 2))}",
+                  f"g = {g}", f"f = {_fmt(f)}"]  # fmt: skip
+    obs = {"lambda1": 1.9, "lambda2": 2.0, "Q": [[35.4, 14.9]], "alpha1": 1.0,
+           "alpha1_bar": 0.5, "phi0": 1.0, "phi_min": 0.005} | (observer or {})  # fmt: skip
+    lines.append("[observer]")
+    lines += [f"{k} = {_fmt(v)}" for k, v in obs.items()]
+    ctrl = {"gamma": 0.5, "sigma": 0.3, "ghat_ref": 1.0, "g_min": 0.5} | (controller or {})
+    lines.append("[controller]")
+    lines += [f"{k} = {_fmt(v)}" for k, v in ctrl.items()]
+    opts = {"sign": "tanh", "sign_width": 0.05, "ghat_law": "sigma+projection",
+            "feedforward": True, "derivatives": "oracle", "tau_threshold": 0.5} | (options or {})  # fmt: skip
+    lines.append("[options]")
+    lines += [f"{k} = {_fmt(v)}" for k, v in opts.items()]
+    ini = {"eta": [0.1, -0.1], "mu": [0.05, 0.02], "ghat": 1.2} | (initial or {})
+    lines.append("[initial]")
+    lines += [f"{k} = {_fmt(v)}" for k, v in ini.items()]
+    path = tmp_path / f"{name}_{N}.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return load_scenario(path)
+
+
+def random_graph(N, rng, *, signed=False):
+    """A random directed graph reachable from the leader: a random tree plus extra edges."""
+    A = np.zeros((N, N))
+    order = rng.permutation(N)
+    for k in range(1, N):
+        A[order[k], order[rng.integers(0, k)]] = rng.uniform(0.5, 2.0)
+    for _ in range(N):
+        i, j = rng.integers(0, N, 2)
+        if i != j:
+            A[i, j] = rng.uniform(0.5, 2.0)
+    pin = np.zeros(N)
+    pin[order[0]] = 1.0
+    pin[rng.integers(0, N)] = 0.7
+    if signed:
+        h = rng.choice([-1.0, 1.0], N)
+        A = A * np.outer(h, h)  # structurally balanced by construction
+    return A, pin
+
+
+def random_state(cl, rng, scale=1.0):
+    x = cl.x0 + scale * rng.normal(size=cl.layout.nx)
+    for i in range(cl.layout.N):
+        x[cl.layout.slices[("phi", i)]] = rng.uniform(0.01, 1.0)
+        x[cl.layout.slices[("ghat", i)]] = rng.uniform(1.0, 2.0)
+        x[cl.layout.slices[("thetahat", i)]] = rng.uniform(0.0, 3.0, 2)
+    return x
+
+
+def assert_rhs_matches(cl, ref, rng, k=4):
+    for _ in range(k):
+        x = random_state(cl, rng)
+        t = rng.uniform(0.0, 20.0)
+        got = np.array(cl.ode(t, x)).ravel()
+        want = ref.rhs(t, x)
+        lay = cl.layout
+        # block by block: each named part relative to its own size
+        for name, sl in lay.agent_offsets.items():
+            idx = np.concatenate([np.arange(lay.nx)[lay.slices[(name, i)]] for i in range(lay.N)])
+            scale = max(np.abs(want[idx]).max(), 1.0)
+            assert np.abs(got[idx] - want[idx]).max() <= 1e-10 * scale, name
+        assert np.allclose(got[: lay.m], want[: lay.m], rtol=1e-12, atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- vs numpy
+@pytest.mark.parametrize("assembly", ["map", "flat"])
+def test_paper_scenario_matches_reference(assembly):
+    sc = load_scenario(PAPER)
+    g = hand_gains(sc)
+    cl = build_closed_loop(sc, g, assembly=assembly)
+    assert_rhs_matches(cl, Reference(sc, g), np.random.default_rng(1))
+
+
+CASES = [
+    dict(N=3, signed=False, options={}),
+    dict(N=6, signed=True, options={"derivatives": "filtered", "sign": "sat"}),
+    dict(N=8, signed=False, options={"feedforward": False, "ghat_law": "paper"}),
+    dict(N=7, signed=True, options={"ablation": True, "ghat_law": "projection"}),
+    dict(N=20, signed=True, options={"ghat_law": "sigma"}),
+    dict(N=20, signed=False, options={"derivatives": "filtered", "filter_bandwidth": 30.0}),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=lambda c: f"N{c['N']}-{'signed' if c['signed'] else 'coop'}")
+def test_random_graphs_match_reference(tmp_path, case):
+    rng = np.random.default_rng(case["N"] + 100 * case["signed"])
+    A, pin = random_graph(case["N"], rng, signed=case["signed"])
+    sc = write_scenario(tmp_path, A, pin, options=case["options"])
+    g = hand_gains(sc)
+    if case["signed"]:
+        assert np.any(g.h < 0)
+    assert_rhs_matches(build_closed_loop(sc, g), Reference(sc, g), rng, k=3)
+
+
+def test_mixed_models_and_csv_trace_match_reference(tmp_path):
+    tr = tmp_path / "u0.csv"
+    ts = np.linspace(0, 20, 41)
+    tr.write_text("t,u\n" + "\n".join(f"{a},{2 * np.cos(a) + 0.3 * a}" for a in ts) + "\n")
+    rng = np.random.default_rng(7)
+    A, pin = random_graph(5, rng)
+    sc = write_scenario(tmp_path, A, pin, models=["two_link", "point_mass_2d"],
+                        u0=f'u0_csv = "{tr.name}"', faults=("[[0.0, 1.0], [5.0, 0.6]]", ["step(t - 3)", "0.5"]))  # fmt: skip
+    g = hand_gains(sc)
+    cl = build_closed_loop(sc, g)
+    ref = Reference(sc, g)
+    assert_rhs_matches(cl, ref, rng, k=4)
+    assert cl.breakpoints == (3.0, 5.0)
+
+
+# ----------------------------------------------------------------------------- structure
+def test_graph_size_independent_of_N(tmp_path):
+    sizes = {}
+    for N in (5, 500):
+        A = np.diag(np.ones(N - 1), -1)  # a chain: leader -> 1 -> 2 -> ...
+        pin = np.zeros(N)
+        pin[0] = 1.0
+        sc = write_scenario(tmp_path, A, pin, name=f"chain{N}")
+        cl = build_closed_loop(sc, hand_gains(sc))
+        sizes[N] = (cl.ode.n_instructions(), cl.ode.n_nodes(), cl.dae_dyn.n_instructions())
+        assert cl.layout.nx == 2 + N * 12
+    assert sizes[5] == sizes[500]
+
+
+def test_flat_graph_grows_with_N(tmp_path):
+    counts = []
+    for N in (3, 6):
+        A = np.diag(np.ones(N - 1), -1)
+        pin = np.eye(1, N).ravel()
+        sc = write_scenario(tmp_path, A, pin, name=f"flat{N}")
+        counts.append(build_closed_loop(sc, hand_gains(sc), assembly="flat").ode.n_instructions())
+    assert counts[1] > 1.5 * counts[0]
+
+
+def test_ode_and_dae_give_same_accelerations(tmp_path):
+    rng = np.random.default_rng(11)
+    A, pin = random_graph(6, rng, signed=True)
+    sc = write_scenario(tmp_path, A, pin)
+    cl = build_closed_loop(sc, hand_gains(sc))
+    lay = cl.layout
+    for _ in range(4):
+        x, t = random_state(cl, rng), rng.uniform(0, 20)
+        xdot = np.array(cl.ode(t, x)).ravel()
+        qd = np.concatenate([xdot[lay.slices[("q", i)]] for i in range(lay.N)])
+        out = cl.dae_dyn(t=t, x=x, z=qd, p=[], u=[])
+        alg = np.array(out["alg"]).ravel()
+        assert np.abs(alg).max() < 1e-9 * max(1.0, np.abs(qd).max())
+        # and the accelerations solving the residual are qd: solve alg(z) = 0 (affine in z)
+        J = np.array(ca.Function("J", [ca.MX.sym("z", len(qd))], [0])(0)) if False else None
+        z0 = np.zeros_like(qd)
+        r0 = np.array(cl.dae_dyn(t=t, x=x, z=z0, p=[], u=[])["alg"]).ravel()
+        cols = [np.array(cl.dae_dyn(t=t, x=x, z=np.eye(len(qd))[k], p=[], u=[])["alg"]).ravel() - r0
+                for k in range(len(qd))]  # fmt: skip
+        z_solved = np.linalg.solve(np.column_stack(cols), -r0)
+        assert np.allclose(z_solved, qd, rtol=1e-9, atol=1e-9)
+        del J
+        ode_dae = np.array(out["ode"]).ravel()
+        others = np.ones(lay.nx, bool)
+        for i in range(lay.N):
+            others[lay.slices[("q", i)]] = False
+        assert np.allclose(ode_dae[others], xdot[others], rtol=1e-13, atol=1e-12)
+    x0, z0 = cl.x0, cl.z0
+    assert np.abs(np.array(cl.dae_dyn(t=0, x=x0, z=z0, p=[], u=[])["alg"])).max() < 1e-8
+
+
+def test_layout_round_trip():
+    sc = load_scenario(PAPER)
+    cl = build_closed_loop(sc, hand_gains(sc))
+    lay = cl.layout
+    x = np.arange(lay.nx, dtype=float)
+    assert np.array_equal(lay.pack(lay.unpack(x)), x)
+    parts = lay.unpack(cl.x0)
+    assert np.array_equal(parts["p"], np.array([f.p0 for f in sc.followers]))
+    assert np.array_equal(lay.get(cl.x0, "p", 3), sc.followers[3].p0)
+    names = {k[0] for k in lay.slices if isinstance(k, tuple)}
+    assert names == {"mu", "eta", "phi", "p", "q", "thetahat", "ghat"}
+
+
+def test_formation_start(tmp_path):
+    sc = load_scenario(PAPER)
+    A, pin = sc.graph.adjacency, sc.graph.pinning
+    sc2 = write_scenario(tmp_path, A, pin, initial={"start": "formation"})
+    cl = build_closed_loop(sc2, hand_gains(sc2))
+    o = dict(zip(cl.outputs.name_out(), cl.outputs(0.0, cl.x0), strict=True))
+    assert np.abs(np.array(o["et"])).max() < 1e-12
+
+
+def test_bad_assembly_is_a_toolkit_error():
+    sc = load_scenario(PAPER)
+    with pytest.raises(ScenarioError, match="assembly"):
+        build_closed_loop(sc, hand_gains(sc), assembly="tree")
+
+
+# ----------------------------------------------------------------------------- blocks
+def test_gauge_of_signed_graphs():
+    A = np.array([[0, 1, -1], [1, 0, 0], [-1, 0, 0]], dtype=float)
+    h = gauge(A)
+    assert h[0] == h[1] == -h[2]
+    with pytest.raises(ScenarioError, match="balanced"):
+        gauge(np.array([[0, 1, -1], [1, 0, 1], [-1, 1, 0]], dtype=float))
+
+
+def test_formation_rule():
+    d, b0 = ca.SX.sym("d", 2), ca.SX.sym("b0", 2)
+    eps = 0.1
+    f = ca.Function("f", [d, b0], [formation_offset(d, b0, eps)])
+    rng = np.random.default_rng(5)
+    for _ in range(10):
+        v, bb = rng.normal(size=2) * 20, rng.normal(size=2)
+        tau = np.arctan2(v[1], v[0])
+        R = np.array([[np.cos(tau), -np.sin(tau)], [np.sin(tau), np.cos(tau)]])
+        r2 = v @ v
+        # the paper's rotation up to O(ε²/r²)
+        assert np.linalg.norm(np.array(f(v, bb)).ravel() - R @ bb) <= 2 * eps**2 / r2 * np.linalg.norm(bb)
+    assert np.allclose(np.array(f([0, 0], [3, 4])).ravel(), [3, 4])  # faded to angle 0
+    J = ca.Function("J", [d, b0], [ca.jacobian(formation_offset(d, b0, eps), d)])
+    assert np.all(np.isfinite(np.array(J([0, 0], [3, 4]))))
+    # uniform rotation of η̇ rotates b uniformly: b(η̇ = 2(sin t, cos t)) = R(π/2 − t) b0
+    t = 0.7
+    want = np.array([[np.cos(np.pi / 2 - t), -np.sin(np.pi / 2 - t)], [np.sin(np.pi / 2 - t), np.cos(np.pi / 2 - t)]]) @ [1.0, 2.0]  # fmt: skip
+    got = np.array(f(2 * np.array([np.sin(t), np.cos(t)]), [1.0, 2.0])).ravel()
+    assert np.linalg.norm(got - want) < 2 * eps**2 / 4 * np.sqrt(5)
+
+
+def test_projection_keeps_ghat_in_bounds():
+    gh, r = ca.SX.sym("gh"), ca.SX.sym("r")
+    P = ca.Function("P", [gh, r], [projection(gh, r, 1.0, 2.0)])
+    for rate in (-5.0, -1e-3, 0.0, 1e-3, 7.0):
+        assert float(P(2.0, rate)) <= 0.0
+        assert float(P(1.0, rate)) >= 0.0
+        assert float(P(1.5, rate)) == rate  # interior: the law untouched
+        # the removed part always points outward
+        assert (float(P(1.995, rate)) - rate) * 1 <= 0 and (float(P(1.005, rate)) - rate) >= 0
+
+
+def test_filters_converge_on_smooth_inputs():
+    """Quadratic input: exact in steady state. Sine: the analytic steady-state response."""
+    om = 20.0
+    flt = filter_function(1, 1, om)
+    w, z, t = ca.SX.sym("w", 2), ca.SX.sym("z", 3), ca.SX.sym("t")
+    a = 1.3
+
+    def run(sig, times):
+        wdot, zdot, *_ = flt(w, z, ca.jacobian(sig(t), t), sig(t))
+        I = ca.integrator("I", "cvodes", {"t": t, "x": ca.vertcat(w, z), "ode": ca.vertcat(wdot, zdot)},
+                          0.0, times, {"reltol": 1e-11, "abstol": 1e-12})  # fmt: skip
+        return np.array(I(x0=np.zeros(5))["xf"])
+
+    times = np.array([3.0, 4.0])
+    X = run(lambda s: a * s**2 + s, times)
+    # w2 estimates the derivative of η̇ = 2as + 1 -> 2a; z2, z3 estimate ḃ = 2as + 1, b̈ = 2a
+    assert np.allclose(X[1], 2 * a, atol=1e-8)
+    assert np.allclose(X[3], 2 * a * times + 1, atol=1e-8)
+    assert np.allclose(X[4], 2 * a, atol=1e-8)
+    nu = 2.0
+    X = run(lambda s: ca.sin(nu * s), times)
+    H3 = (om / (1j * nu + om)) ** 3
+    for k, tk in enumerate(times):
+        s = np.exp(1j * nu * tk)
+        assert abs(X[3, k] - (H3 * 1j * nu * s).imag) < 1e-7
+        assert abs(X[4, k] - (H3 * (1j * nu) ** 2 * s).imag) < 1e-7
+    # and the derivative estimate's error is the filter lag, small against the signal
+    assert abs(X[4, 0] + nu**2 * np.sin(nu * times[0])) < 0.35 * nu**2
+
+
+# ----------------------------------------------------------------------------- trajectories
+def _trajectory(cl, times, rtol=1e-10):
+    t, x = ca.SX.sym("t"), ca.SX.sym("x", cl.layout.nx)
+    f = cl.ode.expand()
+    I = ca.integrator("I", "cvodes", {"t": t, "x": x, "ode": f(t, x)}, 0.0, times,
+                      {"reltol": rtol, "abstol": 1e-12, "max_num_steps": 200000})  # fmt: skip
+    return np.array(I(x0=cl.x0)["xf"]).T
+
+
+def test_oracle_derivatives_match_central_differences(tmp_path):
+    sc = load_scenario(PAPER)
+    sc = write_scenario(tmp_path, sc.graph.adjacency, sc.graph.pinning)
+    cl = build_closed_loop(sc, hand_gains(sc))
+    h = 1e-4
+    tk = np.array([0.4, 0.9, 1.3])
+    times = np.sort(np.concatenate([tk - h, tk, tk + h]))
+    X = _trajectory(cl, times)
+    O = [dict(zip(cl.outputs.name_out(), [np.array(v) for v in cl.outputs(t, x)], strict=True))
+         for t, x in zip(times, X, strict=True)]  # fmt: skip
+    for k in range(len(tk)):
+        lo, mid, hi = O[3 * k], O[3 * k + 1], O[3 * k + 2]
+        for val, der in (("etadot", "etaddot"), ("b", "bdot"), ("bdot", "bddot"), ("etaddot", "eta3dot")):
+            fd = (hi[val] - lo[val]) / (2 * h)
+            scale = max(np.abs(mid[der]).max(), 1.0)
+            assert np.abs(fd - mid[der]).max() < 2e-5 * scale, (val, tk[k])
+        # η itself: its AD derivative is the flow (consistency of the observer state)
+        Xs = [cl.layout.unpack(X[3 * k + j])["eta"] for j in (0, 2)]
+        assert np.allclose((Xs[1] - Xs[0]) / (2 * h), mid["etadot"], rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("faulty", [False, True])
+def test_exact_cancellation_identity(tmp_path, faulty):
+    """Mχ̇ = −(C + K)χ − Ĵ sgn χ (+ f + (gĝ − 1)Ψ with faults) along a trajectory, eq. (29)."""
+    sc0 = load_scenario(PAPER)
+    faults = ("0.8", ["2*sin(t)", "1 + cos(3*t)"]) if faulty else ("1.0", ["0", "0"])
+    sc = write_scenario(tmp_path, sc0.graph.adjacency, sc0.graph.pinning, faults=faults,
+                        options={"ablation": not faulty, "ghat_law": "sigma"})  # fmt: skip
+    cl = build_closed_loop(sc, hand_gains(sc))
+    times = np.array([0.2, 0.5, 1.0])
+    X = _trajectory(cl, times)
+    t, x = ca.MX.sym("t"), ca.MX.sym("x", cl.layout.nx)
+    o = dict(zip(cl.outputs.name_out(), cl.outputs(t, x), strict=True))
+    chi_dot = ca.jacobian(o["chi"], t) + ca.jtimes(ca.vec(o["chi"]), x, cl.ode(t, x))
+    F = ca.Function("F", [t, x], [ca.reshape(chi_dot, sc.N, sc.n), o["chi"], o["Psi"], o["thetahat"],
+                                  o["ghat"], o["g"], o["f"]])  # fmt: skip
+    model = build_model("two_link")
+    k1 = sc.controller.k1
+    for tk, xk in zip(times, X, strict=True):
+        cd, chi, Psi, th, gh, g, f = (np.array(v) for v in F(tk, xk))
+        P = cl.layout.unpack(xk)
+        for i in range(sc.N):
+            M = np.array(model.M(P["p"][i]))
+            C = np.array(model.C(P["p"][i], P["q"][i]))
+            lhs = M @ cd[i]
+            rhs = -(C + np.diag(k1[i])) @ chi[i] - th[i] * np.tanh(chi[i] / sc.options.sign_width)
+            if faulty:
+                rhs = rhs + f[i] + (g[i, 0] * gh[i, 0] - 1.0) * Psi[i]
+            assert np.abs(lhs - rhs).max() < 1e-7 * max(1.0, np.abs(lhs).max()), (tk, i)
+
+
+def test_paper_scenario_first_second(tmp_path):
+    """The paper's scenario with its shipped defaults integrates (short horizon; full run: make sim)."""
+    sc = load_scenario(PAPER)
+    cl = build_closed_loop(sc, hand_gains(sc))
+    times = np.linspace(0.05, 1.0, 20)
+    X = _trajectory(cl, times, rtol=1e-6)
+    P = [cl.layout.unpack(x) for x in X]
+    gh = np.array([p["ghat"] for p in P])
+    lo, hi = 1.0, 1.0 / sc.controller.g_min
+    assert gh.min() >= lo - 1e-3 and gh.max() <= hi + 1e-3
+    assert np.all(np.array([p["phi"] for p in P]) >= sc.observer.phi_min - 1e-9)
+    assert np.all(np.isfinite(X))

@@ -1,0 +1,152 @@
+"""The whitelist expression parser (symbolic/expressions.py)."""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from symbolic.errors import ExpressionError, ToolkitError
+from symbolic.expressions import FUNCTIONS, parse_expression
+
+WHERE = "scn.toml: followers[2].f[0]"
+
+# The paper's expressions (Table 2) and their plain-Python meaning.
+PAPER = {
+    "2*cos(t)": lambda t: 2 * math.cos(t),
+    "4*sin(2*t) + 1": lambda t: 4 * math.sin(2 * t) + 1,
+    "3*cos(t) + exp(-2*t)": lambda t: 3 * math.cos(t) + math.exp(-2 * t),
+    "2*sin(t)": lambda t: 2 * math.sin(t),
+    "4*cos(t)": lambda t: 4 * math.cos(t),
+    "0.95": lambda t: 0.95,
+}
+
+# Every whitelisted function, with an independent reference.
+OTHERS = {
+    "tan(t/4) - sqrt(t + 1) + log(t + 2)": lambda t: (
+        math.tan(t / 4) - math.sqrt(t + 1) + math.log(t + 2)
+    ),
+    "abs(sin(t)) * tanh(t - 1) ** 2": lambda t: abs(math.sin(t)) * math.tanh(t - 1) ** 2,
+    "atan2(sin(t), cos(t) + 2) + pi": lambda t: math.atan2(math.sin(t), math.cos(t) + 2) + math.pi,
+    "min(t, 2) - max(1, t/2)": lambda t: min(t, 2) - max(1, t / 2),
+    "1 - 0.4*step(t - 5)": lambda t: 1 - 0.4 * (1.0 if t >= 5 else 0.0),
+    "sat(2*(t - 3)) / -2 + +t": lambda t: max(-1.0, min(1.0, 2 * (t - 3))) / -2 + t,
+    "2**-t": lambda t: 2.0**-t,
+}
+
+TIMES = [0.0, 0.3, 1.0, 2.5, 4.999, 5.0, 7.1, 19.9]
+
+
+def _casadi_value(e, t: float) -> float:
+    ts = ca.SX.sym("t")
+    f = ca.Function("f", [ts], [e.casadi(ts)])
+    return float(f(t))
+
+
+@pytest.mark.parametrize("text", list(PAPER) + list(OTHERS))
+def test_accepts_and_backends_agree_with_python(text):
+    ref = {**PAPER, **OTHERS}[text]
+    e = parse_expression(text, where=WHERE)
+    for t in TIMES:
+        want = ref(t)
+        assert float(e.numpy(t)) == pytest.approx(want, rel=1e-12, abs=1e-12)
+        assert _casadi_value(e, t) == pytest.approx(want, rel=1e-12, abs=1e-12)
+    # vectorised numpy evaluation equals the pointwise one
+    arr = e.numpy(np.array(TIMES))
+    assert np.broadcast_to(arr, (len(TIMES),)) == pytest.approx([ref(t) for t in TIMES])
+
+
+def test_numbers_are_constants():
+    e = parse_expression(0.95, where=WHERE)
+    assert e.is_constant() and float(e.numpy(3.0)) == 0.95
+    assert not parse_expression("t", where=WHERE).is_constant()
+    assert parse_expression("2*pi", where=WHERE).is_constant()
+
+
+def test_breakpoints_of_steps():
+    e = parse_expression("1 - 0.3*step(t - 5) - 0.2*step(2*t - 24) + sat(t - 3)", where=WHERE)
+    assert e.breakpoints() == pytest.approx((2.0, 4.0, 5.0, 12.0))  # sat kinks at t - 3 = ±1
+    e2 = parse_expression("abs(t - 3)", where=WHERE)
+    assert e2.breakpoints() == pytest.approx((3.0,))
+    assert parse_expression("step(sin(t))", where=WHERE).breakpoints() == ()  # not affine
+
+
+REJECTED = [
+    ("__import__('os')", "__import__"),
+    ("__import__('os').system('true')", ".system"),
+    ("t.real", ".real"),
+    ("(1).__class__", ".__class__"),
+    ("(lambda x: x)(t)", "lambda"),
+    ("lambda: 1", "lambda"),
+    ("[x for x in (t,)]", "comprehension"),
+    ("sum(x for x in (t, t))", "sum"),
+    ("{x: 1 for x in (t,)}", "comprehension"),
+    ("open('f')", "open"),
+    ("eval('1')", "eval"),
+    ("x + 1", "x"),
+    ("e", "e"),
+    ("t % 2", "%"),
+    ("t // 2", "//"),
+    ("t < 1", "comparison"),
+    ("t if t else 1", "if-else"),
+    ("t and 1", "and/or"),
+    ("t[0]", "subscript [...]"),
+    ("'abc'", "'abc'"),
+    ("True", "True"),
+    ("sin(x=t)", "x"),
+    ("f'{t}'", "f-string"),
+]
+
+
+@pytest.mark.parametrize(("text", "token"), REJECTED)
+def test_rejects_with_file_key_and_token(text, token):
+    with pytest.raises(ExpressionError) as info:
+        parse_expression(text, where=WHERE)
+    msg = str(info.value)
+    assert msg.startswith(WHERE + ":")
+    assert f"token {token!r}" in msg
+    assert "\n" not in msg
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["", "sin(", "2 +* t", "sin(t, t)", "atan2(t)", "1" + "0" * 400, "1e999", "a\x00", "x" * 600],
+)
+def test_other_bad_text_is_one_line_expression_error(text):
+    with pytest.raises(ExpressionError) as info:
+        parse_expression(text, where=WHERE)
+    assert str(info.value).startswith(WHERE + ":") and "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("value", [True, None, [1, 2], {"a": 1}, math.nan, math.inf])
+def test_non_text_values_rejected(value):
+    with pytest.raises(ExpressionError, match="followers"):
+        parse_expression(value, where=WHERE)
+
+
+def test_never_evaluates_text(tmp_path):
+    marker = tmp_path / "pwned"
+    with pytest.raises(ExpressionError):
+        parse_expression(f"__import__('pathlib').Path('{marker}').touch()", where=WHERE)
+    assert not marker.exists()
+
+
+def test_function_list_is_the_issue_list():
+    assert set(FUNCTIONS) == {
+        "sin", "cos", "tan", "exp", "log", "sqrt", "abs", "tanh", "atan2", "min", "max",
+        "step", "sat",
+    }  # fmt: skip
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.text(max_size=60))
+def test_fuzz_text_only_toolkit_errors(text):
+    try:
+        e = parse_expression(text, where=WHERE)
+    except ToolkitError:
+        return
+    e.numpy(np.array([0.0, 1.0]))  # whatever parses also evaluates

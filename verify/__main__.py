@@ -1,0 +1,131 @@
+"""``python -m verify demo|check|report|bench [SCENARIO]`` (``make demo|verify|report|bench``).
+
+- ``check``: the Theorem 1/2 checks and the bound-vs-actual table; exit 0 when every
+  check the theory guarantees holds, 1 otherwise; ``--strict`` (or ``STRICT=1``)
+  also fails on the paper's own claims that do not hold.
+- ``report``: ``check`` plus the figures, ``bounds.csv`` and ``report.md``
+  (simulating the eq. (42) ablation run for Fig. 13 if needed).
+- ``demo``: the whole pipeline from scratch — synthesis, simulation, ablation,
+  verification, report — ending with where the report is and the table.
+- ``bench``: delegated to :mod:`verify.bench` (issue 7).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import os
+import sys
+from pathlib import Path
+
+from symbolic.artifacts import OUT_ROOT
+from symbolic.errors import run_cli
+from verify.bounds import VerifyConfig, VerifyError
+
+DEFAULT_SCENARIO = "scenarios/paper.toml"
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m verify", description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    for name, helptext in (
+        ("check", "verify the theorems and print the bound-vs-actual table"),
+        ("report", "check, then write figures, bounds.csv and report.md"),
+        ("demo", "synth, sim, ablation, verify and report from scratch"),
+    ):
+        p = sub.add_parser(name, help=helptext)
+        p.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO)
+        p.add_argument("--strict", action="store_true",
+                       help="also fail on the paper's own claims (or STRICT=1)")  # fmt: skip
+        p.add_argument("--out", default=None, help="output root (default out/ or $HITL_OUT)")
+        p.add_argument("--tail", type=float, default=0.5,
+                       help="asymptotic window: last fraction of the horizon (default 0.5)")  # fmt: skip
+        p.add_argument("--delta", type=float, default=0.5,
+                       help="Lemma 1's delta, 0 < delta < 1 (default 0.5)")  # fmt: skip
+        p.add_argument("--no-lyapunov", action="store_true",
+                       help="skip the exact dV/dt checks (table from the trajectory only)")  # fmt: skip
+        p.add_argument("--no-gif", action="store_true", help="skip the animation")
+    b = sub.add_parser("bench", help="performance benchmark (verify.bench)")
+    b.add_argument("rest", nargs=argparse.REMAINDER)
+    return ap
+
+
+def _strict(flag: bool) -> bool:
+    env = os.environ.get("STRICT", "0").strip().lower()
+    return flag or env in ("1", "true", "yes", "on")
+
+
+def main(argv: list[str]) -> int:
+    """Entry point; returns the exit status."""
+    args = _parser().parse_args(argv)
+    if args.cmd == "bench":
+        if importlib.util.find_spec("verify.bench") is None:
+            raise VerifyError("verify.bench is not available yet (issue 7): nothing to run")
+        return int(importlib.import_module("verify.bench").main(args.rest) or 0)
+
+    from verify import pipeline as P
+    from verify.figures import all_figures
+    from verify.report import console_table, write_report
+
+    if not Path(args.scenario).is_file():
+        raise VerifyError(f"scenario {args.scenario!r} does not exist: give a TOML file path")
+    strict = _strict(args.strict)
+    cfg = VerifyConfig(lemma1_delta=args.delta, tail_fraction=args.tail)
+    root = Path(args.out) if args.out else OUT_ROOT
+    force = args.cmd == "demo"
+    run = P.obtain_run(args.scenario, out_root=root, force=force)
+    ablation = None
+    if args.cmd in ("report", "demo"):
+        ablation = P.obtain_run(args.scenario, P.ABLATION, out_root=root, force=force)
+    else:  # check: use the ablation run only if it is already there and fresh
+        from generated import api
+
+        asc = api.load(args.scenario, P.ABLATION)
+        if P._fresh(root / asc.name, asc) is not None:
+            ablation = P.obtain_run(args.scenario, P.ABLATION, out_root=root)
+    v = P.verify_run(run, ablation=ablation, config=cfg, out_root=root,
+                     lyapunov=not args.no_lyapunov)  # fmt: skip
+
+    if args.cmd in ("report", "demo"):
+        files, notes = all_figures(
+            run.frame,
+            run.scenario.leader.C0,
+            run.folder / "figures",
+            None if ablation is None else ablation.frame,
+            gif=not args.no_gif,
+        )
+        v.figures, v.notes = files, v.notes + notes
+        rpath, bpath = write_report(v, run.folder, strict=strict)
+    else:
+        from symbolic.artifacts import atomic_write_text
+
+        bpath = atomic_write_text(run.folder / "bounds.csv", v.table.to_csv(index=False))
+        rpath = None
+
+    print(console_table(v.table))
+    print()
+    for chk in v.theorem2:
+        print(chk.where())
+    print(v.ablation_summary)
+    bad = v.failed(strict)
+    paper_bad = v.table[(v.table["kind"] == "paper") & ~v.table["holds"]]
+    print(f"bounds: {bpath}")
+    if rpath is not None:
+        print(f"report: {rpath}")
+    if len(paper_bad):
+        print(f"{len(paper_bad)} of the paper's own claims do not hold on these numbers"
+              + ("" if strict else " (reported; --strict or STRICT=1 makes them fail)"))  # fmt: skip
+    if len(bad):
+        print(f"FAIL: {len(bad)} check(s) failed" + (" (strict)" if strict else ""),
+              file=sys.stderr)  # fmt: skip
+        for r in bad.itertuples(index=False):
+            print(f"  {r.claim} [follower {r.agent}] bound {r.bound:.4g} observed "
+                  f"{r.observed:.4g}: {r.note}", file=sys.stderr)  # fmt: skip
+        return 1
+    print("PASS: every check the theory guarantees holds" + (" (strict)" if strict else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run_cli(main))

@@ -1,0 +1,301 @@
+"""The paper's closed-form claims: Theorem 1's rates, Theorem 2's bounds, Lemmas 1 and 2.
+
+Everything here is a pure function of the scenario (and the synthesised gains);
+nothing reads a trajectory. The formulas follow ``paper-spec.md`` section 6 and,
+for the adaptive-law variants, section 9.3:
+
+- the paper's Theorem 2 (eq. (31)) applies Lemma 1 to V2 although V̇2 has no decay
+  term in ĝ − 1/g, so its bound does not follow; it is reported as the *paper's
+  claim*;
+- with the σ-modification ĝ̇ = −γχᵀΨ − σ(ĝ − ĝ0) the same argument is valid with
+  Ωv2 = min{…, σ} and χv2 + σ g (1/g − ĝ0)² / (2γ);
+- with projection of ĝ onto [1, 1/g_min] (and 1/g inside), the ĝ term of V2 is
+  bounded by its value at the farther end, W_g, and V̇2 ≤ −Ωv2 V2 + χv2 + Ωv2 W_g.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from symbolic.errors import ToolkitError
+from symbolic.models import build_model
+from symbolic.scenario import Scenario
+
+
+class VerifyError(ToolkitError):
+    """The verification cannot run: missing artifact, bad option, inconsistent trajectory."""
+
+
+@dataclass(frozen=True)
+class VerifyConfig:
+    """Choices the paper leaves open, used by every check (documented in docs/verification.md).
+
+    Attributes
+    ----------
+    lemma1_delta : float
+        δ_i of Lemma 1, 0 < δ < 1 (the paper never fixes it).
+    tail_fraction : float
+        The "asymptotic" window is the last ``tail_fraction`` of the horizon.
+    enter_level : float
+        Theorem 1: the time each ‖ē_ηi‖ enters (and stays below) this level.
+    rtol : float
+        Relative round-off allowance of the pointwise Lyapunov inequalities
+        (scaled by the size of the terms; not a modelling tolerance).
+    """
+
+    lemma1_delta: float = 0.5
+    tail_fraction: float = 0.5
+    enter_level: float = 1e-2
+    rtol: float = 1e-7
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.lemma1_delta < 1.0:
+            raise VerifyError(f"lemma1_delta = {self.lemma1_delta}: expected 0 < delta < 1")
+        if not 0.0 < self.tail_fraction <= 1.0:
+            raise VerifyError(f"tail_fraction = {self.tail_fraction}: expected 0 < f <= 1")
+        if self.enter_level <= 0 or self.rtol < 0:
+            raise VerifyError("enter_level must be > 0 and rtol >= 0")
+
+
+@dataclass(frozen=True)
+class Theorem2Constants:
+    """Theorem 2's constants for one follower (paper's law and the provable variant).
+
+    Attributes
+    ----------
+    lam_min_M, lam_max_M : float
+        inf λ_min(M_i) and sup λ_max(M_i) over the configuration space.
+    Omega, chi_v : float
+        Ωv2i and χv2i as printed (eq. (38)): V̇2 ≤ −Ωv2 V2 + χv2 (paper's claim).
+    chi_bar : float
+        χ̄_si of eq. (39)–(40) with the paper's constants.
+    e_bar : ndarray
+        |e_ti,r| ≤ χ̄_si / λ_ir (eq. (41), Lemma 2 with k = 0).
+    edot_bar : ndarray
+        |ė_ti,r| ≤ 2 χ̄_si (Lemma 2 with n = 2, k = 1, θ = λ_ir).
+    variant : str
+        The ĝ law in the scenario ('paper', 'sigma', 'projection', 'sigma+projection').
+    provable : bool
+        Whether the variant's constants give a bound that follows (paper's law: no).
+    Omega_var, chi_v_var, chi_bar_var : float
+        The constants with the variant's correction (section 9.3); equal to the
+        paper's when ``provable`` is False.
+    e_bar_var, edot_bar_var : ndarray
+        Lemma 2 bounds from ``chi_bar_var``.
+    """
+
+    lam_min_M: float
+    lam_max_M: float
+    Omega: float
+    chi_v: float
+    chi_bar: float
+    e_bar: np.ndarray
+    edot_bar: np.ndarray
+    variant: str
+    provable: bool
+    Omega_var: float
+    chi_v_var: float
+    chi_bar_var: float
+    e_bar_var: np.ndarray
+    edot_bar_var: np.ndarray
+
+
+def chi_bar_from(chi_v: float, Omega: float, lam_min_M: float, delta: float) -> float:
+    """χ̄ = sqrt(2 χv / (λ_min(M) Ω (1 − δ))), eqs. (39)–(40).
+
+    Parameters
+    ----------
+    chi_v, Omega : float
+        Lemma 1's ω and λ (V̇ + λV ≤ ω).
+    lam_min_M : float
+        Infimum of λ_min(M) over the configuration.
+    delta : float
+        Lemma 1's δ, 0 < δ < 1.
+
+    Returns
+    -------
+    float
+    """
+    return math.sqrt(2.0 * chi_v / (lam_min_M * Omega * (1.0 - delta)))  # eq. (40)
+
+
+def lemma1_bound(chi_v: float, Omega: float, delta: float) -> float:
+    """Lemma 1's ultimate level of V: ω / (λ (1 − δ))."""
+    return chi_v / (Omega * (1.0 - delta))
+
+
+def lemma1_reaching_time(Omega: float, chi_v: float, V0: float, delta: float) -> float:
+    """Lemma 1's bound t_f ≤ ln(λ(1−δ)V(0)/ω) / (λδ) (0 when V(0) is already inside).
+
+    Parameters
+    ----------
+    Omega, chi_v : float
+        λ and ω of V̇ + λV ≤ ω.
+    V0 : float
+        V(0).
+    delta : float
+        0 < δ < 1.
+
+    Returns
+    -------
+    float
+    """
+    if chi_v <= 0:
+        return math.inf
+    x = Omega * (1.0 - delta) * V0 / chi_v
+    return 0.0 if x <= 1.0 else math.log(x) / (Omega * delta)
+
+
+def comparison_reaching_time(Omega: float, chi_v: float, V0: float, delta: float) -> float:
+    """Time after which V(0)e^{−λt} + ω/λ ≤ ω/(λ(1−δ)) (comparison lemma; always valid).
+
+    Used to report whether the paper's Lemma 1 t_f is at least the time the
+    comparison lemma itself guarantees.
+    """
+    if chi_v <= 0:
+        return math.inf
+    x = Omega * (1.0 - delta) * V0 / (chi_v * delta)
+    return 0.0 if x <= 1.0 else math.log(x) / Omega
+
+
+def lemma2_bounds(gamma_bar: float, theta: float, order: int) -> np.ndarray:
+    """Lemma 2: |(d/dt + θ)^{n−1} γ| ≤ γ̄ ⇒ |γ^{(k)}| ≤ (2θ)^k γ̄ / θ^{n−1}, k = 0..n−1.
+
+    Parameters
+    ----------
+    gamma_bar : float
+        Bound of the filtered signal.
+    theta : float
+        Filter pole θ > 0.
+    order : int
+        n ≥ 1 (n − 1 is the filter order).
+
+    Returns
+    -------
+    ndarray
+        The n bounds for k = 0, …, n−1.
+    """
+    k = np.arange(order)
+    return (2.0 * theta) ** k * gamma_bar / theta ** (order - 1)
+
+
+def mass_bounds(scenario: Scenario, agent: int) -> tuple[float, float]:
+    """(inf λ_min(M_i), sup λ_max(M_i)) over the configuration space of follower ``agent``."""
+    fo = scenario.followers[agent]
+    return build_model(fo.model, fo.params).M_bounds
+
+
+def theorem2_constants(
+    scenario: Scenario, agent: int, config: VerifyConfig | None = None
+) -> Theorem2Constants:
+    """Theorem 2's constants for follower ``agent`` (0-based), paper-spec section 6 and 9.3.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    agent : int
+        0-based follower index.
+    config : VerifyConfig, optional
+        Supplies Lemma 1's δ.
+
+    Returns
+    -------
+    Theorem2Constants
+    """
+    cfg = config or VerifyConfig()
+    if not 0 <= agent < scenario.N:
+        raise VerifyError(f"agent {agent + 1} does not exist: expected 1..{scenario.N}")
+    ctrl, fo = scenario.controller, scenario.followers[agent]
+    lmin, lmax = mass_bounds(scenario, agent)
+    K = ctrl.k1[agent]
+    k2 = float(ctrl.k2[agent])
+    d = np.asarray(fo.d, dtype=float)
+    lam = np.asarray(ctrl.Lambda[agent], dtype=float)
+    delta = cfg.lemma1_delta
+
+    Omega = min(2.0 * float(K.min()) / lmax, k2)  # eq. (38): Ωv2i
+    chi_v = 0.5 * k2 * float(d @ d)  # eq. (38): χv2i = ½ dᵀ k2 d
+    chi_bar = chi_bar_from(chi_v, Omega, lmin, delta)  # eq. (40)
+    e_bar, edot_bar = _lemma2_pair(chi_bar, lam)
+
+    law = scenario.options.ghat_law
+    gamma = float(ctrl.gamma[agent])
+    g_lo = float(fo.g.minimum)  # constant health: g itself
+    gbar = 1.0 / g_lo
+    Om_v, chi_vv, provable = Omega, chi_v, False
+    if "sigma" in law:  # section 9.3: σ-modification adds decay in ĝ − 1/g
+        sigma = float(ctrl.sigma[agent])
+        ghat0 = float(ctrl.ghat_ref[agent])
+        Om_v = min(Omega, sigma)
+        chi_vv = chi_v + sigma * g_lo * (gbar - ghat0) ** 2 / (2.0 * gamma)
+        provable = True
+    elif law == "projection":  # ĝ ∈ [1, 1/g_min]: the ĝ term of V2 is bounded
+        lo, hi = 1.0, 1.0 / ctrl.g_min
+        if lo <= gbar <= hi:
+            Wg = g_lo * max(gbar - lo, hi - gbar) ** 2 / (2.0 * gamma)
+            chi_vv = chi_v + Omega * Wg
+            provable = True
+    chi_bar_v = chi_bar_from(chi_vv, Om_v, lmin, delta) if provable else chi_bar
+    e_bar_v, edot_bar_v = _lemma2_pair(chi_bar_v, lam)
+    return Theorem2Constants(
+        lam_min_M=lmin,
+        lam_max_M=lmax,
+        Omega=Omega,
+        chi_v=chi_v,
+        chi_bar=chi_bar,
+        e_bar=e_bar,
+        edot_bar=edot_bar,
+        variant=law,
+        provable=provable,
+        Omega_var=Om_v,
+        chi_v_var=chi_vv,
+        chi_bar_var=chi_bar_v,
+        e_bar_var=e_bar_v,
+        edot_bar_var=edot_bar_v,
+    )
+
+
+def _lemma2_pair(chi_bar: float, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per component: (|e| ≤ χ̄/λ, |ė| ≤ 2χ̄), Lemma 2 with n = 2 and θ = λ_ir (eq. (41))."""
+    b = np.array([lemma2_bounds(chi_bar, float(lr), 2) for lr in lam])
+    return b[:, 0], b[:, 1]
+
+
+@dataclass(frozen=True)
+class Theorem1Rates:
+    """Theorem 1's decay rates of V1 (paper-spec section 5).
+
+    Attributes
+    ----------
+    supported : float
+        min{δ1 − δ̂1, α̃1, δ2 − δ̂2}: what the LMIs support.
+    printed : float
+        min{δ1, α̃1, δ2}: the paper's claim.
+    alpha1_tilde : float
+        min_i α1i.
+    """
+
+    supported: float
+    printed: float
+    alpha1_tilde: float
+
+
+def theorem1_rates(scenario: Scenario, gains) -> Theorem1Rates:  # noqa: ANN001 (Gains)
+    """δ̃ of Theorem 1 from the synthesised δ1, δ2, δ̂1, δ̂2 and the scenario's α1i.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    gains : synthesis.gains.Gains
+
+    Returns
+    -------
+    Theorem1Rates
+    """
+    a1 = float(np.min(scenario.observer.alpha1))
+    sup = min(gains.delta1 - gains.delta1_hat, a1, gains.delta2 - gains.delta2_hat)
+    printed = min(gains.delta1, a1, gains.delta2)
+    return Theorem1Rates(supported=float(sup), printed=float(printed), alpha1_tilde=a1)

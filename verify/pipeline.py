@@ -1,0 +1,200 @@
+"""The verification pipeline behind ``python -m verify check|report|demo``.
+
+Stages that are missing or stale (their ``scenario_sha256`` differs from the
+scenario's) are produced through :mod:`generated.api` (which runs the synthesis
+when needed); fresh artifacts are reused. The Lyapunov checks need the symbolic
+closed loop and the states: the states come from the simulation run itself or,
+when ``trajectory.csv`` is reused, are read back from its state columns
+(:func:`states_from_frame`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from symbolic.artifacts import OUT_ROOT
+from symbolic.scenario import Scenario
+from verify.bounds import VerifyConfig, VerifyError, theorem1_rates
+from verify.lyapunov import check_theorem1, check_theorem2
+from verify.report import Verification, ablation_statement
+from verify.table import bounds_table
+
+ABLATION = {"options.ablation": True}
+
+
+@dataclass
+class Run:
+    """One simulated scenario: its frame, states (if known), metadata and folder."""
+
+    scenario: Scenario
+    frame: pd.DataFrame
+    X: np.ndarray | None
+    meta: dict[str, Any]
+    folder: Path
+    simulated: bool = False
+    notes: list[str] = field(default_factory=list)
+
+
+def states_from_frame(cl: Any, sc: Scenario, df: pd.DataFrame) -> np.ndarray:
+    """Rebuild the state matrix (K, nx) from the state columns of ``trajectory.csv``.
+
+    Raises
+    ------
+    VerifyError
+        If the layout has states the CSV does not store (the derivative filters).
+    """
+    lay = cl.layout
+    X = np.full((len(df), lay.nx), np.nan)
+    cols = {"eta0": [f"eta0_{k}" for k in range(1, sc.m + 1)]}
+    for key, sl in lay.slices.items():
+        if key == "eta0":
+            names = cols["eta0"]
+        else:
+            name, i = key
+            width = sl.stop - sl.start
+            if name in ("phi", "ghat"):
+                names = [f"{name}{i + 1}"]
+            else:
+                names = [f"{name}{i + 1}_{r}" for r in range(1, width + 1)]
+        if not all(c in df.columns for c in names):
+            raise VerifyError(
+                f"trajectory.csv does not store state {key!r}: re-simulate (verify demo) "
+                "to check the Lyapunov inequalities"
+            )
+        X[:, sl] = df[names].to_numpy(float)
+    return X
+
+
+def _fresh(folder: Path, sc: Scenario) -> dict | None:
+    meta_p, csv_p = folder / "meta.json", folder / "trajectory.csv"
+    if not (meta_p.is_file() and csv_p.is_file()):
+        return None
+    try:
+        meta = json.loads(meta_p.read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+    if meta.get("scenario_sha256") != sc.sha256 or not meta.get("complete", False):
+        return None
+    return meta
+
+
+def obtain_run(
+    path: str | Path,
+    overrides: dict | None = None,
+    *,
+    out_root: Path | None = None,
+    force: bool = False,
+    progress: bool = True,
+) -> Run:
+    """Reuse ``out/<name>/trajectory.csv`` if fresh, else simulate (and synthesize) it.
+
+    Parameters
+    ----------
+    path : str or Path
+        Scenario file.
+    overrides : dict, optional
+        E.g. :data:`ABLATION`.
+    out_root : Path, optional
+    force : bool
+        Simulate even when a fresh trajectory exists.
+    progress : bool
+        Progress bar on stderr.
+
+    Returns
+    -------
+    Run
+    """
+    from generated import api
+
+    root = Path(out_root or OUT_ROOT)
+    sc = api.load(path, overrides)
+    folder = root / sc.name
+    meta = None if force else _fresh(folder, sc)
+    if meta is not None:
+        df = pd.read_csv(folder / "trajectory.csv")
+        return Run(sc, df, None, meta, folder, simulated=False)
+    res = api.run(path, overrides=overrides, out_root=root, progress=progress)
+    return Run(sc, res.frame, res.trajectory.x, res.meta, folder, simulated=True)
+
+
+def verify_run(
+    run: Run,
+    *,
+    ablation: Run | None = None,
+    config: VerifyConfig | None = None,
+    out_root: Path | None = None,
+    lyapunov: bool = True,
+) -> Verification:
+    """Theorem 1/2 checks and the bound-vs-actual table for a run.
+
+    Parameters
+    ----------
+    run : Run
+    ablation : Run, optional
+        The eq. (42) run, for Fig. 13.
+    config : VerifyConfig, optional
+    out_root : Path, optional
+    lyapunov : bool
+        Whether to evaluate the exact V̇1, V̇2 inequalities (needs the closed loop).
+
+    Returns
+    -------
+    Verification
+    """
+    from generated import api
+
+    cfg = config or VerifyConfig()
+    sc = run.scenario
+    root = Path(out_root or OUT_ROOT)
+    gains, _ = api.ensure_gains(sc, root)
+    notes = list(run.notes)
+    t1, t2 = [], []
+    if lyapunov:
+        from symbolic.closed_loop import build_closed_loop
+
+        cl = build_closed_loop(sc, gains)
+        X = run.X if run.X is not None else states_from_frame(cl, sc, run.frame)
+        t = run.frame["t"].to_numpy(float)
+        rates = theorem1_rates(sc, gains)
+        t1 = [
+            check_theorem1(cl, t, X, rates.supported, claim="dV1/dt <= -delta~ V1 (supported)",
+                           config=cfg),
+            check_theorem1(cl, t, X, rates.printed, claim="dV1/dt <= -delta~ V1 (printed)",
+                           config=cfg),
+        ]  # fmt: skip
+        t2 = check_theorem2(cl, sc, t, X, config=cfg)
+    else:
+        notes.append("Lyapunov derivative checks skipped (--no-lyapunov)")
+    if not run.meta.get("complete", True):
+        notes.append(f"simulation incomplete: {run.meta.get('message', '')}")
+    table = bounds_table(
+        sc,
+        run.frame,
+        gains=gains,
+        theorem1=t1,
+        theorem2=t2,
+        ablation=None if ablation is None else ablation.frame,
+        config=cfg,
+    )
+    meta = dict(run.meta)
+    ws = meta.get("wall_seconds")
+    if isinstance(ws, dict):
+        meta["wall_seconds"] = round(float(ws.get("total", math.nan)), 2)
+    return Verification(
+        scenario=sc,
+        table=table,
+        gains=gains,
+        theorem1=t1,
+        theorem2=t2,
+        ablation_summary=ablation_statement(table),
+        notes=notes,
+        meta=meta,
+        config=cfg,
+    )

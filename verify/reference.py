@@ -1,0 +1,450 @@
+"""An independent, plainly written numpy implementation of the closed-loop right-hand side.
+
+This is "what a user writes by hand": every equation of paper-spec sections 1–7
+in vectorised numpy, with the oracle derivatives (η̈_i, η⃛_i, ḃ_i, b̈_i) worked
+out with the chain rule on paper, not by automatic differentiation. It shares
+no code with ``symbolic/`` beyond the scenario loader, the expression parser's
+tree (evaluated here by its own dual-number walker) and the model's sympy
+expressions for models other than the paper's two-link arm (whose closed forms
+are written out below). Tests compare :meth:`Reference.rhs` with the CasADi
+closed loop; the benchmark uses it as the hand-written baseline.
+
+State order (docs/closed-loop.md): ``x = (η0, s_1, …, s_N)``,
+``s_i = (μ_i, η_i, φ_i, p_i, q_i, θ̂_i, ĝ_i[, w_i (2m), z_i (3n)])``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.linalg as sla
+
+from symbolic.scenario import Scenario
+
+
+# ----------------------------------------------------------------------------- expressions
+def _dual(node: tuple, t: float) -> tuple[float, float]:
+    """Value and d/dt of an expression tree (forward dual numbers, written out by hand)."""
+    kind = node[0]
+    if kind == "num":
+        return float(node[1]), 0.0
+    if kind == "t":
+        return float(t), 1.0
+    if kind == "neg":
+        a, da = _dual(node[1], t)
+        return -a, -da
+    if kind == "bin":
+        (a, da), (b, db) = _dual(node[2], t), _dual(node[3], t)
+        op = node[1]
+        if op == "+":
+            return a + b, da + db
+        if op == "-":
+            return a - b, da - db
+        if op == "*":
+            return a * b, da * b + a * db
+        if op == "/":
+            return a / b, (da * b - a * db) / b**2
+        val = a**b
+        dval = b * a ** (b - 1) * da if db == 0 else val * (db * math.log(a) + b * da / a)
+        return val, dval
+    name, args = node[1], [_dual(x, t) for x in node[2]]
+    (a, da) = args[0]
+    if name == "sin":
+        return math.sin(a), math.cos(a) * da
+    if name == "cos":
+        return math.cos(a), -math.sin(a) * da
+    if name == "tan":
+        return math.tan(a), da / math.cos(a) ** 2
+    if name == "exp":
+        return math.exp(a), math.exp(a) * da
+    if name == "log":
+        return math.log(a), da / a
+    if name == "sqrt":
+        return math.sqrt(a), da / (2 * math.sqrt(a))
+    if name == "abs":
+        return abs(a), float(np.sign(a)) * da
+    if name == "tanh":
+        return math.tanh(a), (1 - math.tanh(a) ** 2) * da
+    if name == "step":
+        return (1.0 if a >= 0 else 0.0), 0.0
+    if name == "sat":
+        return min(max(a, -1.0), 1.0), (da if -1 < a < 1 else 0.0)
+    (b, db) = args[1]
+    if name == "atan2":
+        r2 = a * a + b * b
+        return math.atan2(a, b), (b * da - a * db) / r2
+    if name == "min":
+        return (a, da) if a < b else (b, db)
+    if name == "max":
+        return (a, da) if a > b else (b, db)
+    raise ValueError(name)
+
+
+# ----------------------------------------------------------------------------- models
+def _two_link(prm: dict[str, float]):
+    """The paper's closed forms (paper-spec section 3), vectorised over agents."""
+    m1, m2, r1, r2, J1, J2, g0 = (prm[k] for k in ("m1", "m2", "r1", "r2", "J1", "J2", "g0"))
+
+    def mcg(p: np.ndarray, q: np.ndarray):
+        c2 = np.cos(p[:, 1])
+        m11 = (m1 + m2) * r1**2 + m2 * r2**2 + 2 * m2 * r1 * r2 * c2 + J1
+        m12 = m2 * r2**2 + m2 * r1 * r2 * c2
+        m22 = np.full_like(c2, m2 * r2**2 + J2)
+        M = np.stack([np.stack([m11, m12], -1), np.stack([m12, m22], -1)], -2)
+        c = m2 * r1 * r2 * np.sin(p[:, 1])
+        C = np.stack(
+            [
+                np.stack([-c * q[:, 1], -c * (q[:, 0] + q[:, 1])], -1),
+                np.stack([c * q[:, 0], np.zeros_like(c)], -1),
+            ],
+            -2,
+        )
+        G = np.stack(
+            [
+                ((m1 + m2) * r1 * np.cos(p[:, 0]) + m2 * r2 * np.cos(p[:, 0] + p[:, 1])) * g0,
+                m2 * r2 * np.cos(p[:, 0] + p[:, 1]) * g0,
+            ],
+            -1,
+        )
+        return M, C, G
+
+    return mcg
+
+
+def _generic_model(name: str, prm: dict[str, float]):
+    """Other models: numpy lambdas of the model's sympy M, C, G."""
+    import sympy as sp
+
+    from symbolic.models import build_model
+
+    mod = build_model(name, prm)
+    syms = list(mod.sympy_p) + list(mod.sympy_q)
+    fM = sp.lambdify(syms, mod.sympy_M, "numpy")
+    fC = sp.lambdify(syms, mod.sympy_C, "numpy")
+    fG = sp.lambdify(syms, mod.sympy_G, "numpy")
+
+    def mcg(p: np.ndarray, q: np.ndarray):
+        out = []
+        for k in range(p.shape[0]):
+            a = list(p[k]) + list(q[k])
+            out.append(
+                (
+                    np.array(fM(*a), dtype=float),
+                    np.array(fC(*a), dtype=float),
+                    np.array(fG(*a), dtype=float).reshape(-1),
+                )
+            )
+        return tuple(np.array([o[j] for o in out]) for j in range(3))
+
+    return mcg
+
+
+# ----------------------------------------------------------------------------- the loop
+@dataclass
+class Reference:
+    """Plain numpy closed loop of a scenario with given gains.
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+        Uses A0/B0/C0 from the scenario and Theta, Q, lambda1, lambda2, H from the gains.
+    """
+
+    sc: Scenario
+    gains: Any
+
+    def __post_init__(self) -> None:
+        sc, gn = self.sc, self.gains
+        L = sc.leader
+        self.A0, self.B0, self.C0 = (np.asarray(a, dtype=float) for a in (L.A0, L.B0, L.C0))
+        self.m, self.n, self.N, self.p = sc.m, sc.n, sc.N, sc.p
+        m, n = self.m, self.n
+        CB = self.C0 @ self.B0
+        self.Gamma = self.B0 @ np.linalg.inv(CB.T @ CB) @ CB.T
+        self.Phi = np.eye(m) - self.Gamma @ self.C0
+        Th = np.atleast_2d(np.asarray(gn.Theta, dtype=float))
+        self.F = self.Phi @ self.A0 - Th @ self.C0
+        self.K = Th @ (np.eye(n) - self.C0 @ self.Gamma) + self.Phi @ self.A0 @ self.Gamma
+        self.Q = np.atleast_2d(np.asarray(gn.Q, dtype=float)).reshape(self.p, m)
+        self.l1, self.l2 = float(gn.lambda1), float(gn.lambda2)
+        A = np.asarray(sc.graph.adjacency, dtype=float)
+        self.a0 = np.asarray(sc.graph.pinning, dtype=float)
+        self.h = np.diag(np.atleast_2d(gn.H)).astype(float)
+        self.LB = np.diag(np.abs(A).sum(1) + self.a0) - A
+        self.a0h = self.a0 * self.h
+        o, c = sc.observer, sc.controller
+        self.alpha_sum = np.asarray(o.alpha1) + np.asarray(o.alpha1_bar)
+        self.phi_min = float(o.phi_min)
+        self.Lam, self.k1 = np.asarray(c.Lambda), np.asarray(c.k1)
+        self.k2, self.gam = np.asarray(c.k2), np.asarray(c.gamma)
+        self.sig, self.gref = np.asarray(c.sigma), np.asarray(c.ghat_ref)
+        self.b0 = np.array([f.b0 for f in sc.followers])
+        self.opts = sc.options
+        self.filtered = self.opts.derivatives == "filtered"
+        self.na = 2 * m + 1 + 3 * n + 1 + ((2 * m + 3 * n) if self.filtered else 0)
+        # one model evaluator per (model, params) group
+        self.groups: list[tuple[np.ndarray, Any]] = []
+        keys: dict[tuple, list[int]] = {}
+        for i, fo in enumerate(sc.followers):
+            keys.setdefault((fo.model, tuple(sorted(fo.params.items()))), []).append(i)
+        for (name, items), idx in keys.items():
+            prm = dict(items)
+            ev = _two_link(prm) if name == "two_link" else _generic_model(name, prm)
+            self.groups.append((np.array(idx), ev))
+
+    # -- pieces
+    def mcg(self, p: np.ndarray, q: np.ndarray):
+        N, n = self.N, self.n
+        M, C, G = np.zeros((N, n, n)), np.zeros((N, n, n)), np.zeros((N, n))
+        for idx, ev in self.groups:
+            M[idx], C[idx], G[idx] = ev(p[idx], q[idx])
+        return M, C, G
+
+    def leader(self, t: float, eta0: np.ndarray):
+        L = self.sc.leader
+        if L.u0 is not None:
+            u, ud = np.array([_dual(e.node, t) for e in L.u0]).T
+        else:
+            tr = np.asarray(L.u0_trace)
+            ts = tr[:, 0]
+            u = np.array([np.interp(t, ts, tr[:, 1 + k]) for k in range(self.p)])
+            j = np.searchsorted(ts, t, side="right") - 1
+            if t < ts[0] or t > ts[-1] or j >= len(ts) - 1:
+                ud = np.zeros(self.p)
+            else:
+                ud = (tr[j + 1, 1:] - tr[j, 1:]) / (ts[j + 1] - ts[j])
+        e0d = self.A0 @ eta0 + self.B0 @ u  # eq. (3)
+        e0dd = self.A0 @ e0d + self.B0 @ ud
+        return u, ud, e0d, e0dd
+
+    def faults(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        g = np.array([float(fo.g.expr.numpy(t)) for fo in self.sc.followers])
+        f = np.array([[float(e.numpy(t)) for e in fo.f] for fo in self.sc.followers])
+        return g, f
+
+    def split(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        m, n = self.m, self.n
+        x = np.asarray(x, dtype=float)
+        S = x[m:].reshape(self.N, self.na)
+        k = 0
+        out = {"eta0": x[:m]}
+        names = [("mu", m), ("eta", m), ("phi", 1), ("p", n), ("q", n), ("thetahat", n),
+                 ("ghat", 1)]  # fmt: skip
+        if self.filtered:
+            names += [("w", 2 * m), ("z", 3 * n)]
+        for nm, s in names:
+            out[nm] = S[:, k : k + s]
+            k += s
+        out["phi"] = out["phi"][:, 0]
+        out["ghat"] = out["ghat"][:, 0]
+        return out
+
+    def _norm_jets(self, y, yd, ydd):
+        """‖y‖ per row and its first two time derivatives (zero where y = 0)."""
+        if self.p == 1:
+            s = np.sign(y[:, 0])
+            return np.abs(y[:, 0]), s * yd[:, 0], s * ydd[:, 0]
+        nr = np.linalg.norm(y, axis=1)
+        safe = np.where(nr > 0, nr, 1.0)
+        yyd = np.sum(y * yd, 1)
+        nd = np.where(nr > 0, yyd / safe, 0.0)
+        ndd = np.where(
+            nr > 0, (np.sum(yd * yd, 1) + np.sum(y * ydd, 1)) / safe - yyd**2 / safe**3, 0.0
+        )
+        return nr, nd, ndd
+
+    def formation(self, d, dd, ddd):
+        """b_i, ḃ_i, b̈_i of the smoothed rotation (docs/closed-loop.md), chain rule by hand."""
+        b0 = self.b0
+        if self.n != 2 or self.m < 2:
+            z = np.zeros_like(b0)
+            return b0.copy(), z, z
+        eps2 = self.opts.tau_threshold**2
+        d, dd, ddd = d[:, :2], dd[:, :2], ddd[:, :2]
+        g = np.sum(d * d, 1) + eps2
+        gd = 2 * np.sum(d * dd, 1)
+        gdd = 2 * (np.sum(dd * dd, 1) + np.sum(d * ddd, 1))
+        r = g**-0.5
+        rd = -0.5 * g**-1.5 * gd
+        rdd = 0.75 * g**-2.5 * gd**2 - 0.5 * g**-1.5 * gdd
+        c, s = d[:, 0] * r, d[:, 1] * r
+        cd, sd = dd[:, 0] * r + d[:, 0] * rd, dd[:, 1] * r + d[:, 1] * rd
+        cdd = ddd[:, 0] * r + 2 * dd[:, 0] * rd + d[:, 0] * rdd
+        sdd = ddd[:, 1] * r + 2 * dd[:, 1] * rd + d[:, 1] * rdd
+        k = eps2 / g
+        kd = -eps2 * gd / g**2
+        kdd = eps2 * (2 * gd**2 / g**3 - gdd / g**2)
+
+        def rot(c, s, k):
+            return np.stack(
+                [
+                    c * b0[:, 0] - s * b0[:, 1] + k * b0[:, 0],
+                    s * b0[:, 0] + c * b0[:, 1] + k * b0[:, 1],
+                ],
+                -1,
+            )
+
+        return rot(c, s, k), rot(cd, sd, kd), rot(cdd, sdd, kdd)
+
+    def sgn(self, x):
+        mode, w = self.opts.sign, self.opts.sign_width
+        if mode == "exact":
+            return np.sign(x)
+        if mode == "sat":
+            return np.clip(x / w, -1, 1)
+        return np.tanh(x / w)
+
+    def evaluate(self, t: float, x: np.ndarray) -> dict[str, np.ndarray]:
+        """All intermediate signals at (t, x), and ``xdot``."""
+        S = self.split(x)
+        A0, B0, C0 = self.A0, self.B0, self.C0
+        u0, u0d, e0d, e0dd = self.leader(t, S["eta0"])
+        y0, y0d, y0dd = C0 @ S["eta0"], C0 @ e0d, C0 @ e0dd
+        E, mu, phi = S["eta"], S["mu"], S["phi"]
+        LB, a0h = self.LB, self.a0h[:, None]
+        # eq. (6): ψ_i = Σ_j (|a_ij| C0η_i − a_ij C0η_j) + a_i0 (C0η_i − h_i y0)
+        psi = LB @ E @ C0.T - a0h * y0
+        ehat = mu + psi @ self.Gamma.T  # eq. (7)
+        mud = mu @ self.F.T + psi @ self.K.T  # eq. (7)
+        y = ehat @ self.Q.T
+        nr = self._norm_jets(y, y, y)[0]
+        D = nr + phi
+        v = -self.l1 * y - self.l2 * y / D[:, None]  # eq. (9)
+        Ed = E @ A0.T + v @ B0.T  # eq. (9)
+        phid = -self.alpha_sum * (phi - self.phi_min)
+        # oracle: differentiate the observer along the network flow (chain rule by hand)
+        psid = LB @ Ed @ C0.T - a0h * y0d
+        mudd = mud @ self.F.T + psid @ self.K.T
+        yd = (mud + psid @ self.Gamma.T) @ self.Q.T
+        phidd = -self.alpha_sum * phid
+        _, nd, _ = self._norm_jets(y, yd, yd)
+        Dd = nd + phid
+        vd = -self.l1 * yd - self.l2 * (yd / D[:, None] - y * (Dd / D**2)[:, None])
+        Edd = Ed @ A0.T + vd @ B0.T
+        psidd = LB @ Edd @ C0.T - a0h * y0dd
+        ydd = (mudd + psidd @ self.Gamma.T) @ self.Q.T
+        phiddd = -self.alpha_sum * phidd
+        _, nd, ndd = self._norm_jets(y, yd, ydd)
+        Ddd = ndd + phidd
+        vdd = -self.l1 * ydd - self.l2 * (
+            ydd / D[:, None]
+            - 2 * yd * (Dd / D**2)[:, None]
+            - y * (Ddd / D**2)[:, None]
+            + 2 * y * (Dd**2 / D**3)[:, None]
+        )
+        Eddd = Edd @ A0.T + vdd @ B0.T
+        del phiddd
+        b, bd, bdd = self.formation(Ed, Edd, Eddd)
+        out: dict[str, np.ndarray] = {}
+        if self.filtered:
+            w, zf = S["w"], S["z"]
+            m, n, om = self.m, self.n, self.opts.filter_bandwidth
+            w1, w2 = w[:, :m], w[:, m:]
+            z1, z2, z3 = zf[:, :n], zf[:, n : 2 * n], zf[:, 2 * n :]
+            out["wdot"] = np.hstack([w2, om**2 * (Ed - w1) - 2 * om * w2])
+            out["zdot"] = np.hstack([z2, z3, om**3 * (b - z1) - 3 * om**2 * z2 - 3 * om * z3])
+            Edd_c, bd, bdd = w2, z2, z3
+            Edd, Eddd = w2, np.zeros_like(Eddd)
+        else:
+            Edd_c = Edd
+        bd_c, bdd_c = (bd, bdd) if self.opts.feedforward else (0 * bd, 0 * bdd)
+        p, q, th, gh = S["p"], S["q"], S["thetahat"], S["ghat"]
+        M, C, G = self.mcg(p, q)
+        et = p - E @ C0.T - b  # eq. (28)
+        etd = q - Ed @ C0.T - bd_c
+        chi = etd + self.Lam * et
+        Mv = lambda Mx, vx: np.einsum("kij,kj->ki", Mx, vx)  # noqa: E731
+        Psi = (
+            Mv(C, q) + G + Mv(M, Edd_c @ C0.T + bdd_c - self.Lam * etd) - Mv(C, chi)
+            - th * self.sgn(chi) - self.k1 * chi
+        )  # fmt: skip  # eq. (29)
+        u = Psi if self.opts.ablation else gh[:, None] * Psi
+        thd = np.abs(chi) - self.k2[:, None] * th  # eq. (30)
+        r = -self.gam * np.sum(chi * Psi, 1)
+        law = self.opts.ghat_law
+        if "sigma" in law:
+            r = r - self.sig * (gh - self.gref)
+        if "projection" in law:
+            lo, hi = 1.0, 1.0 / self.sc.controller.g_min
+            if hi - lo <= 1e-12:
+                r = 0 * r
+            else:
+                dl = 0.01 * (hi - lo)
+                whi = np.clip((gh - (hi - dl)) / dl, 0, 1)
+                wlo = np.clip((lo + dl - gh) / dl, 0, 1)
+                r = r - whi * np.maximum(r, 0) - wlo * np.minimum(r, 0)
+        g, f = self.faults(t)
+        force = g[:, None] * u + f - Mv(C, q) - G  # eq. (2)
+        qd = np.linalg.solve(M, force[..., None])[..., 0]
+        parts = [mud, Ed, phid[:, None], q, qd, thd, r[:, None]]
+        if self.filtered:
+            parts += [out["wdot"], out["zdot"]]
+        xdot = np.concatenate([e0d, np.hstack(parts).reshape(-1)])
+        out.update(
+            xdot=xdot, psi=psi, ehat=ehat, v=v, etadot=Ed, etaddot=Edd, eta3dot=Eddd, b=b,
+            bdot=bd, bddot=bdd, et=et, chi=chi, Psi=Psi, u=u, qdot=qd, u0=u0, u0dot=u0d,
+        )  # fmt: skip
+        return out
+
+    def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
+        """The closed-loop right-hand side ẋ = f(t, x)."""
+        return self.evaluate(t, x)["xdot"]
+
+
+# ----------------------------------------------------------------------------- hand gains
+def hand_gains(sc: Scenario, *, lambda1: float | None = None, lambda2: float | None = None):
+    """Gains chosen by hand (no LMI solver), for tests and as the benchmark's baseline.
+
+    Θ from the observer Riccati equation of (ΦA0, C0) (a stable Θ exists under
+    Assumption 2 even when (ΦA0, C0) is unobservable); Ω from the Lyapunov
+    equation FᵀΩ + ΩF = −I; T⁻¹ from the scenario's Q when given
+    (T⁻¹ = Qᵀ(QB0)⁻¹Q + NNᵀ, N spanning ker B0ᵀ, so B0ᵀT⁻¹ = Q), else from the
+    control Riccati equation of (A0, B0); Z and w from Lemma 3 with z = (L̄ᵀ)⁻¹1;
+    k1 = 1. These gains are NOT certified.
+    """
+    from symbolic.network import gauge
+    from synthesis.gains import Gains
+
+    L = sc.leader
+    A0, B0, C0 = (np.asarray(a, dtype=float) for a in (L.A0, L.B0, L.C0))
+    m, n = A0.shape[0], C0.shape[0]
+    CB = C0 @ B0
+    Gamma = B0 @ np.linalg.inv(CB.T @ CB) @ CB.T
+    Phi = np.eye(m) - Gamma @ C0
+    if sc.observer.Theta is not None:
+        Theta = np.asarray(sc.observer.Theta, dtype=float)
+    else:
+        P = sla.solve_continuous_are((Phi @ A0).T, C0.T, np.eye(m), np.eye(n))
+        Theta = P @ C0.T
+    F = Phi @ A0 - Theta @ C0
+    Omega = sla.solve_continuous_lyapunov(F.T, -np.eye(m))
+    if sc.observer.Q is not None:
+        Q = np.asarray(sc.observer.Q, dtype=float)
+        Nb = sla.null_space(B0.T)
+        Tinv = Q.T @ np.linalg.solve(Q @ B0, Q) + Nb @ Nb.T
+    else:
+        Tinv = sla.solve_continuous_are(A0, B0, np.eye(m), np.eye(B0.shape[1]))
+        Q = B0.T @ Tinv
+    h = gauge(np.asarray(sc.graph.adjacency))
+    A = np.asarray(sc.graph.adjacency)
+    LB = np.diag(np.abs(A).sum(1) + sc.graph.pinning) - A
+    H = np.diag(h)
+    Lbar = H @ LB @ H
+    z = np.linalg.solve(Lbar.T, np.ones(sc.N))
+    Z = np.diag(z)
+    Zi = np.diag(z**-0.5)
+    w = float(np.linalg.eigvalsh(Zi @ (Lbar.T @ Z + Z @ Lbar) @ Zi).min())
+    l1 = lambda1 if lambda1 is not None else (sc.observer.lambda1 or 1.9)
+    l2 = lambda2 if lambda2 is not None else (sc.observer.lambda2 or max(2.0, L.alpha))
+    return Gains(
+        A0=A0, B0=B0, C0=C0, Gamma=Gamma, Phi=Phi, Theta=Theta, Omega=Omega,
+        T=np.linalg.inv(Tinv), Q=Q, lambda_bar1=sc.observer.lambda_bar1,
+        delta1=sc.observer.delta1, delta2=sc.observer.delta2,
+        delta1_hat=sc.observer.delta1_hat, delta2_hat=sc.observer.delta2_hat,
+        L_bar=Lbar, H=H, Z=Z, w=w, lambda1=float(l1), lambda2=float(l2), alpha=L.alpha, k1=1.0,
+        info={"solver": "hand (verify.reference.hand_gains)", "certified": False},
+    )  # fmt: skip

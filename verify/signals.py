@@ -1,0 +1,127 @@
+"""Reading a trajectory DataFrame (the columns of ``trajectory.csv``) into arrays.
+
+Column format (agents 1-based): ``t``, ``eta0_k``; per follower i: ``p{i}_{r}``,
+``q{i}_{r}``, ``eta{i}_{k}``, ``mu{i}_{k}``, ``phi{i}``, ``thetahat{i}_{r}``,
+``ghat{i}``, ``u{i}_{r}``, ``b{i}_{r}``, ``et{i}_{r}``, ``eeta{i}_{k}``,
+``chi{i}_{r}``, ``V2_{i}``; and ``V1``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from verify.bounds import VerifyError
+
+
+@dataclass(frozen=True)
+class Dims:
+    """Sizes read from the column names: N followers, n outputs, m leader states."""
+
+    N: int
+    n: int
+    m: int
+
+
+def dims(df: pd.DataFrame) -> Dims:
+    """Infer (N, n, m) from the column names.
+
+    Raises
+    ------
+    VerifyError
+        If ``t``, ``eta0_1`` or ``p1_1`` is missing.
+    """
+    cols = set(df.columns)
+    for need in ("t", "eta0_1", "p1_1"):
+        if need not in cols:
+            raise VerifyError(
+                f"trajectory: column {need!r} is missing (expected the trajectory.csv format)"
+            )
+    m = _count(cols, "eta0_{}")
+    n = _count(cols, "p1_{}")
+    N = _count(cols, "p{}_1")
+    return Dims(N=N, n=n, m=m)
+
+
+def _count(cols: set[str], pattern: str) -> int:
+    k = 0
+    while pattern.format(k + 1) in cols:
+        k += 1
+    return k
+
+
+def block(df: pd.DataFrame, prefix: str, i: int, width: int) -> np.ndarray:
+    """Columns ``{prefix}{i}_{1..width}`` (i 1-based) as a (K, width) array."""
+    names = [f"{prefix}{i}_{r}" for r in range(1, width + 1)]
+    missing = [c for c in names if c not in df.columns]
+    if missing:
+        raise VerifyError(f"trajectory: column {missing[0]!r} is missing (re-run the simulation)")
+    return df[names].to_numpy(dtype=float)
+
+
+def has(df: pd.DataFrame, name: str) -> bool:
+    """Whether column ``name`` exists."""
+    return name in df.columns
+
+
+def leader_output(df: pd.DataFrame, C0: np.ndarray) -> np.ndarray:
+    """y0 = C0 η0 along the trajectory, (K, n)."""
+    m = C0.shape[1]
+    eta0 = df[[f"eta0_{k}" for k in range(1, m + 1)]].to_numpy(dtype=float)
+    return eta0 @ np.asarray(C0, dtype=float).T
+
+
+def tail_mask(t: np.ndarray, fraction: float) -> np.ndarray:
+    """Samples in the last ``fraction`` of [t0, t_end] (the "asymptotic" window)."""
+    t0, t1 = float(t[0]), float(t[-1])
+    return t >= t1 - fraction * (t1 - t0) - 1e-12
+
+
+def enter_time(t: np.ndarray, y: np.ndarray, level: float) -> float:
+    """First time after which ``y <= level`` at every later sample (inf if never; t0 if always).
+
+    Parameters
+    ----------
+    t, y : ndarray
+        Samples.
+    level : float
+
+    Returns
+    -------
+    float
+    """
+    above = np.nonzero(np.asarray(y) > level)[0]
+    if above.size == 0:
+        return float(t[0])
+    last = int(above[-1])
+    return math.inf if last == len(t) - 1 else float(t[last + 1])
+
+
+def decay_rate(t: np.ndarray, y: np.ndarray, floor: float = 1e-300) -> float:
+    """Least-squares rate r of y ≈ c e^{−r t} over the given samples (NaN if < 3 usable).
+
+    Parameters
+    ----------
+    t, y : ndarray
+        Samples (y > 0 is used; zeros are dropped).
+    floor : float
+        Values at or below it are ignored.
+
+    Returns
+    -------
+    float
+        The fitted rate (positive = decaying).
+    """
+    ok = np.asarray(y) > floor
+    if ok.sum() < 3:
+        return math.nan
+    slope = np.polyfit(np.asarray(t)[ok], np.log(np.asarray(y)[ok]), 1)[0]
+    return float(-slope)
+
+
+def agent_norm(df: pd.DataFrame, prefix: str, i: int, width: int) -> np.ndarray:
+    """Euclidean norm over components of ``{prefix}{i}_*`` at each sample."""
+    return np.linalg.norm(block(df, prefix, i, width), axis=1)

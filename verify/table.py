@@ -1,0 +1,317 @@
+"""The bound-vs-actual table: one row per agent × component × claim.
+
+Columns: ``claim, agent, component, kind, bound, observed, ratio, holds, window, note``.
+``kind`` says what a failure means:
+
+- ``guaranteed``: follows from the theory for this reconstruction (a failure is a
+  bug; ``make verify`` exits 1);
+- ``paper``: the paper's own claim where it does not follow as printed (paper-spec
+  section 9); ``--strict`` makes these fail too;
+- ``info``: a measurement with no pass/fail (``holds`` is still shown).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from symbolic.scenario import Scenario
+from verify import signals as S
+from verify.bounds import (
+    VerifyConfig,
+    comparison_reaching_time,
+    lemma1_bound,
+    lemma1_reaching_time,
+    theorem2_constants,
+)
+from verify.lyapunov import InequalityCheck, theorem2_guaranteed
+
+COLUMNS = [
+    "claim",
+    "agent",
+    "component",
+    "kind",
+    "bound",
+    "observed",
+    "ratio",
+    "holds",
+    "window",
+    "note",
+]
+KINDS = ("guaranteed", "paper", "info")
+
+
+@dataclass
+class Rows:
+    """Accumulates table rows."""
+
+    rows: list[dict] = field(default_factory=list)
+
+    def add(
+        self,
+        claim: str,
+        kind: str,
+        bound: float,
+        observed: float,
+        window: str,
+        note: str = "",
+        *,
+        agent: int | None = None,
+        component: int | None = None,
+        holds: bool | None = None,
+        larger_is_better: bool = False,
+    ) -> None:
+        assert kind in KINDS
+        if holds is None:
+            if larger_is_better:
+                holds = bool(observed >= bound)
+            else:
+                holds = bool(observed <= bound)
+        ratio = observed / bound if bound not in (0.0,) and math.isfinite(bound) else math.nan
+        self.rows.append(
+            {
+                "claim": claim,
+                "agent": "all" if agent is None else str(agent + 1),
+                "component": "" if component is None else str(component + 1),
+                "kind": kind,
+                "bound": float(bound),
+                "observed": float(observed),
+                "ratio": float(ratio),
+                "holds": bool(holds),
+                "window": window,
+                "note": note,
+            }
+        )
+
+    def frame(self) -> pd.DataFrame:
+        return pd.DataFrame(self.rows, columns=COLUMNS)
+
+
+def _win(a: float, b: float) -> str:
+    return f"[{a:g}, {b:g}] s"
+
+
+def bounds_table(
+    scenario: Scenario,
+    df: pd.DataFrame,
+    *,
+    gains=None,  # noqa: ANN001 (synthesis.gains.Gains)
+    theorem1: list[InequalityCheck] | None = None,
+    theorem2: list[InequalityCheck] | None = None,
+    ablation: pd.DataFrame | None = None,
+    config: VerifyConfig | None = None,
+) -> pd.DataFrame:
+    """Build the bound-vs-actual table from a trajectory and (optionally) the AD checks.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    df : DataFrame
+        The trajectory (``trajectory.csv`` columns).
+    gains : Gains, optional
+        Needed for Theorem 1's rates.
+    theorem1 : list of InequalityCheck, optional
+        [supported-rate check, printed-rate check] from :func:`verify.lyapunov.check_theorem1`.
+    theorem2 : list of InequalityCheck, optional
+        One per follower from :func:`verify.lyapunov.check_theorem2`.
+    ablation : DataFrame, optional
+        The eq. (42) run for the convergence comparison.
+    config : VerifyConfig, optional
+
+    Returns
+    -------
+    DataFrame
+        Columns :data:`COLUMNS`.
+    """
+    cfg = config or VerifyConfig()
+    dm = S.dims(df)
+    if dm.N != scenario.N or dm.n != scenario.n or dm.m != scenario.m:
+        raise S.VerifyError(
+            f"trajectory has N={dm.N}, n={dm.n}, m={dm.m} but scenario {scenario.name!r} has "
+            f"N={scenario.N}, n={scenario.n}, m={scenario.m}: re-run the simulation"
+        )
+    t = df["t"].to_numpy(float)
+    t0, t1 = float(t[0]), float(t[-1])
+    tail = S.tail_mask(t, cfg.tail_fraction)
+    tw = _win(float(t[tail][0]), t1)
+    R = Rows()
+    floor = scenario.observer.phi_min > 0
+
+    # ---------------- Theorem 1: observer
+    for i in range(dm.N):
+        if not S.has(df, f"eeta{i + 1}_1"):
+            break
+        e = S.agent_norm(df, "eeta", i + 1, dm.m)
+        rate = S.decay_rate(t[tail], e[tail], floor=1e-12)
+        if gains is not None:
+            from verify.bounds import theorem1_rates
+
+            r1 = theorem1_rates(scenario, gains)
+            R.add(
+                "T1 |ebar_eta_i| decay rate >= delta~/2 (fit on tail)",
+                "info",
+                r1.supported / 2.0,
+                rate,
+                tw,
+                "phi floor: only ultimately bounded" if floor else "V1 >= c|ebar|^2",
+                agent=i,
+                larger_is_better=True,
+            )
+        te = S.enter_time(t, e, cfg.enter_level)
+        R.add(
+            f"T1 time |ebar_eta_i| enters {cfg.enter_level:g}",
+            "info",
+            t1,
+            te,
+            _win(t0, t1),
+            "inf = never stays inside" if not math.isfinite(te) else "",
+            agent=i,
+        )
+        R.add(
+            "T1 |ebar_eta_i| -> 0 (tail sup)",
+            "info",
+            cfg.enter_level,
+            float(e[tail].max()),
+            tw,
+            f"phi_min = {scenario.observer.phi_min:g}" if floor else "",
+            agent=i,
+        )
+    for chk, label in zip(theorem1 or [], ("supported", "printed"), strict=False):
+        kind = "info" if floor else ("guaranteed" if label == "supported" else "paper")
+        note = (
+            f"worst violation {chk.worst:.3g} at t = {chk.t_worst:.3g} s"
+            if not chk.ok
+            else "holds at every output time"
+        )
+        if floor:
+            note += "; phi floor > 0 breaks the proof's last step (ultimately bounded)"
+        R.add(
+            f"T1 dV1/dt <= -delta~ V1, {label} rate (fraction of time)",
+            kind,
+            1.0,
+            chk.fraction,
+            _win(t0, t1),
+            note,
+            holds=chk.ok,
+            larger_is_better=True,
+        )
+
+    # ---------------- Theorem 2: controller
+    guaranteed, why = theorem2_guaranteed(scenario)
+    for chk in theorem2 or []:
+        note = why if chk.ok else f"{why}; worst {chk.worst:.3g} at t = {chk.t_worst:.3g} s"
+        R.add(
+            "T2 dV2/dt <= -chi'K chi - k2|th-d|^2/2 + k2|d|^2/2 (+slack) (fraction)",
+            "guaranteed" if guaranteed else "info",
+            1.0,
+            chk.fraction,
+            _win(t0, t1),
+            note,
+            agent=chk.agent,
+            holds=chk.ok,
+            larger_is_better=True,
+        )
+    y0 = S.leader_output(df, scenario.leader.C0)
+    for i in range(dm.N):
+        c = theorem2_constants(scenario, i, cfg)
+        lam = np.asarray(scenario.controller.Lambda[i], float)
+        chi = S.block(df, "chi", i + 1, dm.n)
+        et = S.block(df, "et", i + 1, dm.n)
+        etd = chi - et * lam  # ė_t = χ − Λ e_t, eq. (28)
+        chin = np.linalg.norm(chi, axis=1)
+        paper_note = "Lemma 1 applied with no decay in ghat (section 9.3)"
+        R.add("T2 |chi_si| <= chi_bar_si (31), paper", "paper", c.chi_bar, chin[tail].max(), tw,
+              paper_note, agent=i)  # fmt: skip
+        for r in range(dm.n):
+            R.add("T2 |e_ti,r| <= chi_bar/lambda_ir (31), paper", "paper", c.e_bar[r],
+                  np.abs(et[tail, r]).max(), tw, paper_note, agent=i, component=r)  # fmt: skip
+            R.add("Lemma 2 |de_ti,r/dt| <= 2 chi_bar, paper", "paper", c.edot_bar[r],
+                  np.abs(etd[tail, r]).max(), tw, paper_note, agent=i, component=r)  # fmt: skip
+        if c.provable:
+            V2_0 = float(df[f"V2_{i + 1}"].iloc[0]) if S.has(df, f"V2_{i + 1}") else math.nan
+            tc = comparison_reaching_time(c.Omega_var, c.chi_v_var, V2_0, cfg.lemma1_delta)
+            start = max(float(t[tail][0]), tc)
+            win = t >= start
+            kind = "guaranteed" if guaranteed and win.any() and math.isfinite(tc) else "info"
+            vnote = f"ghat law {c.variant!r} (section 9.3); window starts after the comparison-lemma time {tc:.3g} s"
+            if win.any():
+                wv = _win(start, t1)
+                R.add("T2 |chi_si| <= chi_bar_si, provable variant", kind, c.chi_bar_var,
+                      chin[win].max(), wv, vnote, agent=i)  # fmt: skip
+                for r in range(dm.n):
+                    R.add("T2 |e_ti,r| <= chi_bar/lambda_ir, provable variant", kind,
+                          c.e_bar_var[r], np.abs(et[win, r]).max(), wv, vnote, agent=i,
+                          component=r)  # fmt: skip
+        # Definition 1: stated with y0, not C0 η_i
+        b = S.block(df, "b", i + 1, dm.n)
+        p = S.block(df, "p", i + 1, dm.n)
+        dev = np.linalg.norm(p - y0 - b, axis=1)
+        R.add("Def. 1 limsup |p_i - y0 - b_i| <= chi_bar, paper", "paper", c.chi_bar,
+              dev[tail].max(), tw, "uses y0 (the leader's output), not C0 eta_i", agent=i)  # fmt: skip
+        # Lemma 1's reaching time on V2 with the paper's constants
+        if S.has(df, f"V2_{i + 1}"):
+            V2 = df[f"V2_{i + 1}"].to_numpy(float)
+            level = lemma1_bound(c.chi_v, c.Omega, cfg.lemma1_delta)
+            tf = lemma1_reaching_time(c.Omega, c.chi_v, float(V2[0]), cfg.lemma1_delta)
+            te = S.enter_time(t, V2, level)
+            R.add("Lemma 1 reaching time t_f (V2 enters chi_v/(Omega(1-delta))), paper", "paper",
+                  tf, te, _win(t0, t1),
+                  f"V2(0) = {V2[0]:.4g}, level {level:.4g}; " + paper_note, agent=i)  # fmt: skip
+
+    # ---------------- eq. (42) ablation vs the fault-tolerant controller (Fig. 13)
+    if ablation is not None:
+        for i in range(dm.N):
+            ft = S.agent_norm(df, "et", i + 1, dm.n)
+            ab = S.agent_norm(ablation, "et", i + 1, dm.n)
+            ta = ablation["t"].to_numpy(float)
+            lvl = 1e-2
+            t_ft, t_ab = S.enter_time(t, ft, lvl), S.enter_time(ta, ab, lvl)
+            R.add(
+                f"Fig. 13: time |e_ti| enters {lvl:g}: ablation (42) vs FTC (29)",
+                "info",
+                t_ft,
+                t_ab,
+                _win(t0, t1),
+                "bound = FTC time, observed = ablation time; ratio > 1: ablation slower",
+                agent=i,
+                larger_is_better=True,
+            )
+            abt = S.tail_mask(ta, cfg.tail_fraction)
+            R.add(
+                "Fig. 13: tail sup |e_ti|: ablation (42) vs FTC (29)",
+                "info",
+                float(ft[tail].max()),
+                float(ab[abt].max()),
+                tw,
+                "bound = FTC, observed = ablation; ratio > 1: ablation worse",
+                agent=i,
+                larger_is_better=True,
+            )
+    return R.frame()
+
+
+def failures(table: pd.DataFrame, strict: bool = False) -> pd.DataFrame:
+    """Rows that make ``check`` fail: guaranteed ones, plus the paper's claims when strict."""
+    kinds = ["guaranteed", "paper"] if strict else ["guaranteed"]
+    return table[table["kind"].isin(kinds) & ~table["holds"]]
+
+
+def to_markdown(table: pd.DataFrame) -> str:
+    """GitHub Markdown table (no extra dependency), numbers to 4 significant digits."""
+
+    def fmt(v: object) -> str:
+        if isinstance(v, bool | np.bool_):
+            return "yes" if v else "**no**"
+        if isinstance(v, float):
+            if math.isnan(v):
+                return "–"
+            return f"{v:.4g}"
+        return str(v).replace("|", "\\|")
+
+    head = "| " + " | ".join(table.columns) + " |"
+    sep = "|" + "|".join("---" for _ in table.columns) + "|"
+    body = ["| " + " | ".join(fmt(v) for v in row) + " |" for row in table.itertuples(index=False)]
+    return "\n".join([head, sep, *body])
