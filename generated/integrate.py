@@ -81,6 +81,13 @@ class IntegratorSettings:
     fixed_step : float
         Largest step of the fixed-step method (each output interval is divided
         into equal steps no longer than this).
+    fixed_rtol, fixed_atol : float
+        Safeguard of the fixed-step method: an output interval whose embedded error
+        estimate ``|h (k1 + k2)/2| / (atol + rtol |x|)`` exceeds 1 anywhere (or that
+        produces NaN) is recomputed with steps halved, up to ``fixed_max_halvings``
+        times. Loose by design: the exact sign function's chattering (a jump in f of
+        size Δ gives an estimate h Δ / 2) passes; a violent transient does not.
+    fixed_max_halvings : int
     chunk : float
         Simulated seconds per integrator call (restart, progress, failure granularity).
     newton_scheme, linear_solver : str
@@ -94,6 +101,9 @@ class IntegratorSettings:
     max_steps: int = 100000
     fixed_step: float = 1e-3
     chunk: float = 1.0
+    fixed_rtol: float = 1e-2
+    fixed_atol: float = 1e-2
+    fixed_max_halvings: int = 12
     newton_scheme: str = "direct"
     linear_solver: str = "csparse"
 
@@ -102,10 +112,14 @@ class IntegratorSettings:
             raise IntegrationError(
                 f"IntegratorSettings.method: {self.method!r} is not one of {', '.join(METHODS)}"
             )
-        for name in ("rtol", "atol", "fixed_step", "chunk"):
+        for name in ("rtol", "atol", "fixed_step", "chunk", "fixed_rtol", "fixed_atol"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
                 raise IntegrationError(f"IntegratorSettings.{name}: {v!r} must be a number > 0")
+        if not 0 <= int(self.fixed_max_halvings) <= 30:
+            raise IntegrationError(
+                f"IntegratorSettings.fixed_max_halvings: {self.fixed_max_halvings} not in [0, 30]"
+            )
         if int(self.max_steps) < 1:
             raise IntegrationError(f"IntegratorSettings.max_steps: {self.max_steps} must be >= 1")
 
@@ -281,27 +295,49 @@ class _Ros2:
         k1 = ca.solve(W, k0 + GAMMA_ROS2 * h * ft, s.linear_solver)
         k2 = ca.solve(W, rhs(t2, x + h * k1) - 2 * k1 - GAMMA_ROS2 * h * ft, s.linear_solver)
         xn = x + 1.5 * h * k1 + 0.5 * h * k2
-        self.step = ca.Function("ros2_step", [x, t, h, t2], [xn])
-        self._folds: dict[int, ca.Function] = {}
+        # embedded first-order solution x + h k1: scaled local error estimate (max norm)
+        est = ca.fabs(0.5 * h * (k1 + k2)) / (s.fixed_atol + s.fixed_rtol * ca.fabs(x))
+        emax = ca.MX.sym("emax")
+        self.step = ca.Function(
+            "ros2_step", [x, emax, t, h, t2], [xn, ca.fmax(emax, ca.mmax(est))]
+        )
+        self._runs: dict[int, ca.Function] = {}
+
+    def _run(self, K: int) -> ca.Function:
+        f = self._runs.get(K)
+        if f is None:  # K steps in one call; (x, emax) accumulated
+            f = self._runs[K] = self.step.mapaccum(f"ros2_{K}", K, 2)
+        return f
 
     def advance(self, t0: float, t1: float, x: np.ndarray, acc: dict) -> np.ndarray:
-        K = max(1, math.ceil((t1 - t0) / self.s.fixed_step - 1e-9))
-        fold = self._folds.get(K)
-        if fold is None:
-            fold = self._folds[K] = self.step.fold(K)
-        h = (t1 - t0) / K
-        tv = t0 + h * np.arange(K)
-        t2 = tv + h
-        # the last stage-2 evaluation takes the left limit at t1: a jump at t1 (a breakpoint)
-        # belongs to the next segment, as with the variable-step restarts
-        t2[-1] = np.nextafter(t1, t0)
-        acc["steps"] += K
-        acc["rhs_evals"] += 2 * K
-        acc["jac_evals"] += K
-        acc["lin_setups"] += K
-        acc["integrator_calls"] += 1
-        args = (x, tv.reshape(1, -1), np.full((1, K), h), t2.reshape(1, -1))
-        return np.array(fold(*args), dtype=float).ravel()
+        """Advance over [t0, t1] in equal steps <= fixed_step, halved while the error test fails."""
+        K0 = max(1, math.ceil((t1 - t0) / self.s.fixed_step - 1e-9))
+        for level in range(self.s.fixed_max_halvings + 1):
+            K = K0 * 2**level
+            h = (t1 - t0) / K
+            tv = t0 + h * np.arange(K)
+            t2 = tv + h
+            # the last stage-2 evaluation takes the left limit at t1: a jump at t1 (a
+            # breakpoint) belongs to the next segment, as with the variable-step restarts
+            t2[-1] = np.nextafter(t1, t0)
+            acc["steps"] += K
+            acc["rhs_evals"] += 2 * K
+            acc["jac_evals"] += K
+            acc["lin_setups"] += K
+            acc["integrator_calls"] += 1
+            args = (x, 0.0, tv.reshape(1, -1), np.full((1, K), h), t2.reshape(1, -1))
+            X, E = self._run(K)(*args)
+            xn = np.array(X[:, -1], dtype=float).ravel()
+            err = float(E[-1])
+            if np.all(np.isfinite(xn)) and err <= 1.0:
+                if level:
+                    acc["refined_intervals"] += 1
+                return xn
+        raise _ChunkFailure(
+            f"error test still fails with {2**self.s.fixed_max_halvings} times smaller steps "
+            f"(estimate {err:.3g}; raise fixed_rtol/fixed_atol or lower fixed_step)",
+            t1,
+        )
 
 
 def integrate(
@@ -362,7 +398,7 @@ def integrate(
     X[0] = x
     if Z is not None:
         Z[0] = z
-    acc = dict.fromkeys([*_STAT_KEYS, "restarts", "integrator_calls"], 0)
+    acc = dict.fromkeys([*_STAT_KEYS, "restarts", "integrator_calls", "refined_intervals"], 0)
     chunks = _plan(t_out, breakpoints, s.chunk)
     stepper = _Ros2(f, s, nx) if s.method == "fixed" else _Sundials(f, s, nz)
     t_cur = float(t_out[0])
@@ -443,7 +479,10 @@ def _run_chunk(stepper, s: IntegratorSettings, t0: float, x, z, times: list[floa
         out = []
         tp, xp = t0, x
         for tt in times:
-            xp = stepper.advance(tp, tt, xp, acc)
+            try:
+                xp = stepper.advance(tp, tt, xp, acc)
+            except RuntimeError as exc:  # singular iteration matrix, NaN in the factorisation
+                raise _ChunkFailure(_reason(exc), tt) from None
             if not np.all(np.isfinite(xp)):
                 raise _ChunkFailure("state is not finite (NaN or Inf): unstable step", tt)
             out.append(xp)

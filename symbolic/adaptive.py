@@ -7,12 +7,14 @@
 - ``projection``: ĝ̇ = Proj(r) keeping ĝ in [1, 1/g_min];
 - ``sigma+projection``: Proj(r − σ(ĝ − ĝ_ref)).
 
-The projection is Lipschitz: inside a band of width δ = 1 % of the interval at
-each end, the outward part of the rate is faded out linearly,
+The projection is Lipschitz (a smoothed Pomet–Praly projection): in a band of
+width δ = 1 % of the interval just outside each end, the outward part of the
+rate is faded out linearly,
 ``Proj(r) = r − w_hi(ĝ)·max(r, 0) − w_lo(ĝ)·min(r, 0)``, with ``w`` ramping from
-0 to 1 across the band. At the ends ĝ̇ points inward or is zero, so ĝ stays in
-[1, 1/g_min]; and because the removed part always points outward, V̇2 is not
-increased as long as 1/g_i lies inside [1 + δ, 1/g_min − δ].
+0 at the end of the interval to 1 at distance δ outside. Inside [1, 1/g_min]
+the law is untouched; ĝ never leaves [1 − δ, 1/g_min + δ]; and because the
+removed part always points outward, V̇2 is not increased as long as 1/g_i lies
+in [1, 1/g_min].
 """
 
 from __future__ import annotations
@@ -28,8 +30,8 @@ def projection(ghat: ca.SX, rate: ca.SX, lo: float, hi: float) -> ca.SX:
     if hi - lo <= 1e-12:
         return 0 * rate  # interval collapsed (g_min = 1): ĝ is frozen
     delta = BAND * (hi - lo)
-    w_hi = ca.fmin(ca.fmax((ghat - (hi - delta)) / delta, 0.0), 1.0)
-    w_lo = ca.fmin(ca.fmax(((lo + delta) - ghat) / delta, 0.0), 1.0)
+    w_hi = ca.fmin(ca.fmax((ghat - hi) / delta, 0.0), 1.0)
+    w_lo = ca.fmin(ca.fmax((lo - ghat) / delta, 0.0), 1.0)
     return rate - w_hi * ca.fmax(rate, 0.0) - w_lo * ca.fmin(rate, 0.0)
 
 

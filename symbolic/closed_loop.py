@@ -432,7 +432,7 @@ def build_closed_loop(scenario: Scenario, gains: Any, *, assembly: str = "map") 
     )
     outputs = _outputs_function(sc, gains, net, t, x, a)
     x0 = initial_state(sc, lay, outputs)
-    qdd0 = np.array(outputs(0.0, x0)[outputs.name_out().index("qdot")]).T.reshape(-1)
+    qdd0 = np.array(outputs(0.0, x0)[outputs.name_out().index("qdot")]).reshape(-1)  # agent-major
     blocks = dict(net["funs"])
     blocks["leader"] = net["lead"]
     return ClosedLoop(

@@ -99,12 +99,19 @@ def parse_expression(text: Any, *, where: str = "expression") -> Expr:
             f"{where}: a boolean is not an expression of t (expected e.g. '2*cos(t)')"
         )
     if isinstance(text, int | float):
-        if not math.isfinite(float(text)):
-            raise ExpressionError(f"{where}: non-finite number {text!r} (expected a finite value)")
-        return Expr(repr(float(text)), ("num", float(text)))
+        try:
+            value = float(text)
+        except OverflowError:  # an integer beyond the float range
+            value = math.inf
+        if not math.isfinite(value):
+            raise ExpressionError(
+                f"{where}: non-finite number {_short(str(text))} (expected a finite value)"
+            )
+        return Expr(repr(value), ("num", value))
     if not isinstance(text, str):
         raise ExpressionError(
-            f"{where}: {type(text).__name__} is not an expression (expected a string such as '2*cos(t)')"
+            f"{where}: {type(text).__name__} is not an expression "
+            "(expected a string such as '2*cos(t)')"
         )
     if len(text) > MAX_LENGTH:
         raise ExpressionError(

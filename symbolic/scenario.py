@@ -3,8 +3,8 @@
 :func:`load_scenario` reads a file with :mod:`tomllib`, validates every field
 on load and returns a frozen :class:`Scenario`. Every problem is a
 :class:`~symbolic.errors.ScenarioError` naming the file, the key, what is wrong
-and what is expected. The key names are documented in the README
-("Scenario files"); ``scenarios/paper.toml`` is the paper's Table 2.
+and what is expected. Every key, its type, default and meaning is documented
+in ``docs/scenario-format.md``; ``scenarios/paper.toml`` is the paper's Table 2.
 """
 
 from __future__ import annotations
@@ -33,7 +33,8 @@ METHODS = ("cvodes", "idas", "fixed")
 START_MODES = ("given", "formation")
 MAX_TABLE_ROWS = 1000  # rows of a piecewise g_i table
 MAX_TRACE_ROWS = 1_000_000  # rows of a CSV operator trace
-MAX_OUTPUT_ROWS = 1e7  # horizon / output_step: beyond this no trajectory file is sensible
+MAX_OUTPUT_ROWS = 1e7
+MAX_HORIZON = 1e6  # s; far beyond any study here, and keeps time arithmetic finite  # horizon / output_step: beyond this no trajectory file is sensible
 
 
 # --------------------------------------------------------------------------- types
@@ -52,6 +53,19 @@ class Leader:
     @property
     def m(self) -> int:
         return self.A0.shape[0]
+
+    def u0_numpy(self, t: Any) -> np.ndarray:
+        """u0 at time(s) ``t`` with numpy: shape (p,) for a scalar t, (p, len(t)) for an array.
+
+        Expressions are evaluated directly; a CSV trace is interpolated linearly
+        (the same meaning the closed loop gives it).
+        """
+        ts = np.asarray(t, dtype=float)
+        if self.u0 is not None:
+            return np.array([np.broadcast_to(e.numpy(ts), ts.shape) for e in self.u0])
+        tr = self.u0_trace
+        assert tr is not None
+        return np.array([np.interp(ts, tr[:, 0], tr[:, 1 + k]) for k in range(tr.shape[1] - 1)])
 
     @property
     def p(self) -> int:
@@ -433,6 +447,10 @@ def load_scenario(path: str | Path) -> Scenario:
         raise ctx.err("(file)", "is not UTF-8 text", "a UTF-8 TOML file") from None
     except tomllib.TOMLDecodeError as exc:
         raise ctx.err("(file)", f"malformed TOML: {exc}", "valid TOML") from None
+    except (RecursionError, MemoryError):  # absurdly nested arrays or inline tables
+        raise ctx.err("(file)", "nested too deeply", "a scenario file as documented") from None
+    except ValueError as exc:  # e.g. an integer literal with more than 4300 digits
+        raise ctx.err("(file)", f"unreadable value: {exc}", "numbers of ordinary size") from None
     try:
         return _build(ctx, data, path, hashlib.sha256(raw).hexdigest())
     except ScenarioError:
@@ -445,7 +463,9 @@ def load_scenario(path: str | Path) -> Scenario:
 
 def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     ctx.table(data, "", _TOP, {"leader", "graph", "followers"})
-    name = data.get("name", path.stem)
+    # default: the file's stem, made into a plain folder name
+    stem = "".join(c if c.isascii() and (c.isalnum() or c in "-_.") else "_" for c in path.stem)
+    name = data.get("name", stem.lstrip(".")[:100] or "scenario")
     if (
         not isinstance(name, str)
         or not name
@@ -688,6 +708,12 @@ def _integration(ctx: _Ctx, raw: Any) -> Integration:
         fixed_step=ctx.number(I.get("fixed_step", 1e-3), "integration.fixed_step", positive=True),
         max_steps=int(max_steps),
     )
+    if integ.horizon > MAX_HORIZON:
+        raise ctx.err(
+            "integration.horizon",
+            f"{integ.horizon:g} s is beyond {MAX_HORIZON:g} s",
+            f"a horizon in seconds <= {MAX_HORIZON:g}",
+        )
     if integ.rtol >= 1.0:
         raise ctx.err("integration.rtol", f"{integ.rtol} >= 1", "a relative tolerance < 1")
     if integ.output_step > integ.horizon:
@@ -811,6 +837,11 @@ def _sup(fun: Callable[[np.ndarray], np.ndarray], ts: np.ndarray) -> float:
     as d_ir or alpha must not, so each near-maximal local peak is refined with a
     bounded scalar search. Returns nan when ``fun`` is not finite on ``ts``.
     """
+    with np.errstate(all="ignore"):
+        return _sup_impl(fun, ts)
+
+
+def _sup_impl(fun: Callable[[np.ndarray], np.ndarray], ts: np.ndarray) -> float:
     v = fun(ts)
     if not np.all(np.isfinite(v)):
         return math.nan

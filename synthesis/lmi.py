@@ -29,6 +29,8 @@ from symbolic.errors import SynthesisError
 # Solver tolerances set explicitly, and the strictness margin ε >= 10 × each of them.
 SOLVER_TOL = {"CLARABEL": 1e-8, "SCS": 1e-7}
 LMI_EPS = 1e-6
+# Bound X ⪯ CAP_FACTOR·scale·I used only when an analytic centre does not exist (unbounded set).
+CAP_FACTOR = 10.0
 SOLVERS = ("CLARABEL", "SCS")
 
 
@@ -85,6 +87,73 @@ def _sym(M: np.ndarray) -> np.ndarray:
     return 0.5 * (M + M.T)
 
 
+def _sym_basis(m: int) -> list[np.ndarray]:
+    """Basis E_ij (i <= j) of the symmetric m×m matrices."""
+    out = []
+    for i in range(m):
+        for j in range(i, m):
+            E = np.zeros((m, m))
+            E[i, j] = E[j, i] = 1.0
+            out.append(E)
+    return out
+
+
+def _centre_polish(
+    blocks: list[tuple[np.ndarray, list[np.ndarray]]], x0: np.ndarray, *, iters: int = 60
+) -> np.ndarray | None:
+    """Newton's method for the analytic centre max Σ_j log det(M_j0 + Σ_k x_k M_jk).
+
+    The barrier is self-concordant and strictly concave on a bounded set, so Newton
+    from the solver's (interior) point converges quadratically to the unique centre;
+    this removes the solver's ~sqrt(tolerance) error in the argument. Returns None
+    if the start is not strictly interior or Newton fails.
+    """
+
+    def mats(x: np.ndarray) -> list[np.ndarray]:
+        return [M0 + sum(xk * Mk for xk, Mk in zip(x, Ms, strict=True)) for M0, Ms in blocks]
+
+    def value(x: np.ndarray) -> float:
+        tot = 0.0
+        for M in mats(x):
+            try:
+                Lc = np.linalg.cholesky(0.5 * (M + M.T))
+            except np.linalg.LinAlgError:
+                return -np.inf
+            tot += 2.0 * float(np.log(np.diag(Lc)).sum())
+        return tot
+
+    x = np.asarray(x0, dtype=float).copy()
+    f = value(x)
+    if not np.isfinite(f):
+        return None
+    K = x.size
+    for _ in range(iters):
+        g = np.zeros(K)
+        H = np.zeros((K, K))
+        for M, (_, Ms) in zip(mats(x), blocks, strict=True):
+            Mi = np.linalg.inv(0.5 * (M + M.T))
+            W = [Mi @ Mk for Mk in Ms]
+            g += np.array([np.trace(Wk) for Wk in W])
+            H -= np.array([[np.sum(Wk * Wl.T) for Wl in W] for Wk in W])
+        try:
+            dx = -np.linalg.solve(H, g)
+        except np.linalg.LinAlgError:
+            return None
+        dec = float(g @ dx)  # Newton decrement squared (H is negative definite)
+        if dec < 1e-24:
+            break
+        t = 1.0
+        while t > 1e-12:
+            fn = value(x + t * dx)
+            if fn >= f + 0.25 * t * dec:
+                break
+            t *= 0.5
+        else:
+            return None
+        x, f = x + t * dx, fn
+    return x
+
+
 # --------------------------------------------------------------------------- LMI (15)
 def lmi15_matrix(
     A0: np.ndarray, B0: np.ndarray, T: np.ndarray, lb1: float, d1: float
@@ -106,10 +175,50 @@ class TResult:
     Q: np.ndarray
     info: SolveInfo
     feasible: bool
+    cap: float | None = None  # the bound X ⪯ cap·I, when the feasible set needed one
+
+
+def _centre(
+    X: cp.Variable,
+    S: cp.Variable,
+    cons: list,
+    cap: float,
+) -> tuple[SolveInfo, float | None]:
+    """Analytic centre max log det X + log det S; if that fails (the set is unbounded, e.g.
+    when A0 + (δ1/2)I has stable modes), again with X ⪯ cap·I and its barrier."""
+    m = X.shape[0]
+    info = solve(cp.Problem(cp.Maximize(cp.log_det(X) + cp.log_det(S)), cons))
+    if info.status == "optimal" and X.value is not None:
+        return info, None
+    U = cp.Variable((m, m), symmetric=True)
+    obj = cp.log_det(X) + cp.log_det(S) + cp.log_det(U)
+    info = solve(cp.Problem(cp.Maximize(obj), cons + [U == cap * np.eye(m) - X]))
+    return info, cap
+
+
+def _polish_affine(
+    X0: np.ndarray,
+    dirs: list[np.ndarray],
+    others: list[tuple[np.ndarray, list[np.ndarray]]],
+    cap: float | None,
+) -> np.ndarray | None:
+    """Polish X = X0 + Σ x_k D_k to the analytic centre of log det X + Σ log det(others) (+ cap)."""
+    m = X0.shape[0]
+    blocks = [(X0, dirs), *others]
+    if cap is not None:
+        blocks.append((cap * np.eye(m) - X0, [-D for D in dirs]))
+    x = _centre_polish(blocks, np.zeros(len(dirs)))
+    if x is None:
+        return None
+    return _sym(X0 + sum(xk * D for xk, D in zip(x, dirs, strict=True)))
 
 
 def synth_T(A0: np.ndarray, B0: np.ndarray, lb1: float, d1: float) -> TResult:
     """Solve LMI (15) for T ≻ 0 (analytic centre), then Q = B0ᵀT⁻¹.
+
+    The feasible set is bounded when A0 + (δ1/2)I is anti-stable (the paper's double
+    integrator); otherwise T ⪯ cap·I with cap = :data:`CAP_FACTOR`·λ̄1‖B0‖²/δ1 (the
+    scale A0T + δ1T ~ λ̄1B0B0ᵀ suggests) is added and recorded.
 
     Raises
     ------
@@ -121,40 +230,63 @@ def synth_T(A0: np.ndarray, B0: np.ndarray, lb1: float, d1: float) -> TResult:
     S = cp.Variable((m, m), symmetric=True)  # S = −F, symmetric by construction
     F = A0 @ T + T @ A0.T - lb1 * (B0 @ B0.T) + d1 * T  # eq. (15)
     cons = [S == -F, T >> LMI_EPS * np.eye(m), S >> LMI_EPS * np.eye(m)]
-    prob = cp.Problem(cp.Maximize(cp.log_det(T) + cp.log_det(S)), cons)
-    info = solve(prob)
+    cap = CAP_FACTOR * lb1 * float(np.linalg.norm(B0, 2)) ** 2 / d1
+    info, used_cap = _centre(T, S, cons, cap)
     if info.status != "optimal" or T.value is None:
         raise SynthesisError(
             f"observer: LMI (15) in T is infeasible or unsolved for lambda_bar1 = {lb1:g}, "
             f"delta1 = {d1:g} ({info.solver}: {info.status}); lower delta1 or raise lambda_bar1"
         )
     Tv = _sym(np.asarray(T.value))
+    # polish to the exact analytic centre: −F(Tv + D) = −F(Tv) − L(D), L(D) = A0D + DA0ᵀ + δ1D
+    Es = _sym_basis(m)
+    others = [(-lmi15_matrix(A0, B0, Tv, lb1, d1), [-(A0 @ E + E @ A0.T + d1 * E) for E in Es])]
+    Tp = _polish_affine(Tv, Es, others, used_cap)
+    if Tp is not None:
+        Fp = lmi15_matrix(A0, B0, Tp, lb1, d1)
+        if np.linalg.eigvalsh(Tp)[0] >= LMI_EPS and np.linalg.eigvalsh(-Fp)[0] >= LMI_EPS:
+            Tv = Tp
     Qv = B0.T @ np.linalg.inv(Tv)  # Q = B0ᵀT⁻¹ (eq. (9))
-    return TResult(T=Tv, Q=Qv, info=info, feasible=True)
+    return TResult(T=Tv, Q=Qv, info=info, feasible=True, cap=used_cap)
 
 
 def check_given_Q(A0: np.ndarray, B0: np.ndarray, Q: np.ndarray, lb1: float, d1: float) -> TResult:
     """Is the given Q = B0ᵀT⁻¹ for some T satisfying LMI (15)? An LMI in P = T⁻¹.
 
     With B0ᵀP = Q fixed, T⁻¹B0B0ᵀT⁻¹ = QᵀQ and (15) multiplied by P on both sides is
-    linear in P. Returns the analytic centre when feasible; otherwise the P that
+    linear in P. Returns the analytic centre when feasible (with P ⪯ cap·I,
+    cap = :data:`CAP_FACTOR`·λ̄1‖Q‖²/δ1, if the set is unbounded); otherwise the P that
     minimises λ_max of the LMI matrix (``feasible=False``), so downstream code still
     has a T to work with while the violation is reported.
     """
     m = A0.shape[0]
+    Q = np.asarray(Q, dtype=float)
     P = cp.Variable((m, m), symmetric=True)
     S = cp.Variable((m, m), symmetric=True)
     G = P @ A0 + A0.T @ P - lb1 * (Q.T @ Q) + d1 * P  # eq. (15) in P = T⁻¹
     base = [S == -G, B0.T @ P == Q, P >> LMI_EPS * np.eye(m)]
-    prob = cp.Problem(cp.Maximize(cp.log_det(P) + cp.log_det(S)), base + [S >> LMI_EPS * np.eye(m)])
-    info = solve(prob)
+    cap = CAP_FACTOR * max(1.0, lb1 * float(np.linalg.norm(Q, 2)) ** 2 / d1)
+    info, used_cap = _centre(P, S, base + [S >> LMI_EPS * np.eye(m)], cap)
     if info.status == "optimal" and P.value is not None:
         Pv = _sym(np.asarray(P.value))
-        return TResult(T=np.linalg.inv(Pv), Q=np.asarray(Q, float), info=info, feasible=True)
+        # polish over {P : B0ᵀP = Q}: P = Pv + Σ x_k N_k with B0ᵀN_k = 0
+        Es = _sym_basis(m)
+        Amap = np.array([(B0.T @ E).ravel() for E in Es]).T  # columns: B0ᵀE_k
+        _, sv, Vt = np.linalg.svd(Amap)
+        rank = int((sv > 1e-12 * max(1.0, sv[0] if sv.size else 0.0)).sum())
+        Ns = [sum(v * E for v, E in zip(row, Es, strict=True)) for row in Vt[rank:]]
+        if Ns:
+            G0 = -lmi15_matrix_P(A0, Q, Pv, lb1, d1)
+            others = [(G0, [-(N @ A0 + A0.T @ N + d1 * N) for N in Ns])]
+            Pp = _polish_affine(Pv, Ns, others, used_cap)
+            if Pp is not None:
+                Gp = lmi15_matrix_P(A0, Q, Pp, lb1, d1)
+                if np.linalg.eigvalsh(Pp)[0] >= LMI_EPS and np.linalg.eigvalsh(-Gp)[0] >= LMI_EPS:
+                    Pv = Pp
+        return TResult(T=_sym(np.linalg.inv(Pv)), Q=Q, info=info, feasible=True, cap=used_cap)
     # least violation, bounded so the problem stays well posed
-    s = cp.Variable()
-    cap = 1e6 * (1.0 + float(np.abs(Q).max()) ** 2)
-    prob2 = cp.Problem(cp.Minimize(s), base + [S >> -s * np.eye(m), cp.trace(P) <= cap])
+    s_ = cp.Variable()
+    prob2 = cp.Problem(cp.Minimize(s_), base + [S >> -s_ * np.eye(m), P << cap * np.eye(m)])
     info2 = solve(prob2)
     if P.value is None:
         raise SynthesisError(
@@ -162,7 +294,7 @@ def check_given_Q(A0: np.ndarray, B0: np.ndarray, Q: np.ndarray, lb1: float, d1:
             "give a Q for which [[*, Q]] completes to a positive definite T⁻¹"
         )
     Pv = _sym(np.asarray(P.value))
-    return TResult(T=np.linalg.inv(Pv), Q=np.asarray(Q, float), info=info, feasible=False)
+    return TResult(T=_sym(np.linalg.inv(Pv)), Q=Q, info=info, feasible=False, cap=cap)
 
 
 def min_lambda_bar1_for_Q(A0: np.ndarray, B0: np.ndarray, Q: np.ndarray, d1: float) -> float:

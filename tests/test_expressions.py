@@ -122,7 +122,7 @@ def test_other_bad_text_is_one_line_expression_error(text):
     assert str(info.value).startswith(WHERE + ":") and "\n" not in str(info.value)
 
 
-@pytest.mark.parametrize("value", [True, None, [1, 2], {"a": 1}, math.nan, math.inf])
+@pytest.mark.parametrize("value", [True, None, [1, 2], {"a": 1}, math.nan, math.inf, 10**400])
 def test_non_text_values_rejected(value):
     with pytest.raises(ExpressionError, match="followers"):
         parse_expression(value, where=WHERE)

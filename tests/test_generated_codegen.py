@@ -26,9 +26,7 @@ def dyn(name: str, c: float = 0.3) -> ca.Function:
         -2 * x[0] - c * x[1] + ca.tanh(x[2] / 0.05) + ca.sin(3 * t),
         -x[2] / (1 + x[0] ** 2) + ca.sqrt(1 + x[1] ** 2) * ca.cos(t),
     )
-    return ca.Function(
-        name, [t, x, e, e, e], [rhs, e, e, e], ca.dyn_in(), ca.dyn_out()
-    )
+    return ca.Function(name, [t, x, e, e, e], [rhs, e, e, e], ca.dyn_in(), ca.dyn_out())
 
 
 @pytest.fixture
@@ -170,4 +168,6 @@ def test_renamed_keeps_values_and_names():
     h = renamed(mx, "h")
     assert h.is_a("SXFunction")
     xs = np.array([0.3, -1.0, 2.0])
-    np.testing.assert_allclose(np.array(h(0.7, xs, [], [], [])[0]), np.array(f(0.7, xs, [], [], [])[0]), rtol=1e-15)
+    np.testing.assert_allclose(
+        np.array(h(0.7, xs, [], [], [])[0]), np.array(f(0.7, xs, [], [], [])[0]), rtol=1e-15
+    )

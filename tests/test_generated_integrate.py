@@ -41,9 +41,7 @@ def exact_linear(tg, x0):
     return np.array([expm(A_LIN * tt) @ x0 for tt in tg])
 
 
-@pytest.mark.parametrize(
-    ("method", "tol"), [("cvodes", 1e-7), ("fixed", 2e-5)]
-)
+@pytest.mark.parametrize(("method", "tol"), [("cvodes", 1e-7), ("fixed", 2e-5)])
 def test_linear_ode_matches_matrix_exponential(linear, method, tol):
     tg = output_grid(2.0, 0.01)
     x0 = np.array([1.0, 0.0, 1.0])
@@ -92,7 +90,9 @@ def test_dae_with_mass_matrix_matches_matrix_exponential(cg):
     t, x, z = ca.SX.sym("t"), ca.SX.sym("x", 4), ca.SX.sym("z", 2)
     p, q = x[:2], x[2:]
     alg = ca.mtimes(ca.DM(M_DAE), z) + ca.mtimes(ca.DM(C_DAE), q) + ca.mtimes(ca.DM(K_DAE), p)
-    f = ca.Function("mdae", [t, x, z, E, E], [ca.vertcat(q, z), alg, E, E], ca.dyn_in(), ca.dyn_out())
+    f = ca.Function(
+        "mdae", [t, x, z, E, E], [ca.vertcat(q, z), alg, E, E], ca.dyn_in(), ca.dyn_out()
+    )
     dae = compiled(f, cg)
     Minv = np.linalg.inv(M_DAE)
     A = np.block([[np.zeros((2, 2)), np.eye(2)], [-Minv @ K_DAE, -Minv @ C_DAE]])
@@ -156,7 +156,9 @@ def test_cvodes_idas_fixed_agree_on_tanh_switching(cg):
         solve_ivp(rhs, (0, 0.75), x0, method="Radau", rtol=1e-11, atol=1e-13, t_eval=tg[tg <= 0.75]).y.T,
     ])  # fmt: skip
     y75 = ref[-1]
-    ref2 = solve_ivp(rhs, (0.75, 3.0), y75, method="Radau", rtol=1e-11, atol=1e-13, t_eval=tg[tg > 0.75]).y.T
+    ref2 = solve_ivp(
+        rhs, (0.75, 3.0), y75, method="Radau", rtol=1e-11, atol=1e-13, t_eval=tg[tg > 0.75]
+    ).y.T
     ref = np.vstack([ref, ref2])
     assert np.abs(res["cvodes"] - ref).max() < 1e-6
     assert np.abs(res["idas"] - ref).max() < 1e-6
@@ -170,9 +172,13 @@ def test_run_restarts_at_breakpoints(cg):
     t, x = ca.SX.sym("t"), ca.SX.sym("x", 1)
     f = compiled(ode("ramp", t, x, ca.if_else(t >= 0.5, 1.0, 0.0)), cg)
     tg = output_grid(1.0, 0.1)
-    tr = integrate(f, np.zeros(1), tg, IntegratorSettings(rtol=1e-10, atol=1e-12), breakpoints=[0.5])
+    tr = integrate(
+        f, np.zeros(1), tg, IntegratorSettings(rtol=1e-10, atol=1e-12), breakpoints=[0.5]
+    )
     np.testing.assert_allclose(tr.x[:, 0], np.maximum(0.0, tg - 0.5), atol=1e-12)
-    tr2 = integrate(f, np.zeros(1), tg, IntegratorSettings(method="fixed", fixed_step=0.01), breakpoints=[0.5])
+    tr2 = integrate(
+        f, np.zeros(1), tg, IntegratorSettings(method="fixed", fixed_step=0.01), breakpoints=[0.5]
+    )
     np.testing.assert_allclose(tr2.x[:, 0], np.maximum(0.0, tg - 0.5), atol=1e-12)
 
 
@@ -183,7 +189,10 @@ def test_plan_splits_at_breakpoints_and_chunks():
     # every output time once, in order, plus the breakpoint 0.6 as a non-output target
     assert [c[1] for c in targets if c[1] >= 0] == list(range(1, len(tg)))
     assert [c[0] for c in targets if c[1] < 0] == [0.6]
-    assert all(b > a for a, b in zip([0.0] + [c[0] for c in targets], [c[0] for c in targets], strict=False))
+    assert all(
+        b > a
+        for a, b in zip([0.0] + [c[0] for c in targets], [c[0] for c in targets], strict=False)
+    )
     # no chunk crosses a breakpoint, none is longer than the chunk length
     start = 0.0
     for ch in chunks:
@@ -222,12 +231,20 @@ def test_nan_is_a_failure(cg):
     t, x = ca.SX.sym("t"), ca.SX.sym("x", 1)
     f = compiled(ode("nanrhs", t, x, ca.if_else(t > 0.5, ca.sqrt(-1 - x**2), -x)), cg)
     for method in ("cvodes", "fixed"):
-        tr = integrate(f, np.ones(1), output_grid(1.0, 0.1), IntegratorSettings(method=method, max_steps=500))
+        tr = integrate(
+            f, np.ones(1), output_grid(1.0, 0.1), IntegratorSettings(method=method, max_steps=500)
+        )
         assert not tr.complete and tr.t_reached == pytest.approx(0.5)
         np.testing.assert_allclose(tr.x[:, 0], np.exp(-tr.t), rtol=1e-4)
 
 
 def test_progress_is_reported(linear):
     seen = []
-    integrate(linear, np.ones(3), output_grid(3.0, 0.5), IntegratorSettings(chunk=1.0), progress=seen.append)
+    integrate(
+        linear,
+        np.ones(3),
+        output_grid(3.0, 0.5),
+        IntegratorSettings(chunk=1.0),
+        progress=seen.append,
+    )
     assert seen == pytest.approx([1.0, 2.0, 3.0])

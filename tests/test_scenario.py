@@ -116,6 +116,12 @@ def test_csv_scenario_matches_the_expression():
     assert tr[0, 0] == 0.0 and tr[-1, 0] >= s.integration.horizon
     np.testing.assert_allclose(tr[:, 1], 2 * np.cos(tr[:, 0]), atol=1e-8)
     assert s.N == 5 and s.name == "paper-csv"
+    # between rows u0 is linear: within h²/8 · max|ü0| = 0.02²/8 · 2 of the expression
+    ts = np.linspace(0, 20, 777)
+    expr = load_scenario(PAPER).leader
+    np.testing.assert_allclose(s.leader.u0_numpy(ts), expr.u0_numpy(ts), atol=1.0001e-4)
+    assert s.leader.u0_numpy(0.01).shape == (1,)
+    assert expr.u0_numpy(0.5) == pytest.approx([2 * np.cos(0.5)])
 
 
 def test_sup_bounds_are_not_undersampled(tmp_path):
@@ -340,7 +346,7 @@ def test_missing_csv_trace(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("key", "value", "where", "token"),
     [
-        ("f", "[\"__import__('os')\", \"0\"]", "followers[1].f[0]", "__import__"),
+        ("f", '["__import__(\'os\')", "0"]', "followers[1].f[0]", "__import__"),
         ("f", '["0", "t.real"]', "followers[1].f[1]", ".real"),
         ("u0", '["(lambda x: x)(t)"]', "leader.u0[0]", "lambda"),
         ("g", '"0.9 + 0*foo(t)"', "followers[1].g", "foo"),
@@ -441,3 +447,43 @@ def test_summary_lists_what_the_issue_asks(capsys):
     ):
         assert needle in out, needle
     assert math.isfinite(float(re.search(r"horizon = ([0-9.]+) s", out).group(1)))
+
+
+def test_summary_names_the_follower_whose_model_fails_property_1(tmp_path, capsys):
+    import sympy as sp
+
+    from symbolic.models import REGISTRY, ModelSpec, register
+
+    def lag(prm):  # M = k - 1: positive definite only for k > 1
+        x, v = sp.symbols("x v", real=True)
+        return sp.Rational(1, 2) * (sp.nsimplify(prm["k"]) - 1) * v**2, sp.Integer(0), [x], [v]
+
+    register(ModelSpec(name="_test_spring", n=1, defaults={"k": 2.0}, lagrangian=lag))
+    try:
+        text = """
+[leader]
+A0 = [[0]]
+B0 = [[1]]
+C0 = [[1]]
+u0 = ["0"]
+alpha = 1
+[graph]
+adjacency = [[0, 0], [1, 0]]
+pinning = [1, 0]
+[[followers]]
+model = "_test_spring"
+p0 = [0]
+b0 = [1]
+[[followers]]
+model = "_test_spring"
+params = {k = 0.5}
+p0 = [0]
+b0 = [-1]
+"""
+        path = write(tmp_path, text)
+        load_scenario(path)  # the file itself is well formed
+        assert run_cli(main, ["summary", str(path)]) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and f"{path}: followers[2].params: Property 1 fails" in err[0]
+    finally:
+        REGISTRY.pop("_test_spring", None)

@@ -76,9 +76,37 @@ def _get(obj: Any, path: tuple) -> Any:
 
 WEIRD = st.one_of(
     st.sampled_from(
-        [math.nan, math.inf, -math.inf, 1e308, -1e308, 1e-308, 0, 0.0, -1, -1.0, 10**30,
-         2**63 - 1, True, False, "", "synthesize", "t", "nan", "__import__('os')",
-         "1" * 400, [], [[]], [[[1.0]]], {}, {"x": 1}, [1.0, "a"], "9**9**9", "exp(exp(t))"]
+        [
+            math.nan,
+            math.inf,
+            -math.inf,
+            1e308,
+            -1e308,
+            1e-308,
+            0,
+            0.0,
+            -1,
+            -1.0,
+            10**30,
+            2**63 - 1,
+            10**400,
+            True,
+            False,
+            "",
+            "synthesize",
+            "t",
+            "nan",
+            "__import__('os')",
+            "1" * 400,
+            [],
+            [[]],
+            [[[1.0]]],
+            {},
+            {"x": 1},
+            [1.0, "a"],
+            "9**9**9",
+            "exp(exp(t))",
+        ]
     ),  # fmt: skip
     st.floats(allow_nan=True, allow_infinity=True),
     st.integers(min_value=-(2**63), max_value=2**63 - 1),
@@ -133,7 +161,8 @@ def broken_text(draw) -> str:
         elif op == "truncate":
             text = text[:i]
         else:
-            text = text[:i] + draw(st.sampled_from(["nan", "inf", "-", "1e999", "[["])) + text[i:]
+            junk = ["nan", "inf", "-", "1e999", "[[", "9" * 5000, "[" * 3000 + "]" * 3000]
+            text = text[:i] + draw(st.sampled_from(junk)) + text[i:]
     return text
 
 

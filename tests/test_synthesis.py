@@ -21,7 +21,7 @@ from synthesis.assumptions import (
     uio_matrices,
 )
 from synthesis.certificate import k1_bound
-from synthesis.lmi import min_lambda_bar1_for_Q
+from synthesis.lmi import min_lambda_bar1_for_Q, synth_T
 
 ROOT = Path(__file__).resolve().parents[1]
 A0 = np.array([[0.0, 1.0], [0.0, 0.0]])
@@ -276,3 +276,28 @@ def test_certify_catches_edited_theta(g_paper):
     failed = {c["name"] for c in cert["checks"] if not c["passed"]}
     assert "lmi16" in failed and cert["failures"]
     assert certify(g_paper)["passed"]
+
+
+# --------------------------------------------------------------------------- objective, solvers
+def test_lmi15_answer_is_the_analytic_centre():
+    # stationarity of log det T + log det S, S = λ̄1B0B0ᵀ − (A0T + TA0ᵀ + δ1T):
+    # T⁻¹ = A0ᵀS⁻¹ + S⁻¹A0 + δ1S⁻¹ (the adjoint of the Lyapunov-type map), checked in numpy
+    lb1, d1 = 1.0, 0.5
+    T = synth_T(A0, B0, lb1, d1).T
+    S = lb1 * B0 @ B0.T - (A0 @ T + T @ A0.T + d1 * T)
+    Si = np.linalg.inv(S)
+    np.testing.assert_allclose(np.linalg.inv(T), A0.T @ Si + Si @ A0 + d1 * Si, atol=1e-9)
+    np.testing.assert_allclose(T, [[9.0, -3.0], [-3.0, 1.5]], atol=1e-9)
+
+
+def test_scs_fallback_gives_the_same_certified_answer(paper_synth, g_synth, monkeypatch):
+    import synthesis.lmi as lmi
+
+    monkeypatch.setattr(lmi, "SOLVERS", ("NOT-A-SOLVER", "SCS"))  # Clarabel "fails"
+    g = synthesize(paper_synth)
+    assert g.info["solver"] == "SCS" and g.info["solver_tol"] == lmi.SOLVER_TOL["SCS"]
+    assert g.certificate["passed"]
+    # LMI (15): the analytic centre is unique, so both solvers land on the same T
+    np.testing.assert_allclose(g.T, g_synth.T, rtol=1e-8)
+    # LMI (16): the min-norm point is unique but only solved to the solver's accuracy
+    np.testing.assert_allclose(g.Theta, g_synth.Theta, atol=1e-3)

@@ -149,7 +149,9 @@ def test_table_on_synthetic_trajectory(paper):
     assert len(et_rows) == paper.N * paper.n
     for i in range(paper.N):
         _, _, _, _, chi_bar, e_bar, _ = _hand(paper, i, 0.5)
-        row = tb[(tb["claim"] == "T2 |chi_si| <= chi_bar_si (31), paper") & (tb["agent"] == str(i + 1))]
+        row = tb[
+            (tb["claim"] == "T2 |chi_si| <= chi_bar_si (31), paper") & (tb["agent"] == str(i + 1))
+        ]
         assert row["bound"].item() == pytest.approx(chi_bar, rel=1e-10)
         sub = et_rows[et_rows["agent"] == str(i + 1)]
         np.testing.assert_allclose(sub["bound"], e_bar, rtol=1e-10)

@@ -119,6 +119,7 @@ def chi_bar_from(chi_v: float, Omega: float, lam_min_M: float, delta: float) -> 
     -------
     float
     """
+    # eq. (39): ½λ_min‖χ‖² ≤ V2 ≤ χv/(Ω(1−δ)) (Lemma 1); eq. (40): solved for ‖χ‖
     return math.sqrt(2.0 * chi_v / (lam_min_M * Omega * (1.0 - delta)))  # eq. (40)
 
 
@@ -218,7 +219,7 @@ def theorem2_constants(
 
     Omega = min(2.0 * float(K.min()) / lmax, k2)  # eq. (38): Ωv2i
     chi_v = 0.5 * k2 * float(d @ d)  # eq. (38): χv2i = ½ dᵀ k2 d
-    chi_bar = chi_bar_from(chi_v, Omega, lmin, delta)  # eq. (40)
+    chi_bar = chi_bar_from(chi_v, Omega, lmin, delta)  # eq. (39), eq. (40): χ̄_si of (31)
     e_bar, edot_bar = _lemma2_pair(chi_bar, lam)
 
     law = scenario.options.ghat_law
@@ -260,7 +261,7 @@ def theorem2_constants(
 
 def _lemma2_pair(chi_bar: float, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per component: (|e| ≤ χ̄/λ, |ė| ≤ 2χ̄), Lemma 2 with n = 2 and θ = λ_ir (eq. (41))."""
-    b = np.array([lemma2_bounds(chi_bar, float(lr), 2) for lr in lam])
+    b = np.array([lemma2_bounds(chi_bar, float(lr), 2) for lr in lam])  # eq. (41), eq. (31)
     return b[:, 0], b[:, 1]
 
 

@@ -374,8 +374,8 @@ class Reference:
                 r = 0 * r
             else:
                 dl = 0.01 * (hi - lo)
-                whi = np.clip((gh - (hi - dl)) / dl, 0, 1)
-                wlo = np.clip((lo + dl - gh) / dl, 0, 1)
+                whi = np.clip((gh - hi) / dl, 0, 1)  # band of width dl outside [lo, hi]
+                wlo = np.clip((lo - gh) / dl, 0, 1)
                 r = r - whi * np.maximum(r, 0) - wlo * np.minimum(r, 0)
         g, f = self.faults(t)
         force = g[:, None] * u + f - Mv(C, q) - G  # eq. (2)

@@ -1,0 +1,654 @@
+"""``make bench``: our generated C against what users would use instead, from 5 to 2,000 agents.
+
+::
+
+    python -m generated.bench                 # N = 5, 50, 500, 2000; all methods
+    python -m generated.bench --quick         # N = 5, one run each (smoke test)
+    python -m generated.bench --sizes 5,50 --methods c-cvodes-direct,scipy-bdf --runs 3
+
+Every (N, method) cell runs in its own subprocess (its own peak RSS, a hard wall-clock
+limit); the parent prints the table and writes ``out/bench/bench.csv`` and
+``out/bench/scaling.png``. Methods (same scenario, rtol 1e-6, atol 1e-8, tanh sign for
+the variable-step methods, the same output grid):
+
+``scipy-bdf``, ``scipy-rk45``
+    :func:`scipy.integrate.BDF`/``RK45`` on the plain numpy right-hand side of
+    :class:`verify.reference.Reference` (what a user writes by hand). BDF gets the
+    Jacobian's sparsity pattern (``jac_sparsity``): without it scipy differences a
+    dense nx×nx Jacobian (6 GB at N = 2,000).
+``casadi-vm``
+    The symbolic closed loop (``ClosedLoop.ode_dyn``) evaluated by CasADi's virtual
+    machine, no code generation, CVODES with CasADi's own Jacobian.
+``c-cvodes-direct``, ``c-cvodes-gmres``
+    Our generated C + CVODES with the two plans of :mod:`generated.largescale`
+    (sparse direct Jacobian / matrix-free GMRES). "Ours" — the denominator of the
+    ratio column — is the plan :func:`generated.largescale.choose_plan` picks for N.
+``c-idas``
+    Our generated C (DAE form) + IDAS, same plan as ours.
+``fixed``
+    The fixed-step ROS2 method of :mod:`generated.integrate` with the exact sign
+    function (its purpose), step ``integration.fixed_step``.
+
+Scenarios: N = 5 is ``scenarios/paper.toml``; larger N are built by
+:func:`bench_scenario` from it: the paper's follower model and faults (cycled), offsets
+on a circle of radius 4, p_i(0) = b_i0 + noise, and a random acyclic sparse graph in
+which every follower hears its spanning-tree parent and up to two more earlier
+followers (fixed seed), with one follower in a hundred pinned to the leader.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from symbolic.errors import ToolkitError, run_cli
+
+SIZES = (5, 50, 500, 2000)
+METHODS = (
+    "scipy-bdf",
+    "scipy-rk45",
+    "casadi-vm",
+    "c-cvodes-direct",
+    "c-cvodes-gmres",
+    "c-idas",
+    "fixed",
+)
+BENCH_SEED = 20260121
+PAPER = Path(__file__).resolve().parent.parent / "scenarios" / "paper.toml"
+OUTPUT_STEP = 0.1  # output grid of every method (states stored there)
+
+
+class BenchError(ToolkitError):
+    """Bad benchmark arguments."""
+
+
+# ----------------------------------------------------------------------------- scenarios
+def random_graph(N: int, seed: int = BENCH_SEED) -> tuple[np.ndarray, np.ndarray]:
+    """A random sparse acyclic graph with a spanning tree rooted at the leader.
+
+    Follower 0 is pinned; follower i ≥ 1 hears a random parent j < i (the spanning
+    tree) and up to two more random earlier followers (about 3 neighbours each);
+    ``max(1, N // 100)`` followers are pinned (follower 0 among them). Acyclic, so L + B is triangular with
+    eigenvalues ≥ 1 (the observer network is stable for any N).
+
+    Returns
+    -------
+    (adjacency, pinning)
+        ``adjacency[i, j] = 1`` when follower i hears follower j.
+    """
+    if N < 1:
+        raise BenchError(f"N: {N} must be >= 1")
+    rng = np.random.default_rng(seed)
+    A = np.zeros((N, N))
+    pin = np.zeros(N)
+    pin[0] = 1.0
+    for i in range(1, N):
+        A[i, int(rng.integers(0, i))] = 1.0
+        extra = rng.choice(i, size=min(2, i), replace=False)
+        A[i, extra] = 1.0
+    k = max(1, N // 100)
+    if k > 1:  # more pinned followers besides follower 0
+        pin[1 + rng.choice(N - 1, k - 1, replace=False)] = 1.0
+    return A, pin
+
+
+def bench_scenario(N: int, seed: int = BENCH_SEED, horizon: float | None = None):
+    """The benchmark scenario with N followers (N = 5: the paper's own scenario).
+
+    Parameters
+    ----------
+    N : int
+    seed : int
+        Graph and initial-position seed.
+    horizon : float, optional
+        Override of ``integration.horizon`` (default: the paper's 20 s).
+
+    Returns
+    -------
+    Scenario
+    """
+    from symbolic.scenario import Graph, load_scenario
+
+    base = load_scenario(PAPER)
+    if N == base.N:
+        sc = base
+    else:
+        A, pin = random_graph(N, seed)
+        rng = np.random.default_rng(seed + 1)
+        followers = []
+        for i in range(N):
+            src = base.followers[i % base.N]
+            ang = 2.0 * math.pi * i / N
+            b0 = np.array([4.0 * math.cos(ang), 4.0 * math.sin(ang)])
+            p0 = b0 + rng.normal(scale=0.5, size=2)
+            followers.append(dataclasses.replace(src, b0=_frozen(b0), p0=_frozen(p0)))
+
+        def rep(a: Any) -> np.ndarray:  # first agent's value for every agent
+            return _frozen(np.repeat(np.asarray(a)[:1], N, axis=0))
+
+        o, c, ini = base.observer, base.controller, base.initial
+        sc = dataclasses.replace(
+            base,
+            name=f"bench-N{N}",
+            path=f"{PAPER} (generated.bench: N = {N}, seed {seed})",
+            sha256=f"bench-N{N}-seed{seed}-{base.sha256}",
+            description=f"benchmark: {N} followers on a random acyclic graph (seed {seed})",
+            graph=Graph(adjacency=_frozen(A), pinning=_frozen(pin)),
+            followers=tuple(followers),
+            observer=dataclasses.replace(
+                o, alpha1=rep(o.alpha1), alpha1_bar=rep(o.alpha1_bar), phi0=rep(o.phi0)
+            ),
+            controller=dataclasses.replace(
+                c,
+                **{
+                    k: rep(getattr(c, k))
+                    for k in ("Lambda", "k1", "k2", "gamma", "sigma", "ghat_ref")
+                },  # fmt: skip
+            ),
+            initial=dataclasses.replace(
+                ini,
+                eta=rep(ini.eta),
+                mu=rep(ini.mu),
+                theta_hat=rep(ini.theta_hat),
+                ghat=rep(ini.ghat),
+            ),  # fmt: skip
+        )
+    if horizon is not None:
+        sc = dataclasses.replace(
+            sc, integration=dataclasses.replace(sc.integration, horizon=float(horizon))
+        )
+    return sc
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+def bench_gains(sc):
+    """Gains for the benchmark: :func:`synthesis.synthesize` (uncertified warnings allowed).
+
+    Returns
+    -------
+    (Gains, str)
+        The gains and where they came from.
+    """
+    from synthesis import synthesize
+
+    g = synthesize(sc)
+    cert = g.certificate or {}
+    tag = "synthesize" + ("" if cert.get("passed", True) else " (certificate warnings)")
+    return g, tag
+
+
+# ----------------------------------------------------------------------------- worker
+def _rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _write(path: Path, rec: dict[str, Any]) -> None:
+    from symbolic.artifacts import atomic_write_text
+
+    atomic_write_text(path, json.dumps(rec, default=_jsonable))
+
+
+def _jsonable(o: Any) -> Any:
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def _time_casadi_rhs(f, x0: np.ndarray, nz: int = 0) -> float:
+    """Seconds per evaluation of a CasADi integrator-form Function, inside the VM.
+
+    ``f.map(K)`` evaluates K copies in one call, so Python's call overhead is not counted.
+    """
+    import casadi as ca
+
+    nx = x0.size
+    K = int(max(4, min(200, 2_000_000 // max(nx, 1))))
+    fm = f.map(K, "serial")
+    X = np.tile(x0.reshape(-1, 1), (1, K))
+    args = [np.zeros((1, K)), X, np.zeros((nz, K)), ca.DM(0, K), ca.DM(0, K)]
+    fm(*args)
+    reps, t0 = 0, time.perf_counter()
+    while reps < 3 or time.perf_counter() - t0 < 0.3:
+        fm(*args)
+        reps += 1
+    return (time.perf_counter() - t0) / (reps * K)
+
+
+def _time_py_rhs(rhs, x0: np.ndarray) -> float:
+    rhs(0.0, x0)
+    reps, t0 = 0, time.perf_counter()
+    while reps < 3 or time.perf_counter() - t0 < 0.3:
+        rhs(0.0, x0)
+        reps += 1
+    return (time.perf_counter() - t0) / reps
+
+
+def _scipy_run(rhs, x0, t_out, method: str, sparsity, deadline: float) -> dict[str, Any]:
+    """One scipy run, stepping by hand (counts steps; stops at the deadline)."""
+    from scipy.integrate import BDF, RK45
+
+    kw: dict[str, Any] = {"rtol": 1e-6, "atol": 1e-8}
+    if method == "bdf":
+        kw["jac_sparsity"] = sparsity
+    cls = BDF if method == "bdf" else RK45
+    t0 = time.perf_counter()
+    solver = cls(rhs, float(t_out[0]), x0, float(t_out[-1]), **kw)
+    steps, k, out = 0, 1, [x0]
+    status = "ok"
+    while solver.status == "running":
+        msg = solver.step()
+        steps += 1
+        if solver.status == "failed":
+            status = f"failed at t = {solver.t:.4g} s: {msg}"
+            break
+        if k < len(t_out) and solver.t >= t_out[k]:
+            dense = solver.dense_output()
+            while k < len(t_out) and t_out[k] <= solver.t:
+                out.append(dense(t_out[k]))
+                k += 1
+        if time.perf_counter() > deadline:
+            status = f"stopped at the time limit at t = {solver.t:.4g} s"
+            break
+    wall = time.perf_counter() - t0
+    return {
+        "wall": wall,
+        "status": status,
+        "t_reached": float(solver.t),
+        "steps": steps,
+        "rhs_evals": int(solver.nfev),
+        "jac_evals": int(getattr(solver, "njev", 0)),
+        "x_final": out[-1],
+    }
+
+
+def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, out: Path) -> int:
+    """Measure one (N, method) cell and write its record to ``out`` (JSON, rewritten as it goes)."""
+
+    from generated.integrate import output_grid
+    from generated.largescale import build_plan, choose_plan, integrate_plan
+    from symbolic.closed_loop import build_closed_loop
+
+    t_start = time.perf_counter()
+    deadline = t_start + time_limit
+    rec: dict[str, Any] = {"N": N, "method": method, "status": "started", "runs": 0}
+    sc = bench_scenario(N, horizon=horizon)
+    gains, gsrc = bench_gains(sc)
+    rec["gains"] = gsrc
+    t_out = output_grid(sc.integration.horizon, OUTPUT_STEP)
+    ours = choose_plan(N)
+    rec["base_rss_mb"] = _rss_mb()
+    _write(out, rec)
+
+    t0 = time.perf_counter()
+    cl = build_closed_loop(sc, gains)
+    rec["symbolic_s"] = time.perf_counter() - t0
+    x0 = np.asarray(cl.x0, dtype=float)
+    rec["nx"] = int(x0.size)
+    bps = sorted(set(sc.breakpoints()) | set(cl.breakpoints))
+    _write(out, rec)
+
+    run_once = None
+    if method.startswith("scipy"):
+        from verify.reference import Reference
+
+        t0 = time.perf_counter()
+        ref = Reference(sc, gains)
+        rec["symbolic_s"] = time.perf_counter() - t0  # the hand-written RHS needs no build
+        sparsity = None
+        if method == "scipy-bdf":
+            import scipy.sparse as sps
+
+            spc = cl.ode.sparsity_jac(1, 0)
+            r, c = spc.get_triplet()
+            sparsity = sps.csc_matrix((np.ones(len(r)), (r, c)), shape=(x0.size, x0.size))
+        rec["plan"] = "numpy RHS" + (", jac_sparsity" if sparsity is not None else "")
+        rec["rhs_us"] = 1e6 * _time_py_rhs(ref.rhs, x0)
+        kind = method.split("-")[1]
+
+        def run_once():
+            return _scipy_run(ref.rhs, x0, t_out, kind, sparsity, deadline)
+
+    elif method == "fixed":
+        from generated.api import build_from_closed_loop
+        from generated.integrate import IntegratorSettings, integrate
+
+        scx = dataclasses.replace(
+            sc,
+            options=dataclasses.replace(sc.options, sign="exact"),
+            integration=dataclasses.replace(sc.integration, method="fixed"),
+        )
+        t0 = time.perf_counter()
+        clx = build_closed_loop(scx, gains)
+        rec["symbolic_s"] = time.perf_counter() - t0
+        built = build_from_closed_loop(clx, "fixed")
+        rec.update(codegen_s=built.timings["codegen"], compile_s=built.timings["compile"],
+                   c_bytes=built.library.source_bytes, plan=f"ROS2 h = {sc.integration.fixed_step:g} s, exact sign")  # fmt: skip
+        rec["rhs_us"] = 1e6 * _time_casadi_rhs(built.dyn, x0)
+        s = IntegratorSettings(method="fixed", fixed_step=sc.integration.fixed_step, chunk=1e9)
+
+        def run_once():
+            tr = integrate(built.dyn, x0, t_out, s, breakpoints=bps)
+            st = tr.stats
+            return {
+                "wall": st["wall_seconds"], "status": "ok" if tr.complete else tr.message,
+                "t_reached": tr.t_reached, "steps": st["steps"], "rhs_evals": st["rhs_evals"],
+                "jac_evals": st["jac_evals"], "x_final": tr.x[-1],
+            }  # fmt: skip
+
+    else:
+        idas = method == "c-idas"
+        if method == "casadi-vm":
+            plan = choose_plan(N, "direct")
+            dyn = cl.ode_dyn
+            rec.update(codegen_s=0.0, compile_s=0.0, c_bytes=0, plan="CasADi VM, CasADi AD Jacobian, csparse")  # fmt: skip
+        else:
+            plan = ours if method == "c-idas" else choose_plan(N, method.rsplit("-", 1)[1])
+            b = build_plan(cl.dae_dyn if idas else cl.ode_dyn, plan, "cl_dae" if idas else "cl_ode")
+            dyn = b.dyn
+            rec.update(codegen_s=b.timings["codegen"], compile_s=b.timings["compile"],
+                       c_bytes=b.library.source_bytes, cache_hit=b.library.cache_hit,
+                       plan=f"{plan.strategy} ({plan.reason})")  # fmt: skip
+        nz = int(dyn.size1_in(2))
+        rec["rhs_us"] = 1e6 * _time_casadi_rhs(dyn, x0, nz)
+        z0 = np.asarray(cl.z0, dtype=float) if idas else None
+
+        def run_once():
+            r = integrate_plan(dyn, x0, t_out, plan, method="idas" if idas else "cvodes",
+                               rtol=1e-6, atol=1e-8, breakpoints=bps, z0=z0)  # fmt: skip
+            st = r.stats
+            return {
+                "wall": st["wall_seconds"], "status": "ok" if r.complete else r.message,
+                "t_reached": float(r.t[-1]), "steps": st["steps"], "rhs_evals": st["rhs_evals"],
+                "jac_evals": st["jac_evals"], "jtimes_evals": st["jtimes_evals"],
+                "x_final": r.x[-1],
+            }  # fmt: skip
+
+    _write(out, rec)
+    walls: list[float] = []
+    for k in range(runs):
+        res = run_once()
+        walls.append(res.pop("wall"))
+        xf = res.pop("x_final")
+        rec.update(res)
+        rec["runs"] = len(walls)
+        rec["walls"] = walls
+        if k == 0:
+            np.save(out.with_suffix(".npy"), np.asarray(xf, dtype=float))
+        _write(out, rec)
+        if res["status"] != "ok":
+            break
+        left = deadline - time.perf_counter()
+        if k + 1 < runs and walls[-1] > left:  # the next run would not fit
+            rec["runs_note"] = f"{len(walls)} of {runs} runs (time limit {time_limit:g} s)"
+            break
+    rec["peak_rss_mb"] = _rss_mb()
+    rec["done"] = True
+    _write(out, rec)
+    return 0
+
+
+# ----------------------------------------------------------------------------- parent
+def run_cell(
+    N: int, method: str, runs: int, time_limit: float, horizon: float, folder: Path
+) -> dict[str, Any]:
+    """Run one cell in a subprocess with a hard wall-clock limit; return its record."""
+    rec_path = folder / "cells" / f"N{N}-{method}.json"
+    rec_path.parent.mkdir(parents=True, exist_ok=True)
+    for p in (rec_path, rec_path.with_suffix(".npy")):
+        p.unlink(missing_ok=True)
+    cmd = [
+        sys.executable, "-m", "generated.bench", "--worker", str(N), method,
+        "--runs", str(runs), "--time-limit", str(time_limit), "--horizon", str(horizon),
+        "--record", str(rec_path),
+    ]  # fmt: skip
+    t0 = time.perf_counter()
+    hard = time_limit * 1.5 + 120.0  # builds and interpreter start are outside the budget
+    status = None
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=hard, check=False)
+        if proc.returncode != 0:
+            lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+            status = "error: " + (lines[-1] if lines else f"exit {proc.returncode}")
+    except subprocess.TimeoutExpired:
+        status = f"stopped at the time limit ({hard:.0f} s)"
+    rec: dict[str, Any] = {"N": N, "method": method}
+    if rec_path.is_file():
+        try:
+            rec = json.loads(rec_path.read_text())
+        except json.JSONDecodeError:
+            pass
+    if status is not None:
+        rec["status"] = status if not rec.get("runs") else f"{rec.get('status')}; {status}"
+    elif not rec.get("done"):
+        rec["status"] = "error: worker ended without a result"
+    rec["cell_wall_s"] = time.perf_counter() - t0
+    walls = rec.get("walls") or []
+    if walls:
+        rec["int_median_s"] = statistics.median(walls)
+        rec["int_min_s"] = min(walls)
+        rec["int_max_s"] = max(walls)
+        if rec.get("rhs_evals"):
+            rec["int_per_eval_us"] = 1e6 * walls[0] / rec["rhs_evals"]
+    npy = rec_path.with_suffix(".npy")
+    if npy.is_file():
+        rec["_x_final"] = np.load(npy)
+    return rec
+
+
+COLUMNS = [
+    "N", "nx", "method", "plan", "status", "runs", "int_median_s", "int_min_s", "int_max_s",
+    "ratio_to_ours", "symbolic_s", "codegen_s", "compile_s", "c_bytes", "steps", "rhs_evals",
+    "jac_evals", "jtimes_evals", "rhs_us", "peak_rss_mb", "base_rss_mb", "t_reached",
+    "dx_final_vs_ours", "gains",
+]  # fmt: skip
+
+
+def finish(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Add the ratio to ours and the final-state difference to ours, per N."""
+    from generated.largescale import choose_plan
+
+    for N in sorted({r["N"] for r in records}):
+        ours_name = f"c-cvodes-{choose_plan(N).strategy}"
+        ours = next((r for r in records if r["N"] == N and r["method"] == ours_name), None)
+        for r in records:
+            if r["N"] != N:
+                continue
+            r["ours"] = r["method"] == ours_name
+            ok = r.get("status") == "ok"
+            if ours and ours.get("status") == "ok" and ours.get("int_median_s") and ok:
+                r["ratio_to_ours"] = r["int_median_s"] / ours["int_median_s"]
+            xa, xb = r.get("_x_final"), (ours or {}).get("_x_final")
+            complete = ok and (ours or {}).get("status") == "ok"
+            if complete and xa is not None and xb is not None and xa.shape == xb.shape:
+                r["dx_final_vs_ours"] = float(np.max(np.abs(xa - xb)))
+    return records
+
+
+def write_csv(records: list[dict[str, Any]], path: Path) -> Path:
+    """``bench.csv`` (atomically)."""
+    import csv
+    import io
+
+    from symbolic.artifacts import atomic_write_text
+
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(COLUMNS)
+    for r in records:
+        w.writerow([_fmt_csv(r.get(c)) for c in COLUMNS])
+    return atomic_write_text(path, buf.getvalue())
+
+
+def _fmt_csv(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v)
+
+
+def table(records: list[dict[str, Any]]) -> str:
+    """The printed table."""
+    head = ("N", "method", "int med [s]", "min–max [s]", "×ours", "steps", "RHS ev", "µs/RHS",
+            "sym [s]", "cg+cc [s]", "C [kB]", "RSS [MB]", "status")  # fmt: skip
+    rows = [head]
+    for r in records:
+        med = r.get("int_median_s")
+        mm = f"{r['int_min_s']:.3g}–{r['int_max_s']:.3g}" if med is not None else ""
+        cgcc = (r.get("codegen_s") or 0.0) + (r.get("compile_s") or 0.0)
+        star = "*" if r.get("ours") else ""
+        rows.append((
+            str(r["N"]), r["method"] + star, _g(med), mm, _g(r.get("ratio_to_ours")),
+            _g(r.get("steps")), _g(r.get("rhs_evals")), _g(r.get("rhs_us")),
+            _g(r.get("symbolic_s")), _g(cgcc) if "codegen_s" in r else "",
+            _g((r.get("c_bytes") or 0) / 1000) if r.get("c_bytes") else "",
+            _g(r.get("peak_rss_mb")),
+            _status_short(r),
+        ))  # fmt: skip
+    widths = [max(len(row[k]) for row in rows) for k in range(len(head))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines) + "\n(* = ours: the plan generated.largescale.choose_plan picks for N)"
+
+
+def _status_short(r: dict[str, Any]) -> str:
+    s = str(r.get("status", ""))
+    note = r.get("runs_note")
+    return f"{s} [{note}]" if note else s
+
+
+def _g(v: Any) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return ""
+    if isinstance(v, int):
+        return str(v)
+    return f"{v:.3g}"
+
+
+def plot(records: list[dict[str, Any]], path: Path) -> Path | None:
+    """``scaling.png``: integration time against N (log-log), one line per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import io
+
+    import matplotlib.pyplot as plt
+
+    from symbolic.artifacts import atomic_write_bytes
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for meth in METHODS:
+        pts = [(r["N"], r["int_median_s"]) for r in records
+               if r["method"] == meth and r.get("status") == "ok" and r.get("int_median_s")]  # fmt: skip
+        stopped = [r["N"] for r in records if r["method"] == meth and r.get("status") != "ok"]
+        if not pts and not stopped:
+            continue
+        line = None
+        if pts:
+            xs, ys = zip(*sorted(pts), strict=True)
+            (line,) = ax.loglog(xs, ys, "o-", label=meth)
+        for N in stopped:
+            r = next(q for q in records if q["N"] == N and q["method"] == meth)
+            y = r.get("cell_wall_s") or 1.0
+            ax.loglog([N], [y], "x", color=line.get_color() if line else "k")
+    Ns = sorted({r["N"] for r in records})
+    if len(Ns) > 1:
+        ax.loglog(Ns, [0.05 * n / Ns[0] for n in Ns], "k:", lw=0.8, label="∝ N")
+    ax.set_xlabel("followers N")
+    ax.set_ylabel("integration wall time, 20 s horizon [s]")
+    ax.set_title("x: stopped at the time limit or failed (plotted at the cell's wall time)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    buf = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buf, format="png", dpi=120)
+    plt.close(fig)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
+def main(argv: list[str]) -> int:
+    """Command line of ``python -m generated.bench`` (see the module docstring)."""
+    ap = argparse.ArgumentParser(
+        prog="python -m generated.bench", description=__doc__.split("\n")[0]
+    )
+    ap.add_argument("--quick", action="store_true", help="N = 5 only, one run per method")
+    ap.add_argument("--sizes", default=None, help="comma-separated N (default 5,50,500,2000)")
+    ap.add_argument("--methods", default=None, help=f"comma-separated, from {','.join(METHODS)}")
+    ap.add_argument("--runs", type=int, default=None, help="runs per cell (default 5; quick 1)")
+    ap.add_argument("--time-limit", type=float, default=None,
+                    help="seconds per cell (default 120; quick 60)")  # fmt: skip
+    ap.add_argument("--horizon", type=float, default=20.0, help="simulated seconds (default 20)")
+    ap.add_argument("--out", default=None, help="output folder (default out/bench)")
+    ap.add_argument("--worker", nargs=2, metavar=("N", "METHOD"), help=argparse.SUPPRESS)
+    ap.add_argument("--record", default=None, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    runs = a.runs if a.runs is not None else (1 if a.quick else 5)
+    limit = a.time_limit if a.time_limit is not None else (60.0 if a.quick else 120.0)
+    if runs < 1:
+        raise BenchError(f"--runs: {runs} must be >= 1")
+    if not (limit > 0 and a.horizon > 0):
+        raise BenchError("--time-limit and --horizon must be > 0")
+    if a.worker:
+        N, meth = int(a.worker[0]), a.worker[1]
+        return worker(N, meth, runs, limit, a.horizon, Path(a.record))
+    sizes = (5,) if a.quick and a.sizes is None else _ints(a.sizes, SIZES, "--sizes")
+    methods = tuple(a.methods.split(",")) if a.methods else METHODS
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        raise BenchError(
+            f"--methods: {', '.join(bad)} unknown (expected some of {', '.join(METHODS)})"
+        )
+    from symbolic.artifacts import OUT_ROOT
+
+    folder = Path(a.out) if a.out else OUT_ROOT / "bench"
+    folder.mkdir(parents=True, exist_ok=True)
+    print(f"bench: N = {', '.join(map(str, sizes))}; {len(methods)} methods; {runs} run(s); "
+          f"limit {limit:g} s per cell; horizon {a.horizon:g} s; {os.cpu_count()} CPUs", flush=True)  # fmt: skip
+    records = []
+    for N in sizes:
+        for meth in methods:
+            r = run_cell(N, meth, runs, limit, a.horizon, folder)
+            records.append(r)
+            print(f"  N={N:<5d} {meth:<16s} {_g(r.get('int_median_s')):>8s} s  {_status_short(r)}",
+                  flush=True)  # fmt: skip
+    records = finish(records)
+    csv_path = write_csv(records, folder / "bench.csv")
+    png = plot(records, folder / "scaling.png")
+    print(table(records))
+    print(f"wrote {csv_path} and {png}")
+    return 0
+
+
+def _ints(text: str | None, default: tuple[int, ...], what: str) -> tuple[int, ...]:
+    if text is None:
+        return default
+    try:
+        vals = tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise BenchError(f"{what}: {text!r} is not a comma-separated list of integers") from None
+    if not vals or min(vals) < 1:
+        raise BenchError(f"{what}: {text!r} needs integers >= 1")
+    return vals
+
+
+if __name__ == "__main__":
+    sys.exit(run_cli(main))

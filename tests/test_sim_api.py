@@ -1,0 +1,270 @@
+"""End-to-end simulation through the API and the CLI (generated/api.py, generated/__main__.py).
+
+A two-follower scenario over 0.5 s keeps the suite fast; the library is compiled
+with -O0 (3–4× faster to compile) into a temporary build root.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from generated import api
+from generated.__main__ import main as cli_main
+from generated.codegen import CodegenSettings
+from symbolic.errors import BuildError, IntegrationError, ScenarioError, run_cli
+
+SMALL = """
+name = "small"
+description = "two followers, short horizon (tests of generated/)"
+
+[leader]
+A0 = [[0.0, 1.0], [0.0, 0.0]]
+B0 = [[0.0], [1.0]]
+C0 = [[1.0, 1.0], [2.0, 2.0]]
+eta0 = [0.0, 0.0]
+u0 = ["2*cos(t)"]
+alpha = 2.0
+
+[graph]
+adjacency = [[0.0, 0.0], [1.0, 0.0]]
+pinning = [1.0, 1.0]
+
+[[followers]]
+model = "two_link"
+p0 = [1.0, 0.5]
+q0 = [0.0, 0.0]
+b0 = [1.0, 0.0]
+g = [[0.0, 1.0], [0.3, 0.8]]        # a fault at t = 0.3 s: a breakpoint
+f = ["sin(2*t)", "cos(t)"]
+
+[[followers]]
+model = "two_link"
+p0 = [0.5, 1.0]
+q0 = [0.0, 0.0]
+b0 = [0.0, 1.0]
+g = 0.9
+f = ["0.5*sin(t)", "0.5"]
+
+[observer]
+lambda1 = 1.9
+lambda2 = 2.0
+Q = [[35.4, 14.9]]
+Theta = "synthesize"
+alpha1 = 1.0
+alpha1_bar = 1.0
+phi0 = 1.0
+phi_min = 1e-3
+lambda_bar1 = 1.0
+delta1 = 0.5
+delta2 = 1.0
+delta1_hat = 0.25
+delta2_hat = 0.5
+
+[controller]
+Lambda = 10.0
+k1 = 5.0
+k2 = 1.0
+
+[options]
+sign = "tanh"
+sign_width = 0.05
+ghat_law = "projection"
+tau_threshold = 0.5
+
+[initial]
+eta = [0.0, 0.0]
+mu = [0.0, 0.0]
+
+[integration]
+method = "cvodes"
+rtol = 1e-8
+atol = 1e-10
+horizon = 0.5
+output_step = 0.01
+fixed_step = 1e-4
+max_steps = 20000
+"""
+
+
+@pytest.fixture(scope="module")
+def env(tmp_path_factory):
+    root = tmp_path_factory.mktemp("sim")
+    sc = root / "small.toml"
+    sc.write_text(SMALL)
+    cg = CodegenSettings(optimization="-O0", build_root=str(root / "build"))
+    return {"root": root, "scenario": sc, "out": root / "out", "cg": cg}
+
+
+@pytest.fixture(scope="module")
+def base(env):
+    r1 = api.run(env["scenario"], codegen=env["cg"], out_root=env["out"], progress=False)
+    text1 = r1.csv_path.read_bytes()
+    r2 = api.run(env["scenario"], codegen=env["cg"], out_root=env["out"], progress=False)
+    return r1, text1, r2
+
+
+def test_trajectory_columns_rows_and_meta(base, env):
+    r1, text1, _ = base
+    df = pd.read_csv(r1.csv_path)
+    sc = api.load(env["scenario"])
+    assert list(df.columns) == api.column_names(sc)
+    assert list(df.columns[:3]) == ["t", "eta0_1", "eta0_2"]
+    assert "p1_1" in df and "thetahat2_2" in df and "eeta2_2" in df and "V2_2" in df
+    assert df.columns[-1] == "V1"
+    assert len(df) == 51 and df.t.iloc[-1] == 0.5
+    assert np.isfinite(df.to_numpy()).all()
+    m = r1.meta  # the file now holds the second run's meta
+    assert json.loads(r1.meta_path.read_text())["library"]["key"] == m["library"]["key"]
+    assert m["complete"] is True and m["method"] == "cvodes"
+    assert m["scenario_sha256"] == sc.sha256
+    assert m["gains_sha256"] and Path(m["gains_path"]).is_file()
+    assert m["rtol"] == 1e-8 and m["atol"] == 1e-10
+    assert m["steps"] > 0 and m["rhs_evals"] >= m["steps"]
+    assert 0.3 in m["breakpoints"]
+    for k in ("symbolic_build", "codegen", "compile", "integration"):
+        assert m["wall_seconds"][k] >= 0
+    assert m["cache_hit"] is False and m["library"]["cflags"][-1] == "-O0"
+    # the frame returned equals the file written (repr round-trips exactly)
+    pd.testing.assert_frame_equal(df, r1.frame, check_exact=True)
+
+
+def test_trajectory_is_consistent_with_its_own_definitions(base):
+    """Columns derived by the closed loop match their definitions on the state columns."""
+    df = base[0].frame
+    sc_C0 = np.array([[1.0, 1.0], [2.0, 2.0]])
+    for i in (1, 2):
+        p = df[[f"p{i}_1", f"p{i}_2"]].to_numpy()
+        eta = df[[f"eta{i}_1", f"eta{i}_2"]].to_numpy()
+        b = df[[f"b{i}_1", f"b{i}_2"]].to_numpy()
+        et = df[[f"et{i}_1", f"et{i}_2"]].to_numpy()
+        np.testing.assert_allclose(et, p - eta @ sc_C0.T - b, atol=1e-12)  # eq. (28)
+        eeta = df[[f"eeta{i}_1", f"eeta{i}_2"]].to_numpy()
+        np.testing.assert_allclose(eeta, eta - df[["eta0_1", "eta0_2"]].to_numpy(), atol=1e-12)
+    # the leader: η0 = (2(1 - cos t), 2 sin t) for u0 = 2 cos t from rest
+    t = df.t.to_numpy()
+    np.testing.assert_allclose(df.eta0_1, 2 * (1 - np.cos(t)), atol=1e-6)
+    np.testing.assert_allclose(df.eta0_2, 2 * np.sin(t), atol=1e-6)
+
+
+def test_second_run_reuses_library_and_gives_identical_file(base):
+    r1, text1, r2 = base
+    assert r2.meta["cache_hit"] is True and r2.meta["wall_seconds"]["compile"] == 0.0
+    assert r2.meta["library"]["key"] == r1.meta["library"]["key"]
+    assert r2.meta["gains_reused"] is True
+    assert r2.csv_path.read_bytes() == text1
+
+
+def test_codegen_is_deterministic_across_processes(base, env):
+    """Another interpreter (another hash seed) generates the same C: same cache key."""
+    code = (
+        "import sys; from generated import api; from generated.codegen import CodegenSettings;"
+        "sc = api.load(sys.argv[1]); g, _ = api.ensure_gains(sc, sys.argv[2]);"
+        "b = api.build(sc, g, 'cvodes', CodegenSettings(optimization='-O0', build_root=sys.argv[3]));"
+        "print(b.library.key, b.library.cache_hit)"
+    )
+    envv = dict(os.environ, PYTHONHASHSEED="12345")
+    out = subprocess.run(
+        [sys.executable, "-c", code, str(env["scenario"]), str(env["out"]), env["cg"].build_root],
+        capture_output=True, text=True, env=envv, check=True, cwd=Path(__file__).parents[1],
+    ).stdout.split()  # fmt: skip
+    assert out == [base[0].meta["library"]["key"], "True"]
+
+
+def test_ablation_variant_goes_to_its_own_folder(base, env):
+    r = api.run(env["scenario"], overrides={"options.ablation": True}, codegen=env["cg"],
+                out_root=env["out"], progress=False)  # fmt: skip
+    assert r.csv_path.parent.name == "small-ablation"
+    assert r.meta["overrides"] == {"options.ablation": True}
+    assert r.meta["scenario_sha256"] != base[0].meta["scenario_sha256"]
+    assert r.meta["library"]["key"] != base[0].meta["library"]["key"]
+    df, da = base[0].frame, r.frame
+    # eq. (42): u = Ψ without ĝ; the base run's u = ĝ Ψ with ĝ ≠ 1 after the start
+    assert np.abs(da.u1_1.to_numpy()[10:] - df.u1_1.to_numpy()[10:]).max() > 1e-3
+    assert (env["out"] / "small" / "trajectory.csv").read_bytes() == base[1]  # untouched
+
+
+def test_idas_and_fixed_agree_with_cvodes(base, env):
+    """Same closed loop, three integrators: states agree to a tolerance set by the methods."""
+    ref = base[0].frame
+    cols = [c for c in ref.columns if c[:1] in ("p", "q") or c.startswith(("eta", "mu", "ghat"))]
+    scale = np.abs(ref[cols].to_numpy()).max(axis=0) + 1.0
+    for method, tol in (("idas", 1e-5), ("fixed", 1e-3)):
+        r = api.run(env["scenario"], method=method, codegen=env["cg"],
+                    out_root=env["root"] / f"out-{method}", progress=False)  # fmt: skip
+        assert r.meta["method"] == method and r.trajectory.complete
+        err = (np.abs(r.frame[cols].to_numpy() - ref[cols].to_numpy()) / scale).max()
+        assert err < tol, (method, err)
+
+
+def test_failing_integration_writes_incomplete_trajectory_and_exits_2(env, capsys):
+    out = env["root"] / "out-fail"
+    argv = ["sim", str(env["scenario"]), "--set", "integration.max_steps=3", "--variant", "fail",
+            "--opt=-O0", "--out", str(out), "--no-progress"]  # fmt: skip
+    os.environ["HITL_BUILD_DIR"] = env["cg"].build_root
+    try:
+        code = run_cli(cli_main, argv)
+    finally:
+        del os.environ["HITL_BUILD_DIR"]
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("error: cvodes failed after t =")
+    folder = out / "small-fail"
+    meta = json.loads((folder / "meta.json").read_text())
+    assert meta["complete"] is False and meta["message"] in err[0]
+    df = pd.read_csv(folder / "trajectory.csv")
+    assert len(df) == meta["rows"] < 51 and df.t.iloc[-1] == meta["t_reached"]
+    assert np.isfinite(df.to_numpy()).all()
+    assert sorted(p.name for p in folder.iterdir()) == ["gains.json", "meta.json", "trajectory.csv"]
+    with pytest.raises(IntegrationError):
+        api.run(env["scenario"], overrides={"integration.max_steps": 3}, variant="fail",
+                codegen=env["cg"], out_root=out, progress=False)  # fmt: skip
+
+
+def test_broken_compile_via_cli_exits_2(env, capsys):
+    argv = ["sim", str(env["scenario"]), "--opt=-fno-such-flag-hitl", "--out",
+            str(env["root"] / "out-broken"), "--no-progress"]  # fmt: skip
+    os.environ["HITL_BUILD_DIR"] = env["cg"].build_root
+    try:
+        code = run_cli(cli_main, argv)
+    finally:
+        del os.environ["HITL_BUILD_DIR"]
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert "compiling" in err[0] and "model.c failed" in err[0] and "no-such-flag" in err[0]
+    assert not (env["root"] / "out-broken" / "small" / "trajectory.csv").exists()
+
+
+def test_overrides_are_validated_like_the_file(env):
+    sc = api.load(env["scenario"], {"followers[2].g": 0.5, "integration.method": "fixed"})
+    assert sc.followers[1].g.minimum == 0.5 and sc.integration.method == "fixed"
+    assert sc.name == "small-g-0.5-method-fixed"
+    with pytest.raises(ScenarioError, match="options.nonsense"):
+        api.load(env["scenario"], {"options.nonsense": 1})
+    with pytest.raises(ScenarioError, match="sign"):
+        api.load(env["scenario"], {"options.sign": "exact"})  # exact needs the fixed method
+    with pytest.raises(ScenarioError, match="index"):
+        api.load(env["scenario"], {"followers[7].g": 0.5})
+    assert api.parse_override("options.ablation=true") == ("options.ablation", True)
+    assert api.parse_override("integration.method=fixed") == ("integration.method", "fixed")
+    assert api.parse_override("integration.rtol=1e-7") == ("integration.rtol", 1e-7)
+
+
+def test_method_needs_matching_build(base, env):
+    r1 = base[0]
+    sc = api.load(env["scenario"])
+    gains, _ = api.ensure_gains(sc, env["out"])
+    built = api.build(sc, gains, "cvodes", env["cg"])
+    assert built.library.cache_hit
+    with pytest.raises(IntegrationError, match="DAE"):
+        api.simulate(built, sc, api.integrator_settings(sc, "idas"))
+    with pytest.raises(BuildError):
+        api.build(sc, gains, "cvodes", CodegenSettings(compiler="no-such-cc-xyz", build_root=env["cg"].build_root))
+    assert r1.trajectory.complete
