@@ -44,7 +44,9 @@ def adaptive_function(n: int, law: str, g_min: float) -> ca.Function:
     if law not in GHAT_LAWS:
         raise ValueError(f"unknown ghat law {law!r}")
     chi, Psi, thetahat = ca.SX.sym("chi", n), ca.SX.sym("Psi", n), ca.SX.sym("thetahat", n)
-    ghat, k2, gamma, sigma, gref = (ca.SX.sym(s) for s in ("ghat", "k2", "gamma", "sigma", "ghat_ref"))
+    ghat, k2, gamma, sigma, gref = (
+        ca.SX.sym(s) for s in ("ghat", "k2", "gamma", "sigma", "ghat_ref")
+    )
     thetahat_dot = ca.fabs(chi) - k2 * thetahat  # eq. (30), element-wise
     rate = -gamma * ca.dot(chi, Psi)  # eq. (30) with gain γ and χᵀΨ (paper prints χᵀMΨ)
     if "sigma" in law:

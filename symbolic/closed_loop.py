@@ -158,9 +158,7 @@ def make_layout(m: int, n: int, N: int, filtered: bool) -> StateLayout:
         base = m + i * na
         for name, sl in off.items():
             slices[(name, i)] = slice(base + sl.start, base + sl.stop)
-    return StateLayout(
-        slices=slices, nx=m + N * na, m=m, N=N, agent_offsets=off, agent_size=na
-    )
+    return StateLayout(slices=slices, nx=m + N * na, m=m, N=N, agent_offsets=off, agent_size=na)
 
 
 def _param_layout(n: int) -> tuple[dict[str, slice], int]:

@@ -16,7 +16,9 @@ def operator_input(leader: Leader, t: ca.SX) -> ca.SX:
     (t is clamped), so the command stays bounded.
     """
     if leader.u0 is not None:
-        return ca.vertcat(*[ca.SX(e.casadi(t)) if e.is_constant() else e.casadi(t) for e in leader.u0])
+        return ca.vertcat(
+            *[ca.SX(e.casadi(t)) if e.is_constant() else e.casadi(t) for e in leader.u0]
+        )
     tr = np.asarray(leader.u0_trace)
     tc = ca.fmin(ca.fmax(t, float(tr[0, 0])), float(tr[-1, 0]))
     # one interpolant per input: linear in t, the trace's own knots

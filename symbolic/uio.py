@@ -34,9 +34,7 @@ class UIOMatrices:
     K: np.ndarray
 
 
-def uio_matrices(
-    A0: np.ndarray, B0: np.ndarray, C0: np.ndarray, Theta: np.ndarray
-) -> UIOMatrices:
+def uio_matrices(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray, Theta: np.ndarray) -> UIOMatrices:
     """Γ, Φ and the two system matrices of the UIO, eqs. (7)–(8).
 
     Parameters

@@ -139,6 +139,7 @@ def synthesize(scenario: Scenario, *, strict: bool = False) -> Gains:
         "signed_graph": net.signed,
         "lambda_bar1_min_for_given_Q": lb1_min,
         "lmi15_given_Q_feasible": tr.feasible,
+        "lmi15_cap": tr.cap,
         "lmi16_given_Theta_feasible": orr.feasible,
         "notes": notes,
     }

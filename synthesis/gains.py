@@ -51,10 +51,15 @@ class Gains:
     lambda1, lambda2, alpha, k1 : float
         Observer gains, the input bound, and V1's constant.
     certificate : dict
-        ``{"checks": [{"name", "value", "margin", "passed", "detail"}...], "warnings": [...], "passed": bool}``.
+        ``{"checks": [{"name", "value", "margin", "passed", "detail", "involves"}...],
+        "warnings": [...], "failures": [...], "passed": bool, "tol": float, "given": [...],
+        "notes": [...]}`` (see :func:`synthesis.certificate.certify`). ``warnings`` are
+        failed checks involving only scenario-given gains; ``failures`` is empty in any
+        file ``make synth`` writes.
     info : dict
-        Solver name and version, strictness margin ε, scenario SHA-256, and
-        the Lemma 3 variants tried.
+        Solver name, version and tolerance, strictness margin ε (``lmi_eps``), scenario
+        SHA-256, the given gains, both Lemma 3 variants, the invariant zeros, and
+        (Q given) the smallest λ̄1 for which the given Q satisfies LMI (15).
     """
 
     A0: np.ndarray

@@ -178,22 +178,35 @@ class TResult:
     cap: float | None = None  # the bound X ⪯ cap·I, when the feasible set needed one
 
 
-def _centre(
-    X: cp.Variable,
-    S: cp.Variable,
-    cons: list,
-    cap: float,
-) -> tuple[SolveInfo, float | None]:
-    """Analytic centre max log det X + log det S; if that fails (the set is unbounded, e.g.
-    when A0 + (δ1/2)I has stable modes), again with X ⪯ cap·I and its barrier."""
+def _unbounded(A0: np.ndarray, d1: float, B0: np.ndarray | None = None) -> bool:
+    """Does the feasible set of LMI (15) have a recession direction?
+
+    In T: T + tN stays feasible for N ⪰ 0 with L(N) = ĀN + NĀᵀ ⪯ 0, Ā = A0 + (δ1/2)I;
+    such N ≠ 0 exists iff Ā has an eigenvalue with Re <= 0 (so the test is exact).
+    In P = T⁻¹ with B0ᵀP = Q fixed: N ⪰ 0, B0ᵀN = 0, NĀ + ĀᵀN ⪯ 0, trace N = 1 is a small
+    SDP feasibility problem.
+    """
+    m = A0.shape[0]
+    Ab = A0 + 0.5 * d1 * np.eye(m)
+    if B0 is None:
+        return bool(np.linalg.eigvals(Ab).real.min() <= 0)
+    N = cp.Variable((m, m), symmetric=True)
+    R = cp.Variable((m, m), symmetric=True)
+    cons = [N >> 0, cp.trace(N) == 1, B0.T @ N == 0, R == -(N @ Ab + Ab.T @ N), R >> 0]
+    info = solve(cp.Problem(cp.Minimize(0), cons))
+    return info.status == "optimal"
+
+
+def _centre(X: cp.Variable, S: cp.Variable, cons: list, cap: float | None) -> SolveInfo:
+    """Analytic centre max log det X + log det S (+ log det(cap·I − X) when the set is
+    unbounded, e.g. when A0 + (δ1/2)I has stable modes, and X ⪯ cap·I)."""
     m = X.shape[0]
-    info = solve(cp.Problem(cp.Maximize(cp.log_det(X) + cp.log_det(S)), cons))
-    if info.status == "optimal" and X.value is not None:
-        return info, None
-    U = cp.Variable((m, m), symmetric=True)
-    obj = cp.log_det(X) + cp.log_det(S) + cp.log_det(U)
-    info = solve(cp.Problem(cp.Maximize(obj), cons + [U == cap * np.eye(m) - X]))
-    return info, cap
+    obj = cp.log_det(X) + cp.log_det(S)
+    if cap is not None:
+        U = cp.Variable((m, m), symmetric=True)
+        obj = obj + cp.log_det(U)
+        cons = cons + [U == cap * np.eye(m) - X]
+    return solve(cp.Problem(cp.Maximize(obj), cons))
 
 
 def _polish_affine(
@@ -231,7 +244,8 @@ def synth_T(A0: np.ndarray, B0: np.ndarray, lb1: float, d1: float) -> TResult:
     F = A0 @ T + T @ A0.T - lb1 * (B0 @ B0.T) + d1 * T  # eq. (15)
     cons = [S == -F, T >> LMI_EPS * np.eye(m), S >> LMI_EPS * np.eye(m)]
     cap = CAP_FACTOR * lb1 * float(np.linalg.norm(B0, 2)) ** 2 / d1
-    info, used_cap = _centre(T, S, cons, cap)
+    used_cap = cap if _unbounded(A0, d1) else None
+    info = _centre(T, S, cons, used_cap)
     if info.status != "optimal" or T.value is None:
         raise SynthesisError(
             f"observer: LMI (15) in T is infeasible or unsolved for lambda_bar1 = {lb1:g}, "
@@ -266,7 +280,8 @@ def check_given_Q(A0: np.ndarray, B0: np.ndarray, Q: np.ndarray, lb1: float, d1:
     G = P @ A0 + A0.T @ P - lb1 * (Q.T @ Q) + d1 * P  # eq. (15) in P = T⁻¹
     base = [S == -G, B0.T @ P == Q, P >> LMI_EPS * np.eye(m)]
     cap = CAP_FACTOR * max(1.0, lb1 * float(np.linalg.norm(Q, 2)) ** 2 / d1)
-    info, used_cap = _centre(P, S, base + [S >> LMI_EPS * np.eye(m)], cap)
+    used_cap = cap if _unbounded(A0, d1, B0) else None
+    info = _centre(P, S, base + [S >> LMI_EPS * np.eye(m)], used_cap)
     if info.status == "optimal" and P.value is not None:
         Pv = _sym(np.asarray(P.value))
         # polish over {P : B0ᵀP = Q}: P = Pv + Σ x_k N_k with B0ᵀN_k = 0

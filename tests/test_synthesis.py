@@ -301,3 +301,29 @@ def test_scs_fallback_gives_the_same_certified_answer(paper_synth, g_synth, monk
     np.testing.assert_allclose(g.T, g_synth.T, rtol=1e-8)
     # LMI (16): the min-norm point is unique but only solved to the solver's accuracy
     np.testing.assert_allclose(g.Theta, g_synth.Theta, atol=1e-3)
+
+
+def test_unbounded_lmi15_set_gets_a_recorded_cap(paper_synth):
+    # A0 stable: A0 + (δ1/2)I is Hurwitz, T may grow without bound, no analytic centre
+    # exists; the cap T ⪯ cap·I is added and recorded. Zero of (A0, B0, [1, 1]) at -2.
+    A = np.array([[-1.0, 1.0], [0.0, -1.0]])
+    lead = replace(paper_synth.leader, A0=A)
+    g = synthesize(replace(paper_synth, leader=lead))
+    cap = g.info["lmi15_cap"]
+    assert cap is not None and np.linalg.eigvalsh(g.T)[-1] < cap
+    assert np.allclose(g.info["invariant_zeros"], [[-2.0, 0.0]])
+    assert g.certificate["passed"]
+    F15 = A @ g.T + g.T @ A.T - g.lambda_bar1 * B0 @ B0.T + g.delta1 * g.T
+    assert _lmax(F15) < -g.info["solver_tol"]
+
+
+def test_given_theta_checked_not_replaced(paper, g_paper):
+    good = np.array(g_paper.Theta)
+    g = synthesize(replace(paper, observer=replace(paper.observer, Theta=good)))
+    np.testing.assert_array_equal(g.Theta, good)
+    assert "Theta" in g.info["given"] and g.certificate["passed"]
+    bad = np.array([[0.0, 0.0], [-3.0, -3.0]])  # ΦA0 − ΘC0 = [[0, 1], [9, 8]]: unstable
+    g = synthesize(replace(paper, observer=replace(paper.observer, Theta=bad)))
+    np.testing.assert_array_equal(g.Theta, bad)
+    named = {w.split(":")[1].strip() for w in g.certificate["warnings"]}
+    assert {"lmi16", "hurwitz"} <= named and not g.certificate["failures"]

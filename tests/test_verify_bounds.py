@@ -84,14 +84,36 @@ def test_theorem2_constants_match_hand_computation(paper, delta):
     assert theorem2_constants(paper, 0).Omega == 1.0
 
 
-def test_projection_variant_adds_the_bounded_ghat_term(paper):
-    assert paper.options.ghat_law == "projection"
-    c = theorem2_constants(paper, 0)
-    g, gmin = 0.95, paper.controller.g_min
-    Wg = g / 2 * max(1 / g - 1, 1 / gmin - 1 / g) ** 2  # ĝ ∈ [1, 1/g_min], γ = 1
+def _variant(law: str):
+    from generated.api import load
+
+    return load(PAPER, {"options.ghat_law": law}, variant=f"test-{law}")
+
+
+def test_projection_variant_adds_the_bounded_ghat_term():
+    sc = _variant("projection")
+    c = theorem2_constants(sc, 0)
+    g, gmin, gam = 0.95, sc.controller.g_min, float(sc.controller.gamma[0])
+    Wg = g / (2 * gam) * max(1 / g - 1, 1 / gmin - 1 / g) ** 2  # ĝ ∈ [1, 1/g_min]
     assert c.provable
+    assert c.Omega_var == c.Omega
     assert c.chi_v_var == pytest.approx(c.chi_v + c.Omega * Wg, rel=1e-12)
     assert c.chi_bar_var > c.chi_bar
+
+
+def test_sigma_variant_constants():
+    sc = _variant("sigma")
+    c = theorem2_constants(sc, 1)
+    g, gam = 0.95, float(sc.controller.gamma[1])
+    sig, g0 = float(sc.controller.sigma[1]), float(sc.controller.ghat_ref[1])
+    assert c.provable
+    assert c.Omega_var == pytest.approx(min(c.Omega, sig))
+    assert c.chi_v_var == pytest.approx(c.chi_v + sig * g * (1 / g - g0) ** 2 / (2 * gam))
+
+
+def test_paper_law_is_not_provable():
+    c = theorem2_constants(_variant("paper"), 0)
+    assert not c.provable and c.chi_bar_var == c.chi_bar
 
 
 def test_lemma2_second_order():

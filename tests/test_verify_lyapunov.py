@@ -117,3 +117,57 @@ def test_theorem1_decay_rate_supported(loop):
     assert chk.lhs.shape == grid.shape and np.all(np.isfinite(chk.lhs))
     # at t = 0 the observer has not moved yet: V1 > 0 and the check is evaluated there
     assert vals["V1"][0, 0, 0] > 0
+
+
+def test_theorem1_rate_holds_without_the_phi_floor(tmp_path):
+    """With φ_min = 0 (the paper's observer) V̇1 ≤ −δ̃V1 must hold with the supported rate."""
+    api = pytest.importorskip("generated.api")
+    from symbolic.closed_loop import build_closed_loop
+
+    sc = api.load(PAPER, {**CALM, "observer.phi_min": 0.0}, variant="test-verify-phi0")
+    gains, _ = api.ensure_gains(sc, tmp_path)
+    cl = build_closed_loop(sc, gains)
+    grid = np.linspace(0.0, 1.0, 21)
+    F = ca.integrator("F", "cvodes", cl.ode_dyn.expand(), 0.0, grid[1:],
+                      {"abstol": 1e-10, "reltol": 1e-10, "max_num_steps": 200000})  # fmt: skip
+    X = np.vstack([np.asarray(cl.x0).reshape(1, -1), np.array(F(x0=cl.x0)["xf"]).T])
+    r = theorem1_rates(sc, gains)
+    chk = check_theorem1(cl, grid, X, r.supported)
+    assert chk.ok, chk.where()
+    assert np.all(chk.lhs < 0)  # V1 strictly decreasing along the flow
+
+
+def _loop_variant(tmp_path, overrides, variant):
+    api = pytest.importorskip("generated.api")
+    from symbolic.closed_loop import build_closed_loop
+
+    sc = api.load(PAPER, {**CALM, **overrides}, variant=variant)
+    gains, _ = api.ensure_gains(sc, tmp_path)
+    return sc, build_closed_loop(sc, gains)
+
+
+def test_printed_controller_without_feedforward_breaks_theorem2(loop, tmp_path):
+    """Section 9.2: eq. (29) as printed omits ḃ, b̈; with a rotating formation (38) then fails."""
+    sc_ff, _, cl_ff, grid, X = loop
+    sc, cl = _loop_variant(tmp_path, {"options.feedforward": False}, "test-verify-noff")
+    assert cl.layout.nx == cl_ff.layout.nx
+    checks = check_theorem2(cl, sc, grid, X)
+    assert any(not c.ok for c in checks)
+
+
+def test_lemma1_premise_does_not_follow_for_the_paper_law(loop, tmp_path):
+    """Section 9.3: (38)'s first inequality holds, yet V̇2 ≤ −Ωv2 V2 + χv2 fails when ĝ − 1/g is large."""
+    from verify.bounds import theorem2_constants
+
+    sc, cl = _loop_variant(tmp_path, {"options.ghat_law": "paper"}, "test-verify-paperlaw")
+    x = np.asarray(cl.x0, float).reshape(1, -1).copy()
+    for i in range(sc.N):
+        x[0, cl.layout.slices[("ghat", i)]] = 3.0  # far from 1/g = 1.053
+    t = np.array([0.0])
+    assert all(c.ok for c in check_theorem2(cl, sc, t, x))
+    V, Vd = evaluate(lyapunov_derivative(cl, "V2"), t, x)
+    gaps = []
+    for i in range(sc.N):
+        c = theorem2_constants(sc, i)
+        gaps.append(Vd[0, i, 0] + c.Omega * V[0, i, 0] - c.chi_v)
+    assert max(gaps) > 0

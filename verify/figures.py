@@ -178,23 +178,43 @@ def ablation_comparison(df: pd.DataFrame, ablation: pd.DataFrame, folder: Path) 
     return _save(fig, folder, "fig13_ablation")
 
 
-def lyapunov_plot(t, lhs, rhs, title, folder, stem) -> list[Path]:  # noqa: ANN001
-    """A pointwise inequality check: both sides against time."""
-    fig, ax = plt.subplots(figsize=(7, 3.5))
-    ax.plot(t, lhs, label="dV/dt (exact, AD)")
-    ax.plot(t, rhs, "--", label="right-hand side")
-    ax.set_xlabel("time t (s)")
-    ax.set_ylabel("power (units of V per s)")
-    ax.set_yscale("symlog", linthresh=1e-3)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title(title)
-    fig.tight_layout()
-    return _save(fig, folder, stem)
+def lyapunov_figures(theorem1: list, theorem2: list, folder: Path) -> list[Path]:
+    """The pointwise Lyapunov checks: margin rhs − V̇ (≥ 0 where the inequality holds).
+
+    Parameters
+    ----------
+    theorem1, theorem2 : list of verify.lyapunov.InequalityCheck
+    folder : Path
+
+    Returns
+    -------
+    list of Path
+    """
+    out: list[Path] = []
+    for checks, stem, title in (
+        (theorem1, "lyapunov_V1", "Theorem 1: margin -delta~ V1 - dV1/dt (>= 0: holds)"),
+        (theorem2, "lyapunov_V2", "Theorem 2: margin of eq. (38) (>= 0: holds)"),
+    ):
+        if not checks:
+            continue
+        fig, ax = plt.subplots(figsize=(7, 3.8))
+        for k, chk in enumerate(checks):
+            label = chk.claim if chk.agent is None else f"follower {chk.agent + 1}"
+            ax.plot(chk.t, chk.rhs - chk.lhs, color=COLORS[k % len(COLORS)], lw=1.0, label=label)
+        ax.axhline(0.0, color="k", lw=0.8)
+        ax.set_yscale("symlog", linthresh=1e-3)
+        ax.set_xlabel("time t (s)")
+        ax.set_ylabel("margin (units of V per s)")
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        out += _save(fig, folder, stem)
+    return out
 
 
 def animation(
-    df: pd.DataFrame, C0: np.ndarray, folder: Path, frames: int = 80
+    df: pd.DataFrame, C0: np.ndarray, folder: Path, frames: int = 60
 ) -> tuple[Path | None, str]:
     """Animated GIF of the formation (PillowWriter); skipped with a note without Pillow.
 

@@ -437,7 +437,12 @@ def hand_gains(sc: Scenario, *, lambda1: float | None = None, lambda2: float | N
     z = np.linalg.solve(Lbar.T, np.ones(sc.N))
     Z = np.diag(z)
     Zi = np.diag(z**-0.5)
-    w = float(np.linalg.eigvalsh(Zi @ (Lbar.T @ Z + Z @ Lbar) @ Zi).min())
+    # Lemma 3's w (only V1's analysis uses it); skipped on large graphs, where it costs seconds
+    w = (
+        float(np.linalg.eigvalsh(Zi @ (Lbar.T @ Z + Z @ Lbar) @ Zi).min())
+        if sc.N <= 200
+        else np.nan
+    )
     l1 = lambda1 if lambda1 is not None else (sc.observer.lambda1 or 1.9)
     l2 = lambda2 if lambda2 is not None else (sc.observer.lambda2 or max(2.0, L.alpha))
     return Gains(

@@ -184,6 +184,13 @@ def render_markdown(v: Verification, *, strict: bool = False) -> str:
 
     if v.figures:
         L += ["## Figures", ""]
+        shown = ("fig03-10_formation_overview", "fig11_estimation_errors_log",
+                 "fig12_tracking_errors_log", "fig13_ablation", "lyapunov_V1", "lyapunov_V2")  # fmt: skip
+        for p in v.figures:
+            if p.suffix == ".png" and p.stem in shown:
+                L += [f"![{p.stem}](figures/{p.name})", ""]
+        L.append("All files (PNG and PDF):")
+        L.append("")
         for p in v.figures:
             if p.suffix in (".png", ".gif"):
                 L.append(f"- [{p.name}](figures/{p.name})")
