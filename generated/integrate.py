@@ -84,8 +84,8 @@ class IntegratorSettings:
     fixed_rtol, fixed_atol : float
         Safeguard of the fixed-step method: an output interval whose embedded error
         estimate ``|h (k1 + k2)/2| / (atol + rtol |x|)`` exceeds 1 anywhere (or that
-        produces NaN) is recomputed with steps halved, up to ``fixed_max_halvings``
-        times. Loose by design: the exact sign function's chattering (a jump in f of
+        produces NaN) is recomputed as two halves with the same number of steps each
+        (bisection, recursively, at most ``fixed_max_halvings`` levels deep). Loose by design: the exact sign function's chattering (a jump in f of
         size Δ gives an estimate h Δ / 2) passes; a violent transient does not.
     fixed_max_halvings : int
     chunk : float
@@ -101,9 +101,9 @@ class IntegratorSettings:
     max_steps: int = 100000
     fixed_step: float = 1e-3
     chunk: float = 1.0
-    fixed_rtol: float = 1e-2
-    fixed_atol: float = 1e-2
-    fixed_max_halvings: int = 12
+    fixed_rtol: float = 1e-3
+    fixed_atol: float = 1e-3
+    fixed_max_halvings: int = 30
     newton_scheme: str = "direct"
     linear_solver: str = "csparse"
 
@@ -264,7 +264,10 @@ class _Sundials:
         try:
             res = integ(x0=x, z0=z)
         finally:
-            _add_stats(acc, integ.stats())
+            try:
+                _add_stats(acc, integ.stats())
+            except RuntimeError:  # no stats when the call failed before the solver ran
+                pass
         X = np.array(res["xf"], dtype=float).reshape(len(x), len(times), order="F").T
         Z = (
             np.array(res["zf"], dtype=float).reshape(self.nz, len(times), order="F").T
@@ -310,34 +313,38 @@ class _Ros2:
         return f
 
     def advance(self, t0: float, t1: float, x: np.ndarray, acc: dict) -> np.ndarray:
-        """Advance over [t0, t1] in equal steps <= fixed_step, halved while the error test fails."""
-        K0 = max(1, math.ceil((t1 - t0) / self.s.fixed_step - 1e-9))
-        for level in range(self.s.fixed_max_halvings + 1):
-            K = K0 * 2**level
-            h = (t1 - t0) / K
-            tv = t0 + h * np.arange(K)
-            t2 = tv + h
-            # the last stage-2 evaluation takes the left limit at t1: a jump at t1 (a
-            # breakpoint) belongs to the next segment, as with the variable-step restarts
-            t2[-1] = np.nextafter(t1, t0)
-            acc["steps"] += K
-            acc["rhs_evals"] += 2 * K
-            acc["jac_evals"] += K
-            acc["lin_setups"] += K
-            acc["integrator_calls"] += 1
-            args = (x, 0.0, tv.reshape(1, -1), np.full((1, K), h), t2.reshape(1, -1))
-            X, E = self._run(K)(*args)
-            xn = np.array(X[:, -1], dtype=float).ravel()
-            err = float(E[-1])
-            if np.all(np.isfinite(xn)) and err <= 1.0:
-                if level:
-                    acc["refined_intervals"] += 1
-                return xn
-        raise _ChunkFailure(
-            f"error test still fails with {2**self.s.fixed_max_halvings} times smaller steps "
-            f"(estimate {err:.3g}; raise fixed_rtol/fixed_atol or lower fixed_step)",
-            t1,
-        )
+        """Advance over [t0, t1] in equal steps <= fixed_step; bisect where the error test fails."""
+        K = max(1, math.ceil((t1 - t0) / self.s.fixed_step - 1e-9))
+        return self._advance(t0, t1, x, K, 0, acc)
+
+    def _advance(self, t0: float, t1: float, x: np.ndarray, K: int, depth: int, acc: dict):
+        h = (t1 - t0) / K
+        tv = t0 + h * np.arange(K)
+        t2 = tv + h
+        # the last stage-2 evaluation takes the left limit at t1: a jump at t1 (a
+        # breakpoint) belongs to the next segment, as with the variable-step restarts
+        t2[-1] = np.nextafter(t1, t0)
+        acc["steps"] += K
+        acc["rhs_evals"] += 2 * K
+        acc["jac_evals"] += K
+        acc["lin_setups"] += K
+        acc["integrator_calls"] += 1
+        X, E = self._run(K)(x, 0.0, tv.reshape(1, -1), np.full((1, K), h), t2.reshape(1, -1))
+        xn = np.array(X[:, -1], dtype=float).ravel()
+        err = float(E[-1])
+        if np.all(np.isfinite(xn)) and err <= 1.0:
+            return xn
+        if depth >= self.s.fixed_max_halvings:
+            raise _ChunkFailure(
+                f"error test still fails with steps {2**depth} times smaller "
+                f"(estimate {err:.3g}; raise fixed_rtol/fixed_atol or lower fixed_step)",
+                t1,
+            )
+        # the same number of steps on each half: the step is halved where needed only
+        acc["refined_intervals"] += 1
+        tm = 0.5 * (t0 + t1)
+        xm = self._advance(t0, tm, x, K, depth + 1, acc)
+        return self._advance(tm, t1, xm, K, depth + 1, acc)
 
 
 def integrate(

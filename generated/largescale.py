@@ -314,6 +314,9 @@ def integrate_plan(
         targets = [float(t) for t in t_out if a < t <= b * (1 + 1e-14)]
         if not targets or abs(targets[-1] - b) > 1e-12:
             targets.append(b)
+        if method == "idas":
+            # IDACalcIC scales its search by the first output time: keep it close to t0
+            targets.insert(0, a + min(1e-4, 0.01 * (targets[0] - a)))
         integ = ca.integrator("plan", method, dyn, a, targets, opts)
         try:
             res = integ(x0=x, z0=z)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import asdict, replace
 from typing import Any
 
 import numpy as np
@@ -86,14 +86,14 @@ def synthesize(scenario: Scenario, *, strict: bool = False) -> Gains:
             f" (solver bound; lambda1 = {obs.lambda1 if obs.lambda1 is not None else 'synth'}"
             f" then needs w > {lb1_min / obs.lambda1 if obs.lambda1 else math.nan:.4g})"
         )
-    solvers["lmi15"] = tr.info.__dict__
+    solvers["lmi15"] = asdict(tr.info)
     # LMI (16): Ω and Θ jointly, or Ω for the given Θ
     if obs.Theta is None:
         orr = synth_Omega_Theta(Phi, A0, C0, d2, rel_margin=margin)
     else:
         given.append("Theta")
         orr = check_given_Theta(Phi, A0, C0, np.array(obs.Theta, dtype=float), d2)
-    solvers["lmi16"] = orr.info.__dict__
+    solvers["lmi16"] = asdict(orr.info)
 
     # Theorem 1's gains
     if obs.lambda1 is None:

@@ -22,8 +22,12 @@ from symbolic.errors import SynthesisError
 
 # Relative tolerance of the SVD rank tests (rank of C0B0, B0 and of the system pencil).
 RANK_RTOL = 1e-9
-# A candidate s is an invariant zero when σ_min(P(s)) <= ZERO_RTOL · σ_max(P(s)).
-ZERO_RTOL = 1e-7
+# A candidate s is an invariant zero when σ_min(P(s)) <= ZERO_RTOL · ‖[[A0, B0], [C0, 0]]‖, and (tall
+# systems) both random projections have it within MATCH_RTOL_ZERO·(1 + |s|).
+ZERO_RTOL = 1e-4
+MATCH_RTOL_ZERO = 1e-3
+# Generalised eigenvalues beyond INF_ZERO·‖[[A0, B0], [C0, 0]]‖ count as infinite.
+INF_ZERO = 1e7
 
 
 # --------------------------------------------------------------------------- Assumption 1
@@ -267,8 +271,11 @@ def system_pencil(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray, s: complex) ->
 
 
 def _is_zero(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray, s: complex) -> bool:
+    """SVD rank test of the pencil at s, relative to the data (not to |s|: near-infinite
+    eigenvalues of a squared-down pencil would otherwise pass as zeros)."""
     sv = np.linalg.svd(system_pencil(A0, B0, C0, s), compute_uv=False)
-    return bool(sv[-1] <= ZERO_RTOL * max(1.0, sv[0]))
+    data = np.block([[A0, B0], [C0, np.zeros((C0.shape[0], B0.shape[1]))]])
+    return bool(sv[-1] <= ZERO_RTOL * max(1.0, float(np.linalg.norm(data, 2))))
 
 
 def invariant_zeros(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> np.ndarray:
@@ -277,8 +284,10 @@ def invariant_zeros(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> np.ndarra
     The tall (n >= p) pencil s·E − F with E = [[I, 0], [0, 0]], F = [[A0, −B0], [−C0, 0]]
     is squared down from the left by two fixed random projections W (m+p)×(m+n);
     each square pencil's finite generalised eigenvalues contain every invariant zero
-    (and zeros the projection adds). A candidate is kept when the full pencil loses
-    rank there (SVD test) — the added zeros depend on W and fail that test.
+    plus zeros that depend on W. A candidate of the first projection is kept when the
+    second one has it too (within :data:`MATCH_RTOL_ZERO`) and the full pencil loses
+    rank there (SVD test, :data:`ZERO_RTOL`). Square systems use W = I. The tolerances
+    are loose on purpose: a zero of multiplicity k is computed only to ~eps^(1/k).
 
     Parameters
     ----------
@@ -288,8 +297,7 @@ def invariant_zeros(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> np.ndarra
     Returns
     -------
     ndarray
-        Complex zeros, sorted by real part (each multiple zero once per multiplicity
-        found by the first projection).
+        Complex zeros, sorted by real part.
     """
     m, p, n = A0.shape[0], B0.shape[1], C0.shape[0]
     E = np.zeros((m + n, m + p))
@@ -300,20 +308,60 @@ def invariant_zeros(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> np.ndarra
         Ws = [np.eye(m + n)]
     else:
         Ws = [rng.standard_normal((m + p, m + n)) for _ in range(2)]
-    found: list[complex] = []
-    for W in Ws[:1]:
+    # QZ returns the infinite eigenvalues (relative degree) as huge finite numbers:
+    # treat |s| > INF_ZERO · ‖data‖ as infinite
+    big = INF_ZERO * max(1.0, float(np.linalg.norm(F, 2)))
+    evs = []
+    for W in Ws:
         with np.errstate(all="ignore"):
             ev = sla.eigvals(W @ F, W @ E)
-        for s in ev[np.isfinite(ev)]:
-            if abs(s) < 1e12 and _is_zero(A0, B0, C0, complex(s)):
-                found.append(complex(s))
-    # second projection: keep only candidates it confirms (guards against a bad W)
-    if len(Ws) > 1 and found:
-        with np.errstate(all="ignore"):
-            ev2 = sla.eigvals(Ws[1] @ F, Ws[1] @ E)
-        ev2 = ev2[np.isfinite(ev2)]
-        found = [s for s in found if ev2.size and np.min(np.abs(ev2 - s)) <= 1e-5 * (1 + abs(s))]
+        evs.append(ev[np.isfinite(ev) & (np.abs(ev) < big)])
+    found: list[complex] = []
+    for s in evs[0]:
+        s = complex(s)
+        if len(evs) > 1 and (
+            not evs[1].size or np.min(np.abs(evs[1] - s)) > MATCH_RTOL_ZERO * (1 + abs(s))
+        ):
+            continue
+        if _is_zero(A0, B0, C0, s):
+            found.append(s)
     z = np.array(found, dtype=complex)
+    return z[np.argsort(z.real, kind="stable")]
+
+
+def uio_zeros(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> np.ndarray:
+    """Invariant zeros as the unobservable modes of (ΦA0, C0) (second implementation).
+
+    With rank(C0B0) = p, rank [[sI − A0, B0], [C0, 0]] = p + rank [[sI − ΦA0], [C0]], so
+    the invariant zeros are exactly the eigenvalues of ΦA0 on its unobservable subspace
+    (the modes no Θ can move in ΦA0 − ΘC0): the largest ΦA0-invariant subspace in
+    ker C0, found by orthogonal (SVD) steps rather than powers of ΦA0.
+    """
+    _, Phi = uio_matrices(B0, C0)
+    M = Phi @ A0
+    m = A0.shape[0]
+    scale = max(1.0, float(np.linalg.norm(M, 2)), float(np.linalg.norm(C0, 2)))
+    tol = 1e-9 * scale
+
+    def null_basis(X: np.ndarray) -> np.ndarray:
+        if X.shape[1] == 0:
+            return np.zeros((X.shape[1], 0))
+        _, sv, Vt = np.linalg.svd(X)
+        r = int((sv > tol).sum())
+        return Vt[r:].T
+
+    # largest M-invariant subspace in ker C0: V_{k+1} = {x ∈ V_k : Mx ∈ V_k} (orthogonal steps)
+    V = null_basis(C0)
+    for _ in range(m):
+        if V.shape[1] == 0:
+            break
+        Y = null_basis((np.eye(m) - V @ V.T) @ M @ V)
+        if Y.shape[1] == V.shape[1]:
+            break
+        V = V @ Y
+    if V.shape[1] == 0:
+        return np.zeros(0, dtype=complex)
+    z = np.linalg.eigvals(V.T @ M @ V).astype(complex)
     return z[np.argsort(z.real, kind="stable")]
 
 
@@ -353,7 +401,11 @@ def control_zeros(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> np.ndarray 
         if common is None:
             common = z
         else:
-            keep = [s for s in common if z.size and np.min(np.abs(z - s)) <= 1e-6 * (1 + abs(s))]
+            keep = [
+                s
+                for s in common
+                if z.size and np.min(np.abs(z - s)) <= MATCH_RTOL_ZERO * (1 + abs(s))
+            ]
             common = np.array(keep, dtype=complex)
     return common
 
@@ -375,7 +427,11 @@ def check_leader(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> LeaderCheck:
             "both ranks must equal p (choose C0 with C0 B0 of full column rank)"
         )
     zs = invariant_zeros(A0, B0, C0)
-    bad = zs[zs.real >= 0]
+    zu = uio_zeros(A0, B0, C0)
+    # conservative: a zero with Re >= 0 found by either implementation fails Assumption 2
+    bad = np.concatenate([zs[zs.real >= 0], zu[zu.real >= 0]])
+    if bad.size:
+        bad = zs[zs.real >= 0] if (zs.real >= 0).sum() >= (zu.real >= 0).sum() else zu[zu.real >= 0]
     if bad.size:
         txt = ", ".join(_fmt(s) for s in bad)
         raise SynthesisError(
@@ -386,8 +442,12 @@ def check_leader(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> LeaderCheck:
     if cz is None:
         cross = "python-control could not answer"
     else:
-        missing = [s for s in zs if not cz.size or np.min(np.abs(cz - s)) > 1e-5 * (1 + abs(s))]
-        extra = [s for s in cz if not zs.size or np.min(np.abs(zs - s)) > 1e-5 * (1 + abs(s))]
+        missing = [
+            s for s in zs if not cz.size or np.min(np.abs(cz - s)) > MATCH_RTOL_ZERO * (1 + abs(s))
+        ]
+        extra = [
+            s for s in cz if not zs.size or np.min(np.abs(zs - s)) > MATCH_RTOL_ZERO * (1 + abs(s))
+        ]
         if missing:
             raise SynthesisError(
                 "leader: invariant zeros disagree with python-control: "
@@ -399,6 +459,12 @@ def check_leader(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> LeaderCheck:
             if extra
             else ""
         )
+    same = zs.size == zu.size and all(
+        np.min(np.abs(zu - s)) <= MATCH_RTOL_ZERO * (1 + abs(s)) for s in zs
+    )
+    cross += "; unobservable modes of (ΦA0, C0) " + (
+        "agree" if same else f"differ: {', '.join(_fmt(s) for s in zu) or 'none'}"
+    )
     return LeaderCheck(
         rank_C0B0=r_cb, rank_B0=r_b, zeros=zs, control_zeros=cz, cross_check=cross, notes=[]
     )

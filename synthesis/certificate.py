@@ -24,6 +24,7 @@ from synthesis.assumptions import (
     invariant_zeros,
     m_matrix_violation,
     uio_matrices,
+    uio_zeros,
 )
 from synthesis.gains import Gains
 from synthesis.lemma3 import DENSE_EIG_MAX_N, w_of
@@ -175,14 +176,15 @@ def certify(g: Gains, *, tol: float | None = None, given: tuple[str, ...] = ()) 
             )
         )
         zs = invariant_zeros(A0, B0, C0)
-        worst = float(zs.real.max()) if zs.size else -math.inf
+        zu = uio_zeros(A0, B0, C0)  # second implementation; the worst of both counts
+        worst = max([-math.inf] + [float(z.real) for z in (*zs, *zu)])
         checks.append(
             _check(
                 "assumption2_zeros",
                 [[float(s.real), float(s.imag)] for s in zs],
                 -worst,
                 worst < 0,
-                f"invariant zeros of (A0, B0, C0) in Re(s) < 0 (SVD rank test at {ZERO_RTOL:g})",
+                f"invariant zeros of (A0, B0, C0) in Re(s) < 0 (pencil with SVD rank test at {ZERO_RTOL:g}, and unobservable modes of (ΦA0, C0))",
             )
         )
 

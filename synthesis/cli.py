@@ -80,8 +80,9 @@ def main(argv: list[str]) -> int:
         )
     for wline in cert["warnings"]:
         print(f"warning: {wline}", file=sys.stderr)
+    npass = sum(ch["passed"] for ch in cert["checks"])
     print(
-        f"{args.gains}: {len(cert['checks'])} checks pass"
+        f"{args.gains}: {npass}/{len(cert['checks'])} checks pass"
         + (f", {len(cert['warnings'])} warning(s) about given gains" if cert["warnings"] else "")
     )
     return 0

@@ -434,3 +434,58 @@ def test_paper_scenario_first_second(tmp_path):
     assert lo - delta - 1e-6 <= gh.min() and gh.max() <= hi + delta + 1e-6
     assert np.all(np.array([p["phi"] for p in P]) >= sc.observer.phi_min - 1e-9)
     assert np.all(np.isfinite(X))
+
+
+def test_lyapunov_outputs_match_formulas(tmp_path):
+    """V1 (eq. (17)) and V2 (eq. (32), ĝ term weighted g/(2γ)) against numpy formulas."""
+    rng = np.random.default_rng(21)
+    A, pin = random_graph(6, rng, signed=True)
+    sc = write_scenario(tmp_path, A, pin, faults=("0.7", ["sin(t)", "0.5"]))
+    g = hand_gains(sc)
+    cl = build_closed_loop(sc, g)
+    ref = Reference(sc, g)
+    model = build_model("two_link")
+    for _ in range(3):
+        x, t = random_state(cl, rng), rng.uniform(0, 20)
+        o = dict(zip(cl.outputs.name_out(), [np.array(v) for v in cl.outputs(t, x)], strict=True))
+        r = ref.evaluate(t, x)
+        P = cl.layout.unpack(x)
+        E, eta0 = P["eta"], P["eta0"]
+        e_eta = ref.LB @ E - np.outer(ref.a0h, eta0)
+        et = r["ehat"] - e_eta
+        Tinv, Om, z = np.linalg.inv(g.T), g.Omega, np.diag(g.Z)
+        eps = r["ehat"] * ref.h[:, None]
+        V1 = (
+            np.einsum("i,ij,jk,ik->", z, eps, Tinv, eps)
+            + 2
+            * g.lambda2
+            * np.sum(ref.LB.diagonal() * z * P["phi"][:, 0] / sc.observer.alpha1_bar)
+            + g.k1 * np.einsum("ij,jk,ik->", et, Om, et)
+        )
+        assert np.isclose(o["V1"].item(), V1, rtol=1e-11)
+        for i in range(sc.N):
+            M = np.array(model.M(P["p"][i]))
+            chi = r["chi"][i]
+            gam = sc.controller.gamma[i]
+            V2 = (0.5 * chi @ M @ chi + 0.5 * np.sum((P["thetahat"][i] - sc.followers[i].d) ** 2)
+                  + 0.7 / (2 * gam) * (P["ghat"][i, 0] - 1 / 0.7) ** 2)  # fmt: skip
+            assert np.isclose(o["V2"][i, 0], V2, rtol=1e-11)
+        assert np.allclose(o["ebar"], E - np.outer(ref.h, eta0), atol=1e-14)
+
+
+def test_gains_json_round_trip_and_mismatch(tmp_path):
+    """Gains read back from gains.json build the same loop; gains for another leader are refused."""
+    from dataclasses import replace
+
+    from symbolic.errors import SynthesisError
+    from synthesis.gains import load_gains, save_gains
+
+    sc = load_scenario(PAPER)
+    g = hand_gains(sc)
+    g2 = load_gains(save_gains(g, tmp_path / "gains.json"))
+    x, t = random_state(build_closed_loop(sc, g), np.random.default_rng(2)), 3.3
+    a = np.array(build_closed_loop(sc, g).ode(t, x))
+    b = np.array(build_closed_loop(sc, g2).ode(t, x))
+    assert np.array_equal(a, b)
+    with pytest.raises(SynthesisError, match="C0"):
+        build_closed_loop(sc, replace(g, C0=2 * g.C0))

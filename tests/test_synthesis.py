@@ -19,6 +19,7 @@ from synthesis.assumptions import (
     invariant_zeros,
     system_pencil,
     uio_matrices,
+    uio_zeros,
 )
 from synthesis.certificate import k1_bound
 from synthesis.lmi import min_lambda_bar1_for_Q, synth_T
@@ -327,3 +328,57 @@ def test_given_theta_checked_not_replaced(paper, g_paper):
     np.testing.assert_array_equal(g.Theta, bad)
     named = {w.split(":")[1].strip() for w in g.certificate["warnings"]}
     assert {"lmi16", "hurwitz"} <= named and not g.certificate["failures"]
+
+
+def _companion(den_roots, num_roots):
+    """SISO controllable canonical form with the given poles and zeros (monic numerator)."""
+    den, num = np.poly(den_roots), np.poly(num_roots)
+    m = len(den_roots)
+    A = np.zeros((m, m))
+    A[:-1, 1:] = np.eye(m - 1)
+    A[-1, :] = -den[1:][::-1]
+    B = np.zeros((m, 1))
+    B[-1] = 1.0
+    C = np.zeros((1, m))
+    C[0, : len(num)] = num[::-1]
+    return A, B, C
+
+
+def test_pencil_zeros_equal_uio_unobservable_modes_on_random_systems():
+    # second implementation: zeros = unobservable modes of (ΦA0, C0) when rank(C0B0) = p
+    rng = np.random.default_rng(11)
+    checked = 0
+    for _ in range(300):
+        m = int(rng.integers(1, 7))
+        p = int(rng.integers(1, min(m, 3) + 1))
+        n = int(rng.integers(p, 4))
+        A, B, C = (
+            rng.standard_normal((m, m)),
+            rng.standard_normal((m, p)),
+            rng.standard_normal((n, m)),
+        )
+        if n > p and rng.random() < 0.5:  # dependent outputs keep the zeros of the first p
+            C[p:] = rng.standard_normal((n - p, p)) @ C[:p]
+        if np.linalg.svd(C @ B, compute_uv=False)[-1] < 1e-2:
+            continue  # nearly singular C0B0: zeros near infinity, ill-conditioned
+        z1, z2 = invariant_zeros(A, B, C), uio_zeros(A, B, C)
+        assert len(z1) == len(z2)
+        for s in z1:
+            assert np.min(np.abs(z2 - s)) <= 1e-6 * (1 + abs(s))
+        checked += len(z1)
+    assert checked > 200
+
+
+@pytest.mark.parametrize("root", [1.0, -1.0])
+def test_triple_zero_on_tall_system(root):
+    # numerator (s - root)³, relative degree 1 (C0B0 = 1), output repeated: a triple zero is
+    # computed only to ~eps^(1/3); the loose tolerances must still find all three
+    A, B, C = _companion([-0.5, -2.0, -3.0, -4.0], [root] * 3)
+    C2 = np.vstack([C, 2 * C])
+    z = invariant_zeros(A, B, C2)
+    assert len(z) == 3 and np.all(np.abs(z - root) < 1e-3)
+    if root > 0:
+        with pytest.raises(SynthesisError, match="Assumption 2 fails"):
+            check_leader(A, B, C2)
+    else:
+        assert len(check_leader(A, B, C2).zeros) == 3

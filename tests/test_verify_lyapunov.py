@@ -171,3 +171,16 @@ def test_lemma1_premise_does_not_follow_for_the_paper_law(loop, tmp_path):
         c = theorem2_constants(sc, i)
         gaps.append(Vd[0, i, 0] + c.Omega * V[0, i, 0] - c.chi_v)
     assert max(gaps) > 0
+
+
+def test_states_read_back_from_the_trajectory_csv_columns(loop):
+    """`verify check` reuses trajectory.csv: its state columns must rebuild x exactly."""
+    import types
+
+    from generated import api
+    from verify.pipeline import states_from_frame
+
+    sc, _, cl, grid, X = loop
+    built = types.SimpleNamespace(outputs=cl.outputs, closed_loop=cl)
+    df = api.trajectory_frame(built, sc, types.SimpleNamespace(t=grid, x=X))
+    np.testing.assert_array_equal(states_from_frame(cl, sc, df), X)

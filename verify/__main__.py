@@ -106,11 +106,12 @@ def main(argv: list[str]) -> int:
         bpath = atomic_write_text(run.folder / "bounds.csv", v.table.to_csv(index=False))
         rpath = None
 
-    print(console_table(v.table))
-    print()
-    for chk in v.theorem2:
+    for chk in v.theorem1 + v.theorem2:
         print(chk.where())
     print(v.ablation_summary)
+    print()
+    print(console_table(v.table))
+    print()
     bad = v.failed(strict)
     paper_bad = v.table[(v.table["kind"] == "paper") & ~v.table["holds"]]
     print(f"bounds: {bpath}")

@@ -44,6 +44,11 @@ def _index_at(t: np.ndarray, when: float) -> int:
     return int(np.argmin(np.abs(t - when)))
 
 
+def _ring_order(offsets: np.ndarray) -> np.ndarray:
+    """Agents sorted by the angle of their formation offset: draws the shape as a polygon."""
+    return np.argsort(np.arctan2(offsets[:, 1], offsets[:, 0]))
+
+
 def _formation_axes(ax, df: pd.DataFrame, C0: np.ndarray, k: int, N: int, n: int) -> None:  # noqa: ANN001
     t = df["t"].to_numpy(float)
     y0 = S.leader_output(df, C0)
@@ -58,9 +63,10 @@ def _formation_axes(ax, df: pd.DataFrame, C0: np.ndarray, k: int, N: int, n: int
         ax.plot(*S.block(df, "p", i + 1, n)[: k + 1, :2].T, "-", color=c, lw=0.6, alpha=0.4)
         ax.plot(P[i, 0], P[i, 1], "o", color=c, ms=7, label=f"follower {i + 1} p_{i + 1}")
         ax.plot(slots[i, 0], slots[i, 1], "s", mfc="none", color=c, ms=9)
-    ring = np.vstack([slots, slots[:1]])
+    order = _ring_order(slots - y0[k])
+    ring = np.vstack([slots[order], slots[order[:1]]])
     ax.plot(ring[:, 0], ring[:, 1], "k--", lw=0.8, label="desired shape y0 + b_i")
-    ringp = np.vstack([P, P[:1]])
+    ringp = np.vstack([P[order], P[order[:1]]])
     ax.plot(ringp[:, 0], ringp[:, 1], "-", color="tab:gray", lw=1.0, label="followers' shape")
     ax.set_title(f"t = {t[k]:.2f} s")
     ax.set_xlabel(f"position component 1 ({POS_UNIT})")
@@ -108,7 +114,7 @@ def formation_snapshots(
     h, lab = axes.flat[0].get_legend_handles_labels()
     fig.legend(h, lab, loc="lower center", ncol=4, fontsize=8)
     fig.suptitle("Formation snapshots (Figs. 3-10): circles p_i, squares y0 + b_i")
-    fig.tight_layout(rect=(0, 0.06, 1, 0.97))
+    fig.tight_layout(rect=(0, 0.06 if rows > 1 else 0.14, 1, 0.97))  # room for the legend
     out += _save(fig, folder, "fig03-10_formation_overview")
     return out
 
@@ -203,6 +209,8 @@ def lyapunov_figures(theorem1: list, theorem2: list, folder: Path) -> list[Path]
             ax.plot(chk.t, chk.rhs - chk.lhs, color=COLORS[k % len(COLORS)], lw=1.0, label=label)
         ax.axhline(0.0, color="k", lw=0.8)
         ax.set_yscale("symlog", linthresh=1e-3)
+        lo = min(float(np.min(c.rhs - c.lhs)) for c in checks)
+        ax.set_ylim(bottom=min(-1e-2, 2.0 * lo))
         ax.set_xlabel("time t (s)")
         ax.set_ylabel("margin (units of V per s)")
         ax.set_title(title)
@@ -252,7 +260,8 @@ def animation(
         lead.set_data([y0[k, 0]], [y0[k, 1]])
         fol.set_data(P[k, :, 0], P[k, :, 1])
         slot.set_data(slots[k, :, 0], slots[k, :, 1])
-        ring = np.vstack([slots[k], slots[k, :1]])
+        o = _ring_order(B[k])
+        ring = np.vstack([slots[k, o], slots[k, o[:1]]])
         shape.set_data(ring[:, 0], ring[:, 1])
         title.set_text(f"formation, t = {t[k]:.2f} s")
         return lead, fol, slot, shape, title

@@ -282,6 +282,17 @@ def theorem2_guaranteed(scenario: Scenario) -> tuple[bool, str]:
         return False, "filtered derivatives: their error joins the disturbance (section 6)"
     if scenario.followers and any(fo.g.breakpoints for fo in scenario.followers):
         return False, "time-varying health g_i(t): V2's weight g/(2 gamma) changes in time"
+    if "projection" in o.ghat_law:
+        from symbolic.adaptive import BAND
+
+        hi = 1.0 / scenario.controller.g_min
+        band = BAND * (hi - 1.0)
+        for i, fo in enumerate(scenario.followers):
+            if not 1.0 + band <= 1.0 / fo.g.minimum <= hi - band:
+                return False, (
+                    f"1/g_{i + 1} = {1 / fo.g.minimum:.4g} outside the projection interval "
+                    f"[{1 + band:.4g}, {hi - band:.4g}]: the projection may increase dV2/dt"
+                )
     return True, "exact feedforward (oracle): must hold up to round-off"
 
 

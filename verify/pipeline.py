@@ -116,7 +116,9 @@ def obtain_run(
     root = Path(out_root or OUT_ROOT)
     sc = api.load(path, overrides)
     folder = root / sc.name
-    meta = None if force else _fresh(folder, sc)
+    # the derivative filters' states are not in trajectory.csv: such runs are always re-simulated
+    reusable = not force and sc.options.derivatives != "filtered"
+    meta = _fresh(folder, sc) if reusable else None
     if meta is not None:
         df = pd.read_csv(folder / "trajectory.csv")
         return Run(sc, df, None, meta, folder, simulated=False)

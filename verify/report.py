@@ -85,6 +85,44 @@ def _fmt_list(a: np.ndarray) -> str:
     return "[" + ", ".join(f"{x:.3g}" for x in a) + "]"
 
 
+def findings(v: Verification) -> list[str]:
+    """A few plain sentences with the headline numbers."""
+    tb = v.table
+    out = ["Findings:", ""]
+    if v.theorem2:
+        n_ok = sum(c.ok for c in v.theorem2)
+        out.append(
+            f"- Eq. (38) with exact dV2/dt holds at every output time for {n_ok} of "
+            f"{len(v.theorem2)} followers."
+        )
+    paper_t2 = tb[(tb["kind"] == "paper") & tb["claim"].str.startswith("T2")]
+    if not paper_t2.empty:
+        out.append(
+            f"- Theorem 2's printed bounds (31): observed/bound at most "
+            f"{paper_t2['ratio'].max():.3g} on the tail: they hold here although they do not "
+            "follow as printed (section 9.3), and are loose."
+        )
+    for chk, label in zip(v.theorem1, ("supported", "printed"), strict=False):
+        out.append(
+            f"- dV1/dt <= -delta~ V1 ({label} rate) holds at {100 * chk.fraction:.1f}% of "
+            "output times."
+        )
+    ebar = tb[tb["claim"].str.startswith("T1 |ebar_eta_i| -> 0")]
+    if not ebar.empty:
+        out.append(
+            f"- Observer error on the tail: max |ebar_eta_i| = {ebar['observed'].max():.3g}."
+        )
+    lem = tb[tb["claim"].str.startswith("Lemma 1 reaching")]
+    if not lem.empty:
+        out.append(
+            f"- Lemma 1: V2 enters its level after {lem['observed'].min():.3g}–"
+            f"{lem['observed'].max():.3g} s; the printed t_f bounds are "
+            f"{lem['bound'].min():.3g}–{lem['bound'].max():.3g} s."
+        )
+    out.append("")
+    return out
+
+
 def render_markdown(v: Verification, *, strict: bool = False) -> str:
     """The report as Markdown text."""
     sc, tb, cfg = v.scenario, v.table, v.config
@@ -120,6 +158,7 @@ def render_markdown(v: Verification, *, strict: bool = False) -> str:
         "are measurements.",
         "",
     ]
+    L += findings(v)
     if not fp.empty:
         L.append("The paper's claims that do not hold on these numbers:")
         L.append("")
