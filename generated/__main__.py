@@ -33,7 +33,11 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--variant", help="name suffix of an overridden run (default from the keys)")
     sim.add_argument("--opt", default="-O1", help="compiler optimisation flag (default -O1)")
     sim.add_argument("--compiler", default="gcc")
-    sim.add_argument("--jacobian", choices=("sparse", "gmres"), default="sparse")
+    sim.add_argument("--jacobian", choices=("sparse", "gmres", "jvp"), default="sparse")
+    sim.add_argument(
+        "--fixed-tol", type=float, default=None,
+        help="error-test tolerance of the fixed-step method's bisection safeguard (default 1e-3)",
+    )  # fmt: skip
     sim.add_argument("--linear-solver", default="csparse")
     sim.add_argument("--out", default=None, help="output root (default out/ or $HITL_OUT)")
     sim.add_argument("--no-progress", action="store_true")
@@ -62,6 +66,7 @@ def main(argv: list[str]) -> int:
         codegen=cg,
         out_root=args.out,
         progress=not args.no_progress,
+        fixed_tol=args.fixed_tol,
     )
     m = res.meta
     w = m["wall_seconds"]

@@ -274,13 +274,22 @@ def build_from_closed_loop(
 
 # --------------------------------------------------------------------------- simulate
 def integrator_settings(
-    sc: Scenario, method: str | None = None, codegen: CodegenSettings | None = None
+    sc: Scenario,
+    method: str | None = None,
+    codegen: CodegenSettings | None = None,
+    fixed_tol: float | None = None,
 ) -> IntegratorSettings:
-    """The scenario's integration settings (tolerances, steps) with the codegen linear algebra."""
+    """The scenario's integration settings (tolerances, steps) with the codegen linear algebra.
+
+    ``fixed_tol`` sets the fixed-step method's safeguard tolerance (``fixed_rtol`` and
+    ``fixed_atol``; default 1e-3, see :class:`IntegratorSettings`).
+    """
     ig = sc.integration
     cg = codegen or CodegenSettings()
     lin = cg.integrator_options()
+    extra = {} if fixed_tol is None else {"fixed_rtol": fixed_tol, "fixed_atol": fixed_tol}
     return IntegratorSettings(
+        **extra,
         method=method or ig.method,
         rtol=ig.rtol,
         atol=ig.atol,
@@ -486,6 +495,7 @@ def run(
     out_root: str | Path | None = None,
     progress: bool = True,
     raise_on_failure: bool = True,
+    fixed_tol: float | None = None,
 ) -> RunResult:
     """Load, synthesize if needed, build if needed, integrate, and write trajectory.csv + meta.json.
 
@@ -504,6 +514,8 @@ def run(
         Progress bar on stderr for runs longer than a second.
     raise_on_failure : bool
         After writing an incomplete trajectory, raise :class:`IntegrationError`.
+    fixed_tol : float, optional
+        Safeguard tolerance of the fixed-step method (default 1e-3).
 
     Returns
     -------
@@ -523,7 +535,7 @@ def run(
     root = Path(out_root or OUT_ROOT)
     gains, ginfo = ensure_gains(sc, root)
     built = build(sc, gains, method, codegen)
-    s = integrator_settings(sc, method, codegen)
+    s = integrator_settings(sc, method, codegen, fixed_tol)
     bar = ProgressBar(f"sim {sc.name} ({method})", sc.integration.horizon) if progress else None
     try:
         traj = simulate(built, sc, s, bar)
@@ -553,6 +565,8 @@ def run(
         "atol": s.atol,
         "max_steps": s.max_steps,
         "fixed_step": s.fixed_step if method == "fixed" else None,
+        "fixed_rtol": s.fixed_rtol if method == "fixed" else None,
+        "fixed_atol": s.fixed_atol if method == "fixed" else None,
         "newton_scheme": s.newton_scheme,
         "linear_solver": s.linear_solver,
         "horizon": sc.integration.horizon,

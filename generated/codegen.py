@@ -36,7 +36,7 @@ from symbolic.errors import BuildError
 
 #: default cache root (gitignored); ``HITL_BUILD_DIR`` overrides it
 DEFAULT_BUILD_ROOT = Path(__file__).resolve().parent / "build"
-JACOBIAN_STRATEGIES = ("sparse", "gmres")
+JACOBIAN_STRATEGIES = ("sparse", "gmres", "jvp")
 SOURCE_NAME = "model.c"
 LIBRARY_NAME = "model.so"
 MANIFEST_NAME = "manifest.json"
@@ -60,7 +60,9 @@ class CodegenSettings:
         with a direct sparse linear solver; ``"gmres"``: additionally
         ``fwd1_<name>`` (``f.forward(1)``, Jacobian-vector products) and the
         integrators' iterative ``newton_scheme = "gmres"`` (no factorisation, for
-        large N).
+        large N); ``"jvp"``: only ``fwd1_<name>`` and GMRES (no Jacobian generated at
+        all: code size flat in N with ``expand=False``; the fixed-step method then
+        builds its Jacobian from forward sweeps).
     linear_solver : str
         Direct sparse linear solver of CVODES/IDAS and of the fixed-step method
         (a CasADi Linsol plugin: ``csparse``, ``qr``, ``ldl``, ``lapacklu`` (dense)).
@@ -110,7 +112,7 @@ class CodegenSettings:
 
     def integrator_options(self) -> dict[str, Any]:
         """The CVODES/IDAS options that follow from the Jacobian strategy."""
-        if self.jacobian == "gmres":
+        if self.jacobian in ("gmres", "jvp"):
             return {"newton_scheme": "gmres"}
         return {"newton_scheme": "direct", "linear_solver": self.linear_solver}
 
@@ -227,8 +229,8 @@ def generate_source(
         Named functions to put in the library.
     settings : CodegenSettings
     with_derivatives : sequence of str
-        Names whose ``jac_<name>`` (``f.jacobian()``) and, with ``jacobian="gmres"``,
-        ``fwd1_<name>`` (``f.forward(1)``) are generated as well.
+        Names whose ``jac_<name>`` (``f.jacobian()``, strategies sparse and gmres) and
+        ``fwd1_<name>`` (``f.forward(1)``, strategies gmres and jvp) are generated as well.
 
     Returns
     -------
@@ -245,10 +247,11 @@ def generate_source(
         cg.add(f)
         names.append(f.name())
         if f.name() in with_derivatives:
-            jac = f.jacobian()  # named jac_<name>, as the integrator plugins look it up
-            cg.add(jac)
-            names.append(jac.name())
-            if settings.jacobian == "gmres":
+            if settings.jacobian in ("sparse", "gmres"):
+                jac = f.jacobian()  # named jac_<name>, as the integrator plugins look it up
+                cg.add(jac)
+                names.append(jac.name())
+            if settings.jacobian in ("gmres", "jvp"):
                 fwd = f.forward(1)
                 cg.add(fwd)
                 names.append(fwd.name())

@@ -14,19 +14,26 @@ failing chunk is replayed one output interval at a time, so the returned
 :class:`Trajectory` keeps every output time reached; it is marked incomplete and
 carries the method, the time reached and the solver's reason.
 
-The fixed-step method is the L-stable two-stage Rosenbrock (W-)method ROS2 of
-Verwer, Spee, Blom and Hundsdorfer (SIAM J. Sci. Comput. 20, 1999), with the
-generated sparse Jacobian and a sparse LU (CasADi Linsol):
+The fixed-step method is the L-stable two-stage Rosenbrock method ROS2 of Verwer,
+Spee, Blom and Hundsdorfer (SIAM J. Sci. Comput. 20, 1999), applied to the
+autonomised system (t' = 1), with the generated sparse Jacobian and a sparse LU
+(CasADi Linsol), γ = 1 + 1/√2:
 
-    (I − γhJ) k1 = f(t_n, x_n)
-    (I − γhJ) k2 = f(t_n + h, x_n + h k1) − 2 k1
-    x_{n+1} = x_n + (3/2) h k1 + (1/2) h k2,      γ = 1 + 1/√2.
+    (I − γhJ) k1 = f(t_n, x_n) + γh ∂f/∂t
+    (I − γhJ) k2 = f(t_n + h, x_n + h k1) − 2 k1 − γh ∂f/∂t
+    x_{n+1} = x_n + (3/2) h k1 + (1/2) h k2.
 
 It is linearly implicit: no Newton iteration that could fail to converge on the
-exact sign function, and order 2 for any Jacobian approximation (a W-method),
-so the Jacobian of the discontinuous terms (zero almost everywhere) does no harm.
+exact sign function, and order 2 for any Jacobian approximation (a W-method), so
+the Jacobian of the discontinuous terms (zero almost everywhere) does no harm.
 Explicit RK4 at dt = 1e-4 diverges on the paper's closed loop (its adaptive laws
-are stiff); this scheme is unconditionally stable on the linear part.
+are stiff); this scheme is unconditionally stable on the linear part. The step is
+fixed (``fixed_step``, equal steps per output interval); a loose safeguard
+recomputes an output interval as two halves (recursively) where the embedded
+first-order error estimate exceeds ``fixed_rtol``/``fixed_atol`` or a NaN
+appears: at the paper's t = 0 the Jacobian has eigenvalues with real parts
+±1e5 and entries ~1e10 (ĝ's rate), which no fixed step of 1e-3 or 1e-4 resolves.
+The exact sign's chattering (a jump Δ in f gives an estimate hΔ/2) passes it.
 """
 
 from __future__ import annotations
@@ -93,6 +100,9 @@ class IntegratorSettings:
     newton_scheme, linear_solver : str
         Linear algebra of CVODES/IDAS (see ``CodegenSettings.integrator_options``);
         ``linear_solver`` is also the sparse solver of the fixed-step method.
+    extra_options : tuple of (str, value) pairs
+        Merged last into the CVODES/IDAS options (e.g. ``("use_preconditioner", False)``,
+        ``("max_krylov", 50)`` for GMRES at large N).
     """
 
     method: str = "cvodes"
@@ -106,6 +116,7 @@ class IntegratorSettings:
     fixed_max_halvings: int = 30
     newton_scheme: str = "direct"
     linear_solver: str = "csparse"
+    extra_options: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -256,6 +267,7 @@ class _Sundials:
         else:
             opts["suppress_algebraic"] = True  # without it IDAS stalls at t ≈ 0.008 s
             opts["calc_ic"] = True
+        opts.update(dict(s.extra_options))
         self.opts = opts
 
     def __call__(self, t0: float, x: np.ndarray, z: np.ndarray, times: list[float], acc: dict):
@@ -301,9 +313,7 @@ class _Ros2:
         # embedded first-order solution x + h k1: scaled local error estimate (max norm)
         est = ca.fabs(0.5 * h * (k1 + k2)) / (s.fixed_atol + s.fixed_rtol * ca.fabs(x))
         emax = ca.MX.sym("emax")
-        self.step = ca.Function(
-            "ros2_step", [x, emax, t, h, t2], [xn, ca.fmax(emax, ca.mmax(est))]
-        )
+        self.step = ca.Function("ros2_step", [x, emax, t, h, t2], [xn, ca.fmax(emax, ca.mmax(est))])
         self._runs: dict[int, ca.Function] = {}
 
     def _run(self, K: int) -> ca.Function:

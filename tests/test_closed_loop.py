@@ -37,17 +37,18 @@ def _fmt(v) -> str:
 
 
 def write_scenario(tmp_path, adjacency, pinning, *, models=None, options=None, controller=None,
-                   observer=None, initial=None, faults=None, u0=None, name="t") -> object:  # fmt: skip
+                   observer=None, initial=None, faults=None, u0=None, name="t", leader=None) -> object:  # fmt: skip
     """A two-link (or mixed-model) scenario on an arbitrary graph, written as TOML and loaded."""
     A = np.asarray(adjacency, dtype=float)
     N = A.shape[0]
     rng = np.random.default_rng(N)
-    lines = [f'name = "{name}"', "[leader]", "A0 = [[0.0, 1.0], [0.0, 0.0]]", "B0 = [[0.0], [1.0]]",
-             "C0 = [[1.0, 1.0], [2.0, 2.0]]", "eta0 = [0.3, -0.2]", "alpha = 2.0"]  # fmt: skip
-    if u0 is None:
-        lines.append('u0 = ["2*cos(t)"]')
-    else:
+    lines = [f'name = "{name}"', "[leader]"] + (leader or [
+        "A0 = [[0.0, 1.0], [0.0, 0.0]]", "B0 = [[0.0], [1.0]]", "C0 = [[1.0, 1.0], [2.0, 2.0]]",
+        "eta0 = [0.3, -0.2]", "alpha = 2.0"])  # fmt: skip
+    if u0 is not None:
         lines.append(u0)
+    elif leader is None:
+        lines.append('u0 = ["2*cos(t)"]')
     lines += ["[graph]", f"adjacency = {_fmt(A)}", f"pinning = {_fmt(np.asarray(pinning))}"]
     for i in range(N):
         model = (models or ["two_link"])[i % len(models or ["two_link"])]
@@ -162,6 +163,22 @@ def test_mixed_models_and_csv_trace_match_reference(tmp_path):
     ref = Reference(sc, g)
     assert_rhs_matches(cl, ref, rng, k=4)
     assert cl.breakpoints == (3.0, 5.0)
+
+
+def test_three_state_leader_with_two_inputs_matches_reference(tmp_path):
+    """m = 3, p = 2: the vector norm ‖Qê‖ in v_i (not |·|) and the rotation from η̇_i's first two entries."""
+    leader = ["A0 = [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]]",
+              "B0 = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]", "C0 = [[1.0, 1.0, 0.0], [0.0, 1.0, 1.0]]",
+              "eta0 = [0.3, -0.2, 0.1]", 'u0 = ["cos(t)", "0.5*sin(2*t)"]', "alpha = 2.0"]  # fmt: skip
+    rng = np.random.default_rng(33)
+    A, pin = random_graph(5, rng, signed=True)
+    for deriv in ("oracle", "filtered"):
+        sc = write_scenario(tmp_path, A, pin, leader=leader, name=f"m3{deriv}",
+                            observer={"Q": "synthesize"}, options={"derivatives": deriv},
+                            initial={"eta": [0.1, -0.1, 0.2], "mu": [0.05, 0.02, -0.03]})  # fmt: skip
+        assert (sc.m, sc.p, sc.n) == (3, 2, 2)
+        g = hand_gains(sc)
+        assert_rhs_matches(build_closed_loop(sc, g), Reference(sc, g), rng, k=3)
 
 
 # ----------------------------------------------------------------------------- structure

@@ -171,3 +171,28 @@ def test_renamed_keeps_values_and_names():
     np.testing.assert_allclose(
         np.array(h(0.7, xs, [], [], [])[0]), np.array(f(0.7, xs, [], [], [])[0]), rtol=1e-15
     )
+
+
+def test_jvp_strategy_has_forward_derivative_only(settings):
+    from dataclasses import replace
+
+    s2 = replace(settings, jacobian="jvp")
+    lib = build_library([dyn("toy")], s2, ["toy"])
+    assert "fwd1_toy" in lib.names and "jac_toy" not in lib.names
+    assert s2.integrator_options() == {"newton_scheme": "gmres"}
+    f = dyn("toy")
+    fwd_sym, fwd_ext = f.forward(1), lib.function("fwd1_toy")
+    rng = np.random.default_rng(1)
+    args = [
+        0.4,
+        rng.normal(size=3),
+        [],
+        [],
+        [],
+        *[np.zeros(k.shape) for k in f.call([0.4, np.zeros(3), [], [], []])],
+    ]
+    seeds = [1.0, rng.normal(size=3), [], [], []]
+    a = fwd_sym(*args, *seeds)
+    b = fwd_ext(*args, *seeds)
+    for u, v in zip(a, b, strict=True):
+        np.testing.assert_allclose(np.array(v), np.array(u), rtol=1e-12, atol=1e-12)

@@ -248,3 +248,38 @@ def test_progress_is_reported(linear):
         progress=seen.append,
     )
     assert seen == pytest.approx([1.0, 2.0, 3.0])
+
+
+def test_gmres_with_extra_options_matches_direct(cg, linear):
+    """The matrix-free Newton–Krylov path (extra SUNDIALS options) solves the same problem."""
+    from dataclasses import replace
+
+    t, x = ca.SX.sym("t"), ca.SX.sym("x", 3)
+    f = ode("lin_jvp", t, x, ca.mtimes(ca.DM(A_LIN), x))
+    lib = build_library([f], replace(cg, jacobian="jvp"), ["lin_jvp"])
+    tg = output_grid(1.0, 0.1)
+    x0 = np.array([1.0, 0.0, 1.0])
+    s = IntegratorSettings(rtol=1e-10, atol=1e-12, newton_scheme="gmres",
+                           extra_options=(("use_preconditioner", False), ("max_krylov", 3)))  # fmt: skip
+    tr = integrate(lib.function("lin_jvp"), x0, tg, s)
+    assert tr.complete
+    assert np.abs(tr.x - exact_linear(tg, x0)).max() < 1e-7
+
+
+def test_idas_failure_keeps_trajectory(cg):
+    """x' = z, 0 = z − x² (blow-up at t = 1) in the DAE form."""
+    t, x, z = ca.SX.sym("t"), ca.SX.sym("x", 1), ca.SX.sym("z", 1)
+    f = ca.Function("blowdae", [t, x, z, E, E], [z, z - x**2, E, E], ca.dyn_in(), ca.dyn_out())
+    dae = compiled(f, cg)
+    tr = integrate(
+        dae,
+        np.ones(1),
+        output_grid(2.0, 0.05),
+        IntegratorSettings(method="idas", max_steps=2000),
+        z0=np.ones(1),
+    )
+    assert not tr.complete and "idas failed after t =" in tr.message
+    assert 0.8 <= tr.t_reached < 1.0 and np.all(np.isfinite(tr.x)) and np.all(np.isfinite(tr.z))
+    ok = tr.t < 0.9
+    np.testing.assert_allclose(tr.x[ok, 0], 1 / (1 - tr.t[ok]), rtol=1e-3)
+    np.testing.assert_allclose(tr.z[ok, 0], tr.x[ok, 0] ** 2, rtol=1e-3)

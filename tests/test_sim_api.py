@@ -283,5 +283,10 @@ def test_method_needs_matching_build(base, env):
     with pytest.raises(IntegrationError, match="DAE"):
         api.simulate(built, sc, api.integrator_settings(sc, "idas"))
     with pytest.raises(BuildError):
-        api.build(sc, gains, "cvodes", CodegenSettings(compiler="no-such-cc-xyz", build_root=env["cg"].build_root))
+        api.build(
+            sc,
+            gains,
+            "cvodes",
+            CodegenSettings(compiler="no-such-cc-xyz", build_root=env["cg"].build_root),
+        )
     assert r1.trajectory.complete

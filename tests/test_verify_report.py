@@ -101,3 +101,15 @@ def test_cli_missing_scenario_is_one_line_exit_2(capsys):
     err = capsys.readouterr().err
     assert code == 2
     assert err.count("\n") == 1 and "does not exist" in err
+
+
+def test_cli_bad_override_is_one_line_exit_2(capsys):
+    code = run_cli(main, ["check", str(PAPER), "--set", "no-equals-sign"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "KEY=VALUE" in err
+
+
+def test_cli_bad_delta_is_one_line_exit_2(capsys):
+    code = run_cli(main, ["check", str(PAPER), "--delta", "1.5"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "lemma1_delta" in err

@@ -46,6 +46,9 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--no-lyapunov", action="store_true",
                        help="skip the exact dV/dt checks (table from the trajectory only)")  # fmt: skip
         p.add_argument("--no-gif", action="store_true", help="skip the animation")
+        p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                       help="override a scenario field (e.g. options.feedforward=false); "
+                       "the run goes to out/<name>-<variant>/")  # fmt: skip
     b = sub.add_parser("bench", help="performance benchmark (generated.bench)")
     b.add_argument("rest", nargs=argparse.REMAINDER)
     return ap
@@ -73,17 +76,19 @@ def main(argv: list[str]) -> int:
     strict = _strict(args.strict)
     cfg = VerifyConfig(lemma1_delta=args.delta, tail_fraction=args.tail)
     root = Path(args.out) if args.out else OUT_ROOT
+    from generated import api
+
     force = args.cmd == "demo"
-    run = P.obtain_run(args.scenario, out_root=root, force=force)
+    overrides = dict(api.parse_override(x) for x in args.set) or None
+    abl_over = {**(overrides or {}), **P.ABLATION}
+    run = P.obtain_run(args.scenario, overrides, out_root=root, force=force)
     ablation = None
     if args.cmd in ("report", "demo"):
-        ablation = P.obtain_run(args.scenario, P.ABLATION, out_root=root, force=force)
+        ablation = P.obtain_run(args.scenario, abl_over, out_root=root, force=force)
     else:  # check: use the ablation run only if it is already there and fresh
-        from generated import api
-
-        asc = api.load(args.scenario, P.ABLATION)
+        asc = api.load(args.scenario, abl_over)
         if P._fresh(root / asc.name, asc) is not None:
-            ablation = P.obtain_run(args.scenario, P.ABLATION, out_root=root)
+            ablation = P.obtain_run(args.scenario, abl_over, out_root=root)
     v = P.verify_run(run, ablation=ablation, config=cfg, out_root=root,
                      lyapunov=not args.no_lyapunov)  # fmt: skip
 
