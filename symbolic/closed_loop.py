@@ -308,7 +308,7 @@ def agent_function(sc: Scenario, og: ObserverGains, model_index: int) -> ca.Func
     outs = [sdot, sdot_dae, res, et, etdot, chi, Psi, u, b, bdot, bddot, ehat, v, etadot,
             etaddot, eta3dot, qdot, V2]  # fmt: skip
     return ca.Function(
-        f"agent_{fo.model}",
+        f"agent_{fo.model}_{model_index}",
         [s, psi, dpsi, ddpsi, gf, a, prm],
         outs,
         ["s", "psi", "dpsi", "ddpsi", "gf", "a", "prm"],

@@ -70,6 +70,8 @@ def write_scenario(tmp_path, adjacency, pinning, *, models=None, options=None, c
     ini = {"eta": [0.1, -0.1], "mu": [0.05, 0.02], "ghat": 1.2} | (initial or {})
     lines.append("[initial]")
     lines += [f"{k} = {_fmt(v)}" for k, v in ini.items()]
+    if opts["sign"] == "exact":  # the loader allows the exact sign only with fixed steps
+        lines += ["[integration]", 'method = "fixed"']
     path = tmp_path / f"{name}_{N}.toml"
     path.write_text("\n".join(lines) + "\n")
     return load_scenario(path)
@@ -131,7 +133,7 @@ CASES = [
     dict(N=3, signed=False, options={}),
     dict(N=6, signed=True, options={"derivatives": "filtered", "sign": "sat"}),
     dict(N=8, signed=False, options={"feedforward": False, "ghat_law": "paper"}),
-    dict(N=7, signed=True, options={"ablation": True, "ghat_law": "projection"}),
+    dict(N=7, signed=True, options={"ablation": True, "ghat_law": "projection", "sign": "exact"}),
     dict(N=20, signed=True, options={"ghat_law": "sigma"}),
     dict(N=20, signed=False, options={"derivatives": "filtered", "filter_bandwidth": 30.0}),
 ]
@@ -441,7 +443,7 @@ def test_paper_scenario_first_second(tmp_path):
     cl = build_closed_loop(sc, hand_gains(sc))
     times = np.linspace(0.05, 1.0, 20)
     # The exact solution rides the band's outer edge while |χᵀΨ| ~ 1e8 (t < 0.1 s); the numerical
-    # one overshoots it by the step error: 1.7e-4 at rtol 1e-6, 4e-7 at rtol 1e-9 (measured,
+    # one overshoots it by the step error: up to 3.2e-3 at rtol 1e-6, 4e-7 at rtol 1e-9 (measured,
     # docs/closed-loop.md). Checked at rtol 1e-9 with a 1e-6 allowance for that step error.
     X = _trajectory(cl, times, rtol=1e-9)
     P = [cl.layout.unpack(x) for x in X]

@@ -164,6 +164,7 @@ def test_second_run_reuses_library_and_gives_identical_file(base):
     assert r2.csv_path.read_bytes() == text1
 
 
+@pytest.mark.slow
 def test_codegen_is_deterministic_across_processes(base, env):
     """Another interpreter (another hash seed) generates the same C: same cache key."""
     code = (

@@ -198,6 +198,7 @@ class Reference:
 
     # -- pieces
     def mcg(self, p: np.ndarray, q: np.ndarray):
+        """M (N×n×n), C (N×n×n), G (N×n) of every follower at (p, q) (N×n each)."""
         N, n = self.N, self.n
         M, C, G = np.zeros((N, n, n)), np.zeros((N, n, n)), np.zeros((N, n))
         for idx, ev in self.groups:
@@ -205,6 +206,7 @@ class Reference:
         return M, C, G
 
     def leader(self, t: float, eta0: np.ndarray):
+        """u0, u̇0, η̇0 (eq. (3)) and η̈0 at time t."""
         L = self.sc.leader
         if L.u0 is not None:
             u, ud = np.array([_dual(e.node, t) for e in L.u0]).T
@@ -222,11 +224,13 @@ class Reference:
         return u, ud, e0d, e0dd
 
     def faults(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """True health g_i(t) (N) and bias f_i(t) (N×n); only the plant uses them."""
         g = np.array([float(fo.g.expr.numpy(t)) for fo in self.sc.followers])
         f = np.array([[float(e.numpy(t)) for e in fo.f] for fo in self.sc.followers])
         return g, f
 
     def split(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """Named views of the flat state (agent blocks as N×k arrays)."""
         m, n = self.m, self.n
         x = np.asarray(x, dtype=float)
         S = x[m:].reshape(self.N, self.na)
@@ -291,6 +295,7 @@ class Reference:
         return rot(c, s, k), rot(cd, sd, kd), rot(cdd, sdd, kdd)
 
     def sgn(self, x):
+        """The sign function of ``options.sign`` (exact, sat or tanh with width ε)."""
         mode, w = self.opts.sign, self.opts.sign_width
         if mode == "exact":
             return np.sign(x)
