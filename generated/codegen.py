@@ -313,6 +313,20 @@ def compile_source(source: str, settings: CodegenSettings, folder: Path) -> floa
     return time.perf_counter() - t0
 
 
+def _install(tmp: Path, folder: Path) -> None:
+    """Rename a complete build into place; a concurrent identical build may have won."""
+    for _ in range(2):
+        try:
+            os.rename(tmp, folder)
+            return
+        except OSError:
+            if (folder / MANIFEST_NAME).is_file():  # complete entry from another process
+                shutil.rmtree(tmp, ignore_errors=True)
+                return
+            shutil.rmtree(folder, ignore_errors=True)  # incomplete entry: never trusted
+    os.rename(tmp, folder)
+
+
 def build_library(
     functions: Sequence[ca.Function],
     settings: CodegenSettings | None = None,
@@ -352,8 +366,6 @@ def build_library(
             len(source),
         )  # fmt: skip
     root.mkdir(parents=True, exist_ok=True)
-    if folder.exists():  # an incomplete entry (no manifest) is never trusted
-        shutil.rmtree(folder, ignore_errors=True)
     tmp = Path(tempfile.mkdtemp(dir=root, prefix=f".tmp-{key[:12]}-"))
     try:
         try:
@@ -376,12 +388,7 @@ def build_library(
         }
         # the manifest is written last: its presence marks a complete entry
         (tmp / MANIFEST_NAME).write_text(json.dumps(info, indent=2, sort_keys=True, default=str))
-        try:
-            os.rename(tmp, folder)
-        except OSError:
-            if not (folder / MANIFEST_NAME).is_file():  # not a concurrent identical build
-                raise
-            shutil.rmtree(tmp, ignore_errors=True)
+        _install(tmp, folder)
     finally:
         if tmp.exists() and tmp != folder:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -5,24 +5,20 @@ Bad input is one line on stderr and exit status 2 (:func:`symbolic.errors.run_cl
 
 from __future__ import annotations
 
-import argparse
 import sys
 
-from symbolic.errors import ToolkitError, run_cli
-
-
-class _UsageError(ToolkitError):
-    """Wrong command line."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line, exit 2, like every other bad input
-        raise _UsageError(f"{self.prog}: {message} (see --help)")
+from symbolic.errors import CliParser, run_cli
 
 
 def main(argv: list[str]) -> int:
-    """Entry point; returns the exit status."""
-    parser = _Parser(prog="python -m symbolic", description=__doc__.splitlines()[0])
+    """Entry point; returns the exit status.
+
+    Parameters
+    ----------
+    argv : list of str
+        Command-line arguments without the program name.
+    """
+    parser = CliParser(prog="python -m symbolic", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("summary", help="validate a scenario file and print its summary")
     p.add_argument("scenario", help="path to a scenario TOML file")

@@ -26,7 +26,17 @@ BAND = 0.01  # projection band, fraction of the interval [1, 1/g_min]
 
 
 def projection(ghat: ca.SX, rate: ca.SX, lo: float, hi: float) -> ca.SX:
-    """Lipschitz projection of ``rate`` keeping ``ghat`` in ``[lo, hi]`` (see module docstring)."""
+    """Lipschitz projection of ``rate`` keeping ``ghat`` in ``[lo, hi]`` (see module docstring).
+
+    Parameters
+    ----------
+    ghat : casadi.SX
+        Current ĝ_i.
+    rate : casadi.SX
+        Unprojected rate of ĝ_i.
+    lo, hi : float
+        Interval kept, here [1, 1/g_min]; ``hi - lo <= 1e-12`` freezes ĝ (rate 0).
+    """
     if hi - lo <= 1e-12:
         return 0 * rate  # interval collapsed (g_min = 1): ĝ is frozen
     delta = BAND * (hi - lo)
@@ -40,6 +50,15 @@ def adaptive_function(n: int, law: str, g_min: float) -> ca.Function:
 
     Inputs ``chi, Psi, thetahat, ghat, k2, gamma, sigma, ghat_ref``; outputs
     ``thetahat_dot`` and ``ghat_dot``.
+
+    Parameters
+    ----------
+    n : int
+        Number of coordinates of the follower.
+    law : {"paper", "sigma", "projection", "sigma+projection"}
+        The ĝ law (``options.ghat_law``).
+    g_min : float
+        Designer's worst health; the projection keeps ĝ in [1, 1/g_min].
     """
     if law not in GHAT_LAWS:
         raise ValueError(f"unknown ghat law {law!r}")

@@ -72,13 +72,29 @@ class StateLayout:
     agent_size: int = 0
 
     def get(self, x: np.ndarray, name: str, i: int | None = None) -> np.ndarray:
-        """The part of ``x`` (1-D, or 2-D with time along axis 0) named ``name`` (agent ``i``)."""
+        """The part of ``x`` (1-D, or 2-D with time along axis 0) named ``name`` (agent ``i``).
+
+        Parameters
+        ----------
+        x : ndarray
+            State, 1-D (nx,) or 2-D (time, nx).
+        name : str
+            ``"eta0"`` or an agent-state name (``"mu"``, ``"eta"``, ``"phi"``, ``"p"``, ...).
+        i : int, optional
+            0-based agent; required for agent states, omitted for ``"eta0"``.
+        """
         x = np.asarray(x)
         sl = self.slices[name] if i is None else self.slices[(name, i)]
         return x[..., sl]
 
     def unpack(self, x: np.ndarray) -> dict[str, np.ndarray]:
-        """``{"eta0": (m,), "mu": (N, m), "p": (N, n), ...}`` from a flat state ``x``."""
+        """``{"eta0": (m,), "mu": (N, m), "p": (N, n), ...}`` from a flat state ``x``.
+
+        Parameters
+        ----------
+        x : ndarray
+            Flat state of length nx.
+        """
         x = np.asarray(x, dtype=float).reshape(-1)
         blocks = x[self.m :].reshape(self.N, self.agent_size)
         out = {"eta0": x[: self.m].copy()}
@@ -87,7 +103,13 @@ class StateLayout:
         return out
 
     def pack(self, parts: dict[str, np.ndarray]) -> np.ndarray:
-        """Inverse of :meth:`unpack`; every name of the layout must be present."""
+        """Inverse of :meth:`unpack`; every name of the layout must be present.
+
+        Parameters
+        ----------
+        parts : dict
+            ``"eta0"`` (m,) and one (N, size) array per agent-state name.
+        """
         x = np.zeros(self.nx)
         x[: self.m] = np.asarray(parts["eta0"], dtype=float).reshape(-1)
         blocks = np.zeros((self.N, self.agent_size))
@@ -138,11 +160,8 @@ class ClosedLoop:
 
 
 # ----------------------------------------------------------------------------- helpers
-def _agent_offsets(m: int, n: int, filtered: bool) -> tuple[dict[str, slice], int]:
-    sizes = [("mu", m), ("eta", m), ("phi", 1), ("p", n), ("q", n), ("thetahat", n), ("ghat", 1)]
-    if filtered:
-        nw, nz = filter_sizes(m, n)
-        sizes += [("w", nw), ("z", nz)]
+def _offsets(sizes: list[tuple[str, int]]) -> tuple[dict[str, slice], int]:
+    """Consecutive slices for named blocks of the given sizes, and the total size."""
     off, k = {}, 0
     for name, s in sizes:
         off[name] = slice(k, k + s)
@@ -150,8 +169,28 @@ def _agent_offsets(m: int, n: int, filtered: bool) -> tuple[dict[str, slice], in
     return off, k
 
 
+def _agent_offsets(m: int, n: int, filtered: bool) -> tuple[dict[str, slice], int]:
+    sizes = [("mu", m), ("eta", m), ("phi", 1), ("p", n), ("q", n), ("thetahat", n), ("ghat", 1)]
+    if filtered:
+        nw, nz = filter_sizes(m, n)
+        sizes += [("w", nw), ("z", nz)]
+    return _offsets(sizes)
+
+
 def make_layout(m: int, n: int, N: int, filtered: bool) -> StateLayout:
-    """The state layout for leader size m, n coordinates, N agents."""
+    """The state layout for leader size m, n coordinates, N agents.
+
+    Parameters
+    ----------
+    m : int
+        Leader state size.
+    n : int
+        Coordinates per follower.
+    N : int
+        Number of followers.
+    filtered : bool
+        Add the derivative-filter states ``w`` and ``z`` to each agent block.
+    """
     off, na = _agent_offsets(m, n, filtered)
     slices: dict[Any, slice] = {"eta0": slice(0, m)}
     for i in range(N):
@@ -173,11 +212,7 @@ def _param_layout(n: int) -> tuple[dict[str, slice], int]:
         ("b0", n),
         ("d", n),
     ]
-    off, k = {}, 0
-    for name, s in sizes:
-        off[name] = slice(k, k + s)
-        k += s
-    return off, k
+    return _offsets(sizes)
 
 
 def _param_matrix(sc: Scenario) -> np.ndarray:
@@ -241,6 +276,16 @@ def agent_function(sc: Scenario, og: ObserverGains, model_index: int) -> ca.Func
     its first two time derivatives), ``gf`` = (g_i(t), f_i(t)), ``a`` (acceleration,
     used only by the DAE residual) and ``prm`` (per-agent numbers).
     Outputs ``sdot`` (ODE), ``sdot_dae`` (q̇ = a), ``res`` (DAE residual) and diagnostics.
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario (options, controller settings, follower models).
+    og : ObserverGains
+        Observer gains shared by all agents.
+    model_index : int
+        0-based follower whose model (and parameters) the Function uses; followers
+        with the same model and parameters share it.
     """
     fo = sc.followers[model_index]
     model = build_model(fo.model, fo.params)
@@ -504,6 +549,15 @@ def initial_state(sc: Scenario, lay: StateLayout, outputs: ca.Function) -> np.nd
     ``given`` uses Table 2's p_i(0); ``formation`` puts p_i(0) at C0 η_i(0) + b_i(0)
     (q_i(0) stays as given). Filter states start at the current signal with zero
     derivatives: w1 = η̇_i(0), z1 = b_i(0).
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario (initial values and ``initial.start``).
+    lay : StateLayout
+        Layout of x.
+    outputs : casadi.Function
+        The closed loop's ``(t, x) -> outputs`` Function, used for η̇_i(0) and b_i(0).
     """
     m, n, N = sc.m, sc.n, sc.N
     parts = {

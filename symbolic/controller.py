@@ -17,6 +17,15 @@ def sign_function(x: ca.SX, mode: str, width: float) -> ca.SX:
 
     The boundary layers (paper-spec 9.5) make the right-hand side Lipschitz for
     variable-step integrators; ``exact`` is the paper's sign function.
+
+    Parameters
+    ----------
+    x : casadi.SX
+        Argument.
+    mode : {"exact", "sat", "tanh"}
+        ``options.sign``.
+    width : float
+        Boundary-layer width ε (unused for ``exact``).
     """
     if mode == "exact":
         return ca.sign(x)
@@ -36,6 +45,19 @@ def controller_function(
     (Lambda and k1 are the diagonals of Λ_i and K_i). Outputs ``et``, ``etdot``,
     ``chi``, ``Psi`` and ``u``. With feedforward off the caller passes ḃ = b̈ = 0,
     which is eq. (29) exactly as printed.
+
+    Parameters
+    ----------
+    model : ELModel
+        The follower's Euler–Lagrange model (M, C, G).
+    C0 : ndarray
+        n×m leader output matrix.
+    sign : {"exact", "sat", "tanh"}
+        Sign function in Ψ_i (:func:`sign_function`).
+    sign_width : float
+        Its boundary-layer width ε.
+    ablation : bool
+        True for eq. (42), u = Ψ (no ĝ factor).
     """
     n = model.n
     m = C0.shape[1]

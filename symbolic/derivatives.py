@@ -64,7 +64,15 @@ def flow_jets(flow: ca.Function) -> tuple[ca.Function, ca.Function]:
 
 
 def filter_sizes(m: int, n: int) -> tuple[int, int]:
-    """Numbers of filter states: (2m for η̇_i, 3n for b_i)."""
+    """Numbers of filter states: (2m for η̇_i, 3n for b_i).
+
+    Parameters
+    ----------
+    m : int
+        Leader state size.
+    n : int
+        Coordinates per follower.
+    """
     return 2 * m, 3 * n
 
 
@@ -77,6 +85,15 @@ def filter_function(m: int, n: int, omega: float) -> ca.Function:
     ω³/(s+ω)³ to z1, so ``z2``, ``z3`` estimate ḃ_i, b̈_i. The estimates lag
     the true derivatives by about 3/ω (2/ω for w2): exact for a derivative that
     is constant, a lag error of (3/ω)·(next derivative) otherwise.
+
+    Parameters
+    ----------
+    m : int
+        Leader state size (η̇_i has m entries).
+    n : int
+        Coordinates per follower (b_i has n entries).
+    omega : float
+        Filter bandwidth ω in rad/s (``options.filter_bandwidth``).
 
     Returns
     -------

@@ -7,8 +7,10 @@ line to stderr and exit with status 2 (see :func:`run_cli`).
 
 from __future__ import annotations
 
+import argparse
 import sys
 from collections.abc import Callable
+from typing import NoReturn
 
 
 class ToolkitError(Exception):
@@ -59,12 +61,48 @@ class IntegrationError(ToolkitError):
     """An integrator gave up; carries the time reached."""
 
     def __init__(self, message: str, t_reached: float | None = None) -> None:
+        """Record the message and the time the integrator reached.
+
+        Parameters
+        ----------
+        message : str
+            One-line description.
+        t_reached : float, optional
+            Last time the integrator reached, if known.
+        """
         self.t_reached = t_reached
         super().__init__(message)
 
 
+class UsageError(ToolkitError):
+    """A wrong command line."""
+
+
+class CliParser(argparse.ArgumentParser):
+    """``argparse`` parser whose errors raise :class:`UsageError` (one line, exit 2 via
+    :func:`run_cli`) instead of printing the usage and exiting; sub-parsers inherit it."""
+
+    def error(self, message: str) -> NoReturn:
+        """Raise the one-line :class:`UsageError`.
+
+        Parameters
+        ----------
+        message : str
+            argparse's description of what is wrong.
+        """
+        raise UsageError(f"{self.prog}: {message} (see --help)")
+
+
 def run_cli(main: Callable[[list[str]], int], argv: list[str] | None = None) -> int:
-    """Run a command-line ``main`` so that toolkit errors become one line and exit 2."""
+    """Run a command-line ``main`` so that toolkit errors become one line and exit 2.
+
+    Parameters
+    ----------
+    main : callable
+        ``main(argv) -> int``, the command's entry point.
+    argv : list of str, optional
+        Arguments; default ``sys.argv[1:]``.
+    """
     try:
         return main(sys.argv[1:] if argv is None else argv)
     except ToolkitError as exc:

@@ -55,11 +55,23 @@ class Expr:
     node: tuple
 
     def casadi(self, t: Any) -> Any:
-        """Evaluate with CasADi operations on a symbol or number ``t``."""
+        """Evaluate with CasADi operations on a symbol or number ``t``.
+
+        Parameters
+        ----------
+        t : casadi.SX or float
+            Time.
+        """
         return _eval(self.node, t, _CASADI)
 
     def numpy(self, t: Any) -> Any:
-        """Evaluate with numpy on a float or array ``t`` (overflow gives inf/nan, no warning)."""
+        """Evaluate with numpy on a float or array ``t`` (overflow gives inf/nan, no warning).
+
+        Parameters
+        ----------
+        t : float or ndarray
+            Time(s).
+        """
         with np.errstate(all="ignore"):
             return _eval(self.node, np.asarray(t, dtype=float), _NUMPY)
 

@@ -19,7 +19,17 @@ import casadi as ca
 
 
 def formation_offset(etadot: ca.SX, b0: ca.SX, eps: float) -> ca.SX:
-    """b_i as a CasADi expression of the agent's own η̇_i and b_i0 (see module docstring)."""
+    """b_i as a CasADi expression of the agent's own η̇_i and b_i0 (see module docstring).
+
+    Parameters
+    ----------
+    etadot : casadi.SX
+        The agent's estimate η̇_i (m entries; the first two set the angle).
+    b0 : casadi.SX
+        The formation vector b_i0 (n entries).
+    eps : float
+        Fading threshold ε (``options.tau_threshold``).
+    """
     n = b0.numel()
     if n != 2 or etadot.numel() < 2:
         return b0
@@ -33,6 +43,15 @@ def formation_offset(etadot: ca.SX, b0: ca.SX, eps: float) -> ca.SX:
 
 def formation_function(m: int, n: int, eps: float) -> ca.Function:
     """b_i and its first two time derivatives from η̇_i, η̈_i, η⃛_i (chain rule by forward AD).
+
+    Parameters
+    ----------
+    m : int
+        Leader state size.
+    n : int
+        Coordinates per follower.
+    eps : float
+        Fading threshold ε (``options.tau_threshold``).
 
     Returns
     -------

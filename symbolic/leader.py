@@ -14,6 +14,13 @@ def operator_input(leader: Leader, t: ca.SX) -> ca.SX:
     From the scenario's expressions, or from its CSV trace through a linear
     ``ca.interpolant``; outside the trace's time range the end values are held
     (t is clamped), so the command stays bounded.
+
+    Parameters
+    ----------
+    leader : Leader
+        The scenario's leader (u0 expressions or CSV trace).
+    t : casadi.SX
+        Time symbol.
     """
     if leader.u0 is not None:
         return ca.vertcat(
@@ -36,6 +43,11 @@ def leader_function(leader: Leader) -> ca.Function:
     Outputs ``eta0dot`` (eq. (3)), ``eta0ddot`` (= A0 η̇0 + B0 u̇0, needed by the
     oracle derivatives), ``y0``, ``y0dot``, ``y0ddot``, ``u0`` and ``u0dot``
     (u̇0 = ∂u0/∂t by AD; piecewise constant for a CSV trace).
+
+    Parameters
+    ----------
+    leader : Leader
+        The scenario's leader (A0, B0, C0 and u0).
     """
     A0, B0, C0 = (ca.DM(leader.A0), ca.DM(leader.B0), ca.DM(leader.C0))
     t = ca.SX.sym("t")

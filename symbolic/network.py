@@ -1,4 +1,4 @@
-"""The follower network: graph matrices, the gauge of signed graphs, and agent-wise assembly.
+"""The follower network: graph matrices and agent-wise assembly.
 
 The coupling between agents is linear (paper-spec section 1): with the columns
 ``E = [η_1 … η_N]`` (m×N), the neighbourhood error is
@@ -11,7 +11,6 @@ or, for comparison, called once per agent (``assembly="flat"``).
 
 from __future__ import annotations
 
-from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -21,6 +20,7 @@ import numpy as np
 
 from symbolic.errors import ScenarioError
 from symbolic.scenario import Graph
+from synthesis.assumptions import find_gauge, pinned_laplacian
 
 ASSEMBLIES = ("map", "flat")
 
@@ -73,55 +73,6 @@ def _sparse(a: np.ndarray) -> ca.DM:
     return ca.DM(sp, a[rows, cols].tolist() if rows.size else [])
 
 
-def gauge(adjacency: np.ndarray) -> np.ndarray:
-    """Gauge ``h`` of a structurally balanced signed graph (Remark 2, paper-spec section 1).
-
-    Two-colours the undirected support of the graph so that ``a_ij h_i h_j ≥ 0``
-    on every edge; component roots get ``h = +1``.
-
-    Parameters
-    ----------
-    adjacency : ndarray
-        N×N signed adjacency.
-
-    Returns
-    -------
-    ndarray
-        N signs ±1 (all +1 for a cooperative graph).
-
-    Raises
-    ------
-    ScenarioError
-        If the graph is not structurally balanced.
-    """
-    A = np.asarray(adjacency, dtype=float)
-    N = A.shape[0]
-    h = np.zeros(N)
-    for root in range(N):
-        if h[root] != 0:
-            continue
-        h[root] = 1.0
-        queue = deque([root])
-        while queue:
-            i = queue.popleft()
-            for j in np.nonzero((A[i] != 0) | (A[:, i] != 0))[0]:
-                for w in (A[i, j], A[j, i]):
-                    if w == 0:
-                        continue
-                    want = h[i] * np.sign(w)
-                    if h[j] == 0:
-                        h[j] = want
-                        queue.append(j)
-                    elif h[j] != want:
-                        raise ScenarioError(
-                            "graph",
-                            "adjacency",
-                            f"signed graph is not structurally balanced (edge {i + 1}-{j + 1})",
-                            "two groups with positive edges inside and negative edges between",
-                        )
-    return h
-
-
 def graph_matrices(graph: Graph, h: np.ndarray | None = None) -> GraphMatrices:
     """Build :class:`GraphMatrices` from a scenario graph.
 
@@ -130,17 +81,24 @@ def graph_matrices(graph: Graph, h: np.ndarray | None = None) -> GraphMatrices:
     graph : Graph
         The scenario's graph.
     h : ndarray, optional
-        Gauge signs (e.g. ``gains.h``); computed with :func:`gauge` when omitted.
+        Gauge signs (e.g. ``gains.h``); computed with
+        :func:`synthesis.assumptions.find_gauge` (the gains' convention) when omitted.
+
+    Raises
+    ------
+    ScenarioError
+        If ``h`` is not N signs ±1.
+    SynthesisError
+        If ``h`` is omitted and the signed graph is not structurally balanced.
     """
     A = np.asarray(graph.adjacency, dtype=float)
     a0 = np.asarray(graph.pinning, dtype=float)
     if h is None:
-        h = gauge(A)
+        h = find_gauge(A, a0)
     h = np.asarray(h, dtype=float).reshape(-1)
     if h.shape != a0.shape or not np.all(np.abs(h) == 1.0):
         raise ScenarioError("gains", "H", f"gauge has entries {h}", f"{len(a0)} signs +1/-1")
-    D = np.diag(np.abs(A).sum(axis=1))
-    L_B = D - A + np.diag(a0)
+    L_B = pinned_laplacian(A, a0).toarray()
     return GraphMatrices(A=A, a0=a0, h=h, L_B=L_B, l_bar=np.diag(L_B).copy())
 
 
@@ -150,6 +108,17 @@ def coupling(C0: np.ndarray | None, X: Any, leader: Any, gm: GraphMatrices) -> A
     With ``X = E`` (columns η_i) and ``leader = y0`` this is ψ (the measured
     neighbourhood output of eq. (6)); with ``C0 = None`` and ``leader = η0`` it
     is the (uncomputable) neighbourhood state error e_η.
+
+    Parameters
+    ----------
+    C0 : ndarray or None
+        n×m output matrix, or None for the state (no output map).
+    X : casadi.SX or MX
+        Agent columns, m×N (η_i).
+    leader : casadi.SX or MX
+        The leader's column, y0 (with ``C0``) or η0 (without).
+    gm : GraphMatrices
+        Graph matrices (L_B and a0 ∘ h).
     """
     CX = X if C0 is None else ca.mtimes(ca.DM(C0), X)
     return ca.mtimes(CX, gm.LBt_sparse()) - ca.mtimes(leader, gm.a0h_sparse())

@@ -45,6 +45,11 @@ def safe_norm(y: ca.SX) -> ca.SX:
 
     For one component this is |y| (derivative sign y); otherwise the square
     root is taken only where ‖y‖² > 0, so forward-mode AD never forms 0/0.
+
+    Parameters
+    ----------
+    y : casadi.SX
+        Vector.
     """
     if y.numel() == 1:
         return ca.fabs(y)
@@ -57,6 +62,11 @@ def observer_function(g: ObserverGains) -> ca.Function:
 
     Inputs ``so`` (μ_i, η_i, φ_i), ``psi`` (n) and ``prm`` = (α1i + ᾱ1i, φ_min).
     Outputs ``sodot`` (μ̇_i, η̇_i, φ̇_i), ``v`` (p) and ``ehat`` (m).
+
+    Parameters
+    ----------
+    g : ObserverGains
+        Gains of eq. (9) and the UIO matrices.
     """
     m = g.A0.shape[0]
     n = g.uio.Gamma.shape[1]

@@ -13,7 +13,6 @@ import csv
 import hashlib
 import math
 import tomllib
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +23,7 @@ from scipy.optimize import minimize_scalar
 
 from symbolic.errors import ExpressionError, ScenarioError
 from symbolic.expressions import Expr, parse_expression
+from synthesis.assumptions import unreachable_followers
 
 SYNTH = "synthesize"
 SIGN_MODES = ("exact", "sat", "tanh")
@@ -59,6 +59,11 @@ class Leader:
 
         Expressions are evaluated directly; a CSV trace is interpolated linearly
         (the same meaning the closed loop gives it).
+
+        Parameters
+        ----------
+        t : float or ndarray
+            Time(s).
         """
         ts = np.asarray(t, dtype=float)
         if self.u0 is not None:
@@ -543,7 +548,7 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     if np.any(np.diag(Aadj) != 0):
         raise ctx.err("graph.adjacency", "has a non-zero diagonal (self-loop)", "a_ii = 0")
     pin = ctx.vector(G["pinning"], "graph.pinning", N, nonneg=True)
-    unreachable = _unreachable(Aadj, pin)
+    unreachable = unreachable_followers(Aadj, pin)
     if unreachable:
         names = ", ".join(str(i + 1) for i in unreachable)
         raise ctx.err("graph", f"follower(s) {names} cannot be reached from the leader (Assumption 1)",
@@ -1002,17 +1007,3 @@ def _is_float(s: str) -> bool:
     except (ValueError, OverflowError):
         return False
     return True
-
-
-def _unreachable(A: np.ndarray, pin: np.ndarray) -> list[int]:
-    """Followers not reachable from the leader along edges j -> i with a_ij != 0."""
-    N = len(pin)
-    seen = [bool(pin[i] > 0) for i in range(N)]
-    queue = deque(i for i in range(N) if seen[i])
-    while queue:
-        j = queue.popleft()
-        for i in range(N):
-            if not seen[i] and A[i, j] != 0:
-                seen[i] = True
-                queue.append(i)
-    return [i for i in range(N) if not seen[i]]

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from synthesis.assumptions import uio_matrices as gamma_phi
+
 
 @dataclass(frozen=True)
 class UIOMatrices:
@@ -45,16 +47,20 @@ def uio_matrices(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray, Theta: np.ndarr
         m×n observer gain.
     """
     A0, B0, C0, Theta = (np.asarray(a, dtype=float) for a in (A0, B0, C0, Theta))
-    CB = C0 @ B0
-    Gamma = B0 @ np.linalg.solve(CB.T @ CB, CB.T)  # eq. (7), sign reconstructed
-    Phi = np.eye(A0.shape[0]) - Gamma @ C0  # eq. (7): Φ B0 = 0
+    Gamma, Phi = gamma_phi(B0, C0)  # eq. (7), signs reconstructed: Φ B0 = 0
     F = Phi @ A0 - Theta @ C0  # eq. (8)
     K = Theta @ (np.eye(C0.shape[0]) - C0 @ Gamma) + Phi @ A0 @ Gamma  # eq. (7)
     return UIOMatrices(Gamma=Gamma, Phi=Phi, F=F, K=K)
 
 
 def uio_function(mats: UIOMatrices) -> ca.Function:
-    """One agent's UIO as a Function ``(mu, psi) -> (mudot, ehat)``, eq. (7)."""
+    """One agent's UIO as a Function ``(mu, psi) -> (mudot, ehat)``, eq. (7).
+
+    Parameters
+    ----------
+    mats : UIOMatrices
+        Γ, F = ΦA0 − ΘC0 and K from :func:`uio_matrices`.
+    """
     m, n = mats.Gamma.shape
     mu = ca.SX.sym("mu", m)
     psi = ca.SX.sym("psi", n)

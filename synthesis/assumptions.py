@@ -145,7 +145,15 @@ def _cycle(parent: np.ndarray, depth: np.ndarray, u: int, v: int) -> list[int]:
 
 
 def unreachable_followers(adjacency: np.ndarray | sp.spmatrix, pinning: np.ndarray) -> list[int]:
-    """0-based followers with no directed path from the leader (edges j -> i when a_ij != 0)."""
+    """0-based followers with no directed path from the leader (edges j -> i when a_ij != 0).
+
+    Parameters
+    ----------
+    adjacency : ndarray or sparse matrix
+        N×N, ``adjacency[i, j] = a_ij`` (follower i hears follower j).
+    pinning : ndarray
+        N pinning gains a_i0; followers with a_i0 > 0 hear the leader.
+    """
     A = sp.csr_matrix(adjacency, dtype=float)
     At = sp.csr_matrix(A.T)  # row j lists the i that hear j
     N = A.shape[0]
@@ -203,11 +211,29 @@ def check_network(adjacency: np.ndarray | sp.spmatrix, pinning: np.ndarray) -> N
         )
     signed = bool((A.data < 0).any())
     h = find_gauge(A, b) if signed else np.ones(N)
-    D = sp.diags(np.asarray(abs(A).sum(axis=1)).ravel())
-    L = D - A  # L = D − A with D = diag(Σ_j |a_ij|)
     Hs = sp.diags(h)
-    L_bar = sp.csr_matrix(Hs @ (L + sp.diags(b)) @ Hs)  # L̄ = H(L + B)H (Lemma 3, Remark 2)
+    L_bar = sp.csr_matrix(Hs @ pinned_laplacian(A, b) @ Hs)  # L̄ = H(L + B)H (Lemma 3, Remark 2)
     return NetworkCheck(h=h, L_bar=L_bar, signed=signed)
+
+
+def pinned_laplacian(adjacency: np.ndarray | sp.spmatrix, pinning: np.ndarray) -> sp.csr_matrix:
+    """``L + B`` of a signed graph: ``L = D − A`` with ``D = diag(Σ_j |a_ij|)``, ``B = diag(a_i0)``.
+
+    Parameters
+    ----------
+    adjacency : ndarray or sparse matrix
+        N×N signed adjacency, ``adjacency[i, j] = a_ij``.
+    pinning : ndarray
+        N pinning gains a_i0.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix
+        N×N, ``L + B`` (not gauge-transformed; L̄ = H(L + B)H).
+    """
+    A = sp.csr_matrix(adjacency, dtype=float)
+    D = sp.diags(np.asarray(abs(A).sum(axis=1)).ravel())
+    return sp.csr_matrix(D - A + sp.diags(np.asarray(pinning, dtype=float)))
 
 
 def m_matrix_violation(L_bar: np.ndarray | sp.spmatrix) -> str | None:
@@ -215,6 +241,11 @@ def m_matrix_violation(L_bar: np.ndarray | sp.spmatrix) -> str | None:
 
     Checks the sign pattern (off-diagonal <= 0) and semipositivity: a Z-matrix is a
     nonsingular M-matrix iff (L̄ᵀ)⁻¹1 exists and is positive (solved sparse).
+
+    Parameters
+    ----------
+    L_bar : ndarray or sparse matrix
+        N×N matrix to test, L̄ = H(L + B)H.
     """
     Ls = sp.csc_matrix(L_bar, dtype=float)
     off = Ls - sp.diags(Ls.diagonal())
@@ -263,7 +294,19 @@ def _rank(M: np.ndarray) -> int:
 
 
 def system_pencil(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray, s: complex) -> np.ndarray:
-    """Rosenbrock system matrix [[sI − A0, B0], [C0, 0]] at s (Assumption 2)."""
+    """Rosenbrock system matrix [[sI − A0, B0], [C0, 0]] at s (Assumption 2).
+
+    Parameters
+    ----------
+    A0 : ndarray
+        m×m leader state matrix.
+    B0 : ndarray
+        m×p leader input matrix.
+    C0 : ndarray
+        n×m leader output matrix.
+    s : complex
+        Point at which the pencil is evaluated.
+    """
     m, p, n = A0.shape[0], B0.shape[1], C0.shape[0]
     top = np.hstack([s * np.eye(m) - A0, B0])
     bot = np.hstack([C0, np.zeros((n, p))])
@@ -336,6 +379,15 @@ def uio_zeros(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> np.ndarray:
     the invariant zeros are exactly the eigenvalues of ΦA0 on its unobservable subspace
     (the modes no Θ can move in ΦA0 − ΘC0): the largest ΦA0-invariant subspace in
     ker C0, found by orthogonal (SVD) steps rather than powers of ΦA0.
+
+    Parameters
+    ----------
+    A0 : ndarray
+        m×m leader state matrix.
+    B0 : ndarray
+        m×p leader input matrix.
+    C0 : ndarray
+        n×m leader output matrix.
     """
     _, Phi = uio_matrices(B0, C0)
     M = Phi @ A0
@@ -371,6 +423,15 @@ def control_zeros(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> np.ndarray 
     Without slycot python-control handles square systems only. For tall systems every
     invariant zero is a zero of each square sub-system (C0 restricted to p rows), so
     the common zeros of those sub-systems (at most 20 of them) bound the answer.
+
+    Parameters
+    ----------
+    A0 : ndarray
+        m×m leader state matrix.
+    B0 : ndarray
+        m×p leader input matrix.
+    C0 : ndarray
+        n×m leader output matrix.
     """
     try:
         import control
@@ -412,6 +473,15 @@ def control_zeros(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> np.ndarray 
 
 def check_leader(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> LeaderCheck:
     """Assumption 2: rank conditions and invariant zeros (paper-spec section 2).
+
+    Parameters
+    ----------
+    A0 : ndarray
+        m×m leader state matrix.
+    B0 : ndarray
+        m×p leader input matrix.
+    C0 : ndarray
+        n×m leader output matrix.
 
     Raises
     ------
@@ -482,6 +552,13 @@ def uio_matrices(B0: np.ndarray, C0: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
     Γ = B0[(C0B0)ᵀ(C0B0)]⁻¹(C0B0)ᵀ and Φ = I − ΓC0, so that ΦB0 = 0 (eq. (7), signs
     reconstructed: the paper prints Γ with the opposite sign and Φ = I + ΓC0).
+
+    Parameters
+    ----------
+    B0 : ndarray
+        m×p leader input matrix.
+    C0 : ndarray
+        n×m leader output matrix; C0B0 must have full column rank p.
     """
     CB = C0 @ B0
     Gamma = B0 @ np.linalg.solve(CB.T @ CB, CB.T)  # eq. (7)

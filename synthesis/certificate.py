@@ -28,6 +28,7 @@ from synthesis.assumptions import (
 )
 from synthesis.gains import Gains
 from synthesis.lemma3 import DENSE_EIG_MAX_N, w_of
+from synthesis.lmi import lmi15_matrix, lmi16_matrix
 
 DEFAULT_TOL = 1e-8  # when the gains file records no solver tolerance
 SYM_RTOL = 1e-9  # relative asymmetry accepted in T, Ω, Z, L̄ᵀZ + ZL̄
@@ -39,12 +40,17 @@ def k1_bound(g: Gains) -> float:
 
     With Ē = (ZH) ⊗ (T⁻¹X), X = ΦA0 − ΘC0 − A0, the product is Z ⊗ Ω⁻¹XᵀT⁻¹X
     (H Z H = Z for diagonal H, Z), so λ_max = max(z) · λ_max(XᵀT⁻¹X, Ω): per-agent sized.
+
+    Parameters
+    ----------
+    g : Gains
+        Gains supplying A0, C0, Φ, Θ, T, Ω, Z, δ̂1 and δ̂2.
     """
     X = g.Phi @ g.A0 - g.Theta @ g.C0 - g.A0
     K = X.T @ np.linalg.solve(g.T, X)
     K = 0.5 * (K + K.T)
     lam = float(sla.eigh(K, 0.5 * (g.Omega + g.Omega.T), eigvals_only=True)[-1])
-    return float(np.diag(g.Z).max()) * lam / (g.delta1_hat * g.delta2_hat)
+    return float(np.diag(g.Z).max()) * lam / (g.delta1_hat * g.delta2_hat)  # k1 of V1, eq. (17)
 
 
 def _check(
@@ -235,7 +241,7 @@ def certify(g: Gains, *, tol: float | None = None, given: tuple[str, ...] = ()) 
     # --- LMI (15) and Q = B0ᵀT⁻¹
     lam_T = float(np.linalg.eigvalsh(T)[0])
     checks.append(_check("T_pd", lam_T, lam_T - tol, lam_T > tol, "λ_min(T) > tol", Qg))
-    F15 = A0 @ T + T @ A0.T - g.lambda_bar1 * (B0 @ B0.T) + g.delta1 * T  # eq. (15)
+    F15 = lmi15_matrix(A0, B0, T, g.lambda_bar1, g.delta1)  # eq. (15)
     lam15 = float(np.linalg.eigvalsh(0.5 * (F15 + F15.T))[-1])
     checks.append(
         _check(
@@ -260,7 +266,7 @@ def certify(g: Gains, *, tol: float | None = None, given: tuple[str, ...] = ()) 
     lam_O = float(np.linalg.eigvalsh(Om)[0])
     checks.append(_check("Omega_pd", lam_O, lam_O - tol, lam_O > tol, "λ_min(Ω) > tol", Tg))
     Ac = g.Phi @ A0 - g.Theta @ C0
-    F16 = Ac.T @ Om + Om @ Ac + g.delta2 * Om  # eq. (16)
+    F16 = lmi16_matrix(g.Phi, A0, C0, g.Theta, Om, g.delta2)  # eq. (16)
     lam16 = float(np.linalg.eigvalsh(0.5 * (F16 + F16.T))[-1])
     checks.append(
         _check(

@@ -7,26 +7,16 @@ environment has the effect of ``--strict``.
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 from pathlib import Path
 
 from symbolic.artifacts import out_dir
-from symbolic.errors import SynthesisError, ToolkitError
+from symbolic.errors import CliParser, SynthesisError
 from symbolic.scenario import load_scenario
 from synthesis.api import synthesize
 from synthesis.certificate import certify
 from synthesis.gains import load_gains, save_gains
-
-
-class _UsageError(ToolkitError):
-    """Bad command line."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line, exit 2, no usage dump
-        raise _UsageError(f"synthesis: {message} (usage: python -m synthesis synth|certify PATH)")
 
 
 def _strict(flag: bool) -> bool:
@@ -34,8 +24,14 @@ def _strict(flag: bool) -> bool:
 
 
 def main(argv: list[str]) -> int:
-    """Entry point; returns the exit status (errors are raised as ToolkitError)."""
-    ap = _Parser(prog="python -m synthesis", description=__doc__)
+    """Entry point; returns the exit status (errors are raised as ToolkitError).
+
+    Parameters
+    ----------
+    argv : list of str
+        Command-line arguments without the program name.
+    """
+    ap = CliParser(prog="python -m synthesis", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
     s = sub.add_parser("synth", help="synthesise and certify gains for a scenario")
     s.add_argument("scenario")

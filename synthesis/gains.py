@@ -97,6 +97,11 @@ class Gains:
         return np.diag(self.Z).copy()
 
     def to_json_dict(self) -> dict[str, Any]:
+        """The fields as JSON-ready values (arrays as nested lists).
+
+        Also copies the solver name, its version and the scenario hash from ``info`` to
+        the top level.
+        """
         out: dict[str, Any] = {}
         for f in fields(self):
             v = getattr(self, f.name)
@@ -108,7 +113,15 @@ class Gains:
 
 
 def gains_from_dict(d: dict[str, Any], *, source: str = "gains") -> Gains:
-    """Rebuild :class:`Gains` from a JSON dictionary (no re-synthesis)."""
+    """Rebuild :class:`Gains` from a JSON dictionary (no re-synthesis).
+
+    Parameters
+    ----------
+    d : dict
+        Parsed ``gains.json``; ``certificate`` and ``info`` may be absent.
+    source : str
+        Name of the source used in error messages (the file path).
+    """
     kw: dict[str, Any] = {}
     for f in fields(Gains):
         if f.name not in d:
@@ -128,7 +141,15 @@ def gains_from_dict(d: dict[str, Any], *, source: str = "gains") -> Gains:
 
 
 def save_gains(gains: Gains, path: str | Path) -> Path:
-    """Write ``gains.json`` atomically (temporary file in the same folder, then rename)."""
+    """Write ``gains.json`` atomically (temporary file in the same folder, then rename).
+
+    Parameters
+    ----------
+    gains : Gains
+        The gains to write.
+    path : str or Path
+        Destination file; its folder is created.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     text = json.dumps(gains.to_json_dict(), indent=2, sort_keys=True)
@@ -137,7 +158,13 @@ def save_gains(gains: Gains, path: str | Path) -> Path:
 
 
 def load_gains(path: str | Path) -> Gains:
-    """Read a ``gains.json`` written by :func:`save_gains`."""
+    """Read a ``gains.json`` written by :func:`save_gains`.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``gains.json`` file.
+    """
     path = Path(path)
     try:
         d = json.loads(path.read_text())

@@ -89,7 +89,13 @@ def w_of(L_bar: np.ndarray | sp.spmatrix, z: np.ndarray) -> float:
 
 
 def lemma3_z(L_bar: np.ndarray | sp.spmatrix) -> np.ndarray:
-    """z = (L̄ᵀ)⁻¹1_N (Lemma 3), by a sparse LU solve."""
+    """z = (L̄ᵀ)⁻¹1_N (Lemma 3), by a sparse LU solve.
+
+    Parameters
+    ----------
+    L_bar : ndarray or sparse matrix
+        N×N, L̄ = H(L + B)H, a nonsingular M-matrix.
+    """
     Ls = sp.csc_matrix(L_bar, dtype=float)
     z = np.atleast_1d(spla.spsolve(sp.csc_matrix(Ls.T), np.ones(Ls.shape[0])))
     if not np.all(np.isfinite(z)) or z.min() <= 0:
@@ -109,6 +115,17 @@ def best_diagonal_z(
     starts at [w_lo, 2·min Re λ(L̄)] (an upper bound for any Z ≻ 0: the inequality
     makes −L̄ + (w/2)I Lyapunov stable). The returned w is recomputed from the
     returned z with numpy, never taken from the solver.
+
+    Parameters
+    ----------
+    L_bar : ndarray
+        N×N, L̄ = H(L + B)H.
+    w_lo : float
+        Lower end of the bisection bracket (a w known to be feasible, or 0).
+    cond : float
+        Bound on Z: I ⪯ Z ⪯ cond·I.
+    solver_order : tuple of str
+        cvxpy solvers tried in turn at each step.
 
     Returns
     -------
@@ -162,6 +179,11 @@ def best_diagonal_z(
 
 def lemma3(L_bar: np.ndarray | sp.spmatrix) -> Lemma3Result:
     """Both Z variants of Lemma 3 and the better one (paper-spec section 1).
+
+    Parameters
+    ----------
+    L_bar : ndarray or sparse matrix
+        N×N, L̄ = H(L + B)H, a nonsingular M-matrix (Assumption 1).
 
     Raises
     ------

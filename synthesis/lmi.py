@@ -58,6 +58,13 @@ def solve(prob: cp.Problem, *, solvers: tuple[str, ...] | None = None) -> SolveI
     """Solve with Clarabel, falling back to SCS when Clarabel fails or is inaccurate.
 
     Returns the info of the last solver tried; the caller inspects ``status``.
+
+    Parameters
+    ----------
+    prob : cvxpy.Problem
+        The problem; solved in place.
+    solvers : tuple of str, optional
+        Solvers to try in order; default :data:`SOLVERS`.
     """
     last = SolveInfo("none", "", "not solved", 0.0, LMI_EPS)
     for name in SOLVERS if solvers is None else solvers:
@@ -158,19 +165,53 @@ def _centre_polish(
 def lmi15_matrix(
     A0: np.ndarray, B0: np.ndarray, T: np.ndarray, lb1: float, d1: float
 ) -> np.ndarray:
-    """A0T + TA0ᵀ − λ̄1B0B0ᵀ + δ1T (eq. (15), transposes as the proof needs them)."""
+    """A0T + TA0ᵀ − λ̄1B0B0ᵀ + δ1T (eq. (15), transposes as the proof needs them).
+
+    Parameters
+    ----------
+    A0 : ndarray
+        m×m leader state matrix.
+    B0 : ndarray
+        m×p leader input matrix.
+    T : ndarray or cvxpy expression
+        m×m symmetric matrix.
+    lb1 : float
+        λ̄1.
+    d1 : float
+        δ1.
+    """
     return A0 @ T + T @ A0.T - lb1 * (B0 @ B0.T) + d1 * T  # eq. (15)
 
 
 def lmi15_matrix_P(
     A0: np.ndarray, Q: np.ndarray, P: np.ndarray, lb1: float, d1: float
 ) -> np.ndarray:
-    """PA0 + A0ᵀP − λ̄1QᵀQ + δ1P = T⁻¹(eq. (15))T⁻¹ with P = T⁻¹ and Q = B0ᵀP."""
+    """PA0 + A0ᵀP − λ̄1QᵀQ + δ1P = T⁻¹(eq. (15))T⁻¹ with P = T⁻¹ and Q = B0ᵀP.
+
+    Parameters
+    ----------
+    A0 : ndarray
+        m×m leader state matrix.
+    Q : ndarray
+        p×m, Q = B0ᵀP.
+    P : ndarray or cvxpy expression
+        m×m symmetric, P = T⁻¹.
+    lb1 : float or cvxpy expression
+        λ̄1.
+    d1 : float
+        δ1.
+    """
     return P @ A0 + A0.T @ P - lb1 * (Q.T @ Q) + d1 * P  # eq. (15), congruent form
 
 
 @dataclass(frozen=True)
 class TResult:
+    """Result of LMI (15): T, Q = B0ᵀT⁻¹ and the solver's report.
+
+    ``feasible`` says whether (15) holds; ``cap`` is the bound T ⪯ cap·I (or P ⪯ cap·I)
+    added when the feasible set is unbounded, else None.
+    """
+
     T: np.ndarray
     Q: np.ndarray
     info: SolveInfo
@@ -233,6 +274,17 @@ def synth_T(A0: np.ndarray, B0: np.ndarray, lb1: float, d1: float) -> TResult:
     integrator); otherwise T ⪯ cap·I with cap = :data:`CAP_FACTOR`·λ̄1‖B0‖²/δ1 (the
     scale A0T + δ1T ~ λ̄1B0B0ᵀ suggests) is added and recorded.
 
+    Parameters
+    ----------
+    A0 : ndarray
+        m×m leader state matrix.
+    B0 : ndarray
+        m×p leader input matrix.
+    lb1 : float
+        λ̄1 > 0.
+    d1 : float
+        δ1 > 0.
+
     Raises
     ------
     SynthesisError
@@ -241,7 +293,7 @@ def synth_T(A0: np.ndarray, B0: np.ndarray, lb1: float, d1: float) -> TResult:
     m = A0.shape[0]
     T = cp.Variable((m, m), symmetric=True)
     S = cp.Variable((m, m), symmetric=True)  # S = −F, symmetric by construction
-    F = A0 @ T + T @ A0.T - lb1 * (B0 @ B0.T) + d1 * T  # eq. (15)
+    F = lmi15_matrix(A0, B0, T, lb1, d1)  # eq. (15)
     cons = [S == -F, T >> LMI_EPS * np.eye(m), S >> LMI_EPS * np.eye(m)]
     cap = CAP_FACTOR * lb1 * float(np.linalg.norm(B0, 2)) ** 2 / d1
     used_cap = cap if _unbounded(A0, d1) else None
@@ -272,12 +324,25 @@ def check_given_Q(A0: np.ndarray, B0: np.ndarray, Q: np.ndarray, lb1: float, d1:
     cap = :data:`CAP_FACTOR`·λ̄1‖Q‖²/δ1, if the set is unbounded); otherwise the P that
     minimises λ_max of the LMI matrix (``feasible=False``), so downstream code still
     has a T to work with while the violation is reported.
+
+    Parameters
+    ----------
+    A0 : ndarray
+        m×m leader state matrix.
+    B0 : ndarray
+        m×p leader input matrix.
+    Q : ndarray
+        p×m gain given by the scenario.
+    lb1 : float
+        λ̄1 > 0.
+    d1 : float
+        δ1 > 0.
     """
     m = A0.shape[0]
     Q = np.asarray(Q, dtype=float)
     P = cp.Variable((m, m), symmetric=True)
     S = cp.Variable((m, m), symmetric=True)
-    G = P @ A0 + A0.T @ P - lb1 * (Q.T @ Q) + d1 * P  # eq. (15) in P = T⁻¹
+    G = lmi15_matrix_P(A0, Q, P, lb1, d1)  # eq. (15) in P = T⁻¹
     base = [S == -G, B0.T @ P == Q, P >> LMI_EPS * np.eye(m)]
     cap = CAP_FACTOR * max(1.0, lb1 * float(np.linalg.norm(Q, 2)) ** 2 / d1)
     used_cap = cap if _unbounded(A0, d1, B0) else None
@@ -317,11 +382,22 @@ def min_lambda_bar1_for_Q(A0: np.ndarray, B0: np.ndarray, Q: np.ndarray, d1: flo
 
     The feasible set grows with λ̄1 (−λ̄1QᵀQ ⪯ 0), so the feasible range is
     (min, ∞). Returns ``inf`` when no λ̄1 works.
+
+    Parameters
+    ----------
+    A0 : ndarray
+        m×m leader state matrix.
+    B0 : ndarray
+        m×p leader input matrix.
+    Q : ndarray
+        p×m gain given by the scenario.
+    d1 : float
+        δ1 > 0.
     """
     m = A0.shape[0]
     P = cp.Variable((m, m), symmetric=True)
     lb = cp.Variable()
-    G = P @ A0 + A0.T @ P - lb * (Q.T @ Q) + d1 * P  # eq. (15) in P = T⁻¹
+    G = lmi15_matrix_P(A0, Q, P, lb, d1)  # eq. (15) in P = T⁻¹
     cons = [B0.T @ P == Q, P >> LMI_EPS * np.eye(m), -G >> LMI_EPS * np.eye(m), lb >= 0]
     prob = cp.Problem(cp.Minimize(lb), cons)
     info = solve(prob)
@@ -334,13 +410,31 @@ def min_lambda_bar1_for_Q(A0: np.ndarray, B0: np.ndarray, Q: np.ndarray, d1: flo
 def lmi16_matrix(
     Phi: np.ndarray, A0: np.ndarray, C0: np.ndarray, Theta: np.ndarray, Omega: np.ndarray, d2: float
 ) -> np.ndarray:
-    """(ΦA0 − ΘC0)ᵀΩ + Ω(ΦA0 − ΘC0) + δ2Ω (eq. (16))."""
+    """(ΦA0 − ΘC0)ᵀΩ + Ω(ΦA0 − ΘC0) + δ2Ω (eq. (16)).
+
+    Parameters
+    ----------
+    Phi : ndarray
+        m×m, Φ = I − ΓC0.
+    A0 : ndarray
+        m×m leader state matrix.
+    C0 : ndarray
+        n×m leader output matrix.
+    Theta : ndarray
+        m×n observer gain Θ.
+    Omega : ndarray or cvxpy expression
+        m×m symmetric Ω.
+    d2 : float
+        δ2.
+    """
     Ac = Phi @ A0 - Theta @ C0
     return Ac.T @ Omega + Omega @ Ac + d2 * Omega  # eq. (16)
 
 
 @dataclass(frozen=True)
 class OmegaResult:
+    """Result of LMI (16): Ω, Θ, the solver's report and whether (16) holds (``feasible``)."""
+
     Omega: np.ndarray
     Theta: np.ndarray
     info: SolveInfo
@@ -355,6 +449,19 @@ def synth_Omega_Theta(
     The minimum-norm objective lands on the boundary of the feasible set, so the LMI
     is solved at δ2(1 + rel_margin) and certified at δ2: the certified eigenvalue
     margin is then about rel_margin·δ2·λ_min(Ω) instead of ε.
+
+    Parameters
+    ----------
+    Phi : ndarray
+        m×m, Φ = I − ΓC0.
+    A0 : ndarray
+        m×m leader state matrix.
+    C0 : ndarray
+        n×m leader output matrix.
+    d2 : float
+        δ2 > 0, the rate certified.
+    rel_margin : float
+        The LMI is solved at δ2(1 + rel_margin).
 
     Raises
     ------
@@ -386,12 +493,25 @@ def synth_Omega_Theta(
 def check_given_Theta(
     Phi: np.ndarray, A0: np.ndarray, C0: np.ndarray, Theta: np.ndarray, d2: float
 ) -> OmegaResult:
-    """With Θ given, LMI (16) is an LMI in Ω alone: find Ω (Ω ⪰ I, min ‖Ω‖_F) or report it fails."""
+    """With Θ given, LMI (16) is an LMI in Ω alone: find Ω (Ω ⪰ I, min ‖Ω‖_F) or report it fails.
+
+    Parameters
+    ----------
+    Phi : ndarray
+        m×m, Φ = I − ΓC0.
+    A0 : ndarray
+        m×m leader state matrix.
+    C0 : ndarray
+        n×m leader output matrix.
+    Theta : ndarray
+        m×n observer gain given by the scenario.
+    d2 : float
+        δ2 > 0.
+    """
     m = A0.shape[0]
     Om = cp.Variable((m, m), symmetric=True)
     S = cp.Variable((m, m), symmetric=True)
-    Ac = Phi @ A0 - Theta @ C0
-    F = Ac.T @ Om + Om @ Ac + d2 * Om  # eq. (16)
+    F = lmi16_matrix(Phi, A0, C0, Theta, Om, d2)  # eq. (16)
     cons = [S == -F, S >> LMI_EPS * np.eye(m), Om >> np.eye(m)]
     prob = cp.Problem(cp.Minimize(cp.sum_squares(Om)), cons)
     info = solve(prob)

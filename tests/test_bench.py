@@ -151,3 +151,23 @@ def test_quick_smoke_run(tmp_path: Path) -> None:
         # same scenario, same tolerances: the final states agree (relative to max(1, |x|))
         assert float(rk["rel_dx_final_vs_ours"]) < 1e-2
     assert (tmp_path / "scaling.png").stat().st_size > 1000
+
+
+def test_finish_ratios_and_table_from_synthetic_records() -> None:
+    from generated.bench import finish, table
+
+    x = np.array([1.0, 100.0])
+    recs = [
+        {"N": 5, "method": "c-cvodes-direct", "status": "ok", "int_median_s": 0.5,
+         "int_min_s": 0.4, "int_max_s": 0.6, "_x_final": x},
+        {"N": 5, "method": "scipy-bdf", "status": "ok", "int_median_s": 30.0,
+         "int_min_s": 30.0, "int_max_s": 30.0, "_x_final": x + np.array([0.01, 1.0])},
+        {"N": 5, "method": "scipy-rk45", "status": "stopped at the time limit at t = 1 s"},
+    ]  # fmt: skip
+    out = finish(recs)
+    assert out[0]["ours"] and out[0]["ratio_to_ours"] == 1.0
+    assert out[1]["ratio_to_ours"] == pytest.approx(60.0)
+    assert out[1]["rel_dx_final_vs_ours"] == pytest.approx(0.01)  # max(0.01/1, 1/100)
+    assert "ratio_to_ours" not in out[2]  # no ratio for a run that did not finish
+    txt = table(out)
+    assert "c-cvodes-direct*" in txt and "stopped at the time limit" in txt

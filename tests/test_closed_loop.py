@@ -14,11 +14,12 @@ import pytest
 from symbolic.adaptive import projection
 from symbolic.closed_loop import build_closed_loop
 from symbolic.derivatives import filter_function
-from symbolic.errors import ScenarioError
+from symbolic.errors import ScenarioError, SynthesisError
 from symbolic.formation import formation_offset
 from symbolic.models import build_model
-from symbolic.network import gauge
-from symbolic.scenario import load_scenario
+from symbolic.network import graph_matrices
+from symbolic.scenario import Graph, load_scenario
+from synthesis.assumptions import find_gauge
 from verify.reference import Reference, hand_gains
 
 PAPER = "scenarios/paper.toml"
@@ -291,12 +292,17 @@ def test_bad_assembly_is_a_toolkit_error():
 
 
 # ----------------------------------------------------------------------------- blocks
-def test_gauge_of_signed_graphs():
+def test_graph_matrices_use_the_synthesis_gauge():
+    # one gauge implementation (synthesis.assumptions.find_gauge): the pinned follower 3 gets +1
     A = np.array([[0, 1, -1], [1, 0, 0], [-1, 0, 0]], dtype=float)
-    h = gauge(A)
-    assert h[0] == h[1] == -h[2]
-    with pytest.raises(ScenarioError, match="balanced"):
-        gauge(np.array([[0, 1, -1], [1, 0, 1], [-1, 1, 0]], dtype=float))
+    pin = np.array([0.0, 0.0, 1.0])
+    gm = graph_matrices(Graph(adjacency=A, pinning=pin))
+    np.testing.assert_array_equal(gm.h, [-1.0, -1.0, 1.0])
+    np.testing.assert_array_equal(gm.h, find_gauge(A, pin))
+    np.testing.assert_array_equal(gm.L_B, np.diag(np.abs(A).sum(1) + pin) - A)
+    with pytest.raises(SynthesisError, match="balanced"):
+        graph_matrices(Graph(adjacency=np.array([[0, 1, -1], [1, 0, 1], [-1, 1, 0]], dtype=float),
+                             pinning=np.ones(3)))  # fmt: skip
 
 
 def test_formation_rule():

@@ -196,3 +196,20 @@ def test_jvp_strategy_has_forward_derivative_only(settings):
     b = fwd_ext(*args, *seeds)
     for u, v in zip(a, b, strict=True):
         np.testing.assert_allclose(np.array(v), np.array(u), rtol=1e-12, atol=1e-12)
+
+
+def test_concurrent_identical_builds_share_one_entry(settings):
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(2) as ex:
+        libs = list(ex.map(lambda _: build_library([dyn("conc")], settings, ["conc"]), range(2)))
+    assert libs[0].key == libs[1].key and libs[0].path.is_file()
+    entries = [p for p in settings.root().iterdir() if not p.name.startswith(".")]
+    assert [p.name for p in entries] == [libs[0].key]
+    x = np.array([0.1, 0.2, 0.3])
+    for lib in libs:
+        np.testing.assert_allclose(
+            np.array(lib.function("conc")(0.5, x, [], [], [])[0]),
+            np.array(dyn("conc")(0.5, x, [], [], [])[0]),
+            rtol=1e-12,
+        )

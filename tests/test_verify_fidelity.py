@@ -36,3 +36,15 @@ def test_scan_finds_the_core_equations():
     for k in (3, 7, 9, 15, 16, 17, 28, 29, 30, 32, 38, 40, 42):
         assert emap.get(k), f"no '# eq. ({k})' comment in the code"
     assert any("verify.lyapunov" in loc for loc in emap[38])
+
+
+def test_scan_reads_every_range_in_a_comment(tmp_path):
+    pkg = tmp_path / "verify"
+    pkg.mkdir()
+    (pkg / "m.py").write_text(
+        "def f():\n    return 0  # eq. (18)–(20) by hand; eq. (33)–(35) and (41) too\n",
+        encoding="utf-8",
+    )
+    emap = equation_map(tmp_path)
+    assert sorted(emap) == [18, 19, 20, 33, 34, 35, 41]
+    assert emap[34] == ["verify.m:f"]

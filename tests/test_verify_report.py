@@ -113,3 +113,13 @@ def test_cli_bad_delta_is_one_line_exit_2(capsys):
     code = run_cli(main, ["check", str(PAPER), "--delta", "1.5"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "lemma1_delta" in err
+
+
+@pytest.mark.parametrize(
+    "argv", [["frobnicate"], ["check", str(PAPER), "--tail", "half"], ["check", "--nope"]]
+)
+def test_cli_bad_arguments_are_one_line_exit_2(capsys, argv):
+    # argparse errors go through symbolic.errors.CliParser: no usage dump, one line
+    code = run_cli(main, argv)
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "see --help" in err

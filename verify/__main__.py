@@ -20,14 +20,14 @@ import sys
 from pathlib import Path
 
 from symbolic.artifacts import OUT_ROOT
-from symbolic.errors import run_cli
+from symbolic.errors import CliParser, run_cli
 from verify.bounds import VerifyConfig, VerifyError
 
 DEFAULT_SCENARIO = "scenarios/paper.toml"
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m verify", description=__doc__.splitlines()[0])
+    ap = CliParser(prog="python -m verify", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     for name, helptext in (
         ("check", "verify the theorems and print the bound-vs-actual table"),
@@ -60,7 +60,13 @@ def _strict(flag: bool) -> bool:
 
 
 def main(argv: list[str]) -> int:
-    """Entry point; returns the exit status."""
+    """Entry point; returns the exit status.
+
+    Parameters
+    ----------
+    argv : list of str
+        Command-line arguments without the program name.
+    """
     args = _parser().parse_args(argv)
     if args.cmd == "bench":  # the benchmark lives in generated.bench (make bench)
         if importlib.util.find_spec("generated.bench") is None:

@@ -124,8 +124,18 @@ def chi_bar_from(chi_v: float, Omega: float, lam_min_M: float, delta: float) -> 
 
 
 def lemma1_bound(chi_v: float, Omega: float, delta: float) -> float:
-    """Lemma 1's ultimate level of V: ω / (λ (1 − δ))."""
-    return chi_v / (Omega * (1.0 - delta))
+    """Lemma 1's ultimate level of V: ω / (λ (1 − δ)).
+
+    Parameters
+    ----------
+    chi_v : float
+        ω of V̇ + λV ≤ ω.
+    Omega : float
+        λ of V̇ + λV ≤ ω.
+    delta : float
+        0 < δ < 1.
+    """
+    return chi_v / (Omega * (1.0 - delta))  # eq. (4) (Lemma 1): V → ω/(λ(1 − δ))
 
 
 def lemma1_reaching_time(Omega: float, chi_v: float, V0: float, delta: float) -> float:
@@ -147,7 +157,7 @@ def lemma1_reaching_time(Omega: float, chi_v: float, V0: float, delta: float) ->
     if chi_v <= 0:
         return math.inf
     x = Omega * (1.0 - delta) * V0 / chi_v
-    return 0.0 if x <= 1.0 else math.log(x) / (Omega * delta)
+    return 0.0 if x <= 1.0 else math.log(x) / (Omega * delta)  # eq. (4) (Lemma 1): t_f
 
 
 def comparison_reaching_time(Omega: float, chi_v: float, V0: float, delta: float) -> float:
@@ -155,6 +165,15 @@ def comparison_reaching_time(Omega: float, chi_v: float, V0: float, delta: float
 
     Used to report whether the paper's Lemma 1 t_f is at least the time the
     comparison lemma itself guarantees.
+
+    Parameters
+    ----------
+    Omega, chi_v : float
+        λ and ω of V̇ + λV ≤ ω.
+    V0 : float
+        V(0).
+    delta : float
+        0 < δ < 1.
     """
     if chi_v <= 0:
         return math.inf
@@ -180,11 +199,19 @@ def lemma2_bounds(gamma_bar: float, theta: float, order: int) -> np.ndarray:
         The n bounds for k = 0, …, n−1.
     """
     k = np.arange(order)
-    return (2.0 * theta) ** k * gamma_bar / theta ** (order - 1)
+    return (2.0 * theta) ** k * gamma_bar / theta ** (order - 1)  # eq. (5) (Lemma 2)
 
 
 def mass_bounds(scenario: Scenario, agent: int) -> tuple[float, float]:
-    """(inf λ_min(M_i), sup λ_max(M_i)) over the configuration space of follower ``agent``."""
+    """(inf λ_min(M_i), sup λ_max(M_i)) over the configuration space of follower ``agent``.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario (the follower's model and parameters).
+    agent : int
+        0-based follower index.
+    """
     fo = scenario.followers[agent]
     return build_model(fo.model, fo.params).M_bounds
 

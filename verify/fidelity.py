@@ -14,7 +14,7 @@ from pathlib import Path
 
 PACKAGES = ("symbolic", "synthesis", "generated", "verify")
 _EQ = re.compile(r"#.*?\beqs?\.\s*\((\d+)\)(?:\s*[–-]\s*\((\d+)\))?")
-_MORE = re.compile(r"\((\d+)\)")
+_MORE = re.compile(r"\((\d+)\)(?:\s*[–-]\s*\((\d+)\))?")
 
 
 def _functions(tree: ast.AST) -> list[tuple[int, int, str]]:
@@ -69,7 +69,8 @@ def equation_map(root: str | Path = ".") -> dict[int, list[str]]:
                 nums = {int(m.group(1))}
                 if m.group(2):  # a range "(36)–(38)"
                     nums |= set(range(int(m.group(1)), int(m.group(2)) + 1))
-                nums |= {int(x) for x in _MORE.findall(comment[m.end() :]) if 1 <= int(x) <= 42}
+                for a, b in _MORE.findall(comment[m.end() :]):  # further numbers and ranges
+                    nums |= set(range(int(a), int(b or a) + 1))
                 inner = [f for f in funcs if f[0] <= lineno <= f[1]]
                 where = max(inner, key=lambda f: f[0])[2] if inner else "<module>"
                 for k in nums:
@@ -79,7 +80,13 @@ def equation_map(root: str | Path = ".") -> dict[int, list[str]]:
 
 
 def markdown(root: str | Path = ".") -> str:
-    """The table of equations (1)–(42) with their implementing functions."""
+    """The table of equations (1)–(42) with their implementing functions.
+
+    Parameters
+    ----------
+    root : str or Path
+        The repository root.
+    """
     emap = equation_map(root)
     rows = ["| eq. | implemented in (from `# eq. (N)` comments) |", "|---|---|"]
     for k in range(1, 43):

@@ -141,7 +141,16 @@ def _per_agent_plot(df, prefix, width, ylabel, title, folder, stem, log=False) -
 
 
 def estimation_errors(df: pd.DataFrame, folder: Path) -> list[Path]:
-    """Fig. 11: ē_ηi = η_i − η0 per component (linear) and |ē_ηi| (log)."""
+    """Fig. 11: ē_ηi = η_i − η0 per component (linear) and |ē_ηi| (log).
+
+    Parameters
+    ----------
+    df : DataFrame
+        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
+        component).
+    folder : Path
+        Folder the figure files are written to.
+    """
     dm = S.dims(df)
     out = _per_agent_plot(df, "eeta", dm.m, "ebar_eta,{r} (state units)",
                           "Fig. 11: estimation errors ebar_eta_i = eta_i - eta0", folder,
@@ -152,7 +161,16 @@ def estimation_errors(df: pd.DataFrame, folder: Path) -> list[Path]:
 
 
 def tracking_errors(df: pd.DataFrame, folder: Path) -> list[Path]:
-    """Fig. 12: e_ti = p_i − C0η_i − b_i per component (linear) and |e_ti| (log)."""
+    """Fig. 12: e_ti = p_i − C0η_i − b_i per component (linear) and |e_ti| (log).
+
+    Parameters
+    ----------
+    df : DataFrame
+        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
+        component).
+    folder : Path
+        Folder the figure files are written to.
+    """
     dm = S.dims(df)
     out = _per_agent_plot(df, "et", dm.n, f"e_t,{{r}} ({POS_UNIT})",
                           "Fig. 12: tracking errors e_ti = p_i - C0 eta_i - b_i", folder,
@@ -163,7 +181,18 @@ def tracking_errors(df: pd.DataFrame, folder: Path) -> list[Path]:
 
 
 def ablation_comparison(df: pd.DataFrame, ablation: pd.DataFrame, folder: Path) -> list[Path]:
-    """Fig. 13: ‖e_ti‖ of the fault-tolerant controller (29) and the ablation (42), same axes."""
+    """Fig. 13: ‖e_ti‖ of the fault-tolerant controller (29) and the ablation (42), same axes.
+
+    Parameters
+    ----------
+    df : DataFrame
+        The fault-tolerant run's trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
+        component).
+    ablation : DataFrame
+        The ablation run's trajectory (eq. (42)), same format.
+    folder : Path
+        Folder the figure files are written to.
+    """
     dm = S.dims(df)
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
     for ax, log in zip(axes, (False, True), strict=True):
@@ -226,6 +255,18 @@ def animation(
 ) -> tuple[Path | None, str]:
     """Animated GIF of the formation (PillowWriter); skipped with a note without Pillow.
 
+    Parameters
+    ----------
+    df : DataFrame
+        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
+        component).
+    C0 : ndarray
+        n×m leader output matrix (the formation is drawn around y0 = C0η0).
+    folder : Path
+        Folder the figure files are written to.
+    frames : int
+        Number of frames, sampled evenly over the trajectory.
+
     Returns
     -------
     (path or None, note)
@@ -283,7 +324,22 @@ def all_figures(
     *,
     gif: bool = True,
 ) -> tuple[list[Path], list[str]]:
-    """Every figure; returns the files written and notes (e.g. a skipped animation)."""
+    """Every figure; returns the files written and notes (e.g. a skipped animation).
+
+    Parameters
+    ----------
+    df : DataFrame
+        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
+        component).
+    C0 : ndarray
+        n×m leader output matrix.
+    folder : Path
+        Folder the figure files are written to.
+    ablation : DataFrame, optional
+        The ablation run's trajectory; Fig. 13 is skipped without it.
+    gif : bool
+        Also write the animation.
+    """
     folder.mkdir(parents=True, exist_ok=True)
     files = formation_snapshots(df, C0, folder)
     files += estimation_errors(df, folder)

@@ -90,12 +90,28 @@ def _make(claim, agent, t, lhs, rhs, scale, rtol) -> InequalityCheck:  # noqa: A
 
 
 def output_names(cl: Any) -> list[str]:
-    """Names of the closed loop's outputs."""
+    """Names of the closed loop's outputs.
+
+    Parameters
+    ----------
+    cl : ClosedLoop
+        The symbolic closed loop (its ``outputs`` Function and ``layout``).
+    """
     return list(cl.outputs.name_out())
 
 
 def symbolic_outputs(cl: Any, t: Any, x: Any) -> dict[str, Any]:
-    """Call ``cl.outputs`` on symbols and return {name: expression}."""
+    """Call ``cl.outputs`` on symbols and return {name: expression}.
+
+    Parameters
+    ----------
+    cl : ClosedLoop
+        The symbolic closed loop (its ``outputs`` Function and ``layout``).
+    t : casadi.SX or MX
+        Time symbol.
+    x : casadi.SX or MX
+        State symbol (nx entries).
+    """
     res = cl.outputs.call([t, x])
     return dict(zip(cl.outputs.name_out(), res, strict=True))
 
@@ -135,6 +151,15 @@ def lyapunov_derivative(cl: Any, name: str, ode: ca.Function | None = None) -> c
 def evaluate(fun: ca.Function, t: np.ndarray, X: np.ndarray) -> list[np.ndarray]:
     """Evaluate a ``(t, x) -> ...`` function at K samples; X is (K, nx).
 
+    Parameters
+    ----------
+    fun : casadi.Function
+        A Function of ``(t, x)``.
+    t : ndarray
+        K sample times.
+    X : ndarray
+        (K, nx) states at those times.
+
     Returns
     -------
     list of ndarray
@@ -152,20 +177,50 @@ def evaluate(fun: ca.Function, t: np.ndarray, X: np.ndarray) -> list[np.ndarray]
 
 
 def outputs_at(cl: Any, t: np.ndarray, X: np.ndarray) -> dict[str, np.ndarray]:
-    """All outputs at K samples: {name: (K, rows, cols)}; per-agent outputs have row i = agent i."""
+    """All outputs at K samples: {name: (K, rows, cols)}; per-agent outputs have row i = agent i.
+
+    Parameters
+    ----------
+    cl : ClosedLoop
+        The symbolic closed loop (its ``outputs`` Function and ``layout``).
+    t : ndarray
+        K sample times.
+    X : ndarray
+        (K, nx) states at those times.
+    """
     vals = evaluate(cl.outputs, t, X)
     return dict(zip(cl.outputs.name_out(), vals, strict=True))
 
 
 def agent_block(vals: dict[str, np.ndarray], name: str, agent: int) -> np.ndarray:
-    """Agent ``agent``'s row of a per-agent output: (K, cols)."""
+    """Agent ``agent``'s row of a per-agent output: (K, cols).
+
+    Parameters
+    ----------
+    vals : dict
+        Outputs as returned by :func:`outputs_at`.
+    name : str
+        Output name.
+    agent : int
+        0-based follower index.
+    """
     if name not in vals:
         raise VerifyError(f"closed loop has no output {name!r}; update verify")
     return vals[name][:, agent, :]
 
 
 def state_block(cl: Any, X: np.ndarray, key: Any) -> np.ndarray:
-    """Columns of the state for layout key ``key``: (K, width)."""
+    """Columns of the state for layout key ``key``: (K, width).
+
+    Parameters
+    ----------
+    cl : ClosedLoop
+        The symbolic closed loop (its ``outputs`` Function and ``layout``).
+    X : ndarray
+        (K, nx) states.
+    key : str or tuple
+        Layout key: ``"eta0"`` or ``(name, agent)``.
+    """
     if key not in cl.layout.slices:
         raise VerifyError(f"closed loop layout has no state {key!r}")
     return X[:, cl.layout.slices[key]]
@@ -210,7 +265,17 @@ def check_theorem1(
 
 # --------------------------------------------------------------------------- Theorem 2
 def sgn_eps(chi: np.ndarray, mode: str, width: float) -> np.ndarray:
-    """The sign function the controller uses: exact, sat(χ/ε) or tanh(χ/ε)."""
+    """The sign function the controller uses: exact, sat(χ/ε) or tanh(χ/ε).
+
+    Parameters
+    ----------
+    chi : ndarray
+        Argument, element-wise.
+    mode : {"exact", "sat", "tanh"}
+        ``options.sign``.
+    width : float
+        Boundary-layer width ε (unused for ``exact``).
+    """
     if mode == "exact":
         return np.sign(chi)
     if mode == "sat":
@@ -272,7 +337,13 @@ def theorem2_rhs(
 
 
 def theorem2_guaranteed(scenario: Scenario) -> tuple[bool, str]:
-    """Whether eq. (38) must hold pointwise for this scenario's closed loop, and why not."""
+    """Whether eq. (38) must hold pointwise for this scenario's closed loop, and why not.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The scenario (its options, health functions and ĝ law).
+    """
     o = scenario.options
     if o.ablation:
         return False, "ablation (42): no fault-tolerant factor, V2's adaptive term does not cancel"

@@ -45,6 +45,16 @@ class Run:
 def states_from_frame(cl: Any, sc: Scenario, df: pd.DataFrame) -> np.ndarray:
     """Rebuild the state matrix (K, nx) from the state columns of ``trajectory.csv``.
 
+    Parameters
+    ----------
+    cl : ClosedLoop
+        The symbolic closed loop (its ``outputs`` Function and ``layout``).
+    sc : Scenario
+        The scenario (m, for the leader's columns).
+    df : DataFrame
+        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
+        component).
+
     Raises
     ------
     VerifyError

@@ -23,6 +23,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from symbolic.scenario import Scenario
+from verify.lyapunov import sgn_eps
 
 
 # ----------------------------------------------------------------------------- expressions
@@ -198,7 +199,13 @@ class Reference:
 
     # -- pieces
     def mcg(self, p: np.ndarray, q: np.ndarray):
-        """M (N×n×n), C (N×n×n), G (N×n) of every follower at (p, q) (N×n each)."""
+        """M (N×n×n), C (N×n×n), G (N×n) of every follower at (p, q) (N×n each).
+
+        Parameters
+        ----------
+        p, q : ndarray
+            N×n positions and velocities of all followers.
+        """
         N, n = self.N, self.n
         M, C, G = np.zeros((N, n, n)), np.zeros((N, n, n)), np.zeros((N, n))
         for idx, ev in self.groups:
@@ -206,7 +213,15 @@ class Reference:
         return M, C, G
 
     def leader(self, t: float, eta0: np.ndarray):
-        """u0, u̇0, η̇0 (eq. (3)) and η̈0 at time t."""
+        """u0, u̇0, η̇0 (eq. (3)) and η̈0 at time t.
+
+        Parameters
+        ----------
+        t : float
+            Time.
+        eta0 : ndarray
+            Leader state η0 (m).
+        """
         L = self.sc.leader
         if L.u0 is not None:
             u, ud = np.array([_dual(e.node, t) for e in L.u0]).T
@@ -224,13 +239,25 @@ class Reference:
         return u, ud, e0d, e0dd
 
     def faults(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """True health g_i(t) (N) and bias f_i(t) (N×n); only the plant uses them."""
+        """True health g_i(t) (N) and bias f_i(t) (N×n); only the plant uses them.
+
+        Parameters
+        ----------
+        t : float
+            Time.
+        """
         g = np.array([float(fo.g.expr.numpy(t)) for fo in self.sc.followers])
         f = np.array([[float(e.numpy(t)) for e in fo.f] for fo in self.sc.followers])
         return g, f
 
     def split(self, x: np.ndarray) -> dict[str, np.ndarray]:
-        """Named views of the flat state (agent blocks as N×k arrays)."""
+        """Named views of the flat state (agent blocks as N×k arrays).
+
+        Parameters
+        ----------
+        x : ndarray
+            Flat closed-loop state.
+        """
         m, n = self.m, self.n
         x = np.asarray(x, dtype=float)
         S = x[m:].reshape(self.N, self.na)
@@ -262,7 +289,13 @@ class Reference:
         return nr, nd, ndd
 
     def formation(self, d, dd, ddd):
-        """b_i, ḃ_i, b̈_i of the smoothed rotation (docs/closed-loop.md), chain rule by hand."""
+        """b_i, ḃ_i, b̈_i of the smoothed rotation (docs/closed-loop.md), chain rule by hand.
+
+        Parameters
+        ----------
+        d, dd, ddd : ndarray
+            N×m: η̇_i, η̈_i and η⃛_i of every follower.
+        """
         b0 = self.b0
         if self.n != 2 or self.m < 2:
             z = np.zeros_like(b0)
@@ -295,16 +328,25 @@ class Reference:
         return rot(c, s, k), rot(cd, sd, kd), rot(cdd, sdd, kdd)
 
     def sgn(self, x):
-        """The sign function of ``options.sign`` (exact, sat or tanh with width ε)."""
-        mode, w = self.opts.sign, self.opts.sign_width
-        if mode == "exact":
-            return np.sign(x)
-        if mode == "sat":
-            return np.clip(x / w, -1, 1)
-        return np.tanh(x / w)
+        """The sign function of ``options.sign`` (exact, sat or tanh with width ε).
+
+        Parameters
+        ----------
+        x : ndarray
+            Argument, element-wise.
+        """
+        return sgn_eps(x, self.opts.sign, self.opts.sign_width)
 
     def evaluate(self, t: float, x: np.ndarray) -> dict[str, np.ndarray]:
-        """All intermediate signals at (t, x), and ``xdot``."""
+        """All intermediate signals at (t, x), and ``xdot``.
+
+        Parameters
+        ----------
+        t : float
+            Time.
+        x : ndarray
+            Flat closed-loop state.
+        """
         S = self.split(x)
         A0, B0, C0 = self.A0, self.B0, self.C0
         u0, u0d, e0d, e0dd = self.leader(t, S["eta0"])
@@ -396,7 +438,15 @@ class Reference:
         return out
 
     def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
-        """The closed-loop right-hand side ẋ = f(t, x)."""
+        """The closed-loop right-hand side ẋ = f(t, x).
+
+        Parameters
+        ----------
+        t : float
+            Time.
+        x : ndarray
+            Flat closed-loop state.
+        """
         return self.evaluate(t, x)["xdot"]
 
 
@@ -410,16 +460,22 @@ def hand_gains(sc: Scenario, *, lambda1: float | None = None, lambda2: float | N
     (T⁻¹ = Qᵀ(QB0)⁻¹Q + NNᵀ, N spanning ker B0ᵀ, so B0ᵀT⁻¹ = Q), else from the
     control Riccati equation of (A0, B0); Z and w from Lemma 3 with z = (L̄ᵀ)⁻¹1;
     k1 = 1. These gains are NOT certified.
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario (leader, graph and the observer gains it gives).
+    lambda1, lambda2 : float, optional
+        Override the observer gains λ1, λ2 (default: the scenario's, else 1.9 and
+        max(2, α)).
     """
-    from symbolic.network import gauge
+    from synthesis.assumptions import check_network, uio_matrices
     from synthesis.gains import Gains
 
     L = sc.leader
     A0, B0, C0 = (np.asarray(a, dtype=float) for a in (L.A0, L.B0, L.C0))
     m, n = A0.shape[0], C0.shape[0]
-    CB = C0 @ B0
-    Gamma = B0 @ np.linalg.inv(CB.T @ CB) @ CB.T
-    Phi = np.eye(m) - Gamma @ C0
+    Gamma, Phi = uio_matrices(B0, C0)  # eq. (7)
     if sc.observer.Theta is not None:
         Theta = np.asarray(sc.observer.Theta, dtype=float)
     else:
@@ -434,11 +490,9 @@ def hand_gains(sc: Scenario, *, lambda1: float | None = None, lambda2: float | N
     else:
         Tinv = sla.solve_continuous_are(A0, B0, np.eye(m), np.eye(B0.shape[1]))
         Q = B0.T @ Tinv
-    h = gauge(np.asarray(sc.graph.adjacency))
-    A = np.asarray(sc.graph.adjacency)
-    LB = np.diag(np.abs(A).sum(1) + sc.graph.pinning) - A
-    H = np.diag(h)
-    Lbar = H @ LB @ H
+    net = check_network(sc.graph.adjacency, sc.graph.pinning)  # the certified gains' H and L̄
+    H = np.diag(net.h)
+    Lbar = net.L_bar.toarray()
     z = np.linalg.solve(Lbar.T, np.ones(sc.N))
     Z = np.diag(z)
     Zi = np.diag(z**-0.5)

@@ -52,12 +52,24 @@ class Verification:
     config: VerifyConfig = field(default_factory=VerifyConfig)
 
     def failed(self, strict: bool = False) -> pd.DataFrame:
-        """Rows that fail ``check`` (guaranteed; plus the paper's claims when strict)."""
+        """Rows that fail ``check`` (guaranteed; plus the paper's claims when strict).
+
+        Parameters
+        ----------
+        strict : bool
+            Also count the paper's own claims (kind ``paper``).
+        """
         return failures(self.table, strict)
 
 
 def ablation_statement(table: pd.DataFrame) -> str:
-    """One plain sentence on whether the ablation (42) converges more slowly (Fig. 13)."""
+    """One plain sentence on whether the ablation (42) converges more slowly (Fig. 13).
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+    """
     rows = table[table["claim"].str.startswith("Fig. 13: time")]
     if rows.empty:
         return "No ablation run: Fig. 13 was not reproduced."
@@ -86,7 +98,13 @@ def _fmt_list(a: np.ndarray) -> str:
 
 
 def findings(v: Verification) -> list[str]:
-    """A few plain sentences with the headline numbers."""
+    """A few plain sentences with the headline numbers.
+
+    Parameters
+    ----------
+    v : Verification
+        The verification results.
+    """
     tb = v.table
     out = ["Findings:", ""]
     if v.theorem2:
@@ -129,7 +147,15 @@ def findings(v: Verification) -> list[str]:
 
 
 def render_markdown(v: Verification, *, strict: bool = False) -> str:
-    """The report as Markdown text."""
+    """The report as Markdown text.
+
+    Parameters
+    ----------
+    v : Verification
+        The verification results.
+    strict : bool
+        Whether the paper's own claims count as failures.
+    """
     sc, tb, cfg = v.scenario, v.table, v.config
     L: list[str] = [f"# Verification report: `{sc.name}`", ""]
     L += [f"Scenario `{sc.path}` (sha256 `{sc.sha256[:12]}`): {sc.description}", ""]
@@ -255,6 +281,15 @@ def render_markdown(v: Verification, *, strict: bool = False) -> str:
 def write_report(v: Verification, folder: Path, *, strict: bool = False) -> tuple[Path, Path]:
     """Write ``bounds.csv`` and ``report.md`` into ``folder`` atomically.
 
+    Parameters
+    ----------
+    v : Verification
+        The verification results.
+    folder : Path
+        Output folder (created).
+    strict : bool
+        Whether the paper's own claims count as failures.
+
     Returns
     -------
     (report path, bounds path)
@@ -266,7 +301,13 @@ def write_report(v: Verification, folder: Path, *, strict: bool = False) -> tupl
 
 
 def console_table(table: pd.DataFrame) -> str:
-    """Compact plain-text table for the terminal."""
+    """Compact plain-text table for the terminal.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+    """
     cols = ["claim", "agent", "component", "kind", "bound", "observed", "ratio", "holds"]
     t = table[cols].copy()
     t["claim"] = t["claim"].str.slice(0, 60)

@@ -29,6 +29,12 @@ class Dims:
 def dims(df: pd.DataFrame) -> Dims:
     """Infer (N, n, m) from the column names.
 
+    Parameters
+    ----------
+    df : DataFrame
+        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
+        component).
+
     Raises
     ------
     VerifyError
@@ -54,7 +60,20 @@ def _count(cols: set[str], pattern: str) -> int:
 
 
 def block(df: pd.DataFrame, prefix: str, i: int, width: int) -> np.ndarray:
-    """Columns ``{prefix}{i}_{1..width}`` (i 1-based) as a (K, width) array."""
+    """Columns ``{prefix}{i}_{1..width}`` (i 1-based) as a (K, width) array.
+
+    Parameters
+    ----------
+    df : DataFrame
+        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
+        component).
+    prefix : str
+        Signal name, e.g. ``"p"`` or ``"et"``.
+    i : int
+        1-based agent number.
+    width : int
+        Number of components.
+    """
     names = [f"{prefix}{i}_{r}" for r in range(1, width + 1)]
     missing = [c for c in names if c not in df.columns]
     if missing:
@@ -63,19 +82,45 @@ def block(df: pd.DataFrame, prefix: str, i: int, width: int) -> np.ndarray:
 
 
 def has(df: pd.DataFrame, name: str) -> bool:
-    """Whether column ``name`` exists."""
+    """Whether column ``name`` exists.
+
+    Parameters
+    ----------
+    df : DataFrame
+        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
+        component).
+    name : str
+        Column name.
+    """
     return name in df.columns
 
 
 def leader_output(df: pd.DataFrame, C0: np.ndarray) -> np.ndarray:
-    """y0 = C0 η0 along the trajectory, (K, n)."""
+    """y0 = C0 η0 along the trajectory, (K, n).
+
+    Parameters
+    ----------
+    df : DataFrame
+        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
+        component).
+    C0 : ndarray
+        n×m leader output matrix.
+    """
     m = C0.shape[1]
     eta0 = df[[f"eta0_{k}" for k in range(1, m + 1)]].to_numpy(dtype=float)
     return eta0 @ np.asarray(C0, dtype=float).T
 
 
 def tail_mask(t: np.ndarray, fraction: float) -> np.ndarray:
-    """Samples in the last ``fraction`` of [t0, t_end] (the "asymptotic" window)."""
+    """Samples in the last ``fraction`` of [t0, t_end] (the "asymptotic" window).
+
+    Parameters
+    ----------
+    t : ndarray
+        Sample times, increasing.
+    fraction : float
+        Fraction of the time span counted as the tail.
+    """
     t0, t1 = float(t[0]), float(t[-1])
     return t >= t1 - fraction * (t1 - t0) - 1e-12
 
@@ -123,5 +168,18 @@ def decay_rate(t: np.ndarray, y: np.ndarray, floor: float = 1e-300) -> float:
 
 
 def agent_norm(df: pd.DataFrame, prefix: str, i: int, width: int) -> np.ndarray:
-    """Euclidean norm over components of ``{prefix}{i}_*`` at each sample."""
+    """Euclidean norm over components of ``{prefix}{i}_*`` at each sample.
+
+    Parameters
+    ----------
+    df : DataFrame
+        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
+        component).
+    prefix : str
+        Signal name, e.g. ``"et"``.
+    i : int
+        1-based agent number.
+    width : int
+        Number of components.
+    """
     return np.linalg.norm(block(df, prefix, i, width), axis=1)

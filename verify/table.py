@@ -64,6 +64,32 @@ class Rows:
         holds: bool | None = None,
         larger_is_better: bool = False,
     ) -> None:
+        """Append one row; ``ratio = observed / bound`` (NaN for a zero or infinite bound).
+
+        Parameters
+        ----------
+        claim : str
+            What is compared.
+        kind : {"guaranteed", "paper", "info"}
+            What a failure means (module docstring).
+        bound : float
+            The bound.
+        observed : float
+            The measured value.
+        window : str
+            Time window of the measurement.
+        note : str
+            Free text.
+        agent : int, optional
+            0-based follower (shown 1-based); None for all.
+        component : int, optional
+            0-based component (shown 1-based); None for none.
+        holds : bool, optional
+            Whether the claim holds; default ``observed <= bound`` (``>=`` with
+            ``larger_is_better``).
+        larger_is_better : bool
+            Compare ``observed >= bound`` when ``holds`` is not given.
+        """
         assert kind in KINDS
         if holds is None:
             if larger_is_better:
@@ -87,6 +113,7 @@ class Rows:
         )
 
     def frame(self) -> pd.DataFrame:
+        """The rows as a DataFrame with :data:`COLUMNS`."""
         return pd.DataFrame(self.rows, columns=COLUMNS)
 
 
@@ -300,13 +327,27 @@ def bounds_table(
 
 
 def failures(table: pd.DataFrame, strict: bool = False) -> pd.DataFrame:
-    """Rows that make ``check`` fail: guaranteed ones, plus the paper's claims when strict."""
+    """Rows that make ``check`` fail: guaranteed ones, plus the paper's claims when strict.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+    strict : bool
+        Also count the paper's own claims (kind ``paper``).
+    """
     kinds = ["guaranteed", "paper"] if strict else ["guaranteed"]
     return table[table["kind"].isin(kinds) & ~table["holds"]]
 
 
 def to_markdown(table: pd.DataFrame) -> str:
-    """GitHub Markdown table (no extra dependency), numbers to 4 significant digits."""
+    """GitHub Markdown table (no extra dependency), numbers to 4 significant digits.
+
+    Parameters
+    ----------
+    table : DataFrame
+        Any table; booleans are shown as yes/**no**, NaN as –.
+    """
 
     def fmt(v: object) -> str:
         if isinstance(v, bool | np.bool_):

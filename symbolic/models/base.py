@@ -92,6 +92,12 @@ class ELModel:
 
 
 def register(spec: ModelSpec) -> ModelSpec:
-    """Add ``spec`` to :data:`REGISTRY` (one call per model file)."""
+    """Add ``spec`` to :data:`REGISTRY` (one call per model file).
+
+    Parameters
+    ----------
+    spec : ModelSpec
+        The model's name, Lagrangian and default parameters.
+    """
     REGISTRY[spec.name] = spec
     return spec

@@ -20,13 +20,22 @@ def euler_lagrange_matrices(T: sp.Expr, V: sp.Expr, p: list[sp.Symbol], q: list[
     M_kj = ∂²T/∂q_k∂q_j; C_kj = Σ_i c_ijk q_i with the Christoffel symbols of
     the first kind c_ijk = ½(∂M_kj/∂p_i + ∂M_ki/∂p_j − ∂M_ij/∂p_k), which is the
     choice that makes Ṁ − 2C skew-symmetric (Property 2); G_k = ∂V/∂p_k.
+
+    Parameters
+    ----------
+    T : sympy.Expr
+        Kinetic energy, quadratic in ``q``.
+    V : sympy.Expr
+        Potential energy, a function of ``p``.
+    p, q : list of sympy.Symbol
+        Generalised coordinates and velocities.
     """
     n = len(p)
-    M = sp.Matrix(n, n, lambda k, j: sp.simplify(sp.diff(T, q[k], q[j])))
+    M = sp.Matrix(n, n, lambda k, j: sp.simplify(sp.diff(T, q[k], q[j])))  # eq. (2): M
     C = sp.zeros(n, n)
     for k in range(n):
         for j in range(n):
-            C[k, j] = sp.simplify(
+            C[k, j] = sp.simplify(  # eq. (2): C from the Christoffel symbols
                 sum(
                     sp.Rational(1, 2)
                     * (sp.diff(M[k, j], p[i]) + sp.diff(M[k, i], p[j]) - sp.diff(M[i, j], p[k]))
@@ -34,7 +43,7 @@ def euler_lagrange_matrices(T: sp.Expr, V: sp.Expr, p: list[sp.Symbol], q: list[
                     for i in range(n)
                 )
             )
-    G = sp.Matrix([sp.simplify(sp.diff(V, pk)) for pk in p])
+    G = sp.Matrix([sp.simplify(sp.diff(V, pk)) for pk in p])  # eq. (2): G
     return M, C, G
 
 
@@ -48,6 +57,15 @@ def check_properties(
     minimised exactly over one period with :func:`sympy.minimum`; anything
     else falls back to a dense grid (reported as ``"sampled"``). Property 2
     must simplify to the zero matrix exactly.
+
+    Parameters
+    ----------
+    M, C : sympy.Matrix
+        Inertia and Coriolis matrices.
+    p, q : list of sympy.Symbol
+        Generalised coordinates and velocities.
+    name : str
+        Model name, for the error message.
 
     Returns
     -------
@@ -210,6 +228,13 @@ def _build_cached(name: str, items: tuple[tuple[str, float], ...]) -> ELModel:
 
 def build_model(name: str, params: Mapping[str, float] | None = None) -> ELModel:
     """Derive the model ``name`` with ``params`` (defaults filled in), cached.
+
+    Parameters
+    ----------
+    name : str
+        A registered model name (``REGISTRY``).
+    params : mapping of str to float, optional
+        Parameters overriding the model's defaults.
 
     Raises
     ------

@@ -15,7 +15,7 @@ def _lagrangian(prm):
     p = list(sp.symbols("x y", real=True))
     q = list(sp.symbols("vx vy", real=True))
     m = sp.nsimplify(prm["m"])
-    T = sp.Rational(1, 2) * m * (q[0] ** 2 + q[1] ** 2)
+    T = sp.Rational(1, 2) * m * (q[0] ** 2 + q[1] ** 2)  # eq. (1): M = mI, C = 0, G = 0
     return T, sp.Integer(0), p, q
 
 

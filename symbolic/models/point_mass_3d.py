@@ -15,7 +15,7 @@ def _lagrangian(prm):
     p = list(sp.symbols("x y z", real=True))
     q = list(sp.symbols("vx vy vz", real=True))
     m, g0 = (sp.nsimplify(prm[k]) for k in ("m", "g0"))
-    T = sp.Rational(1, 2) * m * sum(v**2 for v in q)
+    T = sp.Rational(1, 2) * m * sum(v**2 for v in q)  # eq. (1) with gravity: M = mI, C = 0
     V = m * g0 * p[2]
     return T, V, p, q
 
