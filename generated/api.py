@@ -44,7 +44,7 @@ from generated.codegen import CodegenSettings, Library, build_library, check_dyn
 from generated.integrate import IntegratorSettings, Trajectory, integrate, output_grid
 from symbolic.artifacts import OUT_ROOT, atomic_write_text, sha256_file
 from symbolic.errors import BuildError, IntegrationError, ScenarioError, SynthesisError
-from symbolic.scenario import Scenario, load_scenario
+from symbolic.scenario import Scenario, load_scenario, scenario_from_dict
 
 ODE_NAME, DAE_NAME, OUT_NAME = "cl_ode", "cl_dae", "cl_out"
 
@@ -129,8 +129,6 @@ def load(
     sc = load_scenario(path)
     if not overrides:
         return sc
-    from symbolic import scenario as scmod
-
     raw = Path(path).read_bytes()
     data = tomllib.loads(raw.decode("utf-8"))
     for k, v in overrides.items():
@@ -138,7 +136,7 @@ def load(
     canon = json.dumps({k: overrides[k] for k in sorted(overrides)}, sort_keys=True, default=str)
     sha = hashlib.sha256((sc.sha256 + "\n" + canon).encode()).hexdigest()
     # the loader's own validation, on the modified table
-    out = scmod._build(scmod._Ctx(str(path)), data, Path(path), sha)
+    out = scenario_from_dict(data, path=path, sha256=sha)
     label = variant or _variant_label(overrides)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", label):
         raise ScenarioError(

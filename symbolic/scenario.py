@@ -456,11 +456,35 @@ def load_scenario(path: str | Path) -> Scenario:
         raise ctx.err("(file)", "nested too deeply", "a scenario file as documented") from None
     except ValueError as exc:  # e.g. an integer literal with more than 4300 digits
         raise ctx.err("(file)", f"unreadable value: {exc}", "numbers of ordinary size") from None
+    return scenario_from_dict(data, path=path, sha256=hashlib.sha256(raw).hexdigest())
+
+
+def scenario_from_dict(data: dict[str, Any], *, path: str | Path, sha256: str) -> Scenario:
+    """Validate an already-parsed scenario table exactly like a file.
+
+    Used for programmatic variants (e.g. the ablation run): the caller edits the
+    table read from a file and validates it here, so a variant can never skip a
+    check a file would get.
+
+    Parameters
+    ----------
+    data : dict
+        The table as :func:`tomllib.loads` returns it.
+    path : str or Path
+        The file it came from (for messages and relative CSV paths).
+    sha256 : str
+        The identity recorded in the scenario (and downstream artifacts).
+
+    Returns
+    -------
+    Scenario
+        Frozen, typed, validated.
+    """
+    path = Path(path)
+    ctx = _Ctx(str(path))
     try:
-        return _build(ctx, data, path, hashlib.sha256(raw).hexdigest())
-    except ScenarioError:
-        raise
-    except ExpressionError:
+        return _build(ctx, data, path, sha256)
+    except (ScenarioError, ExpressionError):
         raise
     except RecursionError:
         raise ctx.err("(file)", "nested too deeply", "a flat scenario table") from None
