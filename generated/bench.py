@@ -547,6 +547,27 @@ def table(records: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n(* = ours: the plan generated.largescale.choose_plan picks for N)"
 
 
+def markdown(records: list[dict[str, Any]]) -> str:
+    """The results as a Markdown table (``out/bench/bench.md``, for the README)."""
+    head = ["N", "method", "integration [s] median (min–max)", "× ours", "steps", "RHS evals",
+            "µs / RHS", "symbolic [s]", "codegen + gcc [s]", "C [kB]", "peak RSS [MB]", "status"]  # fmt: skip
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in records:
+        med = r.get("int_median_s")
+        t = f"{med:.3g} ({r['int_min_s']:.3g}–{r['int_max_s']:.3g})" if med is not None else ""
+        cgcc = (r.get("codegen_s") or 0.0) + (r.get("compile_s") or 0.0)
+        cells = [
+            str(r["N"]), r["method"] + (" *" if r.get("ours") else ""), t,
+            _g(r.get("ratio_to_ours")), _g(r.get("steps")), _g(r.get("rhs_evals")),
+            _g(r.get("rhs_us")), _g(r.get("symbolic_s")),
+            _g(cgcc) if "codegen_s" in r else "",
+            _g(r["c_bytes"] / 1000) if r.get("c_bytes") else "", _g(r.get("peak_rss_mb")),
+            _status_short(r).replace("|", "/"),
+        ]  # fmt: skip
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def _status_short(r: dict[str, Any]) -> str:
     s = str(r.get("status", ""))
     note = r.get("runs_note")
@@ -667,8 +688,11 @@ def main(argv: list[str]) -> int:
     records = finish(records)
     csv_path = write_csv(records, folder / "bench.csv")
     png = plot(records, folder / "scaling.png")
+    from symbolic.artifacts import atomic_write_text
+
+    atomic_write_text(folder / "bench.md", markdown(records))
     print(table(records))
-    print(f"wrote {csv_path} and {png}")
+    print(f"wrote {csv_path}, {folder / 'bench.md'} and {png}")
     return 0
 
 

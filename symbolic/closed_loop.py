@@ -337,7 +337,7 @@ def agent_function(sc: Scenario, og: ObserverGains, model_index: int) -> ca.Func
     M, Cm, G = model.M(S["p"]), model.C(S["p"], S["q"]), model.G(S["p"])
     force = g * u + f - Cm @ S["q"] - G  # eq. (2): M p̈ = g u + f − C q − G
     qdot = ca.solve(M, force)
-    res = M @ a - force  # DAE residual M a + C q + G − g u − f
+    res = M @ a - force  # eq. (2) as a DAE residual: M a + C q + G − g u − f
     head = [sodot, S["q"]]
     tail = [thd, ghd, *extra]
     sdot = ca.vertcat(*head, qdot, *tail)

@@ -20,7 +20,8 @@ from types import ModuleType
 
 import pytest
 
-# generated/ is left out while it is being edited; add it here once it passes.
+# generated/ is left out: it is still being edited and had 66 problems at 00:16 UTC on
+# 2026-11-22 (mostly undocumented parameters); add it here once it passes.
 PACKAGES = ["symbolic", "synthesis", "verify"]
 
 _HEADER = re.compile(r"^\s*-{3,}\s*$")

@@ -165,11 +165,13 @@ class Reference:
         self.m, self.n, self.N, self.p = sc.m, sc.n, sc.N, sc.p
         m, n = self.m, self.n
         CB = self.C0 @ self.B0
-        self.Gamma = self.B0 @ np.linalg.inv(CB.T @ CB) @ CB.T
-        self.Phi = np.eye(m) - self.Gamma @ self.C0
+        self.Gamma = self.B0 @ np.linalg.inv(CB.T @ CB) @ CB.T  # eq. (7)
+        self.Phi = np.eye(m) - self.Gamma @ self.C0  # eq. (7)
         Th = np.atleast_2d(np.asarray(gn.Theta, dtype=float))
-        self.F = self.Phi @ self.A0 - Th @ self.C0
-        self.K = Th @ (np.eye(n) - self.C0 @ self.Gamma) + self.Phi @ self.A0 @ self.Gamma
+        self.F = self.Phi @ self.A0 - Th @ self.C0  # eq. (8)
+        self.K = (
+            Th @ (np.eye(n) - self.C0 @ self.Gamma) + self.Phi @ self.A0 @ self.Gamma
+        )  # eq. (7)
         self.Q = np.atleast_2d(np.asarray(gn.Q, dtype=float)).reshape(self.p, m)
         self.l1, self.l2 = float(gn.lambda1), float(gn.lambda2)
         A = np.asarray(sc.graph.adjacency, dtype=float)
@@ -362,7 +364,7 @@ class Reference:
         D = nr + phi
         v = -self.l1 * y - self.l2 * y / D[:, None]  # eq. (9)
         Ed = E @ A0.T + v @ B0.T  # eq. (9)
-        phid = -self.alpha_sum * (phi - self.phi_min)
+        phid = -self.alpha_sum * (phi - self.phi_min)  # eq. (9), with the floor φ_min
         # oracle: differentiate the observer along the network flow (chain rule by hand)
         psid = LB @ Ed @ C0.T - a0h * y0d
         mudd = mud @ self.F.T + psid @ self.K.T
@@ -402,16 +404,16 @@ class Reference:
         p, q, th, gh = S["p"], S["q"], S["thetahat"], S["ghat"]
         M, C, G = self.mcg(p, q)
         et = p - E @ C0.T - b  # eq. (28)
-        etd = q - Ed @ C0.T - bd_c
-        chi = etd + self.Lam * et
+        etd = q - Ed @ C0.T - bd_c  # eq. (28)
+        chi = etd + self.Lam * et  # eq. (28)
         Mv = lambda Mx, vx: np.einsum("kij,kj->ki", Mx, vx)  # noqa: E731
         Psi = (
             Mv(C, q) + G + Mv(M, Edd_c @ C0.T + bdd_c - self.Lam * etd) - Mv(C, chi)
             - th * self.sgn(chi) - self.k1 * chi
         )  # fmt: skip  # eq. (29)
-        u = Psi if self.opts.ablation else gh[:, None] * Psi
+        u = Psi if self.opts.ablation else gh[:, None] * Psi  # eq. (42) / eq. (29)
         thd = np.abs(chi) - self.k2[:, None] * th  # eq. (30)
-        r = -self.gam * np.sum(chi * Psi, 1)
+        r = -self.gam * np.sum(chi * Psi, 1)  # eq. (30), ĝ law with gain γ
         law = self.opts.ghat_law
         if "sigma" in law:
             r = r - self.sig * (gh - self.gref)
