@@ -8,6 +8,7 @@ line to stderr and exit with status 2 (see :func:`run_cli`).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Callable
 from typing import NoReturn
@@ -111,3 +112,30 @@ def run_cli(main: Callable[[list[str]], int], argv: list[str] | None = None) -> 
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
+
+
+def strict_mode(flag: bool = False) -> bool:
+    """Whether strict mode is on: ``--strict`` or the ``STRICT`` environment variable.
+
+    Parameters
+    ----------
+    flag : bool
+        The command line's ``--strict``.
+
+    Returns
+    -------
+    bool
+        True for ``--strict`` or ``STRICT`` in {1, true, yes, on}; False for unset or
+        {0, false, no, off, ""}.
+
+    Raises
+    ------
+    UsageError
+        For any other value of ``STRICT``.
+    """
+    env = os.environ.get("STRICT", "").strip().lower()
+    if env in ("1", "true", "yes", "on"):
+        return True
+    if env not in ("", "0", "false", "no", "off"):
+        raise UsageError(f"STRICT={env!r} is not understood (use STRICT=1 or STRICT=0)")
+    return flag

@@ -7,12 +7,11 @@ environment has the effect of ``--strict``.
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
 from symbolic.artifacts import out_dir
-from symbolic.errors import CliParser, SynthesisError
+from symbolic.errors import CliParser, SynthesisError, strict_mode
 from symbolic.scenario import load_scenario
 from synthesis.api import synthesize
 from synthesis.certificate import certify
@@ -20,7 +19,8 @@ from synthesis.gains import load_gains, save_gains
 
 
 def _strict(flag: bool) -> bool:
-    return flag or os.environ.get("STRICT", "0").strip() not in ("", "0")
+    """``--strict`` or ``STRICT=1`` (one reading for every command: :func:`strict_mode`)."""
+    return strict_mode(flag)
 
 
 def main(argv: list[str]) -> int:

@@ -15,12 +15,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import importlib.util
-import os
 import sys
 from pathlib import Path
 
 from symbolic.artifacts import OUT_ROOT
-from symbolic.errors import CliParser, run_cli
+from symbolic.errors import CliParser, run_cli, strict_mode
 from verify.bounds import VerifyConfig, VerifyError
 
 DEFAULT_SCENARIO = "scenarios/paper.toml"
@@ -55,8 +54,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _strict(flag: bool) -> bool:
-    env = os.environ.get("STRICT", "0").strip().lower()
-    return flag or env in ("1", "true", "yes", "on")
+    """``--strict`` or ``STRICT=1`` (one reading for every command: :func:`strict_mode`)."""
+    return strict_mode(flag)
 
 
 def main(argv: list[str]) -> int:

@@ -1,0 +1,30 @@
+"""The shared error family and strict-mode reading used by every command."""
+
+import pytest
+
+from symbolic.errors import ScenarioError, UsageError, strict_mode
+
+
+@pytest.mark.parametrize("value", ["1", "true", "YES", "on"])
+def test_strict_on(monkeypatch, value):
+    monkeypatch.setenv("STRICT", value)
+    assert strict_mode(False) is True
+
+
+@pytest.mark.parametrize("value", ["", "0", "false", "no", "OFF"])
+def test_strict_off_unless_flag(monkeypatch, value):
+    monkeypatch.setenv("STRICT", value)
+    assert strict_mode(False) is False
+    assert strict_mode(True) is True
+
+
+def test_strict_rejects_unknown_value(monkeypatch):
+    monkeypatch.setenv("STRICT", "maybe")
+    with pytest.raises(UsageError, match="STRICT"):
+        strict_mode(False)
+
+
+def test_messages_are_one_line():
+    err = ScenarioError("f.toml", "leader.A0", "has\nshape 3x3", "shape 2x2")
+    assert "\n" not in str(err)
+    assert str(err).startswith("f.toml: leader.A0:")
