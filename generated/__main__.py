@@ -45,6 +45,18 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str]) -> int:
+    """Run the ``sim`` command and print a one-line summary on stderr.
+
+    Parameters
+    ----------
+    argv : list of str
+        Command-line arguments without the program name.
+
+    Returns
+    -------
+    int
+        0 on success; toolkit errors are raised (``run_cli`` turns them into exit status 2).
+    """
     args = _parser().parse_args(argv)
     from generated import api
     from generated.codegen import CodegenSettings

@@ -54,6 +54,11 @@ def parse_override(text: str) -> tuple[str, Any]:
     """``"options.ablation=true"`` -> ``("options.ablation", True)`` (value read as TOML).
 
     A value that is not valid TOML is taken as a string (``integration.method=fixed``).
+
+    Parameters
+    ----------
+    text : str
+        ``KEY=VALUE`` as given to ``--set``.
     """
     if "=" not in text:
         raise ScenarioError("--set", text, "is not KEY=VALUE", "e.g. options.ablation=true")
@@ -159,6 +164,15 @@ class GainsInfo:
 def ensure_gains(sc: Scenario, out_root: str | Path | None = None):
     """Read ``out/<name>/gains.json`` if it belongs to this scenario, else synthesize and write it.
 
+    The file belongs to the scenario when its ``scenario_sha256`` equals ``sc.sha256``.
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario (``name`` picks the folder, ``sha256`` decides reuse).
+    out_root : str or Path, optional
+        Output root; default ``out/`` (``$HITL_OUT``).
+
     Returns
     -------
     (Gains, GainsInfo)
@@ -252,7 +266,19 @@ def build_from_closed_loop(
     *,
     t_symbolic_start: float | None = None,
 ) -> Built:
-    """Compile an existing :class:`~symbolic.closed_loop.ClosedLoop` for ``method``."""
+    """Compile an existing :class:`~symbolic.closed_loop.ClosedLoop` for ``method``.
+
+    Parameters
+    ----------
+    cl : ClosedLoop
+        Supplies ``ode_dyn``/``dae_dyn`` and ``outputs``.
+    method : str
+        ``idas`` compiles the DAE form, any other method the ODE form.
+    settings : CodegenSettings, optional
+    t_symbolic_start : float, optional
+        ``time.perf_counter()`` when the symbolic build began, so that
+        ``timings["symbolic_build"]`` includes it (default: now).
+    """
     settings = settings or CodegenSettings()
     t0 = time.perf_counter() if t_symbolic_start is None else t_symbolic_start
     form = "dae" if method == "idas" else "ode"
@@ -279,8 +305,17 @@ def integrator_settings(
 ) -> IntegratorSettings:
     """The scenario's integration settings (tolerances, steps) with the codegen linear algebra.
 
-    ``fixed_tol`` sets the fixed-step method's safeguard tolerance (``fixed_rtol`` and
-    ``fixed_atol``; default 1e-3, see :class:`IntegratorSettings`).
+    Parameters
+    ----------
+    sc : Scenario
+        Supplies ``integration`` (method, rtol, atol, max_steps, fixed_step).
+    method : str, optional
+        Overrides ``integration.method``.
+    codegen : CodegenSettings, optional
+        Supplies the Newton scheme and linear solver (default ``CodegenSettings()``).
+    fixed_tol : float, optional
+        Safeguard tolerance of the fixed-step method (sets ``fixed_rtol`` and
+        ``fixed_atol``; default 1e-3, see :class:`IntegratorSettings`).
     """
     ig = sc.integration
     cg = codegen or CodegenSettings()
@@ -306,8 +341,27 @@ def simulate(
 ) -> Trajectory:
     """Integrate the compiled closed loop over the scenario's horizon (split at breakpoints).
 
-    Returns an incomplete :class:`Trajectory` on an integrator failure (see
-    :func:`generated.integrate.integrate`).
+    Parameters
+    ----------
+    built : Built
+        Its form must match the method (``dae`` for ``idas``, else ``ode``).
+    sc : Scenario
+        Supplies the horizon, output step and breakpoints.
+    settings : IntegratorSettings, optional
+        Default :func:`integrator_settings` of ``sc``.
+    progress : callable, optional
+        Called with the simulated time reached after every integrator call.
+
+    Returns
+    -------
+    Trajectory
+        Incomplete (not raised) on an integrator failure (see
+        :func:`generated.integrate.integrate`).
+
+    Raises
+    ------
+    IntegrationError
+        If the method does not match ``built.form``.
     """
     s = settings or integrator_settings(sc)
     if (s.method == "idas") != (built.form == "dae"):
@@ -332,7 +386,13 @@ def simulate(
 
 # --------------------------------------------------------------------------- outputs
 def column_names(sc: Scenario) -> list[str]:
-    """The CSV columns, in order (agents and components 1-based)."""
+    """The CSV columns, in order (agents and components 1-based).
+
+    Parameters
+    ----------
+    sc : Scenario
+        Supplies the sizes ``N``, ``n`` and ``m``.
+    """
     m, n, N = sc.m, sc.n, sc.N
     cols = ["t"] + [f"eta0_{k}" for k in range(1, m + 1)]
     for i in range(1, N + 1):
@@ -365,7 +425,15 @@ _OUTPUT_ALIASES = {
 
 
 def evaluate_outputs(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:
-    """All named outputs at every output time: ``name -> array (K, rows, cols)``."""
+    """All named outputs at every output time: ``name -> array (K, rows, cols)``.
+
+    Parameters
+    ----------
+    built : Built
+        Supplies the compiled ``outputs`` Function.
+    traj : Trajectory
+        The output times and states.
+    """
     K = len(traj.t)
     f = built.outputs
     if K == 0:
@@ -391,7 +459,22 @@ def _agent_rows(arr: np.ndarray, N: int, width: int, name: str) -> np.ndarray:
 
 
 def trajectory_frame(built: Built, sc: Scenario, traj: Trajectory) -> pd.DataFrame:
-    """The trajectory as a DataFrame with exactly the columns of :func:`column_names`."""
+    """The trajectory as a DataFrame with exactly the columns of :func:`column_names`.
+
+    Parameters
+    ----------
+    built : Built
+        Supplies the state layout and the compiled outputs.
+    sc : Scenario
+        Supplies the sizes ``N``, ``n`` and ``m``.
+    traj : Trajectory
+        The output times and states.
+
+    Raises
+    ------
+    BuildError
+        If the closed loop's outputs or state layout do not give these columns.
+    """
     cl = built.closed_loop
     sl = cl.layout.slices
     outs = evaluate_outputs(built, traj)
@@ -432,7 +515,13 @@ def trajectory_frame(built: Built, sc: Scenario, traj: Trajectory) -> pd.DataFra
 
 
 def csv_text(df: pd.DataFrame) -> str:
-    """Deterministic CSV: header, then ``repr`` of every float (shortest round-trip form)."""
+    """Deterministic CSV: header, then ``repr`` of every float (shortest round-trip form).
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        All columns numeric; the index is not written.
+    """
     buf = io.StringIO()
     buf.write(",".join(df.columns) + "\n")
     for row in df.to_numpy(dtype=float).tolist():
@@ -442,7 +531,21 @@ def csv_text(df: pd.DataFrame) -> str:
 
 # --------------------------------------------------------------------------- progress
 class ProgressBar:
-    """A one-line progress bar on stderr, shown only once a run has lasted more than a second."""
+    """A one-line progress bar on stderr, shown only once a run has lasted more than a second.
+
+    Call it with the simulated time reached; it redraws at most every 0.1 s.
+
+    Parameters
+    ----------
+    label : str
+        Text before the bar.
+    horizon : float
+        Simulated time that counts as 100 %.
+    stream : file-like, optional
+        Where to write (default ``sys.stderr``).
+    delay : float
+        Wall seconds before the bar first appears.
+    """
 
     def __init__(self, label: str, horizon: float, stream: Any = None, delay: float = 1.0):
         self.label, self.horizon, self.delay = label, horizon, delay
@@ -466,6 +569,7 @@ class ProgressBar:
         self.shown = True
 
     def close(self) -> None:
+        """End the bar's line, if it was shown."""
         if self.shown:
             self.stream.write("\n")
             self.stream.flush()

@@ -156,7 +156,18 @@ class Library:
     source_bytes: int
 
     def function(self, name: str) -> ca.Function:
-        """Load ``name`` from the library with :func:`casadi.external`."""
+        """Load ``name`` from the library with :func:`casadi.external`.
+
+        Parameters
+        ----------
+        name : str
+            One of :attr:`names`.
+
+        Raises
+        ------
+        BuildError
+            If the library has no function ``name``.
+        """
         if name not in self.names:
             raise BuildError(
                 f"library {self.path}: no function {name!r} (it has {', '.join(self.names)})"
@@ -168,6 +179,11 @@ class Library:
 @functools.lru_cache(maxsize=8)
 def compiler_identity(compiler: str) -> str:
     """Resolved path and first ``--version`` line of ``compiler`` (part of the cache key).
+
+    Parameters
+    ----------
+    compiler : str
+        Executable name or path, looked up on ``PATH``.
 
     Raises
     ------
@@ -190,7 +206,17 @@ def compiler_identity(compiler: str) -> str:
 
 
 def renamed(f: ca.Function, name: str, *, expand: bool = True) -> ca.Function:
-    """``f`` under a new name with the same inputs/outputs (SX when possible)."""
+    """``f`` under a new name with the same inputs/outputs (SX when possible).
+
+    Parameters
+    ----------
+    f : casadi.Function
+        The function to copy.
+    name : str
+        The new name.
+    expand : bool
+        Expand an MX ``f`` to SX; it stays MX if expansion fails or ``expand`` is False.
+    """
     fs = f if f.is_a("SXFunction") else (_expanded(f) if expand else None)
     if fs is not None:
         args = fs.sx_in()
@@ -207,7 +233,15 @@ def _expanded(f: ca.Function) -> ca.Function | None:
 
 
 def check_dyn_signature(f: ca.Function, what: str) -> None:
-    """Raise :class:`BuildError` unless ``f`` has the integrator signature ``dyn_in -> dyn_out``."""
+    """Raise :class:`BuildError` unless ``f`` has the integrator signature ``dyn_in -> dyn_out``.
+
+    Parameters
+    ----------
+    f : casadi.Function
+        The function to check.
+    what : str
+        How ``f`` is named in the error message.
+    """
     if list(f.name_in()) != list(ca.dyn_in()) or list(f.name_out()) != list(ca.dyn_out()):
         raise BuildError(
             f"{what}: has inputs ({', '.join(f.name_in())}) and outputs "
@@ -262,7 +296,16 @@ def generate_source(
 
 
 def cache_key(source: str, settings: CodegenSettings) -> str:
-    """SHA-256 of everything that produced a library."""
+    """SHA-256 of everything that produced a library.
+
+    Parameters
+    ----------
+    source : str
+        The generated C text.
+    settings : CodegenSettings
+        Its compiler identity, flags and key fields enter the key (not ``build_root``
+        or ``timeout``); the CasADi version does too.
+    """
     ident = {
         "source_sha256": hashlib.sha256(source.encode()).hexdigest(),
         "compiler": compiler_identity(settings.compiler),
@@ -276,6 +319,15 @@ def cache_key(source: str, settings: CodegenSettings) -> str:
 
 def compile_source(source: str, settings: CodegenSettings, folder: Path) -> float:
     """Write ``source`` to ``folder/model.c`` and compile ``folder/model.so``.
+
+    Parameters
+    ----------
+    source : str
+        The C text.
+    settings : CodegenSettings
+        Compiler, flags and timeout.
+    folder : Path
+        Output folder, created if missing.
 
     Returns
     -------

@@ -175,6 +175,13 @@ class Trajectory:
 def output_grid(horizon: float, output_step: float) -> np.ndarray:
     """Output times ``0, h, 2h, ..., horizon`` (the last one exactly ``horizon``).
 
+    Parameters
+    ----------
+    horizon : float
+        Final time (s).
+    output_step : float
+        Spacing ``h`` of the output times (s); must divide ``horizon``.
+
     Raises
     ------
     IntegrationError

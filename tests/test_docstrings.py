@@ -1,12 +1,13 @@
 """Every public function and class has a docstring naming its parameters (python-control style).
 
-For each module of the packages in ``PACKAGES``: every function and class whose name does
-not start with ``_`` and that is defined in that module (not imported into it) must have a
-docstring; every such function, and every public method defined in such a class, must
-list each of its arguments (keyword-only included; ``self``/``cls`` excepted; ``*args`` and
-``**kwargs`` may be written with or without the stars) in a numpy-style ``Parameters``
-section. A class with its own ``__init__`` may document the constructor's arguments in the
-class docstring or in ``__init__``'s. Dataclasses need only the class docstring.
+For each module of the packages in ``PACKAGES`` except ``EXCLUDED_MODULES``: every function
+and class whose name does not start with ``_`` and that is defined in that module (not
+imported into it) must have a docstring; every such function, and every public method
+defined in such a class, must list each of its arguments (keyword-only included;
+``self``/``cls`` excepted; ``*args`` and ``**kwargs`` may be written with or without the
+stars) in a numpy-style ``Parameters`` section. A class with its own ``__init__`` may
+document the constructor's arguments in the class docstring or in ``__init__``'s.
+Dataclasses need only the class docstring.
 """
 
 from __future__ import annotations
@@ -20,9 +21,12 @@ from types import ModuleType
 
 import pytest
 
-# generated/ is left out: it is still being edited and had 66 problems at 00:16 UTC on
-# 2026-11-22 (mostly undocumented parameters); add it here once it passes.
-PACKAGES = ["symbolic", "synthesis", "verify"]
+PACKAGES = ["symbolic", "synthesis", "verify", "generated"]
+# modules neither imported nor checked
+EXCLUDED_MODULES = {
+    "generated.bench",  # being written for issue 7; add when done
+    "generated.largescale",  # being written for issue 7; add when done
+}
 
 _HEADER = re.compile(r"^\s*-{3,}\s*$")
 _PARAM_LINE = re.compile(r"^(\*{0,2}\w+(?:\s*,\s*\*{0,2}\w+)*)\s*(?::.*)?$")
@@ -32,7 +36,8 @@ def _modules(package: str) -> list[ModuleType]:
     pkg = importlib.import_module(package)
     mods = [pkg]
     for info in pkgutil.walk_packages(pkg.__path__, prefix=f"{package}."):
-        mods.append(importlib.import_module(info.name))
+        if info.name not in EXCLUDED_MODULES:
+            mods.append(importlib.import_module(info.name))
     return mods
 
 
