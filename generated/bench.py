@@ -606,25 +606,25 @@ def plot(records: list[dict[str, Any]], path: Path) -> Path | None:
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for meth in METHODS:
-        pts = [(r["N"], r["int_median_s"]) for r in records
-               if r["method"] == meth and r.get("status") == "ok" and r.get("int_median_s")]  # fmt: skip
-        stopped = [r["N"] for r in records if r["method"] == meth and r.get("status") != "ok"]
-        if not pts and not stopped:
+        mine = [r for r in records if r["method"] == meth]
+        pts = [(r["N"], r["int_median_s"]) for r in mine
+               if r.get("status") == "ok" and r.get("int_median_s")]  # fmt: skip
+        # stopped or failed cells that ran (not the "not run" ones), at their wall time
+        bad = [(r["N"], r["cell_wall_s"]) for r in mine
+               if r.get("status") != "ok" and r.get("cell_wall_s")
+               and not str(r.get("status", "")).startswith(("not run", "build only"))]  # fmt: skip
+        if not pts and not bad:
             continue
-        line = None
-        if pts:
-            xs, ys = zip(*sorted(pts), strict=True)
-            (line,) = ax.loglog(xs, ys, "o-", label=meth)
-        for N in stopped:
-            r = next(q for q in records if q["N"] == N and q["method"] == meth)
-            y = r.get("cell_wall_s") or 1.0
-            ax.loglog([N], [y], "x", color=line.get_color() if line else "k")
+        xy = list(zip(*sorted(pts), strict=True)) if pts else [[], []]
+        (line,) = ax.loglog(*xy, "o-", label=meth)
+        if bad:
+            ax.loglog(*zip(*sorted(bad), strict=True), "x", color=line.get_color(), ms=8)
     Ns = sorted({r["N"] for r in records})
     if len(Ns) > 1:
         ax.loglog(Ns, [0.05 * n / Ns[0] for n in Ns], "k:", lw=0.8, label="∝ N")
     ax.set_xlabel("followers N")
     ax.set_ylabel("integration wall time, 20 s horizon [s]")
-    ax.set_title("x: stopped at the time limit or failed (plotted at the cell's wall time)")
+    ax.set_title("x: stopped at the time limit or failed (at the cell's wall time)", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     buf = io.BytesIO()

@@ -28,7 +28,10 @@ Hook wanted in ``generated/integrate.py`` (so the simulation CLI can use ``gmres
 the SUNDIALS options of ``_Sundials`` (this module needs
 ``("use_preconditioner", False), ("max_krylov", k)``), and in
 ``generated/codegen.py`` a ``CodegenSettings.jacobian = "jvp"`` that generates
-``fwd1_<name>`` *without* ``jac_<name>``. Until then :func:`integrate_plan` calls
+``fwd1_<name>`` *without* ``jac_<name>`` but with the Jacobian's sparsity pattern
+(``CodeGenerator.add(f, True)``; without it CasADi's set-up allocates a dense nx×nx
+matrix). Until then :func:`build_plan` compiles through the codegen module's
+``cache_key``/``compile_source`` and :func:`integrate_plan` calls
 :func:`casadi.integrator` itself.
 """
 
@@ -45,8 +48,10 @@ import numpy as np
 from symbolic.errors import BuildError, IntegrationError
 
 PLANS = ("direct", "gmres")
-#: above this many agents ``auto`` switches to the matrix-free plan (measured crossover,
-#: docs/performance.md: the generated Jacobian is ~0.1–0.3 MB of C per agent)
+#: above this many agents ``auto`` switches to the matrix-free plan. Measured
+#: (docs/performance.md): N = 5 direct 0.67 s vs gmres 1.16 s; N = 50 direct does not
+#: even compile in 60 s (≈ 0.13 MB of expanded C per agent). 20 is a judgement call
+#: between the two; the crossover itself was not measured.
 DIRECT_MAX_AGENTS = 20
 #: Krylov subspace size: the closed loop's stiff modes (φ floor, tanh layer, gains
 #: λ_ir k1_ir) need more than CVODES's default of 5
