@@ -33,7 +33,11 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--variant", help="name suffix of an overridden run (default from the keys)")
     sim.add_argument("--opt", default="-O1", help="compiler optimisation flag (default -O1)")
     sim.add_argument("--compiler", default="gcc")
-    sim.add_argument("--jacobian", choices=("sparse", "gmres", "jvp"), default="sparse")
+    sim.add_argument(
+        "--jacobian", choices=("auto", "sparse", "gmres", "jvp"), default="auto",
+        help="Newton linear algebra: auto (default) = sparse (direct) for N <= 20, else jvp "
+        "(matrix-free GMRES, generated/largescale.py)",
+    )  # fmt: skip
     sim.add_argument(
         "--fixed-tol", type=float, default=None,
         help="error-test tolerance of the fixed-step method's bisection safeguard (default 1e-3)",

@@ -203,6 +203,26 @@ def ensure_gains(sc: Scenario, out_root: str | Path | None = None):
 
 
 # --------------------------------------------------------------------------- build
+def resolve_codegen(N: int, settings: CodegenSettings | None = None) -> CodegenSettings:
+    """``settings`` with its Jacobian strategy resolved for N agents (the large-N plan).
+
+    ``jacobian="auto"`` becomes ``sparse`` (direct Newton) for N <= 20 and ``jvp``
+    (matrix-free GMRES, mapped MX) above: :func:`generated.largescale.choose_plan`.
+
+    Parameters
+    ----------
+    N : int
+        Number of followers.
+    settings : CodegenSettings, optional
+        Default ``CodegenSettings(jacobian="auto")``.
+    """
+    from generated.largescale import choose_plan
+
+    settings = settings or CodegenSettings(jacobian="auto")
+    plan = choose_plan(N, settings.jacobian, linear_solver=settings.linear_solver)
+    return plan.codegen_settings(settings)
+
+
 @dataclass(frozen=True)
 class Built:
     """A closed loop compiled for one method.
@@ -246,10 +266,11 @@ def build(
         ``cvodes``/``fixed`` build the ODE form, ``idas`` the DAE form (default:
         the scenario's method).
     settings : CodegenSettings, optional
+        ``jacobian="auto"`` is resolved from ``sc.N`` (:func:`resolve_codegen`).
     closed_loop : ClosedLoop, optional
         A prebuilt closed loop (skips ``build_closed_loop``).
     """
-    settings = settings or CodegenSettings()
+    settings = resolve_codegen(sc.N, settings)
     method = method or sc.integration.method
     t0 = time.perf_counter()
     if closed_loop is None:
@@ -275,11 +296,12 @@ def build_from_closed_loop(
     method : str
         ``idas`` compiles the DAE form, any other method the ODE form.
     settings : CodegenSettings, optional
+        ``jacobian="auto"`` is resolved from the closed loop's N (:func:`resolve_codegen`).
     t_symbolic_start : float, optional
         ``time.perf_counter()`` when the symbolic build began, so that
         ``timings["symbolic_build"]`` includes it (default: now).
     """
-    settings = settings or CodegenSettings()
+    settings = resolve_codegen(cl.layout.N, settings)
     t0 = time.perf_counter() if t_symbolic_start is None else t_symbolic_start
     form = "dae" if method == "idas" else "ode"
     src, name = (cl.dae_dyn, DAE_NAME) if form == "dae" else (cl.ode_dyn, ODE_NAME)
@@ -312,25 +334,28 @@ def integrator_settings(
     method : str, optional
         Overrides ``integration.method``.
     codegen : CodegenSettings, optional
-        Supplies the Newton scheme and linear solver (default ``CodegenSettings()``).
+        Its Jacobian strategy (``auto`` resolved from ``sc.N``) gives the Newton scheme,
+        the linear solver and the plan's extra SUNDIALS options
+        (:func:`generated.largescale.choose_plan`; default ``jacobian="auto"``).
     fixed_tol : float, optional
         Safeguard tolerance of the fixed-step method (sets ``fixed_rtol`` and
         ``fixed_atol``; default 1e-3, see :class:`IntegratorSettings`).
     """
+    from generated.largescale import choose_plan
+
     ig = sc.integration
-    cg = codegen or CodegenSettings()
-    lin = cg.integrator_options()
+    cg = codegen or CodegenSettings(jacobian="auto")
+    plan = choose_plan(sc.N, cg.jacobian, linear_solver=cg.linear_solver)
     extra = {} if fixed_tol is None else {"fixed_rtol": fixed_tol, "fixed_atol": fixed_tol}
-    return IntegratorSettings(
+    base = IntegratorSettings(
         **extra,
         method=method or ig.method,
         rtol=ig.rtol,
         atol=ig.atol,
         max_steps=ig.max_steps,
         fixed_step=ig.fixed_step,
-        newton_scheme=lin["newton_scheme"],
-        linear_solver=cg.linear_solver,
     )
+    return plan.integrator_settings(base)
 
 
 def simulate(
@@ -610,6 +635,8 @@ def run(
     method : str, optional
         Overrides ``integration.method`` for this run without renaming the output.
     codegen : CodegenSettings, optional
+        Default ``CodegenSettings(jacobian="auto")``: the plan is chosen from N
+        (:func:`resolve_codegen`).
     out_root : str or Path, optional
         Default ``out/`` (``$HITL_OUT``).
     progress : bool
@@ -623,11 +650,12 @@ def run(
     -------
     RunResult
     """
-    codegen = codegen or CodegenSettings()
     t_all = time.perf_counter()
     t0 = time.perf_counter()
     sc = load(path, overrides, variant)
     t_load = time.perf_counter() - t0
+    requested = (codegen or CodegenSettings(jacobian="auto")).jacobian
+    codegen = resolve_codegen(sc.N, codegen)
     method = method or sc.integration.method
     if sc.options.sign == "exact" and method != "fixed":
         raise ScenarioError(
@@ -671,6 +699,7 @@ def run(
         "fixed_atol": s.fixed_atol if method == "fixed" else None,
         "newton_scheme": s.newton_scheme,
         "linear_solver": s.linear_solver,
+        "integrator_extra_options": dict(s.extra_options),
         "horizon": sc.integration.horizon,
         "output_step": sc.integration.output_step,
         "breakpoints": sorted(set(sc.breakpoints()) | set(built.closed_loop.breakpoints)),
@@ -690,6 +719,8 @@ def run(
             "cflags": list(codegen.cflags),
             "compiler": codegen.compiler,
             "jacobian": codegen.jacobian,
+            "jacobian_requested": requested,
+            "expand": codegen.expand,
             "casadi": ca.__version__,
         },
         "cache_hit": built.library.cache_hit,

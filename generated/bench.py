@@ -21,10 +21,14 @@ the variable-step methods, the same output grid):
     machine, no code generation, CVODES with CasADi's own Jacobian.
 ``c-cvodes-direct``, ``c-cvodes-gmres``
     Our generated C + CVODES with the two plans of :mod:`generated.largescale`
-    (sparse direct Jacobian / matrix-free GMRES). "Ours" — the denominator of the
-    ratio column — is the plan :func:`generated.largescale.choose_plan` picks for N.
+    (``jacobian="sparse"``: sparse direct Jacobian / ``"jvp"``: matrix-free GMRES),
+    built and integrated by the functions of ``make sim``
+    (:func:`generated.api.build_from_closed_loop`, :func:`generated.api.integrator_settings`,
+    :func:`generated.api.simulate`). "Ours" — the denominator of the ratio column — is
+    the plan :func:`generated.largescale.choose_plan` picks for N (what ``make sim``
+    runs with its default ``--jacobian auto``).
 ``c-idas``
-    Our generated C (DAE form) + IDAS, same plan as ours.
+    Our generated C (DAE form) + IDAS, same plan as ours, same functions.
 ``fixed``
     The fixed-step ROS2 method of :mod:`generated.integrate` with the exact sign
     function (its purpose), step ``integration.fixed_step``.
@@ -72,6 +76,9 @@ OUTPUT_STEP = 0.1  # output grid of every method (states stored there)
 #: methods whose build is cheap at any N: after they hit the time limit, larger N still
 #: get a build-only cell (build times, C size, RHS time) instead of nothing
 CHEAP_BUILDS = ("scipy-bdf", "scipy-rk45", "casadi-vm", "c-cvodes-gmres", "c-idas")
+#: ``CodegenSettings.jacobian`` of the CasADi methods (``auto``: the plan of ``make sim``)
+JACOBIAN_OF = {"casadi-vm": "sparse", "c-cvodes-direct": "sparse", "c-cvodes-gmres": "jvp",
+               "c-idas": "auto"}  # fmt: skip
 
 
 class BenchError(ToolkitError):
@@ -86,6 +93,13 @@ def random_graph(N: int, seed: int = BENCH_SEED) -> tuple[np.ndarray, np.ndarray
     tree) and up to two more random earlier followers (about 3 neighbours each);
     ``max(1, N // 100)`` followers are pinned (follower 0 among them). Acyclic, so L + B is triangular with
     eigenvalues ≥ 1 (the observer network is stable for any N).
+
+    Parameters
+    ----------
+    N : int
+        Number of followers (>= 1).
+    seed : int
+        Random seed.
 
     Returns
     -------
@@ -184,6 +198,11 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 
 def bench_gains(sc):
     """Gains for the benchmark: :func:`synthesis.synthesize` (uncertified warnings allowed).
+
+    Parameters
+    ----------
+    sc : Scenario
+        A :func:`bench_scenario`.
 
     Returns
     -------
@@ -296,10 +315,31 @@ def _scipy_run(rhs, x0, t_out, method: str, sparsity, deadline: float) -> dict[s
 
 
 def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, out: Path) -> int:
-    """Measure one (N, method) cell and write its record to ``out`` (JSON, rewritten as it goes)."""
+    """Measure one (N, method) cell and write its record to ``out`` (JSON, rewritten as it goes).
+
+    Parameters
+    ----------
+    N : int
+        Number of followers.
+    method : str
+        One of :data:`METHODS`.
+    runs : int
+        Integration runs (0: build only).
+    time_limit : float
+        Wall seconds after which no further run is started.
+    horizon : float
+        Simulated seconds.
+    out : Path
+        The record (JSON); the final state goes next to it (``.npy``).
+
+    Returns
+    -------
+    int
+        Exit status 0.
+    """
 
     from generated.integrate import output_grid
-    from generated.largescale import build_plan, choose_plan, integrate_plan
+    from generated.largescale import choose_plan
     from symbolic.closed_loop import build_closed_loop
 
     t_start = time.perf_counter()
@@ -309,8 +349,10 @@ def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, ou
     gains, gsrc = bench_gains(sc)
     rec["gains"] = gsrc
     H = sc.integration.horizon
-    t_out = output_grid(H, H / max(1, round(H / OUTPUT_STEP)))
-    ours = choose_plan(N)
+    step = H / max(1, round(H / OUTPUT_STEP))
+    # every method stores the same grid; api.simulate reads it from the scenario
+    sc = dataclasses.replace(sc, integration=dataclasses.replace(sc.integration, output_step=step))
+    t_out = output_grid(H, step)
     rec["base_rss_mb"] = _rss_mb()
     _write(out, rec)
 
@@ -371,31 +413,42 @@ def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, ou
             }  # fmt: skip
 
     else:
+        # ours and its variants: the functions of ``make sim`` (generated.api), with the
+        # Jacobian strategy of the method (c-idas: the one choose_plan picks for N)
+        from generated.api import build_from_closed_loop, integrator_settings, simulate
+        from generated.codegen import CodegenSettings
+        from generated.integrate import integrate
+
         idas = method == "c-idas"
+        meth = "idas" if idas else "cvodes"
+        cg = CodegenSettings(jacobian=JACOBIAN_OF[method])
+        plan = choose_plan(N, cg.jacobian)
+        s = integrator_settings(sc, meth, cg)
+        label = f"{plan.jacobian}: {plan.strategy} Newton ({plan.reason})"
         if method == "casadi-vm":
-            plan = choose_plan(N, "direct")
             dyn = cl.ode_dyn
-            rec.update(codegen_s=0.0, compile_s=0.0, c_bytes=0, plan="CasADi VM, CasADi AD Jacobian, csparse")  # fmt: skip
+            rec.update(codegen_s=0.0, compile_s=0.0, c_bytes=0,
+                       plan=f"CasADi VM, CasADi AD Jacobian, {label}")  # fmt: skip
         else:
-            plan = ours if method == "c-idas" else choose_plan(N, method.rsplit("-", 1)[1])
-            b = build_plan(cl.dae_dyn if idas else cl.ode_dyn, plan, "cl_dae" if idas else "cl_ode")
-            dyn = b.dyn
-            rec.update(codegen_s=b.timings["codegen"], compile_s=b.timings["compile"],
-                       c_bytes=b.library.source_bytes, cache_hit=b.library.cache_hit,
-                       plan=f"{plan.strategy} ({plan.reason})")  # fmt: skip
+            built = build_from_closed_loop(cl, meth, cg)
+            dyn = built.dyn
+            rec.update(codegen_s=built.timings["codegen"], compile_s=built.timings["compile"],
+                       c_bytes=built.library.source_bytes, cache_hit=built.library.cache_hit,
+                       plan=label)  # fmt: skip
         nz = int(dyn.size1_in(2))
         rec["rhs_us"] = 1e6 * _time_casadi_rhs(dyn, x0, nz)
-        z0 = np.asarray(cl.z0, dtype=float) if idas else None
 
         def run_once():
-            r = integrate_plan(dyn, x0, t_out, plan, method="idas" if idas else "cvodes",
-                               rtol=1e-6, atol=1e-8, breakpoints=bps, z0=z0)  # fmt: skip
-            st = r.stats
+            if method == "casadi-vm":
+                tr = integrate(dyn, x0, t_out, s, breakpoints=bps)
+            else:
+                tr = simulate(built, sc, s)  # exactly what make sim integrates
+            st = tr.stats
             return {
-                "wall": st["wall_seconds"], "status": "ok" if r.complete else r.message,
-                "t_reached": float(r.t[-1]), "steps": st["steps"], "rhs_evals": st["rhs_evals"],
-                "jac_evals": st["jac_evals"], "jtimes_evals": st["jtimes_evals"],
-                "x_final": r.x[-1],
+                "wall": st["wall_seconds"], "status": "ok" if tr.complete else tr.message,
+                "t_reached": tr.t_reached, "steps": st["steps"], "rhs_evals": st["rhs_evals"],
+                "jac_evals": st["jac_evals"], "jtimes_evals": st.get("jtimes_evals"),
+                "x_final": tr.x[-1],
             }  # fmt: skip
 
     _write(out, rec)
@@ -430,7 +483,23 @@ def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, ou
 def run_cell(
     N: int, method: str, runs: int, time_limit: float, horizon: float, folder: Path
 ) -> dict[str, Any]:
-    """Run one cell in a subprocess with a hard wall-clock limit; return its record."""
+    """Run one cell in a subprocess with a hard wall-clock limit; return its record.
+
+    Parameters
+    ----------
+    N : int
+        Number of followers.
+    method : str
+        One of :data:`METHODS`.
+    runs : int
+        Integration runs (0: build only).
+    time_limit : float
+        Seconds per cell (the subprocess is killed 60 s after it).
+    horizon : float
+        Simulated seconds.
+    folder : Path
+        Output folder (records under ``cells/``).
+    """
     rec_path = folder / "cells" / f"N{N}-{method}.json"
     rec_path.parent.mkdir(parents=True, exist_ok=True)
     for p in (rec_path, rec_path.with_suffix(".npy")):
@@ -489,7 +558,13 @@ COLUMNS = [
 
 
 def finish(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Add the ratio to ours and the final-state difference to ours, per N."""
+    """Add the ratio to ours and the final-state difference to ours, per N.
+
+    Parameters
+    ----------
+    records : list of dict
+        Cell records (changed in place and returned).
+    """
     from generated.largescale import choose_plan
 
     for N in sorted({r["N"] for r in records}):
@@ -512,7 +587,15 @@ def finish(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def write_csv(records: list[dict[str, Any]], path: Path) -> Path:
-    """``bench.csv`` (atomically)."""
+    """``bench.csv`` (atomically).
+
+    Parameters
+    ----------
+    records : list of dict
+        Cell records.
+    path : Path
+        The CSV file.
+    """
     import csv
     import io
 
@@ -535,7 +618,13 @@ def _fmt_csv(v: Any) -> str:
 
 
 def table(records: list[dict[str, Any]]) -> str:
-    """The printed table."""
+    """The printed table.
+
+    Parameters
+    ----------
+    records : list of dict
+        Cell records after :func:`finish`.
+    """
     head = ("N", "method", "int med [s]", "min–max [s]", "×ours", "steps", "RHS ev", "µs/RHS",
             "sym [s]", "cg+cc [s]", "C [kB]", "RSS [MB]", "status")  # fmt: skip
     rows = [head]
@@ -559,7 +648,13 @@ def table(records: list[dict[str, Any]]) -> str:
 
 
 def markdown(records: list[dict[str, Any]]) -> str:
-    """The results as a Markdown table (``out/bench/bench.md``, for the README)."""
+    """The results as a Markdown table (``out/bench/bench.md``, for the README).
+
+    Parameters
+    ----------
+    records : list of dict
+        Cell records after :func:`finish`.
+    """
     head = ["N", "method", "integration [s] median (min–max)", "× ours", "steps", "RHS evals",
             "µs / RHS", "symbolic [s]", "codegen + gcc [s]", "C [kB]", "peak RSS [MB]", "status"]  # fmt: skip
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -594,7 +689,15 @@ def _g(v: Any) -> str:
 
 
 def plot(records: list[dict[str, Any]], path: Path) -> Path | None:
-    """``scaling.png``: integration time against N (log-log), one line per method."""
+    """``scaling.png``: integration time against N (log-log), one line per method.
+
+    Parameters
+    ----------
+    records : list of dict
+        Cell records after :func:`finish`.
+    path : Path
+        The PNG file.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -635,7 +738,13 @@ def plot(records: list[dict[str, Any]], path: Path) -> Path | None:
 
 
 def main(argv: list[str]) -> int:
-    """Command line of ``python -m generated.bench`` (see the module docstring)."""
+    """Command line of ``python -m generated.bench`` (see the module docstring).
+
+    Parameters
+    ----------
+    argv : list of str
+        Arguments without the program name.
+    """
     ap = argparse.ArgumentParser(
         prog="python -m generated.bench", description=__doc__.split("\n")[0]
     )

@@ -12,7 +12,10 @@ is either complete or absent.
 Facts this module relies on (measured with CasADi 3.8.2): an external Function used
 as an integrator's DAE must have exactly the inputs (t, x, z, p, u) and outputs
 (ode, alg, quad, zero), and the same library must contain ``jac_<name>`` generated
-with ``f.jacobian()``.
+with ``f.jacobian()`` (direct Newton) or ``fwd1_<name>`` (``f.forward(1)``, GMRES).
+Without ``jac_<name>`` the external must carry its Jacobian's sparsity pattern
+(``CodeGenerator.add(f, True)``), else CasADi's CVODES/IDAS set-up allocates a dense
+nx×nx matrix (N = 500: 2.8 GB, ≈ 400 s; see docs/performance.md).
 """
 
 from __future__ import annotations
@@ -37,6 +40,9 @@ from symbolic.errors import BuildError
 #: default cache root (gitignored); ``HITL_BUILD_DIR`` overrides it
 DEFAULT_BUILD_ROOT = Path(__file__).resolve().parent / "build"
 JACOBIAN_STRATEGIES = ("sparse", "gmres", "jvp")
+#: ``auto`` is resolved from the number of agents by :func:`generated.largescale.choose_plan`
+#: before anything is generated
+JACOBIAN_CHOICES = ("auto", *JACOBIAN_STRATEGIES)
 SOURCE_NAME = "model.c"
 LIBRARY_NAME = "model.so"
 MANIFEST_NAME = "manifest.json"
@@ -87,10 +93,10 @@ class CodegenSettings:
     codegen_options: tuple[tuple[str, Any], ...] = field(default=(("with_header", False),))
 
     def __post_init__(self) -> None:
-        if self.jacobian not in JACOBIAN_STRATEGIES:
+        if self.jacobian not in JACOBIAN_CHOICES:
             raise BuildError(
                 f"CodegenSettings.jacobian: {self.jacobian!r} is not allowed "
-                f"(expected one of {', '.join(JACOBIAN_STRATEGIES)})"
+                f"(expected one of {', '.join(JACOBIAN_CHOICES)})"
             )
         if not ca.has_linsol(self.linear_solver):
             raise BuildError(
@@ -111,10 +117,25 @@ class CodegenSettings:
         return Path(env) if env else DEFAULT_BUILD_ROOT
 
     def integrator_options(self) -> dict[str, Any]:
-        """The CVODES/IDAS options that follow from the Jacobian strategy."""
-        if self.jacobian in ("gmres", "jvp"):
-            return {"newton_scheme": "gmres"}
-        return {"newton_scheme": "direct", "linear_solver": self.linear_solver}
+        """The CVODES/IDAS options that follow from the Jacobian strategy.
+
+        Those of :func:`generated.largescale.choose_plan` (the one place that maps a
+        strategy to solver options; ``jvp`` adds ``use_preconditioner=False`` and
+        ``max_krylov``).
+
+        Raises
+        ------
+        BuildError
+            For ``jacobian="auto"`` (it depends on N: resolve it first).
+        """
+        from generated.largescale import choose_plan  # largescale imports this module
+
+        if self.jacobian not in JACOBIAN_STRATEGIES:
+            raise BuildError(
+                f"CodegenSettings.jacobian: {self.jacobian!r} depends on N "
+                "(resolve it with generated.largescale.choose_plan(N))"
+            )
+        return choose_plan(1, self.jacobian, linear_solver=self.linear_solver).integrator_options
 
     def key_fields(self) -> dict[str, Any]:
         """The settings that enter the cache key (the build root does not)."""
@@ -264,13 +285,20 @@ def generate_source(
     settings : CodegenSettings
     with_derivatives : sequence of str
         Names whose ``jac_<name>`` (``f.jacobian()``, strategies sparse and gmres) and
-        ``fwd1_<name>`` (``f.forward(1)``, strategies gmres and jvp) are generated as well.
+        ``fwd1_<name>`` (``f.forward(1)``, strategies gmres and jvp) are generated as well;
+        with ``jvp`` they also carry their Jacobian's sparsity pattern (no code, O(nnz)
+        integers) so that CVODES/IDAS never allocate a dense nx×nx matrix.
 
     Returns
     -------
     (str, tuple of str)
         The C text and the names of all functions in it.
     """
+    if settings.jacobian not in JACOBIAN_STRATEGIES:
+        raise BuildError(
+            f"CodegenSettings.jacobian: {settings.jacobian!r} must be resolved before "
+            "generating code (generated.largescale.choose_plan(N).codegen_settings(...))"
+        )
     cg = ca.CodeGenerator(SOURCE_NAME, dict(settings.codegen_options))
     names: list[str] = []
     seen: set[str] = set()
@@ -278,9 +306,11 @@ def generate_source(
         if f.name() in seen:
             raise BuildError(f"generate_source: two functions are named {f.name()!r}")
         seen.add(f.name())
-        cg.add(f)
+        derive = f.name() in with_derivatives
+        # jvp: no jac_<name>, so the pattern must come with the function itself
+        cg.add(f, derive and settings.jacobian == "jvp")
         names.append(f.name())
-        if f.name() in with_derivatives:
+        if derive:
             if settings.jacobian in ("sparse", "gmres"):
                 jac = f.jacobian()  # named jac_<name>, as the integrator plugins look it up
                 cg.add(jac)
@@ -392,7 +422,7 @@ def build_library(
         Functions to compile, under their own names.
     settings : CodegenSettings, optional
     with_derivatives : sequence of str
-        Names that also get ``jac_<name>`` (and ``fwd1_<name>`` with ``jacobian="gmres"``).
+        Names that also get their derivative companions (see :func:`generate_source`).
 
     Returns
     -------

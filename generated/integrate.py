@@ -166,7 +166,8 @@ class Trajectory:
         Empty when complete, else the reason (method, time reached, solver flag).
     stats : dict
         ``steps``, ``rhs_evals``, ``jac_evals``, ``lin_setups``, ``error_test_fails``,
-        ``newton_fails``, ``restarts``, ``integrator_calls``, ``wall_seconds``.
+        ``newton_fails``, ``newton_iters``, ``jtimes_evals``, ``restarts``, ``integrator_calls``,
+        ``wall_seconds``.
     """
 
     t: np.ndarray
@@ -253,6 +254,8 @@ _STAT_KEYS = {
     "lin_setups": ("nlinsetups",),
     "error_test_fails": ("netfails",),
     "newton_fails": ("nncfails",),
+    "newton_iters": ("nniters",),
+    "jtimes_evals": ("n_call_jtimesF",),
 }
 
 

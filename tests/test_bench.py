@@ -13,7 +13,9 @@ import pytest
 import scipy.linalg as sla
 
 from generated.bench import BenchError, bench_scenario, main, random_graph
-from generated.largescale import choose_plan, integrate_plan, plan_functions
+from generated.codegen import CodegenSettings, build_library
+from generated.integrate import IntegratorSettings, integrate
+from generated.largescale import choose_plan
 from symbolic.errors import ToolkitError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -55,15 +57,37 @@ def test_bench_scenario_shapes_and_offsets() -> None:
 
 # ----------------------------------------------------------------------------- plans
 def test_choose_plan() -> None:
-    assert choose_plan(5).strategy == "direct"
+    small = choose_plan(5)
+    assert small.strategy == "direct" and small.jacobian == "sparse" and small.expand is None
+    assert small.extra_options == () and small.derivatives == ("jac",)
+    assert choose_plan(20).jacobian == "sparse" and choose_plan(21).jacobian == "jvp"
     big = choose_plan(2000)
-    assert big.strategy == "gmres" and not big.expand and big.derivatives == ("fwd1",)
+    assert big.strategy == "gmres" and big.expand is False and big.derivatives == ("fwd1",)
     assert big.integrator_options["newton_scheme"] == "gmres"
     assert big.integrator_options["use_preconditioner"] is False
-    assert choose_plan(2000, "direct").derivatives == ("jac",)
-    for bad in ({"strategy": "lu"}, {"max_krylov": 0}):
+    assert choose_plan(2000, "sparse").derivatives == ("jac",)
+    assert choose_plan(2000, "gmres").derivatives == ("jac", "fwd1")
+    assert choose_plan(50, direct_max_agents=100).jacobian == "sparse"  # threshold overridable
+    for bad in ({"jacobian": "lu"}, {"max_krylov": 0}, {"linear_solver": "nope"}):
         with pytest.raises(ToolkitError):
             choose_plan(10, **bad)
+
+
+def test_plan_settings_feed_codegen_and_integrate() -> None:
+    """The plan only fills in CodegenSettings / IntegratorSettings; everything else is kept."""
+    base_cg = CodegenSettings(optimization="-O0", jacobian="auto", build_root="/x")
+    cg = choose_plan(2000).codegen_settings(base_cg)
+    assert (cg.jacobian, cg.expand, cg.optimization, cg.build_root) == ("jvp", False, "-O0", "/x")
+    assert choose_plan(5).codegen_settings(base_cg).expand is True  # sparse keeps the caller's
+    base = IntegratorSettings(rtol=1e-7, extra_options=(("max_krylov", 5), ("foo", 1)))
+    s = choose_plan(2000).integrator_settings(base)
+    assert s.rtol == 1e-7 and s.newton_scheme == "gmres"
+    assert dict(s.extra_options) == {"max_krylov": 20, "foo": 1, "use_preconditioner": False}
+    d = choose_plan(5).integrator_settings(base)
+    assert d.newton_scheme == "direct" and d.linear_solver == "csparse"
+    assert d.extra_options == base.extra_options
+    with pytest.raises(ToolkitError, match="resolved"):
+        build_library([_linear_dyn(np.eye(2))], CodegenSettings(jacobian="auto"), ["lin"])
 
 
 def _linear_dyn(A: np.ndarray) -> ca.Function:
@@ -79,7 +103,7 @@ def test_gmres_companion_is_the_jacobian_vector_product() -> None:
     rng = np.random.default_rng(0)
     A = rng.normal(size=(6, 6))
     f = _linear_dyn(A)
-    fwd = plan_functions(f, choose_plan(100))[1]
+    fwd = f.forward(1)  # what codegen generates as fwd1_<name> for the jvp plan
     assert fwd.name() == "fwd1_lin"
     v = rng.normal(size=6)
     x = rng.normal(size=6)
@@ -88,31 +112,29 @@ def test_gmres_companion_is_the_jacobian_vector_product() -> None:
     np.testing.assert_allclose(np.array(jv).ravel(), A @ v, rtol=1e-12)
 
 
-@pytest.mark.parametrize("strategy", ["direct", "gmres"])
-def test_integrate_plan_matches_matrix_exponential(strategy: str) -> None:
+@pytest.mark.parametrize("strategy", ["sparse", "jvp"])
+def test_plan_settings_integrate_matches_matrix_exponential(strategy: str) -> None:
     # stiff linear test problem (eigenvalues -1 ... -1e4) with the exact solution expm(At) x0
     rng = np.random.default_rng(1)
     V = np.linalg.qr(rng.normal(size=(8, 8)))[0]
     A = V @ np.diag(-np.logspace(0, 4, 8)) @ V.T
     x0 = rng.normal(size=8)
     t_out = np.linspace(0.0, 2.0, 5)
-    res = integrate_plan(
-        _linear_dyn(A), x0, t_out, choose_plan(8, strategy), rtol=1e-8, atol=1e-10,
-        breakpoints=[0.7],
-    )  # fmt: skip
+    s = choose_plan(8, strategy).integrator_settings(IntegratorSettings(rtol=1e-8, atol=1e-10))
+    res = integrate(_linear_dyn(A), x0, t_out, s, breakpoints=[0.7])
     assert res.complete, res.message
     assert np.allclose(res.t, t_out)
     exact = np.array([sla.expm(A * t) @ x0 for t in t_out])
     np.testing.assert_allclose(res.x, exact, atol=1e-6)
     assert res.stats["steps"] > 0 and res.stats["rhs_evals"] > 0
-    if strategy == "gmres":
+    if strategy == "jvp":
         assert res.stats["jac_evals"] == 0  # matrix-free: no Jacobian is ever formed
 
 
-def test_integrate_plan_reports_failure_instead_of_raising() -> None:
+def test_plan_settings_failure_is_reported_not_raised() -> None:
     A = np.array([[-1.0]])
-    res = integrate_plan(_linear_dyn(A), np.ones(1), np.linspace(0, 1, 3), choose_plan(1),
-                         max_steps=1)  # fmt: skip
+    s = choose_plan(1).integrator_settings(IntegratorSettings(max_steps=1))
+    res = integrate(_linear_dyn(A), np.ones(1), np.linspace(0, 1, 3), s)
     assert not res.complete and "failed" in res.message
     assert res.x.shape[0] == len(res.t) >= 1
 
@@ -175,18 +197,74 @@ def test_finish_ratios_and_table_from_synthetic_records() -> None:
 
 def test_gmres_build_carries_the_jacobian_sparsity(tmp_path: Path) -> None:
     """The compiled matrix-free RHS reports A's pattern, not a dense Jacobian."""
-    from generated.codegen import CodegenSettings
-    from generated.largescale import build_plan
+    from generated.codegen import renamed
 
     A = np.diag(-np.arange(1.0, 7.0)) + np.diag(np.ones(5), -1)  # bidiagonal
     plan = choose_plan(100)
-    b = build_plan(_linear_dyn(A), plan, "lin_cl", CodegenSettings(build_root=str(tmp_path)))
-    assert set(b.library.names) == {"lin_cl", "fwd1_lin_cl"}  # no jac_ generated
-    sp = b.dyn.sparsity_jac(1, 0)
+    cg = plan.codegen_settings(CodegenSettings(build_root=str(tmp_path)))
+
+    def build():
+        f = renamed(_linear_dyn(A), "lin_cl", expand=cg.expand)
+        return build_library([f], cg, ["lin_cl"])
+
+    lib = build()
+    assert set(lib.names) == {"lin_cl", "fwd1_lin_cl"}  # no jac_ generated
+    dyn = lib.function("lin_cl")
+    sp = dyn.sparsity_jac(1, 0)
     assert sp.nnz() == np.count_nonzero(A)
     x0 = np.ones(6)
-    res = integrate_plan(b.dyn, x0, np.array([0.0, 0.5]), plan, rtol=1e-9, atol=1e-12)
+    s = plan.integrator_settings(IntegratorSettings(rtol=1e-9, atol=1e-12))
+    res = integrate(dyn, x0, np.array([0.0, 0.5]), s)
     assert res.complete
     np.testing.assert_allclose(res.x[-1], sla.expm(0.5 * A) @ x0, rtol=1e-6)
-    again = build_plan(_linear_dyn(A), plan, "lin_cl", CodegenSettings(build_root=str(tmp_path)))
-    assert again.library.cache_hit and again.library.key == b.library.key
+    again = build()
+    assert again.cache_hit and again.key == lib.key
+
+
+@pytest.mark.slow
+def test_api_auto_picks_the_large_n_plan_and_agrees_with_direct(tmp_path: Path) -> None:
+    """N = 21 through generated.api: ``auto`` builds the matrix-free plan; same trajectory.
+
+    Reference: the direct plan (``sparse``: generated sparse Jacobian + csparse) on the
+    same closed loop. The loop is sensitive in its first 0.2 s (at rtol 1e-6 the direct
+    plan differs from itself at rtol 1e-9 by 12 % in q; measured at N = 30), so both
+    runs use rtol 1e-9, atol 1e-11; measured agreement 5.7e-5 at N = 24 (relative to
+    max(1, |x|)), 1.5e-4 at N = 30 over 0.2 s.
+    """
+    import dataclasses
+
+    from generated import api
+    from symbolic.closed_loop import build_closed_loop
+
+    N = 21  # the smallest N where auto chooses jvp; the direct build is ~16 s of gcc -O0
+    sc = bench_scenario(N, horizon=0.1)
+    ig = dataclasses.replace(sc.integration, rtol=1e-9, atol=1e-11)
+    sc = dataclasses.replace(sc, integration=ig)
+    gains = synthesize_gains(sc)
+    cl = build_closed_loop(sc, gains)
+    runs = {}
+    for jac in ("auto", "sparse"):
+        cg = CodegenSettings(optimization="-O0", build_root=str(tmp_path), jacobian=jac)
+        built = api.build(sc, gains, "cvodes", cg, closed_loop=cl)
+        s = api.integrator_settings(sc, "cvodes", cg)
+        traj = api.simulate(built, sc, s)
+        assert traj.complete, traj.message
+        runs[jac] = (built, s, traj)
+    built, s, traj = runs["auto"]
+    assert "jac_cl_ode" not in built.library.names and "fwd1_cl_ode" in built.library.names
+    nx = traj.x.shape[1]
+    assert built.dyn.sparsity_jac(1, 0).nnz() < 0.1 * nx * nx  # the pattern, not dense
+    assert s.newton_scheme == "gmres" and dict(s.extra_options)["use_preconditioner"] is False
+    assert traj.stats["jac_evals"] == 0  # matrix-free
+    ref = runs["sparse"][2]
+    assert runs["sparse"][1].newton_scheme == "direct" and ref.stats["jac_evals"] > 0
+    np.testing.assert_array_equal(traj.t, ref.t)
+    rel = np.abs(traj.x - ref.x) / np.maximum(1.0, np.abs(ref.x))
+    assert rel.max() < 1e-3
+
+
+def synthesize_gains(sc):
+    """Gains of a benchmark scenario (synthesis, as the benchmark does)."""
+    from generated.bench import bench_gains
+
+    return bench_gains(sc)[0]

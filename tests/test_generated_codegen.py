@@ -179,7 +179,12 @@ def test_jvp_strategy_has_forward_derivative_only(settings):
     s2 = replace(settings, jacobian="jvp")
     lib = build_library([dyn("toy")], s2, ["toy"])
     assert "fwd1_toy" in lib.names and "jac_toy" not in lib.names
-    assert s2.integrator_options() == {"newton_scheme": "gmres"}
+    # no Jacobian to precondition with: GMRES must run unpreconditioned
+    assert s2.integrator_options() == {
+        "newton_scheme": "gmres",
+        "use_preconditioner": False,
+        "max_krylov": 20,
+    }
     f = dyn("toy")
     fwd_sym, fwd_ext = f.forward(1), lib.function("fwd1_toy")
     rng = np.random.default_rng(1)
