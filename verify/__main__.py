@@ -58,6 +58,27 @@ def _strict(flag: bool) -> bool:
     return strict_mode(flag)
 
 
+def _stage_line(label: str, run) -> None:
+    """One line per simulated run: where its gains and trajectory are, and how it went.
+
+    Parameters
+    ----------
+    label : str
+        Name of the run in the line.
+    run : verify.pipeline.Run
+        The run (its ``meta`` is the simulation's meta.json).
+    """
+    m = run.meta or {}
+    state = "complete" if m.get("complete", True) else f"INCOMPLETE at t = {m.get('t_reached')}"
+    print(
+        f"[{label}] gains {m.get('gains_path')} "
+        f"({'reused' if m.get('gains_reused') else 'synthesised'}); "
+        f"trajectory {run.folder / 'trajectory.csv'} "
+        f"({'reused' if not run.simulated else m.get('method')}, {m.get('steps')} steps, "
+        f"library {'cached' if m.get('cache_hit') else 'built'}, {state})"
+    )
+
+
 def main(argv: list[str]) -> int:
     """Entry point; returns the exit status.
 
@@ -86,10 +107,16 @@ def main(argv: list[str]) -> int:
     force = args.cmd == "demo"
     overrides = dict(api.parse_override(x) for x in args.set) or None
     abl_over = {**(overrides or {}), **P.ABLATION}
+    if args.cmd == "demo":  # what is being run, before the stages
+        from symbolic.summary import summarize
+
+        print(summarize(api.load(args.scenario, overrides)), end="\n\n")
     run = P.obtain_run(args.scenario, overrides, out_root=root, force=force)
+    _stage_line("run", run)
     ablation = None
     if args.cmd in ("report", "demo"):
         ablation = P.obtain_run(args.scenario, abl_over, out_root=root, force=force)
+        _stage_line("ablation (42)", ablation)
     else:  # check: use the ablation run only if it is already there and fresh
         asc = api.load(args.scenario, abl_over)
         if P._fresh(root / asc.name, asc) is not None:
