@@ -415,9 +415,12 @@ class _Ros2:
         acc["jac_evals"] += K
         acc["lin_setups"] += K
         acc["integrator_calls"] += 1
-        X, E = self._run(K)(x, 0.0, tv.reshape(1, -1), np.full((1, K), h), t2.reshape(1, -1))
-        xn = np.array(X[:, -1], dtype=float).ravel()
-        err = float(E[-1])
+        try:
+            X, E = self._run(K)(x, 0.0, tv.reshape(1, -1), np.full((1, K), h), t2.reshape(1, -1))
+            xn = np.array(X[:, -1], dtype=float).ravel()
+            err = float(E[-1])
+        except RuntimeError:  # NaN met inside the interval (e.g. in the linear solve)
+            xn, err = np.full_like(x, np.nan), math.inf  # refine, as for a failed error test
         if np.all(np.isfinite(xn)) and err <= 1.0:
             return xn
         if depth >= self.s.fixed_max_halvings:

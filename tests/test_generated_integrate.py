@@ -329,3 +329,26 @@ def test_idas_leaves_algebraic_states_out_of_newton_test(cg):
     old = integrate(dae, x0, tg, IntegratorSettings(method="idas", rtol=1e-6, atol=1e-8,
                     algebraic_atol=1e-8), z0=np.zeros(1))  # fmt: skip
     assert old.stats["newton_fails"] > 10 * max(tr.stats["newton_fails"], 1)
+
+
+def test_fixed_step_refines_where_a_step_meets_nan():
+    """ROS2 over one coarse output interval: a step that leaves the RHS's domain (sqrt
+    of a negative number) puts NaN into the next step's Jacobian, and the sparse linear
+    solve raises; that interval is refined like a failed error test instead of ending
+    the run (before the fix: "Nonzero 0 is not-a-number" at t = 0). The result matches
+    scipy's Radau (independent implementation)."""
+    from scipy.integrate import solve_ivp
+
+    t, x = ca.SX.sym("t"), ca.SX.sym("x", 2)
+    rhs = ca.vertcat(1 - 50 * ca.sqrt(x[0]) + 0.1 * x[1], x[0] - x[1])
+    f = ode("sqrt_decay", t, x, rhs)
+    s = IntegratorSettings(method="fixed", fixed_step=0.1, fixed_rtol=1e-4, fixed_atol=1e-6)
+    tr = integrate(f, np.array([1.0, 0.0]), np.array([0.0, 1.0]), s)
+    assert tr.complete, tr.message
+    assert tr.stats["refined_intervals"] > 0
+
+    def g(_t, y):
+        return [1 - 50 * np.sqrt(max(y[0], 0.0)) + 0.1 * y[1], y[0] - y[1]]
+
+    ref = solve_ivp(g, (0, 1), [1.0, 0.0], method="Radau", rtol=1e-10, atol=1e-12)
+    assert np.allclose(tr.x[-1], ref.y[:, -1], rtol=1e-3, atol=1e-5)
