@@ -508,25 +508,14 @@ def _outputs_function(sc: Scenario, gains: Any, net: dict, t: Any, x: Any, a: An
         + float(gains.k1) * ca.sum2(ca.sum1(etilde * ca.mtimes(Om, etilde)))
     )  # eq. (17)
     GF = net["GF"]
-    items = {
-        "et": net["et"].T,
-        "etdot": net["etdot"].T,
-        "chi": net["chi"].T,
-        "u": net["u"].T,
-        "Psi": net["Psi"].T,
-        "b": net["b"].T,
-        "bdot": net["bdot"].T,
-        "bddot": net["bddot"].T,
+    # per-agent network signals, transposed to N×k (row i = follower i)
+    items = {k: net[k].T for k in ("et", "etdot", "chi", "u", "Psi", "b", "bdot", "bddot")}
+    items |= {
         "ehat": ehat.T,
         "ebar": ebar.T,
         "etilde": etilde.T,
         "e_eta": e_eta.T,
-        "psi": net["psi"].T,
-        "v": net["v"].T,
-        "etadot": net["etadot"].T,
-        "etaddot": net["etaddot"].T,
-        "eta3dot": net["eta3dot"].T,
-        "qdot": net["qdot"].T,
+        **{k: net[k].T for k in ("psi", "v", "etadot", "etaddot", "eta3dot", "qdot")},
         "V1": V1,
         "V2": net["V2"].T,
         "thetahat": X[lay.agent_offsets["thetahat"], :].T,
