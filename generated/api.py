@@ -306,8 +306,8 @@ def build_from_closed_loop(
     form = "dae" if method == "idas" else "ode"
     src, name = (cl.dae_dyn, DAE_NAME) if form == "dae" else (cl.ode_dyn, ODE_NAME)
     check_dyn_signature(src, f"closed loop {form}_dyn")
-    dyn = renamed(src, name, expand=settings.expand)
-    outs = renamed(cl.outputs, OUT_NAME, expand=settings.expand)
+    dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
+    outs = renamed(cl.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
     t_sym = time.perf_counter() - t0
     lib = build_library([dyn, outs], settings, with_derivatives=[name])
     timings = {

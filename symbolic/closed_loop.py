@@ -19,6 +19,7 @@ slices and back.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -370,8 +371,42 @@ def _groups(sc: Scenario) -> list[list[int]]:
     return list(keys.values())
 
 
-def _network(sc: Scenario, gains: Any, assembly: str, t: Any, x: Any, a: Any) -> dict[str, Any]:
-    """Symbolic evaluation of the whole network at (t, x) (and accelerations a)."""
+def _slim(f: ca.Function, keep: Sequence[str] | None) -> ca.Function:
+    """``f`` with only the outputs ``keep`` (all when None).
+
+    A mapped MX call evaluates every output of the per-agent SX Function, and its
+    forward derivative differentiates all of them: the right-hand side needs only
+    ``sdot`` (ODE) or ``sdot_dae``/``res`` (DAE). SX-expanded builds prune dead code
+    anyway; for the large-N (MX map) plan this cut the generated right-hand side's
+    work (docs/performance.md).
+    """
+    if keep is None:
+        return f
+    args = f.sx_in()
+    res = dict(zip(f.name_out(), f.call(args), strict=True))
+    return ca.Function(
+        f"{f.name()}_{'_'.join(keep)}",
+        args,
+        [res[k] for k in keep],
+        f.name_in(),
+        list(keep),
+        {"cse": True},
+    )
+
+
+def _network(
+    sc: Scenario,
+    gains: Any,
+    assembly: str,
+    t: Any,
+    x: Any,
+    a: Any,
+    keep: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """Symbolic evaluation of the whole network at (t, x) (and accelerations a).
+
+    ``keep`` names the per-agent outputs needed (all when None, see :func:`_slim`).
+    """
     m, n, N = sc.m, sc.n, sc.N
     filtered = sc.options.derivatives == "filtered"
     lay = make_layout(m, n, N, filtered)
@@ -407,18 +442,19 @@ def _network(sc: Scenario, gains: Any, assembly: str, t: Any, x: Any, a: Any) ->
     if len(groups) == 1:
         f = agent_function(sc, og, 0)
         funs["agent"] = f
-        outs = apply_agents(f, N, args, assembly)
+        outs = apply_agents(_slim(f, keep), N, args, assembly)
     else:
         parts, order = [], []
         for grp in groups:
             f = agent_function(sc, og, grp[0])
             funs[f"agent_{grp[0]}"] = f
-            parts.append(apply_agents(f, len(grp), [arg[:, grp] for arg in args], assembly))
+            cols = [arg[:, grp] for arg in args]
+            parts.append(apply_agents(_slim(f, keep), len(grp), cols, assembly))
             order += grp
         inv = list(np.argsort(order))
         outs = [ca.horzcat(*[p[k] for p in parts])[:, inv] for k in range(len(parts[0]))]
         f = funs[next(iter(funs))]
-    named = dict(zip(f.name_out(), outs, strict=True))
+    named = dict(zip(f.name_out() if keep is None else keep, outs, strict=True))
     named.update(
         eta0=eta0, eta0dot=eta0dot, eta0ddot=eta0ddot, y0=y0, y0dot=y0dot, u0=u0, u0dot=u0dot,
         psi=psi, X=X, E=E, GF=GF, gm=gm, lay=lay, funs=funs, lead=lead,
@@ -460,9 +496,9 @@ def build_closed_loop(scenario: Scenario, gains: Any, *, assembly: str = "map") 
     lay = make_layout(m, n, N, filtered)
     Sym = ca.MX if assembly == "map" else ca.SX
     t, x, a = Sym.sym("t"), Sym.sym("x", lay.nx), Sym.sym("z", n * N)
-    net = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N))
+    net = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N), keep=("sdot",))
     xdot = ca.vertcat(net["eta0dot"], ca.vec(net["sdot"]))  # eq. (3) and every agent
-    net_dae = _network(sc, gains, assembly, t, x, a)
+    net_dae = _network(sc, gains, assembly, t, x, a, keep=("sdot_dae", "res"))
     xdot_dae = ca.vertcat(net_dae["eta0dot"], ca.vec(net_dae["sdot_dae"]))
     alg = ca.vec(net_dae["res"])
     e0 = Sym(0, 1)
@@ -473,7 +509,8 @@ def build_closed_loop(scenario: Scenario, gains: Any, *, assembly: str = "map") 
     dae_dyn = ca.Function(
         "dae_dyn", [t, x, a, e0, e0], [xdot_dae, alg, e0, e0], ca.dyn_in(), ca.dyn_out()
     )
-    outputs = _outputs_function(sc, gains, net, t, x, a)
+    net_out = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N))  # every signal
+    outputs = _outputs_function(sc, gains, net_out, t, x, a)
     x0 = initial_state(sc, lay, outputs)
     qdd0 = np.array(outputs(0.0, x0)[outputs.name_out().index("qdot")]).reshape(-1)  # agent-major
     blocks = dict(net["funs"])

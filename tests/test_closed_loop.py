@@ -514,3 +514,26 @@ def test_gains_json_round_trip_and_mismatch(tmp_path):
     assert np.array_equal(a, b)
     with pytest.raises(SynthesisError, match="C0"):
         build_closed_loop(sc, replace(g, C0=2 * g.C0))
+
+
+def test_ode_maps_only_the_state_derivative():
+    """The mapped ODE calls a per-agent Function with only ``sdot`` (docs/performance.md):
+    fewer instructions than the full per-agent Function, the same values."""
+    from symbolic.closed_loop import _slim
+
+    sc = load_scenario(PAPER)
+    cl = build_closed_loop(sc, hand_gains(sc))
+    full = cl.blocks["agent"]
+    slim = _slim(full, ("sdot",))
+    assert slim.name_out() == ["sdot"]
+    assert slim.n_instructions() < 0.7 * full.n_instructions()
+    rng = np.random.default_rng(11)
+    for _ in range(5):
+        args = [rng.normal(size=full.size_in(k)) for k in range(full.n_in())]
+        want = np.array(full(*args)[full.name_out().index("sdot")])
+        np.testing.assert_allclose(np.array(slim(*args)), want, rtol=1e-13, atol=1e-13)
+    # the ODE of the map assembly is exactly the outputs function's agent derivatives
+    x = random_state(cl, rng)
+    ode = np.array(cl.ode(0.37, x)).ravel()
+    flat = build_closed_loop(sc, hand_gains(sc), assembly="flat")
+    np.testing.assert_allclose(ode, np.array(flat.ode(0.37, x)).ravel(), rtol=1e-12, atol=1e-9)

@@ -218,3 +218,33 @@ def test_concurrent_identical_builds_share_one_entry(settings):
             np.array(dyn("conc")(0.5, x, [], [], [])[0]),
             rtol=1e-12,
         )
+
+
+def test_cse_shrinks_the_code_and_keeps_the_values(tmp_path):
+    """CodegenSettings.cse: fewer instructions (right-hand side and Jacobian), same numbers."""
+    t = ca.SX.sym("t")
+    x = ca.SX.sym("x", 3)
+    e = ca.SX(0, 1)
+    s = ca.sin(x[0] * x[1]) + ca.exp(t * x[2])  # built twice below: identical subtrees
+    s2 = ca.sin(x[0] * x[1]) + ca.exp(t * x[2])
+    rhs = ca.vertcat(s * x[0], s2 * x[1], ca.tanh(s) + s2**2)
+    f = ca.Function("dup", [t, x, e, e, e], [rhs, e, e, e], ca.dyn_in(), ca.dyn_out())
+    plain, shared = renamed(f, "dup"), renamed(f, "dup", cse=True)
+    assert shared.n_instructions() < plain.n_instructions()
+    libs = {
+        flag: build_library(
+            [renamed(f, "dup", cse=flag)],
+            CodegenSettings(build_root=str(tmp_path / str(flag)), cse=flag),
+            with_derivatives=["dup"],
+        )
+        for flag in (False, True)
+    }
+    assert libs[False].key != libs[True].key  # the setting is part of the cache key
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        tt, xx = rng.uniform(-1, 1), rng.normal(size=3)
+        a = [libs[k].function("dup")(tt, xx, [], [], [])[0] for k in (False, True)]
+        np.testing.assert_allclose(np.array(a[1]), np.array(a[0]), rtol=1e-14, atol=1e-14)
+        j = [libs[k].function("jac_dup")(tt, xx, [], [], [], 0, 0, 0, 0) for k in (False, True)]
+        for u, v in zip(j[0], j[1], strict=True):
+            np.testing.assert_allclose(np.array(v), np.array(u), rtol=1e-14, atol=1e-14)
