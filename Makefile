@@ -45,6 +45,7 @@ test: lint
 
 bench: $(STAMP)
 	$(PY) -m generated.bench
+	$(PY) -m generated.steps
 
 clean:
 	rm -rf out generated/build .pytest_cache

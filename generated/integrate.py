@@ -167,7 +167,7 @@ class Trajectory:
     stats : dict
         ``steps``, ``rhs_evals``, ``jac_evals``, ``lin_setups``, ``error_test_fails``,
         ``newton_fails``, ``newton_iters``, ``jtimes_evals``, ``restarts``, ``integrator_calls``,
-        ``wall_seconds``.
+        ``wall_seconds`` and, for CVODES/IDAS, ``last_step`` (the last step size taken).
     """
 
     t: np.ndarray
@@ -260,6 +260,9 @@ _STAT_KEYS = {
 
 
 def _add_stats(acc: dict[str, Any], st: dict[str, Any]) -> None:
+    h = st.get("hlast")
+    if isinstance(h, float) and math.isfinite(h) and h > 0:
+        acc["last_step"] = h
     for k, names in _STAT_KEYS.items():
         for nm in names:
             v = st.get(nm)
