@@ -175,7 +175,13 @@ def step_profile(built: Any, sc: Any, edges: Sequence[float], settings: Any = No
 
 
 def windows_frame(windows: Sequence[Window]) -> pd.DataFrame:
-    """The windows as a table (one row per window, with steps per second)."""
+    """The windows as a table (one row per window, with steps per second).
+
+    Parameters
+    ----------
+    windows : sequence of Window
+        From :func:`step_profile`.
+    """
     rows = [{**dataclasses.asdict(w), "steps_per_s": w.steps_per_second} for w in windows]
     return pd.DataFrame(rows)
 
