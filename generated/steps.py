@@ -318,7 +318,7 @@ def main(argv: list[str]) -> int:
         if args.bench_n < 1:
             raise UsageError(f"--bench-n {args.bench_n}: must be >= 1")
         sc = bench_scenario(args.bench_n)
-        gains = bench_gains(sc)
+        gains, _ = bench_gains(sc)
     else:
         sc = api.load(args.scenario)
         gains, _ = api.ensure_gains(sc)

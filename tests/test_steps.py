@@ -118,3 +118,15 @@ def test_cli_errors_are_one_line(capsys):
     assert run_cli(main, ["--vary", "observer.phi_min"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(e.startswith("error: ") for e in err)
+
+
+def test_cli_profiles_a_benchmark_scenario(tmp_path, capsys):
+    """``--bench-n`` profiles the benchmark's random-graph scenario and writes the CSV."""
+    import pandas as pd
+
+    assert main(["--bench-n", "2", "--no-knobs", "--out", str(tmp_path)]) == 0
+    wf = pd.read_csv(tmp_path / "steps_windows.csv")
+    assert wf["end"].iloc[-1] == 20.0 and (wf["steps"] > 0).all()
+    assert not (tmp_path / "steps_knobs.csv").exists()
+    out = capsys.readouterr().out
+    assert "N = 2" in out and "one uninterrupted run" in out
