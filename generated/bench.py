@@ -33,6 +33,11 @@ the variable-step methods, the same output grid):
     The fixed-step ROS2 method of :mod:`generated.integrate` with the exact sign
     function (its purpose), step ``integration.fixed_step``.
 
+Compile cache: unless ``--warm-cache``, the cells build into a fresh cache
+``<out>/build`` (emptied at the start), so every ``codegen_s``/``compile_s`` is a real
+build, never a cache hit from an earlier ``make sim``; cells of one run share it (the
+runs of a cell, and methods with the same library, reuse it within the run).
+
 Scenarios: N = 5 is ``scenarios/paper.toml``; larger N are built by
 :func:`bench_scenario` from it: the paper's follower model and faults (cycled), offsets
 on a circle of radius 4, p_i(0) = b_i0 + noise, and a random acyclic sparse graph in
@@ -551,8 +556,8 @@ def run_cell(
 
 COLUMNS = [
     "N", "nx", "method", "plan", "status", "runs", "int_median_s", "int_min_s", "int_max_s",
-    "ratio_to_ours", "symbolic_s", "codegen_s", "compile_s", "c_bytes", "steps", "rhs_evals",
-    "jac_evals", "jtimes_evals", "rhs_us", "peak_rss_mb", "base_rss_mb", "t_reached",
+    "ratio_to_ours", "symbolic_s", "codegen_s", "compile_s", "cache_hit", "c_bytes", "steps",
+    "rhs_evals", "jac_evals", "jtimes_evals", "rhs_us", "peak_rss_mb", "base_rss_mb", "t_reached",
     "rel_dx_final_vs_ours", "gains",
 ]  # fmt: skip
 
@@ -758,6 +763,9 @@ def main(argv: list[str]) -> int:
                     help="seconds per cell for ours (default 4x --time-limit)")  # fmt: skip
     ap.add_argument("--horizon", type=float, default=20.0, help="simulated seconds (default 20)")
     ap.add_argument("--out", default=None, help="output folder (default out/bench)")
+    ap.add_argument("--warm-cache", action="store_true",
+                    help="reuse compiled libraries from generated/build (default: a fresh cache "
+                    "in <out>/build, so codegen and gcc times are measured, not cache hits)")  # fmt: skip
     ap.add_argument("--worker", nargs=2, metavar=("N", "METHOD"), help=argparse.SUPPRESS)
     ap.add_argument("--record", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -782,6 +790,11 @@ def main(argv: list[str]) -> int:
 
     folder = Path(a.out) if a.out else OUT_ROOT / "bench"
     folder.mkdir(parents=True, exist_ok=True)
+    if not a.warm_cache:  # the cells (subprocesses) inherit the empty cache
+        import shutil
+
+        shutil.rmtree(folder / "build", ignore_errors=True)
+        os.environ["HITL_BUILD_DIR"] = str((folder / "build").resolve())
     print(f"bench: N = {', '.join(map(str, sizes))}; {len(methods)} methods; {runs} run(s); "
           f"limit {limit:g} s per cell; horizon {a.horizon:g} s; {os.cpu_count()} CPUs", flush=True)  # fmt: skip
     ours_limit = a.ours_time_limit if a.ours_time_limit is not None else 4.0 * limit

@@ -169,6 +169,9 @@ def test_quick_smoke_run(tmp_path: Path) -> None:
     assert ours["status"] == "ok" and float(ours["ratio_to_ours"]) == 1.0
     assert int(ours["steps"]) > 0 and int(ours["rhs_evals"]) >= int(ours["steps"])
     assert float(ours["c_bytes"]) > 0 and float(ours["peak_rss_mb"]) > 0
+    # a fresh compile cache in <out>/build: the build time is a real build, not a hit
+    assert ours["cache_hit"] in ("False", "false", "0") and float(ours["compile_s"]) > 0
+    assert any((tmp_path / "build").glob("*/model.so"))
     if rk["status"] == "ok":
         # same scenario, same tolerances: the final states agree (relative to max(1, |x|))
         assert float(rk["rel_dx_final_vs_ours"]) < 1e-2
