@@ -18,7 +18,8 @@ Knobs (:func:`knob_sensitivity`)
 
 ``python -m generated.steps [SCENARIO] [--bench-n N] [--vary KEY=V1,V2 ...] [--out DIR]``
 prints both tables and writes ``steps_windows.csv`` and ``steps_knobs.csv``
-(default folder ``out/steps/<scenario name>/``). ``make bench`` runs it on the paper
+(default folder ``out/steps/<scenario name>/``; the variants' gains go to its
+``variants/`` subfolder). ``make bench`` runs it on the paper
 scenario after the benchmark.
 """
 
@@ -344,7 +345,7 @@ def main(argv: list[str]) -> int:
         f"({100 * flagged / max(tot, 1):.0f} %) in {int(near.sum())} of {len(wf)} windows"
     )
     if args.bench_n is None and not args.no_knobs:
-        kf = knob_sensitivity(args.scenario, vary)
+        kf = knob_sensitivity(args.scenario, vary, out_root=folder / "variants")
         atomic_write_text(folder / "steps_knobs.csv", kf.to_csv(index=False))
         print("\nknob sensitivity (whole runs, one field changed; a diagnostic, not a tuning):")
         print(kf.to_string(index=False, float_format=lambda v: f"{v:.3g}"))

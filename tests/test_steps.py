@@ -130,3 +130,14 @@ def test_cli_profiles_a_benchmark_scenario(tmp_path, capsys):
     assert not (tmp_path / "steps_knobs.csv").exists()
     out = capsys.readouterr().out
     assert "N = 2" in out and "one uninterrupted run" in out
+
+
+def test_cli_knob_table_and_variant_gains_stay_in_the_output_folder(small, tmp_path):
+    import pandas as pd
+
+    out = tmp_path / "steps"
+    assert main([str(small["path"]), "--vary", "integration.horizon=0.2", "--out", str(out)]) == 0
+    kf = pd.read_csv(out / "steps_knobs.csv")
+    assert kf["key"].tolist() == ["(file)", "integration.horizon"]
+    assert (out / "steps_windows.csv").is_file()
+    assert sorted(p.name for p in (out / "variants").iterdir()) == ["small", "small-horizon-0.2"]
