@@ -358,6 +358,20 @@ def integrator_settings(
     return plan.integrator_settings(base)
 
 
+def breakpoints(built: Built, sc: Scenario) -> list[float]:
+    """Known discontinuity times of a run: the scenario's and the closed loop's, sorted.
+
+    Parameters
+    ----------
+    built : Built
+        Supplies ``closed_loop.breakpoints``.
+    sc : Scenario
+        Supplies ``sc.breakpoints()`` (fault onsets, steps in inputs).
+    """
+    cl_bps = getattr(built.closed_loop, "breakpoints", ())
+    return sorted(set(sc.breakpoints()) | {float(b) for b in cl_bps})
+
+
 def simulate(
     built: Built,
     sc: Scenario,
@@ -396,14 +410,13 @@ def simulate(
         )
     cl = built.closed_loop
     t_out = output_grid(sc.integration.horizon, sc.integration.output_step)
-    bps = set(sc.breakpoints()) | {float(b) for b in getattr(cl, "breakpoints", ())}
     z0 = np.asarray(cl.z0, dtype=float) if built.form == "dae" else None
     return integrate(
         built.dyn,
         np.asarray(cl.x0, dtype=float),
         t_out,
         s,
-        breakpoints=sorted(bps),
+        breakpoints=breakpoints(built, sc),
         z0=z0,
         progress=progress,
     )
@@ -702,7 +715,7 @@ def run(
         "integrator_extra_options": dict(s.extra_options),
         "horizon": sc.integration.horizon,
         "output_step": sc.integration.output_step,
-        "breakpoints": sorted(set(sc.breakpoints()) | set(built.closed_loop.breakpoints)),
+        "breakpoints": breakpoints(built, sc),
         "rows": len(df),
         "complete": traj.complete,
         "t_reached": traj.t_reached,

@@ -53,6 +53,7 @@ import json
 import math
 import os
 import resource
+import shutil
 import signal
 import statistics
 import subprocess
@@ -792,8 +793,6 @@ def main(argv: list[str]) -> int:
     folder = Path(a.out) if a.out else OUT_ROOT / "bench"
     folder.mkdir(parents=True, exist_ok=True)
     if not a.warm_cache:  # the cells (subprocesses) inherit the empty cache
-        import shutil
-
         shutil.rmtree(folder / "build", ignore_errors=True)
         os.environ["HITL_BUILD_DIR"] = str((folder / "build").resolve())
     print(f"bench: N = {', '.join(map(str, sizes))}; {len(methods)} methods; {runs} run(s); "

@@ -152,7 +152,7 @@ def step_profile(built: Any, sc: Any, edges: Sequence[float], settings: Any = No
         raise IntegrationError("edges: must increase strictly from 0 (e.g. 0, 0.1, 1, 2)")
     s = settings or api.integrator_settings(sc)
     s = dataclasses.replace(s, chunk=float(e[-1]))  # one integrator call per window
-    bps = sorted(set(sc.breakpoints()) | {float(b) for b in built.closed_loop.breakpoints})
+    bps = api.breakpoints(built, sc)
     x = np.asarray(built.closed_loop.x0, dtype=float)
     changes = u0_sign_change_times(sc, float(e[-1]))
     out = []
@@ -191,8 +191,9 @@ def _tail_errors(built: Any, traj: Any, fraction: float = 0.25) -> tuple[float, 
     """Max of |η_i − η0| and |e_t| over the last ``fraction`` of the run, all agents and
     components (the "tail" of docs/closed-loop.md: [15, 20] s for 20 s)."""
     from generated.api import evaluate_outputs
+    from verify.signals import tail_mask
 
-    k = traj.t >= traj.t[-1] * (1 - fraction) - 1e-12
+    k = tail_mask(traj.t, fraction)
     lay = built.closed_loop.layout
     x = traj.x[k]
     eta0 = lay.get(x, "eta0")

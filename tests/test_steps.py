@@ -61,6 +61,7 @@ def test_u0_sign_changes_of_the_paper_command_are_those_of_cos():
 
 def test_step_profile_tiles_the_run(small):
     sc, built = small["sc"], small["built"]
+    assert api.breakpoints(built, sc) == [0.3]  # the fault onset of follower 1
     edges = default_edges(sc.integration.horizon)
     wins = step_profile(built, sc, edges)
     assert [w.start for w in wins] == edges[:-1].tolist()
