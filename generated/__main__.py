@@ -10,6 +10,7 @@ import argparse
 import sys
 
 from symbolic.errors import run_cli
+from symbolic.scenario import METHODS
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -17,9 +18,7 @@ def _parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="cmd", required=True)
     sim = sub.add_parser("sim", help="simulate a scenario with generated C")
     sim.add_argument("scenario", help="scenario TOML file")
-    sim.add_argument(
-        "--method", choices=("cvodes", "idas", "fixed"), help="override integration.method"
-    )
+    sim.add_argument("--method", choices=METHODS, help="override integration.method")
     sim.add_argument(
         "--set",
         dest="overrides",

@@ -263,8 +263,8 @@ def build(
     sc : Scenario
     gains : Gains
     method : str, optional
-        ``cvodes``/``fixed`` build the ODE form, ``idas`` the DAE form (default:
-        the scenario's method).
+        ``cvodes``/``fixed`` build the ODE form, ``idas`` the DAE form, ``native`` the
+        ODE form plus the native driver's functions (default: the scenario's method).
     settings : CodegenSettings, optional
         ``jacobian="auto"`` is resolved from ``sc.N`` (:func:`resolve_codegen`).
     closed_loop : ClosedLoop, optional
@@ -294,7 +294,8 @@ def build_from_closed_loop(
     cl : ClosedLoop
         Supplies ``ode_dyn``/``dae_dyn`` and ``outputs``.
     method : str
-        ``idas`` compiles the DAE form, any other method the ODE form.
+        ``idas`` compiles the DAE form, any other method the ODE form; ``native`` adds
+        :func:`generated.native.native_functions` and links the driver and SUNDIALS.
     settings : CodegenSettings, optional
         ``jacobian="auto"`` is resolved from the closed loop's N (:func:`resolve_codegen`).
     t_symbolic_start : float, optional
@@ -308,8 +309,14 @@ def build_from_closed_loop(
     check_dyn_signature(src, f"closed loop {form}_dyn")
     dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
     outs = renamed(cl.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
+    functions, derive, toolchain = [dyn, outs], [name], None
+    if method == "native":  # the driver's functions and SUNDIALS; CVODES' jac_ not needed
+        from generated import native
+
+        functions += native.native_functions(src, cse=settings.cse)[0]
+        derive, toolchain = [], native.toolchain()
     t_sym = time.perf_counter() - t0
-    lib = build_library([dyn, outs], settings, with_derivatives=[name])
+    lib = build_library(functions, settings, with_derivatives=derive, toolchain=toolchain)
     timings = {
         "symbolic_build": t_sym,
         "codegen": lib.codegen_seconds,
@@ -410,6 +417,17 @@ def simulate(
         )
     cl = built.closed_loop
     t_out = output_grid(sc.integration.horizon, sc.integration.output_step)
+    if s.method == "native":
+        from generated import native
+
+        if native.RHS_NAME not in built.library.names:
+            raise IntegrationError(
+                "method 'native' needs the native build: call build(..., method='native')"
+            )
+        return native.run(
+            built.library.path, np.asarray(cl.x0, dtype=float), t_out, s,
+            breakpoints=breakpoints(built, sc), progress=progress,
+        )  # fmt: skip
     z0 = np.asarray(cl.z0, dtype=float) if built.form == "dae" else None
     return integrate(
         built.dyn,

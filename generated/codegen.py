@@ -28,7 +28,7 @@ import shutil
 import subprocess
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -150,6 +150,30 @@ class CodegenSettings:
         d.pop("timeout")
         d["codegen_options"] = [list(p) for p in self.codegen_options]
         return d
+
+
+@dataclass(frozen=True)
+class Toolchain:
+    """What a library needs beyond the generated code (the native integrator's driver).
+
+    Attributes
+    ----------
+    appended_source : str
+        C text appended to the generated code (one translation unit, so it can call
+        the generated functions directly).
+    include_dirs : tuple of Path
+        ``-I`` folders.
+    libraries : tuple of Path
+        Shared libraries linked after the source, found at run time through an rpath.
+    key : mapping
+        What else identifies the build (hashes of headers and libraries): part of the
+        cache key, so that a changed header or library is never served from the cache.
+    """
+
+    appended_source: str = ""
+    include_dirs: tuple[Path, ...] = ()
+    libraries: tuple[Path, ...] = ()
+    key: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -336,16 +360,21 @@ def generate_source(
     return cg.dump(), tuple(names)
 
 
-def cache_key(source: str, settings: CodegenSettings) -> str:
+def cache_key(
+    source: str, settings: CodegenSettings, extra: Mapping[str, Any] | None = None
+) -> str:
     """SHA-256 of everything that produced a library.
 
     Parameters
     ----------
     source : str
-        The generated C text.
+        The complete C text.
     settings : CodegenSettings
         Its compiler identity, flags and key fields enter the key (not ``build_root``
         or ``timeout``); the CasADi version does too.
+    extra : mapping, optional
+        Further inputs of the build (e.g. the hash of included headers and the identity
+        of linked libraries, :class:`Toolchain`).
     """
     ident = {
         "source_sha256": hashlib.sha256(source.encode()).hexdigest(),
@@ -354,11 +383,15 @@ def cache_key(source: str, settings: CodegenSettings) -> str:
         "casadi": ca.__version__,
         "settings": settings.key_fields(),
     }
+    if extra:
+        ident["extra"] = dict(extra)
     blob = json.dumps(ident, sort_keys=True, default=str).encode()
     return hashlib.sha256(blob).hexdigest()
 
 
-def compile_source(source: str, settings: CodegenSettings, folder: Path) -> float:
+def compile_source(
+    source: str, settings: CodegenSettings, folder: Path, toolchain: Toolchain | None = None
+) -> float:
     """Write ``source`` to ``folder/model.c`` and compile ``folder/model.so``.
 
     Parameters
@@ -369,6 +402,8 @@ def compile_source(source: str, settings: CodegenSettings, folder: Path) -> floa
         Compiler, flags and timeout.
     folder : Path
         Output folder, created if missing.
+    toolchain : Toolchain, optional
+        Include folders and shared libraries to link (after the source, with an rpath).
 
     Returns
     -------
@@ -383,7 +418,18 @@ def compile_source(source: str, settings: CodegenSettings, folder: Path) -> floa
     folder.mkdir(parents=True, exist_ok=True)
     src = folder / SOURCE_NAME
     src.write_text(source)
-    cmd = [settings.compiler, *settings.cflags, str(src), "-o", str(folder / LIBRARY_NAME), "-lm"]
+    tc = toolchain or Toolchain()
+    cmd = [
+        settings.compiler,
+        *settings.cflags,
+        *(f"-I{d}" for d in tc.include_dirs),
+        str(src),
+        "-o",
+        str(folder / LIBRARY_NAME),
+        *(str(lib) for lib in tc.libraries),
+        *(f"-Wl,-rpath,{d}" for d in sorted({str(Path(lib).parent) for lib in tc.libraries})),
+        "-lm",
+    ]
     t0 = time.perf_counter()
     try:
         res = subprocess.run(
@@ -424,6 +470,7 @@ def build_library(
     functions: Sequence[ca.Function],
     settings: CodegenSettings | None = None,
     with_derivatives: Sequence[str] = (),
+    toolchain: Toolchain | None = None,
 ) -> Library:
     """Generate, compile (or reuse from the cache) and describe a shared library.
 
@@ -434,6 +481,9 @@ def build_library(
     settings : CodegenSettings, optional
     with_derivatives : sequence of str
         Names that also get their derivative companions (see :func:`generate_source`).
+    toolchain : Toolchain, optional
+        Hand-written C appended to the generated code, include folders and libraries
+        to link; its :attr:`Toolchain.key` enters the cache key.
 
     Returns
     -------
@@ -447,9 +497,11 @@ def build_library(
     """
     settings = settings or CodegenSettings()
     t0 = time.perf_counter()
+    tc = toolchain or Toolchain()
     source, names = generate_source(functions, settings, with_derivatives)
+    source += tc.appended_source
     t_codegen = time.perf_counter() - t0
-    key = cache_key(source, settings)
+    key = cache_key(source, settings, tc.key)
     root = settings.root()
     folder = root / key
     manifest = folder / MANIFEST_NAME
@@ -462,7 +514,7 @@ def build_library(
     tmp = Path(tempfile.mkdtemp(dir=root, prefix=f".tmp-{key[:12]}-"))
     try:
         try:
-            t_compile = compile_source(source, settings, tmp)
+            t_compile = compile_source(source, settings, tmp, tc)
         except BuildError as exc:
             failed = root / "failed" / key
             shutil.rmtree(failed, ignore_errors=True)
@@ -476,6 +528,7 @@ def build_library(
             "cflags": list(settings.cflags),
             "casadi": ca.__version__,
             "settings": settings.key_fields(),
+            "toolchain": dict(tc.key),
             "source_bytes": len(source),
             "compile_seconds": t_compile,
         }

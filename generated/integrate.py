@@ -49,8 +49,10 @@ import casadi as ca
 import numpy as np
 
 from symbolic.errors import IntegrationError
+from symbolic.scenario import METHODS as SCENARIO_METHODS
 
-METHODS = ("cvodes", "idas", "fixed")
+#: the integration methods (``native`` runs in :mod:`generated.native`)
+METHODS = SCENARIO_METHODS
 GAMMA_ROS2 = 1.0 + 1.0 / math.sqrt(2.0)
 
 #: SUNDIALS return flags -> readable reason
@@ -80,7 +82,8 @@ class IntegratorSettings:
     Attributes
     ----------
     method : str
-        ``cvodes`` (BDF, default), ``idas`` (the DAE form) or ``fixed`` (ROS2).
+        ``cvodes`` (BDF through CasADi, default), ``native`` (BDF, SUNDIALS CVODE driven
+        from C: :mod:`generated.native`), ``idas`` (the DAE form) or ``fixed`` (ROS2).
     rtol, atol : float
         Relative and absolute tolerances (CVODES, IDAS).
     max_steps : int
@@ -238,11 +241,22 @@ def _plan(t_out: np.ndarray, breakpoints: Sequence[float], chunk: float) -> list
     return chunks
 
 
+def flag_reason(flag: str) -> str:
+    """``"TOO_MUCH_WORK: too many steps ..."`` for a SUNDIALS return flag name.
+
+    Parameters
+    ----------
+    flag : str
+        The flag's name with or without its ``CV_``/``IDA_`` prefix.
+    """
+    flag = re.sub(r"^(?:CV|IDA)_", "", flag)
+    return f"{flag}: {_REASONS.get(flag, 'solver failure')}"
+
+
 def _reason(exc: Exception) -> str:
-    m = re.search(r'returned "(?:CV|IDA)_(\w+)"', str(exc))
+    m = re.search(r'returned "((?:CV|IDA)_\w+)"', str(exc))
     if m:
-        flag = m.group(1)
-        return f"{flag}: {_REASONS.get(flag, 'solver failure')}"
+        return flag_reason(m.group(1))
     lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
     return lines[-1] if lines else type(exc).__name__
 

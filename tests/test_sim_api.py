@@ -222,6 +222,35 @@ def test_idas_and_fixed_agree_with_cvodes(base, env):
     assert e4 < 3e-3 and e4 < e3 / 4, (e3, e4)
 
 
+def test_native_agrees_with_cvodes_and_runs_from_the_cli(base, env, capsys):
+    """The native CVODE driver integrates the same closed loop to the same trajectory."""
+    ref = base[0].frame
+    cols = [c for c in ref.columns if c[:1] in ("p", "q") or c.startswith(("eta", "mu", "ghat"))]
+    scale = np.abs(ref[cols].to_numpy()).max(axis=0) + 1.0
+    out = env["root"] / "out-native"
+    argv = ["sim", str(env["scenario"]), "--method", "native", "--opt=-O0", "--out", str(out),
+            "--no-progress"]  # fmt: skip
+    os.environ["HITL_BUILD_DIR"] = env["cg"].build_root
+    try:
+        code = run_cli(cli_main, argv)
+    finally:
+        del os.environ["HITL_BUILD_DIR"]
+    assert code == 0, capsys.readouterr().err
+    meta = json.loads((out / "small" / "meta.json").read_text())
+    assert meta["method"] == "native" and meta["complete"] is True and meta["form"] == "ode"
+    assert meta["steps"] > 0 and meta["rhs_evals"] >= meta["steps"]
+    df = pd.read_csv(out / "small" / "trajectory.csv")
+    assert list(df.columns) == list(ref.columns) and len(df) == len(ref)
+    err = float((np.abs(df[cols].to_numpy() - ref[cols].to_numpy()) / scale).max())
+    assert err < 1e-5  # both at rtol 1e-8
+    # a build for another method cannot be run natively
+    sc = api.load(env["scenario"])
+    gains, _ = api.ensure_gains(sc, env["out"])
+    built = api.build(sc, gains, "cvodes", env["cg"])
+    with pytest.raises(IntegrationError, match="native build"):
+        api.simulate(built, sc, api.integrator_settings(sc, "native"))
+
+
 def test_failing_integration_writes_incomplete_trajectory_and_exits_2(env, capsys):
     out = env["root"] / "out-fail"
     argv = ["sim", str(env["scenario"]), "--set", "integration.max_steps=3", "--variant", "fail",

@@ -1,0 +1,284 @@
+"""The native integrator: generated C + SUNDIALS CVODE, with Python out of the loop.
+
+``integration.method = "native"`` compiles, next to the closed loop's generated code,
+
+* ``nat_rhs(t, x)``: the right-hand side (SX, common subexpressions eliminated),
+* ``nat_jac(t, x)``: its Jacobian on the pattern of ``M = I − γJ`` (J's pattern plus
+  the diagonal),
+* ``nat_lu_factor``/``nat_lu_solve``: a sparse LU of M without pivoting, unrolled into
+  straight-line code (:mod:`generated.sparse_lu`),
+
+and a hand-written driver (``generated/native/driver.c``) that runs CVODE's BDF method
+with these: a custom direct ``SUNLinearSolver`` on a ``SUNSparseMatrix``. The run is one
+call from Python (ctypes). What this buys over CasADi's CVODES interface (measured in
+docs/performance.md): CVODE re-evaluates J only when its heuristics ask for it (CasADi
+recomputes it at every linear-solver setup), the factorisation has no symbolic phase
+and no pivot search, and there is no per-output-time call overhead.
+
+SUNDIALS comes from the ``scikit-sundae`` wheel (SUNDIALS 7.9 shared libraries, built
+with 32-bit indices). Its wheel has no headers, so the 31 headers the driver needs are
+vendored in ``generated/native/include`` (SUNDIALS 7.9.0, BSD-3-Clause, from the
+official ``sundials4py`` 7.9.0 wheel; only ``sundials_config.h``'s index type is changed
+to match scikit-sundae's build). Before every run ``hitl_native_check`` compares the
+library's version with the headers' and reads back a matrix's dimensions, so a
+mismatched SUNDIALS fails with a clear error instead of corrupting memory.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import hashlib
+import importlib.util
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from generated.codegen import CodegenSettings, Library, Toolchain, build_library
+from generated.integrate import IntegratorSettings, Trajectory, flag_reason
+from generated.sparse_lu import SparseLU, sparse_lu
+from symbolic.errors import BuildError, IntegrationError
+
+NATIVE_DIR = Path(__file__).resolve().parent / "native"
+INCLUDE_DIR = NATIVE_DIR / "include"
+DRIVER = NATIVE_DIR / "driver.c"
+#: the SUNDIALS libraries the driver links, from the scikit-sundae wheel
+SUNDIALS_LIBRARIES = (
+    "sundials_core",
+    "sundials_cvode",
+    "sundials_nvecserial",
+    "sundials_sunmatrixsparse",
+)
+RHS_NAME, JAC_NAME, LU_PREFIX = "nat_rhs", "nat_jac", "nat_lu"
+#: the driver's stats[] layout (enum in driver.c)
+STATS = (
+    "steps",
+    "rhs_evals",
+    "jac_evals",
+    "lin_setups",
+    "error_test_fails",
+    "newton_iters",
+    "newton_fails",
+    "last_step",
+    "lu_factorizations",
+    "pivot_failures",
+    "restarts",
+    "flag",
+    "t_reached",
+)
+_MSG_LEN = 1024
+
+
+def _sha256_file(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def toolchain() -> Toolchain:
+    """The driver source, the vendored headers and scikit-sundae's SUNDIALS libraries.
+
+    Returns
+    -------
+    Toolchain
+        Its key holds the SHA-256 of every header and library, so a change to any of
+        them rebuilds the native library.
+
+    Raises
+    ------
+    BuildError
+        If scikit-sundae (or one of its SUNDIALS libraries) is missing.
+    """
+    spec = importlib.util.find_spec("sksundae")
+    if spec is None or spec.origin is None:
+        raise BuildError(
+            "integration.method 'native': scikit-sundae is not installed (it provides the "
+            "SUNDIALS libraries; pip install 'scikit-sundae==1.2.*', or use method 'cvodes')"
+        )
+    libdir = Path(spec.origin).resolve().parent.parent / "scikit_sundae.libs"
+    libs = []
+    for name in SUNDIALS_LIBRARIES:
+        found = sorted(libdir.glob(f"lib{name}-*.so*")) + sorted(libdir.glob(f"lib{name}.so*"))
+        if not found:
+            raise BuildError(
+                f"integration.method 'native': lib{name} not found in {libdir} "
+                "(reinstall scikit-sundae==1.2.*, or use method 'cvodes')"
+            )
+        libs.append(found[0])
+    headers = sorted(p for p in INCLUDE_DIR.rglob("*.h"))
+    key = {
+        "headers": {str(p.relative_to(INCLUDE_DIR)): _sha256_file(p) for p in headers},
+        "libraries": {p.name: _sha256_file(p) for p in libs},
+    }
+    return Toolchain(DRIVER.read_text(), (INCLUDE_DIR,), tuple(libs), key)
+
+
+def native_functions(
+    ode_dyn: ca.Function, *, cse: bool = True
+) -> tuple[list[ca.Function], SparseLU]:
+    """The four Functions the driver calls, built from the closed loop's ODE.
+
+    Parameters
+    ----------
+    ode_dyn : casadi.Function
+        Integrator form ``(t, x, z, p, u) -> (ode, alg, quad, zero)`` with empty z, p, u
+        (``ClosedLoop.ode_dyn``); expanded to SX.
+    cse : bool
+        Common-subexpression elimination in the generated code.
+
+    Returns
+    -------
+    (list of casadi.Function, SparseLU)
+        ``nat_rhs``, ``nat_jac``, ``nat_lu_factor``, ``nat_lu_solve`` and the LU record.
+
+    Raises
+    ------
+    BuildError
+        If ``ode_dyn`` has algebraic states, parameters or controls, or cannot be expanded.
+    """
+    for i, what in ((2, "algebraic states z"), (3, "parameters p"), (4, "controls u")):
+        if ode_dyn.nnz_in(i):
+            raise BuildError(f"native integrator: {ode_dyn.name()} has {what} (needs an ODE)")
+    try:
+        f = ode_dyn if ode_dyn.is_a("SXFunction") else ode_dyn.expand()
+    except RuntimeError:
+        raise BuildError(
+            f"native integrator: {ode_dyn.name()} cannot be expanded to SX "
+            "(it calls an external function or a linear solver; use method 'cvodes')"
+        ) from None
+    nx = int(f.size1_in(1))
+    t = ca.SX.sym("t")
+    x = ca.SX.sym("x", nx)
+    empty = ca.SX(0, 1)
+    xdot = f(t, x, empty, empty, empty)[0]
+    pattern = ca.jacobian(xdot, x).sparsity() + ca.Sparsity.diag(nx)
+    jac = ca.project(ca.jacobian(xdot, x), pattern)  # structural zeros on the diagonal
+    opts = {"cse": True} if cse else {}
+    rhs_f = ca.Function(RHS_NAME, [t, x], [xdot], ["t", "x"], ["xdot"], opts)
+    jac_f = ca.Function(JAC_NAME, [t, x], [jac], ["t", "x"], ["J"], opts)
+    lu = sparse_lu(pattern, LU_PREFIX, cse=cse)
+    return [rhs_f, jac_f, lu.factor, lu.solve], lu
+
+
+def build(ode_dyn: ca.Function, settings: CodegenSettings | None = None) -> Library:
+    """Compile (or reuse from the cache) the native library of any ODE.
+
+    Parameters
+    ----------
+    ode_dyn : casadi.Function
+        Integrator form with empty z, p, u (see :func:`native_functions`).
+    settings : CodegenSettings, optional
+        Compiler, flags, cache root and ``cse``.
+
+    Returns
+    -------
+    Library
+        Pass ``Library.path`` to :func:`run`.
+    """
+    settings = settings or CodegenSettings()
+    functions, _ = native_functions(ode_dyn, cse=settings.cse)
+    return build_library(functions, settings, toolchain=toolchain())
+
+
+def _load(path: Path) -> ctypes.CDLL:
+    lib = ctypes.CDLL(str(path))
+    lib.hitl_native_check.restype = ctypes.c_int
+    lib.hitl_native_check.argtypes = [ctypes.c_char_p, ctypes.c_int]
+    dp = ctypes.POINTER(ctypes.c_double)
+    lib.hitl_native_run.restype = ctypes.c_int
+    lib.hitl_native_run.argtypes = [
+        ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_double,
+        ctypes.c_double, ctypes.c_long, dp, dp, ctypes.c_char_p, ctypes.c_int,
+    ]  # fmt: skip
+    msg = ctypes.create_string_buffer(_MSG_LEN)
+    if not lib.hitl_native_check(msg, _MSG_LEN):
+        raise BuildError(
+            f"native integrator: {msg.value.decode(errors='replace')} "
+            "(install scikit-sundae==1.2.*, whose SUNDIALS 7.9 the vendored headers match)"
+        )
+    return lib
+
+
+def run(
+    library: Path,
+    x0: np.ndarray,
+    t_out: np.ndarray,
+    settings: IntegratorSettings,
+    *,
+    breakpoints: Sequence[float] = (),
+    progress: Callable[[float], None] | None = None,
+) -> Trajectory:
+    """Integrate with the native driver of a library built with :func:`toolchain`.
+
+    Parameters
+    ----------
+    library : Path
+        The shared library (``Library.path``) holding ``hitl_native_run``.
+    x0 : ndarray
+        Initial state at ``t_out[0]``.
+    t_out : ndarray
+        Increasing output times.
+    settings : IntegratorSettings
+        ``rtol``, ``atol`` and ``max_steps`` (steps allowed between two output times,
+        as CVODES' ``max_num_steps``) are used.
+    breakpoints : sequence of float
+        The run restarts exactly at these times (CVODE stops there, then re-initialises).
+    progress : callable, optional
+        Called once with the time reached (the run is one C call).
+
+    Returns
+    -------
+    Trajectory
+        Incomplete (not raised) when CVODE gives up; ``stats`` as for CVODES plus
+        ``lu_factorizations`` and ``pivot_failures``.
+    """
+    wall0 = time.perf_counter()
+    lib = _load(Path(library))
+    t_out = np.ascontiguousarray(t_out, dtype=float)
+    x = np.ascontiguousarray(x0, dtype=float).ravel()
+    nx, nt = x.size, len(t_out)
+    bps = np.ascontiguousarray(
+        sorted(b for b in breakpoints if t_out[0] < b <= t_out[-1]), dtype=float
+    )
+    X = np.full((nt, nx), np.nan)
+    stats = np.zeros(len(STATS))
+    msg = ctypes.create_string_buffer(_MSG_LEN)
+
+    def ptr(a: np.ndarray):
+        return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+    filled = lib.hitl_native_run(
+        nx, ptr(x), nt, ptr(t_out), len(bps), ptr(bps), float(settings.rtol),
+        float(settings.atol), int(settings.max_steps), ptr(X), ptr(stats), msg, _MSG_LEN,
+    )  # fmt: skip
+    text = msg.value.decode(errors="replace").strip()
+    if filled < 1:
+        raise IntegrationError(f"native integrator could not start: {text or 'unknown error'}")
+    st = dict(zip(STATS, stats.tolist(), strict=True))
+    flag = int(st.pop("flag"))
+    t_reached = float(t_out[filled - 1])
+    st.pop("t_reached")
+    out = {k: (v if k == "last_step" else int(v)) for k, v in st.items()}
+    out.update(integrator_calls=1, jtimes_evals=0, wall_seconds=time.perf_counter() - wall0)
+    message = ""
+    if filled < nt:
+        name, _, detail = text.partition(":")
+        message = (
+            f"native failed after t = {t_reached:.6g} s (working towards t = "
+            f"{float(t_out[filled]):.6g} s): {flag_reason(name.strip() or str(flag))}"
+            + (f" ({detail.strip()})" if detail.strip() else "")
+        )
+    if progress is not None:
+        progress(t_reached)
+    return Trajectory(
+        t=t_out[:filled].copy(),
+        x=X[:filled],
+        z=None,
+        method="native",
+        complete=filled == nt,
+        t_reached=t_reached,
+        message=message,
+        stats=out,
+    )
