@@ -31,7 +31,7 @@ import re
 import sys
 import time
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -44,7 +44,7 @@ from generated.codegen import CodegenSettings, Library, build_library, check_dyn
 from generated.integrate import IntegratorSettings, Trajectory, integrate, output_grid
 from symbolic.artifacts import OUT_ROOT, atomic_write_text, sha256_file
 from symbolic.errors import BuildError, IntegrationError, ScenarioError, SynthesisError
-from symbolic.scenario import Scenario, load_scenario, scenario_from_dict
+from symbolic.scenario import METHODS, Scenario, load_scenario, scenario_from_dict
 
 ODE_NAME, DAE_NAME, OUT_NAME = "cl_ode", "cl_dae", "cl_out"
 
@@ -148,6 +148,29 @@ def load(
             str(path), "variant", f"{label!r} is not a plain name", "[A-Za-z0-9_.-]"
         )
     return dataclasses.replace(out, name=f"{sc.name}-{label}", sha256=sha)
+
+
+def with_method(sc: Scenario, method: str | None) -> Scenario:
+    """``sc`` with ``integration.method`` replaced (unchanged for ``None``; same name).
+
+    Parameters
+    ----------
+    sc : Scenario
+    method : str or None
+        One of :data:`symbolic.scenario.METHODS`.
+
+    Raises
+    ------
+    ScenarioError
+        For an unknown method.
+    """
+    if method is None:
+        return sc
+    if method not in METHODS:
+        raise ScenarioError(
+            str(sc.path), "integration.method", f"{method!r} is unknown", ", ".join(METHODS)
+        )
+    return dataclasses.replace(sc, integration=dataclasses.replace(sc.integration, method=method))
 
 
 # --------------------------------------------------------------------------- synthesis
@@ -410,13 +433,49 @@ def simulate(
         If the method does not match ``built.form``.
     """
     s = settings or integrator_settings(sc)
+    t_out = output_grid(sc.integration.horizon, sc.integration.output_step)
+    x0 = np.asarray(built.closed_loop.x0, dtype=float)
+    return integrate_built(built, x0, t_out, s, breakpoints(built, sc), progress)
+
+
+def integrate_built(
+    built: Built,
+    x0: np.ndarray,
+    t_out: np.ndarray,
+    settings: IntegratorSettings,
+    bps: Sequence[float] = (),
+    progress: Callable[[float], None] | None = None,
+) -> Trajectory:
+    """Integrate a compiled closed loop from ``x0`` with the method of ``settings``.
+
+    The one place that sends ``native`` to :func:`generated.native.run` and the CasADi
+    methods to :func:`generated.integrate.integrate`.
+
+    Parameters
+    ----------
+    built : Built
+        Built for the method (``idas``: DAE form; ``native``: the native build).
+    x0 : ndarray
+        Initial state at ``t_out[0]`` (the DAE's z starts from ``closed_loop.z0``).
+    t_out : ndarray
+        Output times.
+    settings : IntegratorSettings
+    bps : sequence of float
+        Breakpoints (:func:`breakpoints`).
+    progress : callable, optional
+        Called with the simulated time reached.
+
+    Raises
+    ------
+    IntegrationError
+        If the build does not fit the method.
+    """
+    s = settings
     if (s.method == "idas") != (built.form == "dae"):
         raise IntegrationError(
             f"method {s.method!r} needs the {'DAE' if s.method == 'idas' else 'ODE'} build "
             f"(this one is {built.form}): call build(..., method={s.method!r})"
         )
-    cl = built.closed_loop
-    t_out = output_grid(sc.integration.horizon, sc.integration.output_step)
     if s.method == "native":
         from generated import native
 
@@ -424,20 +483,9 @@ def simulate(
             raise IntegrationError(
                 "method 'native' needs the native build: call build(..., method='native')"
             )
-        return native.run(
-            built.library.path, np.asarray(cl.x0, dtype=float), t_out, s,
-            breakpoints=breakpoints(built, sc), progress=progress,
-        )  # fmt: skip
-    z0 = np.asarray(cl.z0, dtype=float) if built.form == "dae" else None
-    return integrate(
-        built.dyn,
-        np.asarray(cl.x0, dtype=float),
-        t_out,
-        s,
-        breakpoints=breakpoints(built, sc),
-        z0=z0,
-        progress=progress,
-    )
+        return native.run(built.library.path, x0, t_out, s, breakpoints=bps, progress=progress)
+    z0 = np.asarray(built.closed_loop.z0, dtype=float) if built.form == "dae" else None
+    return integrate(built.dyn, x0, t_out, s, breakpoints=bps, z0=z0, progress=progress)
 
 
 # --------------------------------------------------------------------------- outputs

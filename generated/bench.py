@@ -4,7 +4,7 @@
 
     python -m generated.bench                 # N = 5, 50, 500, 2000; all methods
     python -m generated.bench --quick         # N = 5, one run each (smoke test)
-    python -m generated.bench --sizes 5,50 --methods c-cvodes-direct,scipy-bdf --runs 3
+    python -m generated.bench --sizes 5,50 --methods c-cvode-native,scipy-bdf --runs 3
 
 Every (N, method) cell runs in its own subprocess (its own peak RSS, a hard wall-clock
 limit); the parent prints the table and writes ``out/bench/bench.csv`` and
@@ -19,14 +19,19 @@ the variable-step methods, the same output grid):
 ``casadi-vm``
     The symbolic closed loop (``ClosedLoop.ode_dyn``) evaluated by CasADi's virtual
     machine, no code generation, CVODES with CasADi's own Jacobian.
+``c-cvode-native``
+    Our generated C (right-hand side, Jacobian, sparse LU) + SUNDIALS CVODE driven
+    from C (:mod:`generated.native`, method ``native``): one call from Python per run.
 ``c-cvodes-direct``, ``c-cvodes-gmres``
-    Our generated C + CVODES with the two plans of :mod:`generated.largescale`
-    (``jacobian="sparse"``: sparse direct Jacobian / ``"jvp"``: matrix-free GMRES),
-    built and integrated by the functions of ``make sim``
-    (:func:`generated.api.build_from_closed_loop`, :func:`generated.api.integrator_settings`,
-    :func:`generated.api.simulate`). "Ours" — the denominator of the ratio column — is
-    the plan :func:`generated.largescale.choose_plan` picks for N (what ``make sim``
-    runs with its default ``--jacobian auto``).
+    Our generated C + CVODES through CasADi's interface with the two plans of
+    :mod:`generated.largescale` (``jacobian="sparse"``: sparse direct Jacobian /
+    ``"jvp"``: matrix-free GMRES).
+
+All of ours are built and integrated by the functions of ``make sim``
+(:func:`generated.api.build_from_closed_loop`, :func:`generated.api.integrator_settings`,
+:func:`generated.api.simulate`). "Ours" — the denominator of the ratio column — is
+:func:`ours_method`: ``c-cvode-native`` where :func:`generated.largescale.choose_plan`
+picks the direct plan (N ≤ 20; the shipped scenarios' method), else ``c-cvodes-gmres``.
 ``c-idas``
     Our generated C (DAE form) + IDAS, same plan as ours, same functions.
 ``fixed``
@@ -71,6 +76,7 @@ METHODS = (
     "scipy-bdf",
     "scipy-rk45",
     "casadi-vm",
+    "c-cvode-native",
     "c-cvodes-direct",
     "c-cvodes-gmres",
     "c-idas",
@@ -83,8 +89,25 @@ OUTPUT_STEP = 0.1  # output grid of every method (states stored there)
 #: get a build-only cell (build times, C size, RHS time) instead of nothing
 CHEAP_BUILDS = ("scipy-bdf", "scipy-rk45", "casadi-vm", "c-cvodes-gmres", "c-idas")
 #: ``CodegenSettings.jacobian`` of the CasADi methods (``auto``: the plan of ``make sim``)
-JACOBIAN_OF = {"casadi-vm": "sparse", "c-cvodes-direct": "sparse", "c-cvodes-gmres": "jvp",
-               "c-idas": "auto"}  # fmt: skip
+JACOBIAN_OF = {"casadi-vm": "sparse", "c-cvode-native": "sparse", "c-cvodes-direct": "sparse",
+               "c-cvodes-gmres": "jvp", "c-idas": "auto"}  # fmt: skip
+
+
+def ours_method(N: int) -> str:
+    """The benchmark method that is ours at N: what ``make sim`` runs for N followers.
+
+    ``c-cvode-native`` (method ``native``) where :func:`generated.largescale.choose_plan`
+    picks the direct plan, else ``c-cvodes-gmres`` (the native build is flat SX code:
+    at N = 50 it is 13 MB of C, see docs/performance.md).
+
+    Parameters
+    ----------
+    N : int
+        Number of followers.
+    """
+    from generated.largescale import choose_plan
+
+    return "c-cvode-native" if choose_plan(N).strategy == "direct" else "c-cvodes-gmres"
 
 
 class BenchError(ToolkitError):
@@ -142,6 +165,8 @@ def bench_scenario(N: int, seed: int = BENCH_SEED, horizon: float | None = None)
     Returns
     -------
     Scenario
+        With ``integration.method`` that of :func:`ours_method` (``native`` for the
+        direct plan, ``cvodes`` above).
     """
     from symbolic.scenario import Graph, load_scenario
 
@@ -189,11 +214,12 @@ def bench_scenario(N: int, seed: int = BENCH_SEED, horizon: float | None = None)
                 ghat=rep(ini.ghat),
             ),  # fmt: skip
         )
+    # the method make sim would use at this N (the native build is for the direct plan)
+    method = "native" if ours_method(N) == "c-cvode-native" else "cvodes"
+    ig = dataclasses.replace(sc.integration, method=method)
     if horizon is not None:
-        sc = dataclasses.replace(
-            sc, integration=dataclasses.replace(sc.integration, horizon=float(horizon))
-        )
-    return sc
+        ig = dataclasses.replace(ig, horizon=float(horizon))
+    return dataclasses.replace(sc, integration=ig)
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -425,12 +451,13 @@ def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, ou
         from generated.codegen import CodegenSettings
         from generated.integrate import integrate
 
-        idas = method == "c-idas"
-        meth = "idas" if idas else "cvodes"
+        meth = {"c-idas": "idas", "c-cvode-native": "native"}.get(method, "cvodes")
         cg = CodegenSettings(jacobian=JACOBIAN_OF[method])
         plan = choose_plan(N, cg.jacobian)
         s = integrator_settings(sc, meth, cg)
         label = f"{plan.jacobian}: {plan.strategy} Newton ({plan.reason})"
+        if meth == "native":
+            label = "native CVODE: generated J (reused by CVODE) and sparse LU without pivoting"
         if method == "casadi-vm":
             dyn = cl.ode_dyn
             rec.update(codegen_s=0.0, compile_s=0.0, c_bytes=0,
@@ -571,10 +598,8 @@ def finish(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
     records : list of dict
         Cell records (changed in place and returned).
     """
-    from generated.largescale import choose_plan
-
     for N in sorted({r["N"] for r in records}):
-        ours_name = f"c-cvodes-{choose_plan(N).strategy}"
+        ours_name = ours_method(N)
         ours = next((r for r in records if r["N"] == N and r["method"] == ours_name), None)
         for r in records:
             if r["N"] != N:
@@ -650,7 +675,7 @@ def table(records: list[dict[str, Any]]) -> str:
     widths = [max(len(row[k]) for row in rows) for k in range(len(head))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines) + "\n(* = ours: the plan generated.largescale.choose_plan picks for N)"
+    return "\n".join(lines) + "\n(* = ours: what make sim runs for N, generated.bench.ours_method)"
 
 
 def markdown(records: list[dict[str, Any]]) -> str:
@@ -787,7 +812,6 @@ def main(argv: list[str]) -> int:
         raise BenchError(
             f"--methods: {', '.join(bad)} unknown (expected some of {', '.join(METHODS)})"
         )
-    from generated.largescale import choose_plan
     from symbolic.artifacts import OUT_ROOT
 
     folder = Path(a.out) if a.out else OUT_ROOT / "bench"
@@ -801,7 +825,7 @@ def main(argv: list[str]) -> int:
     records = []
     stopped: dict[str, int] = {}  # method -> first N where it hit the time limit
     for N in sizes:
-        ours_name = f"c-cvodes-{choose_plan(N).strategy}"
+        ours_name = ours_method(N)
         for meth in methods:
             why = f"stopped at the time limit at N = {stopped.get(meth)}"
             if meth in stopped and meth in CHEAP_BUILDS:  # still measure the build and RHS

@@ -492,6 +492,11 @@ def integrate(
     """
     wall0 = time.perf_counter()
     s = settings
+    if s.method == "native":
+        raise IntegrationError(
+            "method 'native' integrates a native library, not a casadi.Function: "
+            "use generated.api.integrate_built or generated.native.run"
+        )
     nx = int(f.size1_in(1))
     nz = int(f.size1_in(2))
     if f.nnz_in(3) or f.nnz_in(4):

@@ -39,6 +39,7 @@ import pandas as pd
 
 from symbolic.artifacts import OUT_ROOT, atomic_write_text
 from symbolic.errors import CliParser, IntegrationError, UsageError, run_cli
+from symbolic.scenario import METHODS
 
 PAPER = Path(__file__).resolve().parent.parent / "scenarios" / "paper.toml"
 #: the knobs varied by default: the tanh boundary layer, the φ floor of the observer's
@@ -145,7 +146,6 @@ def step_profile(built: Any, sc: Any, edges: Sequence[float], settings: Any = No
         If a window fails (the message names the window).
     """
     from generated import api
-    from generated.integrate import integrate
 
     e = np.asarray(edges, dtype=float)
     if e.ndim != 1 or len(e) < 2 or e[0] != 0.0 or np.any(np.diff(e) <= 0):
@@ -157,7 +157,7 @@ def step_profile(built: Any, sc: Any, edges: Sequence[float], settings: Any = No
     changes = u0_sign_change_times(sc, float(e[-1]))
     out = []
     for a, b in zip(e[:-1], e[1:], strict=True):
-        tr = integrate(built.dyn, x, np.array([a, b]), s, breakpoints=bps)
+        tr = api.integrate_built(built, x, np.array([a, b]), s, bps)
         if not tr.complete:
             raise IntegrationError(f"step profile, window [{a:g}, {b:g}] s: {tr.message}", a)
         x = tr.x[-1]
@@ -207,6 +207,7 @@ def knob_sensitivity(
     vary: Sequence[tuple[str, Sequence[Any]]],
     out_root: str | Path | None = None,
     codegen: Any = None,
+    method: str | None = None,
 ) -> pd.DataFrame:
     """Whole runs with one field changed at a time: steps, time, completion, tail errors.
 
@@ -221,6 +222,8 @@ def knob_sensitivity(
         Where gains of the variants are cached (default ``out/``).
     codegen : CodegenSettings, optional
         Compiler settings (default: those of ``make sim``).
+    method : str, optional
+        Integration method (default: the scenario's).
 
     Returns
     -------
@@ -235,7 +238,7 @@ def knob_sensitivity(
     runs += [(k, v, {k: v}) for k, vals in vary for v in vals]
     rows = []
     for key, value, ov in runs:
-        sc = api.load(path, ov or None, variant=None)
+        sc = api.with_method(api.load(path, ov or None, variant=None), method)
         gains, _ = api.ensure_gains(sc, out_root)
         built = api.build(sc, gains, settings=codegen)
         t0 = time.perf_counter()
@@ -309,6 +312,12 @@ def main(argv: list[str]) -> int:
         metavar="KEY=V1,V2",
         help="knob to vary (repeatable); default sign_width, phi_min, tau_threshold",
     )
+    ap.add_argument(
+        "--method",
+        choices=METHODS,
+        default=None,
+        help="integration method (default: the scenario's; cvodes = through CasADi)",
+    )
     ap.add_argument("--no-knobs", action="store_true", help="window profile only")
     ap.add_argument("--out", default=None, help="output folder (default out/steps/<name>)")
     args = ap.parse_args(argv)  # fmt: skip
@@ -324,6 +333,7 @@ def main(argv: list[str]) -> int:
     else:
         sc = api.load(args.scenario)
         gains, _ = api.ensure_gains(sc)
+    sc = api.with_method(sc, args.method)
     built = api.build(sc, gains)
     folder = Path(args.out) if args.out else Path(OUT_ROOT) / "steps" / sc.name
     folder.mkdir(parents=True, exist_ok=True)
@@ -346,7 +356,7 @@ def main(argv: list[str]) -> int:
         f"({100 * flagged / max(tot, 1):.0f} %) in {int(near.sum())} of {len(wf)} windows"
     )
     if args.bench_n is None and not args.no_knobs:
-        kf = knob_sensitivity(args.scenario, vary, out_root=folder / "variants")
+        kf = knob_sensitivity(args.scenario, vary, out_root=folder / "variants", method=args.method)
         atomic_write_text(folder / "steps_knobs.csv", kf.to_csv(index=False))
         print("\nknob sensitivity (whole runs, one field changed; a diagnostic, not a tuning):")
         print(kf.to_string(index=False, float_format=lambda v: f"{v:.3g}"))

@@ -158,13 +158,13 @@ def test_quick_smoke_run(tmp_path: Path) -> None:
     """``--quick`` end to end on a short horizon: two methods, table, CSV and plot."""
     proc = subprocess.run(
         [sys.executable, "-m", "generated.bench", "--quick", "--horizon", "0.02",
-         "--methods", "c-cvodes-direct,scipy-rk45", "--out", str(tmp_path)],
+         "--methods", "c-cvode-native,scipy-rk45", "--out", str(tmp_path)],
         cwd=ROOT, capture_output=True, text=True, timeout=600, check=False,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert "c-cvodes-direct*" in proc.stdout
+    assert "c-cvode-native*" in proc.stdout
     rows = list(csv.DictReader((tmp_path / "bench.csv").open()))
-    assert [r["method"] for r in rows] == ["c-cvodes-direct", "scipy-rk45"]
+    assert [r["method"] for r in rows] == ["c-cvode-native", "scipy-rk45"]
     ours, rk = rows
     assert ours["status"] == "ok" and float(ours["ratio_to_ours"]) == 1.0
     assert int(ours["steps"]) > 0 and int(ours["rhs_evals"]) >= int(ours["steps"])
@@ -183,7 +183,7 @@ def test_finish_ratios_and_table_from_synthetic_records() -> None:
 
     x = np.array([1.0, 100.0])
     recs = [
-        {"N": 5, "method": "c-cvodes-direct", "status": "ok", "int_median_s": 0.5,
+        {"N": 5, "method": "c-cvode-native", "status": "ok", "int_median_s": 0.5,
          "int_min_s": 0.4, "int_max_s": 0.6, "_x_final": x},
         {"N": 5, "method": "scipy-bdf", "status": "ok", "int_median_s": 30.0,
          "int_min_s": 30.0, "int_max_s": 30.0, "_x_final": x + np.array([0.01, 1.0])},
@@ -195,7 +195,19 @@ def test_finish_ratios_and_table_from_synthetic_records() -> None:
     assert out[1]["rel_dx_final_vs_ours"] == pytest.approx(0.01)  # max(0.01/1, 1/100)
     assert "ratio_to_ours" not in out[2]  # no ratio for a run that did not finish
     txt = table(out)
-    assert "c-cvodes-direct*" in txt and "stopped at the time limit" in txt
+    assert "c-cvode-native*" in txt and "stopped at the time limit" in txt
+
+
+def test_ours_is_what_make_sim_runs() -> None:
+    """Native CVODE for the direct plan (N <= 20, the shipped scenarios), GMRES above."""
+    from generated.bench import ours_method
+    from generated.largescale import DIRECT_MAX_AGENTS
+
+    assert ours_method(5) == ours_method(DIRECT_MAX_AGENTS) == "c-cvode-native"
+    assert ours_method(DIRECT_MAX_AGENTS + 1) == ours_method(2000) == "c-cvodes-gmres"
+    from generated import api
+
+    assert api.load(ROOT / "scenarios" / "paper.toml").integration.method == "native"
 
 
 def test_gmres_build_carries_the_jacobian_sparsity(tmp_path: Path) -> None:

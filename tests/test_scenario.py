@@ -443,7 +443,7 @@ def test_summary_lists_what_the_issue_asks(capsys):
         "Theta = synthesize",
         "lambda1 = 1.9 (given)",
         "ghat law",
-        "integration  cvodes",
+        "integration  native",
     ):
         assert needle in out, needle
     assert math.isfinite(float(re.search(r"horizon = ([0-9.]+) s", out).group(1)))

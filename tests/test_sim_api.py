@@ -251,6 +251,25 @@ def test_native_agrees_with_cvodes_and_runs_from_the_cli(base, env, capsys):
         api.simulate(built, sc, api.integrator_settings(sc, "native"))
 
 
+def test_precision_table_against_the_reference(env):
+    """Errors shrink with the tolerance; the reference agrees with CVODES at its tolerance."""
+    from generated.precision import precision_table, state_label
+
+    sc = api.load(env["scenario"])
+    df, unc = precision_table(sc, ("cvodes", "native"), (1e-5, 1e-8), 1e-11,
+                              codegen=env["cg"], out_root=env["out"])  # fmt: skip
+    assert unc < 1e-6  # two BDF implementations at rtol 1e-11
+    assert list(df.method) == ["cvodes", "cvodes", "native", "native"]
+    assert df.complete.all() and (df.steps > 0).all()
+    for m in ("cvodes", "native"):
+        loose, tight = df[df.method == m].max_err.to_numpy()
+        assert tight < loose / 100  # 1000x tighter tolerance: at least 100x closer
+    assert (df.atol / df.rtol).round(12).eq(1e-2).all()  # the scenario's atol/rtol ratio
+    lay = api.build(sc, api.ensure_gains(sc, env["out"])[0], "cvodes", env["cg"]).closed_loop.layout
+    assert state_label(lay, 0) == "eta0_1"
+    assert state_label(lay, lay.slices[("p", 1)].start + 1) == "p2_2"
+
+
 def test_failing_integration_writes_incomplete_trajectory_and_exits_2(env, capsys):
     out = env["root"] / "out-fail"
     argv = ["sim", str(env["scenario"]), "--set", "integration.max_steps=3", "--variant", "fail",
