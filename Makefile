@@ -46,6 +46,7 @@ test: lint
 bench: $(STAMP)
 	$(PY) -m generated.bench
 	$(PY) -m generated.steps
+	$(PY) -m generated.precision
 
 clean:
 	rm -rf out generated/build .pytest_cache

@@ -208,6 +208,8 @@ def test_ours_is_what_make_sim_runs() -> None:
     from generated import api
 
     assert api.load(ROOT / "scenarios" / "paper.toml").integration.method == "native"
+    assert bench_scenario(5).integration.method == "native"
+    assert bench_scenario(DIRECT_MAX_AGENTS + 1).integration.method == "cvodes"
 
 
 def test_gmres_build_carries_the_jacobian_sparsity(tmp_path: Path) -> None:

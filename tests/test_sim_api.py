@@ -243,8 +243,14 @@ def test_native_agrees_with_cvodes_and_runs_from_the_cli(base, env, capsys):
     assert list(df.columns) == list(ref.columns) and len(df) == len(ref)
     err = float((np.abs(df[cols].to_numpy() - ref[cols].to_numpy()) / scale).max())
     assert err < 1e-5  # both at rtol 1e-8
-    # a build for another method cannot be run natively
+    # with_method changes only the method (same name), and checks it
     sc = api.load(env["scenario"])
+    assert api.with_method(sc, None) is sc
+    assert api.with_method(sc, "idas").integration.method == "idas"
+    assert api.with_method(sc, "idas").name == sc.name
+    with pytest.raises(ScenarioError, match="integration.method"):
+        api.with_method(sc, "rk4")
+    # a build for another method cannot be run natively
     gains, _ = api.ensure_gains(sc, env["out"])
     built = api.build(sc, gains, "cvodes", env["cg"])
     with pytest.raises(IntegrationError, match="native build"):
