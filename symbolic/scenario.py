@@ -182,7 +182,7 @@ class Initial:
 class Integration:
     """Integration settings."""
 
-    method: str  # cvodes | idas | fixed
+    method: str  # cvodes | native | idas | fixed
     rtol: float
     atol: float
     horizon: float

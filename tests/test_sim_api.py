@@ -243,6 +243,15 @@ def test_native_agrees_with_cvodes_and_runs_from_the_cli(base, env, capsys):
     assert list(df.columns) == list(ref.columns) and len(df) == len(ref)
     err = float((np.abs(df[cols].to_numpy() - ref[cols].to_numpy()) / scale).max())
     assert err < 1e-5  # both at rtol 1e-8
+    # deterministic: a second run (library from the cache) writes the same bytes
+    first = (out / "small" / "trajectory.csv").read_bytes()
+    os.environ["HITL_BUILD_DIR"] = env["cg"].build_root
+    try:
+        assert run_cli(cli_main, argv) == 0
+    finally:
+        del os.environ["HITL_BUILD_DIR"]
+    assert (out / "small" / "trajectory.csv").read_bytes() == first
+    assert json.loads((out / "small" / "meta.json").read_text())["cache_hit"] is True
     # with_method changes only the method (same name), and checks it
     sc = api.load(env["scenario"])
     assert api.with_method(sc, None) is sc
