@@ -336,6 +336,13 @@ def build_from_closed_loop(
     if method == "native":  # the driver's functions and SUNDIALS; CVODES' jac_ not needed
         from generated import native
 
+        if cl.layout.N > native.MAX_AGENTS:
+            raise BuildError(
+                f"integration.method 'native' is for N <= {native.MAX_AGENTS} followers "
+                f"(this closed loop has {cl.layout.N}; its flat generated code would take "
+                "gcc minutes to hours): use method 'cvodes' (matrix-free GMRES above N = 20)"
+            )
+
         functions += native.native_functions(src, cse=settings.cse)[0]
         derive, toolchain = [], native.toolchain()
     t_sym = time.perf_counter() - t0

@@ -39,6 +39,7 @@ import numpy as np
 
 from generated.codegen import CodegenSettings, Library, Toolchain, build_library
 from generated.integrate import IntegratorSettings, Trajectory, flag_reason
+from generated.largescale import DIRECT_MAX_AGENTS
 from generated.sparse_lu import SparseLU, sparse_lu
 from symbolic.errors import BuildError, IntegrationError
 
@@ -53,6 +54,10 @@ SUNDIALS_LIBRARIES = (
     "sundials_sunmatrixsparse",
 )
 RHS_NAME, JAC_NAME, LU_PREFIX = "nat_rhs", "nat_jac", "nat_lu"
+#: largest N the closed loop is built natively for (the direct plan's crossover): the
+#: build is flat SX code; N = 20: 4.4 MB of C, gcc -O1 150 s; N = 50: 13 MB, gcc
+#: unfinished after 13 min and 6 GB (docs/performance.md)
+MAX_AGENTS = DIRECT_MAX_AGENTS
 #: the driver's stats[] layout (enum in driver.c)
 STATS = (
     "steps",

@@ -16,7 +16,7 @@ from generated.bench import BenchError, bench_scenario, main, random_graph
 from generated.codegen import CodegenSettings, build_library
 from generated.integrate import IntegratorSettings, integrate
 from generated.largescale import choose_plan
-from symbolic.errors import ToolkitError
+from symbolic.errors import BuildError, ToolkitError
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -278,6 +278,12 @@ def test_api_auto_picks_the_large_n_plan_and_agrees_with_direct(tmp_path: Path) 
     np.testing.assert_array_equal(traj.t, ref.t)
     rel = np.abs(traj.x - ref.x) / np.maximum(1.0, np.abs(ref.x))
     assert rel.max() < 1e-3
+    # the native build is refused above its N (flat code), before any code is generated
+    with pytest.raises(BuildError, match="method 'cvodes'") as ei:
+        api.build(
+            sc, gains, "native", CodegenSettings(build_root=str(tmp_path / "n")), closed_loop=cl
+        )
+    assert "\n" not in str(ei.value) and not (tmp_path / "n").exists()
 
 
 def synthesize_gains(sc):
