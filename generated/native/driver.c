@@ -188,8 +188,10 @@ CASADI_SYMBOL_EXPORT int hitl_native_check(char *msg, int msglen) {
 
 /*
  * Integrate from x0 at t_out[0] and store the state at every t_out[k] (row-major
- * x_out[k * nx + i]). The run restarts (CVodeReInit) at every breakpoint strictly
- * inside (t_out[0], t_out[nt-1]]; it stops exactly there (CVodeSetStopTime).
+ * x_out[k * nx + i]; CVODE's interpolant between its steps, as CVODES through
+ * CasADi). The run restarts (CVodeReInit) at every breakpoint strictly inside
+ * (t_out[0], t_out[nt-1]]; it stops exactly there and at the horizon
+ * (CVodeSetStopTime), never stepping beyond.
  * Returns the number of rows of x_out filled (>= 1), or -1 if CVODE could not be set
  * up; stats[HITL_FLAG] is CVODE's last flag (< 0 on a failure) and msg its name and
  * message.
@@ -208,7 +210,7 @@ CASADI_SYMBOL_EXPORT int hitl_native_run(int nx, const double *x0, int nt, const
   casadi_int *lucol = NULL, *lurow = NULL, lunnz;
   int filled = -1, flag = 0, ib = 0;
   long acc[7] = {0, 0, 0, 0, 0, 0, 0};
-  double t;
+  double t, tstop_set = NAN;
 
   memset(&c, 0, sizeof c);
   for (int i = 0; i < HITL_NSTATS; ++i) stats[i] = 0.0;
@@ -267,29 +269,33 @@ CASADI_SYMBOL_EXPORT int hitl_native_run(int nx, const double *x0, int nt, const
   while (ib < nb && breaks[ib] <= t) ib++;
   for (int k = 1; k < nt; ++k) {
     double tout = t_out[k];
-    while (t < tout) {
-      double stop = tout;
-      int at_break = 0;
-      if (ib < nb && breaks[ib] <= tout) {
-        stop = breaks[ib];
-        at_break = 1;
+    for (;;) {
+      /* CVODE may step past output times (it interpolates there) but never past the
+         next breakpoint or the horizon: the stop time */
+      double stop = ib < nb ? breaks[ib] : t_out[nt - 1];
+      if (stop != tstop_set) {
+        CVodeSetStopTime(mem, stop);
+        tstop_set = stop;
       }
-      CVodeSetStopTime(mem, stop);
-      flag = CVode(mem, stop, y, &t, CV_NORMAL);
+      flag = CVode(mem, tout < stop ? tout : stop, y, &t, CV_NORMAL);
       if (flag < 0) goto done;
-      if (at_break) {
-        long v;
-        CVodeGetNumSteps(mem, &v), acc[0] += v;
-        CVodeGetNumRhsEvals(mem, &v), acc[1] += v;
-        CVodeGetNumJacEvals(mem, &v), acc[2] += v;
-        CVodeGetNumLinSolvSetups(mem, &v), acc[3] += v;
-        CVodeGetNumErrTestFails(mem, &v), acc[4] += v;
-        CVodeGetNumNonlinSolvIters(mem, &v), acc[5] += v;
-        CVodeGetNumNonlinSolvConvFails(mem, &v), acc[6] += v;
-        if (CVodeReInit(mem, t, y)) goto done;
-        stats[HITL_RESTARTS] += 1;
-        ib++;
+      if (t >= stop) {
+        tstop_set = NAN; /* CVODE forgets a stop time once reached */
+        if (ib < nb) {   /* a breakpoint: restart from the state reached */
+          long v;
+          CVodeGetNumSteps(mem, &v), acc[0] += v;
+          CVodeGetNumRhsEvals(mem, &v), acc[1] += v;
+          CVodeGetNumJacEvals(mem, &v), acc[2] += v;
+          CVodeGetNumLinSolvSetups(mem, &v), acc[3] += v;
+          CVodeGetNumErrTestFails(mem, &v), acc[4] += v;
+          CVodeGetNumNonlinSolvIters(mem, &v), acc[5] += v;
+          CVodeGetNumNonlinSolvConvFails(mem, &v), acc[6] += v;
+          if (CVodeReInit(mem, t, y)) goto done;
+          stats[HITL_RESTARTS] += 1;
+          ib++;
+        }
       }
+      if (t >= tout) break;
     }
     memcpy(x_out + (size_t)k * nx, N_VGetArrayPointer(y), (size_t)nx * sizeof(double));
     filled = k + 1;
