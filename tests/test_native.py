@@ -108,6 +108,16 @@ def test_discontinuity_at_a_breakpoint_is_resolved_exactly(cg):
     assert tr.stats["restarts"] == 1
 
 
+def test_never_evaluates_beyond_the_horizon(cg):
+    """ẋ = NaN for t > 1: a run to t = 1 must complete (the horizon is CVODE's stop time)."""
+    t, x = ca.SX.sym("t"), ca.SX.sym("x", 1)
+    lib = native.build(ode("edge", t, x, ca.if_else(t <= 1.0, ca.cos(t), np.nan)), cg)
+    tg = output_grid(1.0, 0.01)  # output times in between are interpolated, not stopped at
+    tr = native.run(lib.path, np.zeros(1), tg, IntegratorSettings(rtol=1e-6, atol=1e-9))
+    assert tr.complete and tr.stats["steps"] < len(tg) - 1  # fewer steps than outputs
+    np.testing.assert_allclose(tr.x[:, 0], np.sin(tg), atol=1e-5)
+
+
 def test_blow_up_gives_an_incomplete_trajectory_with_the_reason(cg):
     """ẋ = x², x(0) = 1: x = 1/(1 − t) leaves every bound before t = 1."""
     t, x = ca.SX.sym("t"), ca.SX.sym("x", 1)
