@@ -55,7 +55,7 @@ SUNDIALS_LIBRARIES = (
 )
 RHS_NAME, JAC_NAME, LU_PREFIX = "nat_rhs", "nat_jac", "nat_lu"
 #: largest N the closed loop is built natively for (the direct plan's crossover): the
-#: build is flat SX code; N = 20: 4.4 MB of C, gcc -O1 150 s; N = 50: 13 MB, gcc
+#: build is flat SX code; N = 20: 4.4 MB of C, gcc -O1 150–165 s; N = 50: 13 MB, gcc
 #: unfinished after 13 min and 6 GB (docs/performance.md)
 MAX_AGENTS = DIRECT_MAX_AGENTS
 #: the driver's stats[] layout (enum in driver.c)
