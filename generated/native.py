@@ -158,8 +158,9 @@ def native_functions(
     x = ca.SX.sym("x", nx)
     empty = ca.SX(0, 1)
     xdot = f(t, x, empty, empty, empty)[0]
-    pattern = ca.jacobian(xdot, x).sparsity() + ca.Sparsity.diag(nx)
-    jac = ca.project(ca.jacobian(xdot, x), pattern)  # structural zeros on the diagonal
+    J = ca.jacobian(xdot, x)
+    pattern = J.sparsity() + ca.Sparsity.diag(nx)
+    jac = ca.project(J, pattern)  # structural zeros on the diagonal
     opts = {"cse": True} if cse else {}
     rhs_f = ca.Function(RHS_NAME, [t, x], [xdot], ["t", "x"], ["xdot"], opts)
     jac_f = ca.Function(JAC_NAME, [t, x], [jac], ["t", "x"], ["J"], opts)

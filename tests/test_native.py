@@ -17,7 +17,7 @@ from generated import native
 from generated.codegen import CodegenSettings, cache_key
 from generated.integrate import IntegratorSettings, output_grid
 from generated.sparse_lu import sparse_lu
-from symbolic.errors import BuildError
+from symbolic.errors import BuildError, IntegrationError
 
 E = ca.SX(0, 1)
 
@@ -94,6 +94,9 @@ def test_linear_ode_matches_matrix_exponential_across_breakpoints(cg):
     assert st["steps"] > 0 and st["rhs_evals"] >= st["steps"]
     assert 0 < st["jac_evals"] <= st["lu_factorizations"] and st["pivot_failures"] == 0
     assert st["newton_iters"] > 0 and st["last_step"] > 0
+    # a state of the wrong size is refused by the driver, in one line
+    with pytest.raises(IntegrationError, match="could not start: nx does not match"):
+        native.run(lib.path, np.zeros(2), tg, s)
 
 
 def test_discontinuity_at_a_breakpoint_is_resolved_exactly(cg):
