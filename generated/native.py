@@ -100,7 +100,8 @@ def toolchain() -> Toolchain:
     if spec is None or spec.origin is None:
         raise BuildError(
             "integration.method 'native': scikit-sundae is not installed (it provides the "
-            "SUNDIALS libraries; pip install 'scikit-sundae==1.2.*', or use method 'cvodes')"
+            "SUNDIALS libraries; pip install -e '.[native]' as the Makefile does, or use "
+            "method 'cvodes')"
         )
     libdir = Path(spec.origin).resolve().parent.parent / "scikit_sundae.libs"
     libs = []
