@@ -1,4 +1,4 @@
-"""Generated-C simulation of the closed loop: CasADi codegen, gcc, cache, CVODES/IDAS/fixed step.
+"""Generated-C simulation of the closed loop: CasADi codegen, gcc, cache, native CVODE, CVODES/IDAS/fixed step.
 
 Stages (each a function in :mod:`generated.api`): load scenario -> synthesize ->
 build (symbolic closed loop, C code generation, compile, cached under
