@@ -343,7 +343,7 @@ def build_from_closed_loop(
                 "gcc minutes to hours): use method 'cvodes' (matrix-free GMRES above N = 20)"
             )
 
-        functions += native.native_functions(src, cse=settings.cse)[0]
+        functions += native.native_functions(dyn, cse=settings.cse)[0]  # dyn: SX already
         derive, toolchain = [], native.toolchain()
     t_sym = time.perf_counter() - t0
     lib = build_library(functions, settings, with_derivatives=derive, toolchain=toolchain)

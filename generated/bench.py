@@ -91,6 +91,19 @@ CHEAP_BUILDS = ("scipy-bdf", "scipy-rk45", "casadi-vm", "c-cvodes-gmres", "c-ida
 #: ``CodegenSettings.jacobian`` of the CasADi methods (``auto``: the plan of ``make sim``)
 JACOBIAN_OF = {"casadi-vm": "sparse", "c-cvode-native": "sparse", "c-cvodes-direct": "sparse",
                "c-cvodes-gmres": "jvp", "c-idas": "auto"}  # fmt: skip
+#: ``integration.method`` of our methods (the rest of JACOBIAN_OF: ``cvodes``)
+INTEGRATION_METHOD_OF = {"c-cvode-native": "native", "c-idas": "idas"}
+
+
+def integration_method(method: str) -> str:
+    """``integration.method`` that a benchmark method of ours runs (``cvodes`` by default).
+
+    Parameters
+    ----------
+    method : str
+        One of the CasADi/generated-C methods of :data:`METHODS`.
+    """
+    return INTEGRATION_METHOD_OF.get(method, "cvodes")
 
 
 def ours_method(N: int) -> str:
@@ -215,8 +228,7 @@ def bench_scenario(N: int, seed: int = BENCH_SEED, horizon: float | None = None)
             ),  # fmt: skip
         )
     # the method make sim would use at this N (the native build is for the direct plan)
-    method = "native" if ours_method(N) == "c-cvode-native" else "cvodes"
-    ig = dataclasses.replace(sc.integration, method=method)
+    ig = dataclasses.replace(sc.integration, method=integration_method(ours_method(N)))
     if horizon is not None:
         ig = dataclasses.replace(ig, horizon=float(horizon))
     return dataclasses.replace(sc, integration=ig)
@@ -451,13 +463,15 @@ def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, ou
         from generated.codegen import CodegenSettings
         from generated.integrate import integrate
 
-        meth = {"c-idas": "idas", "c-cvode-native": "native"}.get(method, "cvodes")
+        meth = integration_method(method)
         cg = CodegenSettings(jacobian=JACOBIAN_OF[method])
         plan = choose_plan(N, cg.jacobian)
         s = integrator_settings(sc, meth, cg)
-        label = f"{plan.jacobian}: {plan.strategy} Newton ({plan.reason})"
-        if meth == "native":
-            label = "native CVODE: generated J (reused by CVODE) and sparse LU without pivoting"
+        label = (
+            "native CVODE: generated J (reused by CVODE) and sparse LU without pivoting"
+            if meth == "native"
+            else f"{plan.jacobian}: {plan.strategy} Newton ({plan.reason})"
+        )
         if method == "casadi-vm":
             dyn = cl.ode_dyn
             rec.update(codegen_s=0.0, compile_s=0.0, c_bytes=0,

@@ -189,7 +189,10 @@ def build(ode_dyn: ca.Function, settings: CodegenSettings | None = None) -> Libr
     return build_library(functions, settings, toolchain=toolchain())
 
 
+@functools.lru_cache(maxsize=16)
 def _load(path: Path) -> ctypes.CDLL:
+    """Load a native library once per process and check its SUNDIALS (the path names
+    a content-hashed cache entry, so what is loaded there never changes)."""
     lib = ctypes.CDLL(str(path))
     lib.hitl_native_check.restype = ctypes.c_int
     lib.hitl_native_check.argtypes = [ctypes.c_char_p, ctypes.c_int]

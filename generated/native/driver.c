@@ -158,6 +158,20 @@ static void hitl_work_size(int (*work)(casadi_int *, casadi_int *, casadi_int *,
   if (w > sz[3]) sz[3] = w;
 }
 
+/* CVODE's counters since the last (re)initialisation, added to acc[0..6]: steps, RHS,
+   Jacobians, linear-solver set-ups, error-test failures, Newton iterations, Newton
+   convergence failures */
+static void hitl_add_counters(void *mem, long *acc) {
+  long v;
+  CVodeGetNumSteps(mem, &v), acc[0] += v;
+  CVodeGetNumRhsEvals(mem, &v), acc[1] += v;
+  CVodeGetNumJacEvals(mem, &v), acc[2] += v;
+  CVodeGetNumLinSolvSetups(mem, &v), acc[3] += v;
+  CVodeGetNumErrTestFails(mem, &v), acc[4] += v;
+  CVodeGetNumNonlinSolvIters(mem, &v), acc[5] += v;
+  CVodeGetNumNonlinSolvConvFails(mem, &v), acc[6] += v;
+}
+
 /* Does the SUNDIALS we run against match the headers we were compiled with? */
 CASADI_SYMBOL_EXPORT int hitl_native_check(char *msg, int msglen) {
   char version[64] = "";
@@ -282,14 +296,7 @@ CASADI_SYMBOL_EXPORT int hitl_native_run(int nx, const double *x0, int nt, const
       if (t >= stop) {
         tstop_set = NAN; /* CVODE forgets a stop time once reached */
         if (ib < nb) {   /* a breakpoint: restart from the state reached */
-          long v;
-          CVodeGetNumSteps(mem, &v), acc[0] += v;
-          CVodeGetNumRhsEvals(mem, &v), acc[1] += v;
-          CVodeGetNumJacEvals(mem, &v), acc[2] += v;
-          CVodeGetNumLinSolvSetups(mem, &v), acc[3] += v;
-          CVodeGetNumErrTestFails(mem, &v), acc[4] += v;
-          CVodeGetNumNonlinSolvIters(mem, &v), acc[5] += v;
-          CVodeGetNumNonlinSolvConvFails(mem, &v), acc[6] += v;
+          hitl_add_counters(mem, acc);
           if (CVodeReInit(mem, t, y)) goto done;
           stats[HITL_RESTARTS] += 1;
           ib++;
@@ -303,15 +310,15 @@ CASADI_SYMBOL_EXPORT int hitl_native_run(int nx, const double *x0, int nt, const
 
 done:
   if (mem) {
-    long v;
     sunrealtype h = 0;
-    CVodeGetNumSteps(mem, &v), stats[HITL_STEPS] = (double)(acc[0] + v);
-    CVodeGetNumRhsEvals(mem, &v), stats[HITL_RHS_EVALS] = (double)(acc[1] + v);
-    CVodeGetNumJacEvals(mem, &v), stats[HITL_JAC_EVALS] = (double)(acc[2] + v);
-    CVodeGetNumLinSolvSetups(mem, &v), stats[HITL_LIN_SETUPS] = (double)(acc[3] + v);
-    CVodeGetNumErrTestFails(mem, &v), stats[HITL_ERR_TEST_FAILS] = (double)(acc[4] + v);
-    CVodeGetNumNonlinSolvIters(mem, &v), stats[HITL_NEWTON_ITERS] = (double)(acc[5] + v);
-    CVodeGetNumNonlinSolvConvFails(mem, &v), stats[HITL_NEWTON_FAILS] = (double)(acc[6] + v);
+    hitl_add_counters(mem, acc);
+    stats[HITL_STEPS] = (double)acc[0];
+    stats[HITL_RHS_EVALS] = (double)acc[1];
+    stats[HITL_JAC_EVALS] = (double)acc[2];
+    stats[HITL_LIN_SETUPS] = (double)acc[3];
+    stats[HITL_ERR_TEST_FAILS] = (double)acc[4];
+    stats[HITL_NEWTON_ITERS] = (double)acc[5];
+    stats[HITL_NEWTON_FAILS] = (double)acc[6];
     CVodeGetLastStep(mem, &h), stats[HITL_LAST_STEP] = h;
   }
   stats[HITL_LU_FACTOR] = (double)c.n_fac;
