@@ -45,7 +45,6 @@ from symbolic.errors import BuildError, IntegrationError
 
 NATIVE_DIR = Path(__file__).resolve().parent / "native"
 INCLUDE_DIR = NATIVE_DIR / "include"
-COMMON = NATIVE_DIR / "common.c"
 DRIVER = NATIVE_DIR / "driver.c"
 #: the SUNDIALS libraries the driver links, from the scikit-sundae wheel
 SUNDIALS_LIBRARIES = (
@@ -75,22 +74,16 @@ STATS = (
     "flag",
     "t_reached",
 )
-MSG_LEN = 1024
+_MSG_LEN = 1024
 
 
 def _sha256_file(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-@functools.lru_cache(maxsize=2)
-def toolchain(driver: Path = DRIVER) -> Toolchain:
+@functools.lru_cache(maxsize=1)
+def toolchain() -> Toolchain:
     """The driver source, the vendored headers and scikit-sundae's SUNDIALS libraries.
-
-    Parameters
-    ----------
-    driver : Path
-        The driver appended after ``common.c`` (the shared linear solver and checks):
-        ``driver.c`` (method ``native``) or ``cascade.c`` (method ``cascade``).
 
     Returns
     -------
@@ -125,8 +118,7 @@ def toolchain(driver: Path = DRIVER) -> Toolchain:
         "headers": {str(p.relative_to(INCLUDE_DIR)): _sha256_file(p) for p in headers},
         "libraries": {p.name: _sha256_file(p) for p in libs},
     }
-    source = COMMON.read_text() + "\n" + Path(driver).read_text()
-    return Toolchain(source, (INCLUDE_DIR,), tuple(libs), key)
+    return Toolchain(DRIVER.read_text(), (INCLUDE_DIR,), tuple(libs), key)
 
 
 def native_functions(
@@ -198,41 +190,20 @@ def build(ode_dyn: ca.Function, settings: CodegenSettings | None = None) -> Libr
 
 
 @functools.lru_cache(maxsize=16)
-def load(path: Path) -> ctypes.CDLL:
-    """Load a native or cascade library once per process and check its SUNDIALS.
-
-    The path names a content-hashed cache entry, so what is loaded there never changes.
-
-    Parameters
-    ----------
-    path : Path
-        ``Library.path`` of a library built with :func:`toolchain`.
-
-    Raises
-    ------
-    BuildError
-        If the SUNDIALS it runs against differs from the vendored headers.
-    """
+def _load(path: Path) -> ctypes.CDLL:
+    """Load a native library once per process and check its SUNDIALS (the path names
+    a content-hashed cache entry, so what is loaded there never changes)."""
     lib = ctypes.CDLL(str(path))
     lib.hitl_native_check.restype = ctypes.c_int
     lib.hitl_native_check.argtypes = [ctypes.c_char_p, ctypes.c_int]
-    dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
-    if hasattr(lib, "hitl_native_run"):
-        lib.hitl_native_run.restype = ctypes.c_int
-        lib.hitl_native_run.argtypes = [
-            ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_double,
-            ctypes.c_double, ctypes.c_long, dp, dp, ctypes.c_char_p, ctypes.c_int,
-        ]  # fmt: skip
-    if hasattr(lib, "hitl_cascade_run"):
-        ci = ctypes.c_int
-        lib.hitl_cascade_run.restype = ci
-        lib.hitl_cascade_run.argtypes = [
-            ci, ci, ci, ci, ip, ip, ip, dp, dp, ci, dp, ip, dp, ci, dp, ci, dp,
-            ctypes.c_double, ctypes.c_double, ctypes.c_long, dp, dp, dp,
-            ctypes.c_char_p, ci,
-        ]  # fmt: skip
-    msg = ctypes.create_string_buffer(MSG_LEN)
-    if not lib.hitl_native_check(msg, MSG_LEN):
+    dp = ctypes.POINTER(ctypes.c_double)
+    lib.hitl_native_run.restype = ctypes.c_int
+    lib.hitl_native_run.argtypes = [
+        ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_double,
+        ctypes.c_double, ctypes.c_long, dp, dp, ctypes.c_char_p, ctypes.c_int,
+    ]  # fmt: skip
+    msg = ctypes.create_string_buffer(_MSG_LEN)
+    if not lib.hitl_native_check(msg, _MSG_LEN):
         raise BuildError(
             f"native integrator: {msg.value.decode(errors='replace')} "
             "(install scikit-sundae==1.2.*, whose SUNDIALS 7.9 the vendored headers match)"
@@ -274,7 +245,7 @@ def run(
         ``lu_factorizations`` and ``pivot_failures``.
     """
     wall0 = time.perf_counter()
-    lib = load(Path(library))
+    lib = _load(Path(library))
     t_out = np.ascontiguousarray(t_out, dtype=float)
     x = np.ascontiguousarray(x0, dtype=float).ravel()
     nx, nt = x.size, len(t_out)
@@ -283,74 +254,29 @@ def run(
     )
     X = np.full((nt, nx), np.nan)
     stats = np.zeros(len(STATS))
-    msg = ctypes.create_string_buffer(MSG_LEN)
+    msg = ctypes.create_string_buffer(_MSG_LEN)
 
     def ptr(a: np.ndarray):
         return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
     filled = lib.hitl_native_run(
         nx, ptr(x), nt, ptr(t_out), len(bps), ptr(bps), float(settings.rtol),
-        float(settings.atol), int(settings.max_steps), ptr(X), ptr(stats), msg, MSG_LEN,
+        float(settings.atol), int(settings.max_steps), ptr(X), ptr(stats), msg, _MSG_LEN,
     )  # fmt: skip
-    return driver_trajectory(
-        "native", filled, t_out, X, dict(zip(STATS, stats.tolist(), strict=True)),
-        msg.value.decode(errors="replace"), wall0, progress,
-    )  # fmt: skip
-
-
-def driver_trajectory(
-    method: str,
-    filled: int,
-    t_out: np.ndarray,
-    X: np.ndarray,
-    stats: dict[str, float],
-    text: str,
-    wall0: float,
-    progress: Callable[[float], None] | None = None,
-    **extra_stats: float,
-) -> Trajectory:
-    """A :class:`Trajectory` from what a C driver returned (native and cascade).
-
-    Parameters
-    ----------
-    method : str
-        ``"native"`` or ``"cascade"``.
-    filled : int
-        Rows of ``X`` the driver filled (< 1: it could not start).
-    t_out, X : ndarray
-        Output times and the driver's output rows.
-    stats : dict
-        The driver's stats by name (:data:`STATS` and any extras).
-    text : str
-        The driver's message (``"FLAG_NAME: SUNDIALS message"`` on a failure).
-    wall0 : float
-        ``time.perf_counter()`` when the run began.
-    progress : callable, optional
-        Called once with the time reached.
-    **extra_stats : float
-        More entries for ``Trajectory.stats``.
-
-    Raises
-    ------
-    IntegrationError
-        If the driver could not start.
-    """
-    text = text.strip()
-    nt = len(t_out)
+    text = msg.value.decode(errors="replace").strip()
     if filled < 1:
-        raise IntegrationError(f"{method} integrator could not start: {text or 'unknown error'}")
-    st = dict(stats)
+        raise IntegrationError(f"native integrator could not start: {text or 'unknown error'}")
+    st = dict(zip(STATS, stats.tolist(), strict=True))
     flag = int(st.pop("flag"))
     t_reached = float(t_out[filled - 1])
     st.pop("t_reached")
     out = {k: (v if k == "last_step" else int(v)) for k, v in st.items()}
-    out.update(extra_stats)
     out.update(integrator_calls=1, jtimes_evals=0, wall_seconds=time.perf_counter() - wall0)
     message = ""
     if filled < nt:
         name, _, detail = text.partition(":")
         message = (
-            f"{method} failed after t = {t_reached:.6g} s (working towards t = "
+            f"native failed after t = {t_reached:.6g} s (working towards t = "
             f"{float(t_out[filled]):.6g} s): {flag_reason(name.strip() or str(flag))}"
             + (f" ({detail.strip()})" if detail.strip() else "")
         )
@@ -360,7 +286,7 @@ def driver_trajectory(
         t=t_out[:filled].copy(),
         x=X[:filled],
         z=None,
-        method=method,
+        method="native",
         complete=filled == nt,
         t_reached=t_reached,
         message=message,
