@@ -262,6 +262,10 @@ class Built:
         ``"ode"`` or ``"dae"``.
     timings : dict
         ``symbolic_build``, ``codegen``, ``compile`` seconds.
+    dag : (Library, Cascade) or None
+        Method ``native`` above :data:`generated.native.MAX_AGENTS` followers: the
+        graph-ordered library (:mod:`generated.dag`) and the per-follower blocks it was
+        built from; None otherwise.
     """
 
     closed_loop: Any
@@ -270,6 +274,7 @@ class Built:
     outputs: ca.Function
     form: str
     timings: dict[str, float] = field(default_factory=dict)
+    dag: tuple[Library, Any] | None = None
 
 
 def build(
@@ -287,7 +292,8 @@ def build(
     gains : Gains
     method : str, optional
         ``cvodes``/``fixed`` build the ODE form, ``idas`` the DAE form, ``native`` the
-        ODE form plus the native driver's functions (default: the scenario's method).
+        ODE form plus the native driver's functions — whole-loop for N <= 20, graph-ordered
+        blocks above (:func:`native_cascade`) — (default: the scenario's method).
     settings : CodegenSettings, optional
         ``jacobian="auto"`` is resolved from ``sc.N`` (:func:`resolve_codegen`).
     closed_loop : ClosedLoop, optional
@@ -300,7 +306,38 @@ def build(
         from symbolic.closed_loop import build_closed_loop
 
         closed_loop = build_closed_loop(sc, gains)
-    return build_from_closed_loop(closed_loop, method, settings, t_symbolic_start=t0)
+    cascade = native_cascade(sc, gains) if method == "native" else None
+    return build_from_closed_loop(
+        closed_loop, method, settings, t_symbolic_start=t0, cascade=cascade
+    )
+
+
+def native_cascade(sc: Scenario, gains: Any) -> Any:
+    """The per-follower blocks the native method needs at ``sc.N`` (None at N <= 20).
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+
+    Returns
+    -------
+    Cascade or None
+        :func:`symbolic.cascade.build_cascade` above :data:`generated.native.MAX_AGENTS`
+        followers (the whole-loop build's limit), None below.
+
+    Raises
+    ------
+    ScenarioError
+        Above the limit, if the graph has a cycle or the followers differ in model.
+    """
+    from generated import native
+
+    if sc.N <= native.MAX_AGENTS:
+        return None
+    from symbolic.cascade import build_cascade
+
+    return build_cascade(sc, gains)
 
 
 def build_from_closed_loop(
@@ -309,6 +346,7 @@ def build_from_closed_loop(
     settings: CodegenSettings | None = None,
     *,
     t_symbolic_start: float | None = None,
+    cascade: Any = None,
 ) -> Built:
     """Compile an existing :class:`~symbolic.closed_loop.ClosedLoop` for ``method``.
 
@@ -324,6 +362,9 @@ def build_from_closed_loop(
     t_symbolic_start : float, optional
         ``time.perf_counter()`` when the symbolic build began, so that
         ``timings["symbolic_build"]`` includes it (default: now).
+    cascade : Cascade, optional
+        Method ``native`` above :data:`generated.native.MAX_AGENTS` followers: the
+        per-follower blocks (:func:`native_cascade`) compiled by :mod:`generated.dag`.
     """
     settings = resolve_codegen(cl.layout.N, settings)
     t0 = time.perf_counter() if t_symbolic_start is None else t_symbolic_start
@@ -332,27 +373,35 @@ def build_from_closed_loop(
     check_dyn_signature(src, f"closed loop {form}_dyn")
     dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
     outs = renamed(cl.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
-    functions, derive, toolchain = [dyn, outs], [name], None
+    functions, derive, toolchain, dag_lib = [dyn, outs], [name], None, None
     if method == "native":  # the driver's functions and SUNDIALS; CVODES' jac_ not needed
         from generated import native
 
-        if cl.layout.N > native.MAX_AGENTS:
-            raise BuildError(
-                f"integration.method 'native' is for N <= {native.MAX_AGENTS} followers "
-                f"(this closed loop has {cl.layout.N}; its flat generated code would take "
-                "gcc minutes to hours): use method 'cvodes' (matrix-free GMRES above N = 20)"
-            )
+        derive = []
+        if cl.layout.N <= native.MAX_AGENTS:  # whole loop, flat SX
+            functions += native.native_functions(dyn, cse=settings.cse)[0]  # dyn: SX already
+            toolchain = native.toolchain()
+        else:  # graph-ordered blocks: one block's code whatever N (generated/dag.py)
+            from generated import dag
 
-        functions += native.native_functions(dyn, cse=settings.cse)[0]  # dyn: SX already
-        derive, toolchain = [], native.toolchain()
+            if cascade is None:
+                raise BuildError(
+                    f"integration.method 'native' above N = {native.MAX_AGENTS} needs the "
+                    "per-follower blocks: call build(sc, gains, method='native') or pass "
+                    "cascade=native_cascade(sc, gains)"
+                )
+            dag_lib = dag.build(cascade, settings)
     t_sym = time.perf_counter() - t0
     lib = build_library(functions, settings, with_derivatives=derive, toolchain=toolchain)
     timings = {
         "symbolic_build": t_sym,
-        "codegen": lib.codegen_seconds,
-        "compile": lib.compile_seconds,
+        "codegen": lib.codegen_seconds + (dag_lib.codegen_seconds if dag_lib else 0.0),
+        "compile": lib.compile_seconds + (dag_lib.compile_seconds if dag_lib else 0.0),
     }
-    return Built(cl, lib, lib.function(name), lib.function(OUT_NAME), form, timings)
+    return Built(
+        cl, lib, lib.function(name), lib.function(OUT_NAME), form, timings,
+        dag=(dag_lib, cascade) if dag_lib else None,
+    )  # fmt: skip
 
 
 # --------------------------------------------------------------------------- simulate
@@ -455,8 +504,9 @@ def integrate_built(
 ) -> Trajectory:
     """Integrate a compiled closed loop from ``x0`` with the method of ``settings``.
 
-    The one place that sends ``native`` to :func:`generated.native.run` and the CasADi
-    methods to :func:`generated.integrate.integrate`.
+    The one place that sends ``native`` to :func:`generated.native.run` (whole loop) or
+    :func:`generated.dag.run` (graph-ordered blocks) and the CasADi methods to
+    :func:`generated.integrate.integrate`.
 
     Parameters
     ----------
@@ -483,6 +533,11 @@ def integrate_built(
             f"method {s.method!r} needs the {'DAE' if s.method == 'idas' else 'ODE'} build "
             f"(this one is {built.form}): call build(..., method={s.method!r})"
         )
+    if s.method == "native" and built.dag is not None:
+        from generated import dag
+
+        lib, cascade = built.dag
+        return dag.run(lib.path, cascade, x0, t_out, s, breakpoints=bps, progress=progress)
     if s.method == "native":
         from generated import native
 

@@ -20,8 +20,11 @@ the variable-step methods, the same output grid):
     The symbolic closed loop (``ClosedLoop.ode_dyn``) evaluated by CasADi's virtual
     machine, no code generation, CVODES with CasADi's own Jacobian.
 ``c-cvode-native``
-    Our generated C (right-hand side, Jacobian, sparse LU) + SUNDIALS CVODE driven
-    from C (:mod:`generated.native`, method ``native``): one call from Python per run.
+    Our generated C + SUNDIALS CVODE driven from C, one call from Python per run
+    (method ``native``): up to N = 20 the whole loop's right-hand side, Jacobian and
+    sparse LU (:mod:`generated.native`); above, one follower's block evaluated along
+    the acyclic graph, Newton systems solved by block forward substitution
+    (:mod:`generated.dag`).
 ``c-cvodes-direct``, ``c-cvodes-gmres``
     Our generated C + CVODES through CasADi's interface with the two plans of
     :mod:`generated.largescale` (``jacobian="sparse"``: sparse direct Jacobian /
@@ -30,8 +33,7 @@ the variable-step methods, the same output grid):
 All of ours are built and integrated by the functions of ``make sim``
 (:func:`generated.api.build_from_closed_loop`, :func:`generated.api.integrator_settings`,
 :func:`generated.api.simulate`). "Ours" — the denominator of the ratio column — is
-:func:`ours_method`: ``c-cvode-native`` where :func:`generated.largescale.choose_plan`
-picks the direct plan (N ≤ 20; the shipped scenarios' method), else ``c-cvodes-gmres``.
+:func:`ours_method`: ``c-cvode-native`` at every N (the shipped scenarios' method).
 ``c-idas``
     Our generated C (DAE form) + IDAS, same plan as ours, same functions.
 ``fixed``
@@ -87,9 +89,16 @@ PAPER = Path(__file__).resolve().parent.parent / "scenarios" / "paper.toml"
 OUTPUT_STEP = 0.1  # output grid of every method (states stored there)
 #: methods whose build is cheap at any N: after they hit the time limit, larger N still
 #: get a build-only cell (build times, C size, RHS time) instead of nothing
-CHEAP_BUILDS = ("scipy-bdf", "scipy-rk45", "casadi-vm", "c-cvodes-gmres", "c-idas")
+CHEAP_BUILDS = (
+    "scipy-bdf",
+    "scipy-rk45",
+    "casadi-vm",
+    "c-cvode-native",
+    "c-cvodes-gmres",
+    "c-idas",
+)
 #: ``CodegenSettings.jacobian`` of the CasADi methods (``auto``: the plan of ``make sim``)
-JACOBIAN_OF = {"casadi-vm": "sparse", "c-cvode-native": "sparse", "c-cvodes-direct": "sparse",
+JACOBIAN_OF = {"casadi-vm": "sparse", "c-cvode-native": "auto", "c-cvodes-direct": "sparse",
                "c-cvodes-gmres": "jvp", "c-idas": "auto"}  # fmt: skip
 #: ``integration.method`` of our methods (the rest of JACOBIAN_OF: ``cvodes``)
 INTEGRATION_METHOD_OF = {"c-cvode-native": "native", "c-idas": "idas"}
@@ -109,18 +118,18 @@ def integration_method(method: str) -> str:
 def ours_method(N: int) -> str:
     """The benchmark method that is ours at N: what ``make sim`` runs for N followers.
 
-    ``c-cvode-native`` (method ``native``) where :func:`generated.largescale.choose_plan`
-    picks the direct plan, else ``c-cvodes-gmres`` (the native build is flat SX code:
-    at N = 50 it is 13 MB of C, see docs/performance.md).
+    ``c-cvode-native`` (method ``native``) at every N: the whole-loop build up to
+    N = 20, the graph-ordered blocks above (:mod:`generated.dag`; the benchmark's graphs
+    are acyclic and its followers share one model).
 
     Parameters
     ----------
     N : int
         Number of followers.
     """
-    from generated.largescale import choose_plan
-
-    return "c-cvode-native" if choose_plan(N).strategy == "direct" else "c-cvodes-gmres"
+    if int(N) < 1:
+        raise BenchError(f"N: {N} must be >= 1")
+    return "c-cvode-native"
 
 
 class BenchError(ToolkitError):
@@ -178,8 +187,7 @@ def bench_scenario(N: int, seed: int = BENCH_SEED, horizon: float | None = None)
     Returns
     -------
     Scenario
-        With ``integration.method`` that of :func:`ours_method` (``native`` for the
-        direct plan, ``cvodes`` above).
+        With ``integration.method`` that of :func:`ours_method` (``native``).
     """
     from symbolic.scenario import Graph, load_scenario
 
@@ -227,7 +235,7 @@ def bench_scenario(N: int, seed: int = BENCH_SEED, horizon: float | None = None)
                 ghat=rep(ini.ghat),
             ),  # fmt: skip
         )
-    # the method make sim would use at this N (the native build is for the direct plan)
+    # the method make sim would use at this N
     ig = dataclasses.replace(sc.integration, method=integration_method(ours_method(N)))
     if horizon is not None:
         ig = dataclasses.replace(ig, horizon=float(horizon))
@@ -467,17 +475,23 @@ def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, ou
         cg = CodegenSettings(jacobian=JACOBIAN_OF[method])
         plan = choose_plan(N, cg.jacobian)
         s = integrator_settings(sc, meth, cg)
-        label = (
-            "native CVODE: generated J (reused by CVODE) and sparse LU without pivoting"
-            if meth == "native"
-            else f"{plan.jacobian}: {plan.strategy} Newton ({plan.reason})"
-        )
+        from generated import native
+
+        if meth != "native":
+            label = f"{plan.jacobian}: {plan.strategy} Newton ({plan.reason})"
+        elif N <= native.MAX_AGENTS:
+            label = "native CVODE: generated J (reused by CVODE) and sparse LU without pivoting"
+        else:
+            label = "native CVODE, graph-ordered blocks: block forward substitution"
         if method == "casadi-vm":
             dyn = cl.ode_dyn
             rec.update(codegen_s=0.0, compile_s=0.0, c_bytes=0,
                        plan=f"CasADi VM, CasADi AD Jacobian, {label}")  # fmt: skip
         else:
-            built = build_from_closed_loop(cl, meth, cg)
+            from generated.api import native_cascade
+
+            cascade = native_cascade(sc, gains) if meth == "native" else None
+            built = build_from_closed_loop(cl, meth, cg, cascade=cascade)
             dyn = built.dyn
             rec.update(codegen_s=built.timings["codegen"], compile_s=built.timings["compile"],
                        c_bytes=built.library.source_bytes, cache_hit=built.library.cache_hit,

@@ -45,6 +45,7 @@ from symbolic.errors import BuildError, IntegrationError
 
 NATIVE_DIR = Path(__file__).resolve().parent / "native"
 INCLUDE_DIR = NATIVE_DIR / "include"
+COMMON = NATIVE_DIR / "common.c"
 DRIVER = NATIVE_DIR / "driver.c"
 #: the SUNDIALS libraries the driver links, from the scikit-sundae wheel
 SUNDIALS_LIBRARIES = (
@@ -74,16 +75,22 @@ STATS = (
     "flag",
     "t_reached",
 )
-_MSG_LEN = 1024
+MSG_LEN = 1024
 
 
 def _sha256_file(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-@functools.lru_cache(maxsize=1)
-def toolchain() -> Toolchain:
+@functools.lru_cache(maxsize=2)
+def toolchain(driver: Path = DRIVER) -> Toolchain:
     """The driver source, the vendored headers and scikit-sundae's SUNDIALS libraries.
+
+    Parameters
+    ----------
+    driver : Path
+        The driver appended after ``common.c`` (the shared linear solver and checks):
+        ``driver.c`` (method ``native``) or ``dag.c`` (method ``native`` above the flat build's size, :mod:`generated.dag`).
 
     Returns
     -------
@@ -118,7 +125,8 @@ def toolchain() -> Toolchain:
         "headers": {str(p.relative_to(INCLUDE_DIR)): _sha256_file(p) for p in headers},
         "libraries": {p.name: _sha256_file(p) for p in libs},
     }
-    return Toolchain(DRIVER.read_text(), (INCLUDE_DIR,), tuple(libs), key)
+    source = COMMON.read_text() + "\n" + Path(driver).read_text()
+    return Toolchain(source, (INCLUDE_DIR,), tuple(libs), key)
 
 
 def native_functions(
@@ -190,20 +198,45 @@ def build(ode_dyn: ca.Function, settings: CodegenSettings | None = None) -> Libr
 
 
 @functools.lru_cache(maxsize=16)
-def _load(path: Path) -> ctypes.CDLL:
-    """Load a native library once per process and check its SUNDIALS (the path names
-    a content-hashed cache entry, so what is loaded there never changes)."""
+def load(path: Path) -> ctypes.CDLL:
+    """Load a native (whole-loop or graph-ordered) library once per process and check its SUNDIALS.
+
+    The path names a content-hashed cache entry, so what is loaded there never changes.
+
+    Parameters
+    ----------
+    path : Path
+        ``Library.path`` of a library built with :func:`toolchain`.
+
+    Raises
+    ------
+    BuildError
+        If the SUNDIALS it runs against differs from the vendored headers.
+    """
     lib = ctypes.CDLL(str(path))
     lib.hitl_native_check.restype = ctypes.c_int
     lib.hitl_native_check.argtypes = [ctypes.c_char_p, ctypes.c_int]
-    dp = ctypes.POINTER(ctypes.c_double)
-    lib.hitl_native_run.restype = ctypes.c_int
-    lib.hitl_native_run.argtypes = [
-        ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_double,
-        ctypes.c_double, ctypes.c_long, dp, dp, ctypes.c_char_p, ctypes.c_int,
-    ]  # fmt: skip
-    msg = ctypes.create_string_buffer(_MSG_LEN)
-    if not lib.hitl_native_check(msg, _MSG_LEN):
+    dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+    if hasattr(lib, "hitl_native_run"):
+        lib.hitl_native_run.restype = ctypes.c_int
+        lib.hitl_native_run.argtypes = [
+            ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_double,
+            ctypes.c_double, ctypes.c_long, dp, dp, ctypes.c_char_p, ctypes.c_int,
+        ]  # fmt: skip
+    if hasattr(lib, "hitl_dag_run"):
+        ci = ctypes.c_int
+        lib.hitl_dag_run.restype = ci
+        lib.hitl_dag_run.argtypes = [
+            ci, ci, ci, ci, ip, ip, ip, dp, dp, ci, dp, ip, dp, ci, dp, ci, dp,
+            ctypes.c_double, ctypes.c_double, ctypes.c_long, dp, dp, ctypes.c_char_p, ci,
+        ]  # fmt: skip
+        lib.hitl_dag_probe.restype = ci
+        lib.hitl_dag_probe.argtypes = [
+            ci, ci, ci, ci, ip, ip, ip, dp, dp, ci, dp, ip, ctypes.c_double, dp,
+            ctypes.c_double, dp, dp, dp, ctypes.c_char_p, ci,
+        ]  # fmt: skip
+    msg = ctypes.create_string_buffer(MSG_LEN)
+    if not lib.hitl_native_check(msg, MSG_LEN):
         raise BuildError(
             f"native integrator: {msg.value.decode(errors='replace')} "
             "(install scikit-sundae==1.2.*, whose SUNDIALS 7.9 the vendored headers match)"
@@ -245,7 +278,7 @@ def run(
         ``lu_factorizations`` and ``pivot_failures``.
     """
     wall0 = time.perf_counter()
-    lib = _load(Path(library))
+    lib = load(Path(library))
     t_out = np.ascontiguousarray(t_out, dtype=float)
     x = np.ascontiguousarray(x0, dtype=float).ravel()
     nx, nt = x.size, len(t_out)
@@ -254,29 +287,74 @@ def run(
     )
     X = np.full((nt, nx), np.nan)
     stats = np.zeros(len(STATS))
-    msg = ctypes.create_string_buffer(_MSG_LEN)
+    msg = ctypes.create_string_buffer(MSG_LEN)
 
     def ptr(a: np.ndarray):
         return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
     filled = lib.hitl_native_run(
         nx, ptr(x), nt, ptr(t_out), len(bps), ptr(bps), float(settings.rtol),
-        float(settings.atol), int(settings.max_steps), ptr(X), ptr(stats), msg, _MSG_LEN,
+        float(settings.atol), int(settings.max_steps), ptr(X), ptr(stats), msg, MSG_LEN,
     )  # fmt: skip
-    text = msg.value.decode(errors="replace").strip()
+    return driver_trajectory(
+        "native", filled, t_out, X, dict(zip(STATS, stats.tolist(), strict=True)),
+        msg.value.decode(errors="replace"), wall0, progress,
+    )  # fmt: skip
+
+
+def driver_trajectory(
+    method: str,
+    filled: int,
+    t_out: np.ndarray,
+    X: np.ndarray,
+    stats: dict[str, float],
+    text: str,
+    wall0: float,
+    progress: Callable[[float], None] | None = None,
+    **extra_stats: float,
+) -> Trajectory:
+    """A :class:`Trajectory` from what a C driver returned (the native drivers).
+
+    Parameters
+    ----------
+    method : str
+        ``"native"``.
+    filled : int
+        Rows of ``X`` the driver filled (< 1: it could not start).
+    t_out, X : ndarray
+        Output times and the driver's output rows.
+    stats : dict
+        The driver's stats by name (:data:`STATS` and any extras).
+    text : str
+        The driver's message (``"FLAG_NAME: SUNDIALS message"`` on a failure).
+    wall0 : float
+        ``time.perf_counter()`` when the run began.
+    progress : callable, optional
+        Called once with the time reached.
+    **extra_stats : float
+        More entries for ``Trajectory.stats``.
+
+    Raises
+    ------
+    IntegrationError
+        If the driver could not start.
+    """
+    text = text.strip()
+    nt = len(t_out)
     if filled < 1:
-        raise IntegrationError(f"native integrator could not start: {text or 'unknown error'}")
-    st = dict(zip(STATS, stats.tolist(), strict=True))
+        raise IntegrationError(f"{method} integrator could not start: {text or 'unknown error'}")
+    st = dict(stats)
     flag = int(st.pop("flag"))
     t_reached = float(t_out[filled - 1])
     st.pop("t_reached")
     out = {k: (v if k == "last_step" else int(v)) for k, v in st.items()}
+    out.update(extra_stats)
     out.update(integrator_calls=1, jtimes_evals=0, wall_seconds=time.perf_counter() - wall0)
     message = ""
     if filled < nt:
         name, _, detail = text.partition(":")
         message = (
-            f"native failed after t = {t_reached:.6g} s (working towards t = "
+            f"{method} failed after t = {t_reached:.6g} s (working towards t = "
             f"{float(t_out[filled]):.6g} s): {flag_reason(name.strip() or str(flag))}"
             + (f" ({detail.strip()})" if detail.strip() else "")
         )
@@ -286,7 +364,7 @@ def run(
         t=t_out[:filled].copy(),
         x=X[:filled],
         z=None,
-        method="native",
+        method=method,
         complete=filled == nt,
         t_reached=t_reached,
         message=message,

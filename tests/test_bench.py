@@ -16,7 +16,7 @@ from generated.bench import BenchError, bench_scenario, main, random_graph
 from generated.codegen import CodegenSettings, build_library
 from generated.integrate import IntegratorSettings, integrate
 from generated.largescale import choose_plan
-from symbolic.errors import BuildError, ToolkitError
+from symbolic.errors import ToolkitError
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -199,17 +199,17 @@ def test_finish_ratios_and_table_from_synthetic_records() -> None:
 
 
 def test_ours_is_what_make_sim_runs() -> None:
-    """Native CVODE for the direct plan (N <= 20, the shipped scenarios), GMRES above."""
+    """Native CVODE at every N: the whole loop up to N = 20, graph-ordered blocks above."""
     from generated.bench import ours_method
     from generated.largescale import DIRECT_MAX_AGENTS
 
     assert ours_method(5) == ours_method(DIRECT_MAX_AGENTS) == "c-cvode-native"
-    assert ours_method(DIRECT_MAX_AGENTS + 1) == ours_method(2000) == "c-cvodes-gmres"
+    assert ours_method(DIRECT_MAX_AGENTS + 1) == ours_method(2000) == "c-cvode-native"
     from generated import api
 
     assert api.load(ROOT / "scenarios" / "paper.toml").integration.method == "native"
     assert bench_scenario(5).integration.method == "native"
-    assert bench_scenario(DIRECT_MAX_AGENTS + 1).integration.method == "cvodes"
+    assert bench_scenario(DIRECT_MAX_AGENTS + 1).integration.method == "native"
 
 
 def test_gmres_build_carries_the_jacobian_sparsity(tmp_path: Path) -> None:
@@ -278,12 +278,15 @@ def test_api_auto_picks_the_large_n_plan_and_agrees_with_direct(tmp_path: Path) 
     np.testing.assert_array_equal(traj.t, ref.t)
     rel = np.abs(traj.x - ref.x) / np.maximum(1.0, np.abs(ref.x))
     assert rel.max() < 1e-3
-    # the native build is refused above its N (flat code), before any code is generated
-    with pytest.raises(BuildError, match="method 'cvodes'") as ei:
-        api.build(
-            sc, gains, "native", CodegenSettings(build_root=str(tmp_path / "n")), closed_loop=cl
-        )
-    assert "\n" not in str(ei.value) and not (tmp_path / "n").exists()
+    # method native above N = 20: the graph-ordered blocks (generated/dag.py), no flat code
+    cgn = CodegenSettings(optimization="-O0", build_root=str(tmp_path / "n"))
+    built_n = api.build(sc, gains, "native", cgn, closed_loop=cl)
+    assert built_n.dag is not None and "nat_rhs" not in built_n.library.names
+    traj_n = api.simulate(built_n, sc, api.integrator_settings(sc, "native", cgn))
+    assert traj_n.complete and traj_n.method == "native", traj_n.message
+    np.testing.assert_array_equal(traj_n.t, ref.t)
+    rel_n = np.abs(traj_n.x - ref.x) / np.maximum(1.0, np.abs(ref.x))
+    assert rel_n.max() < 1e-3
 
 
 def synthesize_gains(sc):

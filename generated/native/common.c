@@ -1,0 +1,239 @@
+/*
+ * Shared part of the hitl-formation CVODE drivers (generated/native.py): SUNDIALS
+ * includes, the context shared by the drivers, the custom direct SUNLinearSolver that
+ * factorises M = I - gamma J with the generated nat_lu_factor / nat_lu_solve (sparse
+ * LU without pivoting, generated/sparse_lu.py), CVODE's counters and the SUNDIALS
+ * version/index check. Prepended to driver.c (whole closed loop, method 'native') or
+ * cascade.c (follower by follower, method 'cascade'); the generated C comes first.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <cvodes/cvodes.h>
+#include <nvector/nvector_serial.h>
+#include <sundials/sundials_linearsolver.h>
+#include <sundials/sundials_version.h>
+#include <sunmatrix/sunmatrix_sparse.h>
+
+/* stats[] layout, read by generated/native.py (STATS) */
+enum {
+  HITL_STEPS, HITL_RHS_EVALS, HITL_JAC_EVALS, HITL_LIN_SETUPS, HITL_ERR_TEST_FAILS,
+  HITL_NEWTON_ITERS, HITL_NEWTON_FAILS, HITL_LAST_STEP, HITL_LU_FACTOR, HITL_PIVOT_FAILS,
+  HITL_RESTARTS, HITL_FLAG, HITL_T_REACHED, HITL_NSTATS
+};
+
+/* a pivot below this (or not finite) makes the setup fail recoverably */
+#define HITL_PIVOT_MIN 1e-13
+
+typedef struct {
+  const casadi_real **arg;
+  casadi_real **res;
+  casadi_int *iw;
+  casadi_real *w;
+  casadi_real *lu, *piv;
+  casadi_int *jcol, *jrow; /* CCS of nat_jac's output: colind[nx+1], row[nnz] */
+  casadi_int jnnz;
+  int nx;
+  long n_rhs, n_jac, n_fac, n_piv_fail;
+  char *msg;
+  int msglen;
+} hitl_ctx;
+
+static void hitl_msg(hitl_ctx *c, const char *text) {
+  if (c->msg && c->msglen > 0) {
+    strncpy(c->msg, text, (size_t)c->msglen - 1);
+    c->msg[c->msglen - 1] = '\0';
+  }
+}
+
+static void hitl_err_handler(int line, const char *func, const char *file, const char *msg,
+                             SUNErrCode code, void *data, SUNContext ctx) {
+  /* keep SUNDIALS' last message instead of printing it */
+  hitl_msg((hitl_ctx *)data, msg ? msg : "SUNDIALS error");
+  (void)line; (void)func; (void)file; (void)code; (void)ctx;
+}
+
+static void hitl_work_size(int (*work)(casadi_int *, casadi_int *, casadi_int *, casadi_int *),
+                           casadi_int *sz) {
+  casadi_int a, r, i, w;
+  work(&a, &r, &i, &w);
+  if (a > sz[0]) sz[0] = a;
+  if (r > sz[1]) sz[1] = r;
+  if (i > sz[2]) sz[2] = i;
+  if (w > sz[3]) sz[3] = w;
+}
+
+/* CVODE's counters since the last (re)initialisation, added to acc[0..6]: steps, RHS,
+   Jacobians, linear-solver set-ups, error-test failures, Newton iterations, Newton
+   convergence failures */
+static void hitl_add_counters(void *mem, long *acc) {
+  long v;
+  CVodeGetNumSteps(mem, &v), acc[0] += v;
+  CVodeGetNumRhsEvals(mem, &v), acc[1] += v;
+  CVodeGetNumJacEvals(mem, &v), acc[2] += v;
+  CVodeGetNumLinSolvSetups(mem, &v), acc[3] += v;
+  CVodeGetNumErrTestFails(mem, &v), acc[4] += v;
+  CVodeGetNumNonlinSolvIters(mem, &v), acc[5] += v;
+  CVodeGetNumNonlinSolvConvFails(mem, &v), acc[6] += v;
+}
+
+/* CVODE with everything it needs: one per run, re-initialised at breakpoints (and, in
+   the cascade, for every follower) */
+typedef struct {
+  SUNContext ctx;
+  N_Vector y;
+  SUNMatrix A;
+  SUNLinearSolver LS;
+  void *mem;
+} hitl_cvode;
+
+/* Allocate the context's work arrays for the generated functions (sz: the largest of
+   their work sizes). Returns 0, or -1 with c->msg set. */
+static int hitl_ctx_alloc(hitl_ctx *c, int nx, const casadi_int *sz) {
+  c->nx = nx;
+  c->arg = (const casadi_real **)calloc((size_t)sz[0] + 1, sizeof(casadi_real *));
+  c->res = (casadi_real **)calloc((size_t)sz[1] + 1, sizeof(casadi_real *));
+  c->iw = (casadi_int *)calloc((size_t)sz[2] + 1, sizeof(casadi_int));
+  c->w = (casadi_real *)calloc((size_t)sz[3] + 1, sizeof(casadi_real));
+  if (!c->arg || !c->res || !c->iw || !c->w) {
+    hitl_msg(c, "out of memory");
+    return -1;
+  }
+  return 0;
+}
+
+/* The SUNDIALS context (errors go to c->msg), the state vector, an empty linear solver
+   (the driver sets its content and operations) and CVODE (BDF) for nx states. The
+   driver creates the matrix s->A. Returns 0, or -1 with c->msg set. */
+static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx) {
+  if (SUNContext_Create(SUN_COMM_NULL, &s->ctx) != SUN_SUCCESS) {
+    s->ctx = NULL;
+    hitl_msg(c, "SUNContext_Create failed");
+    return -1;
+  }
+  SUNContext_ClearErrHandlers(s->ctx);
+  SUNContext_PushErrHandler(s->ctx, hitl_err_handler, c);
+  s->y = N_VNew_Serial(nx, s->ctx);
+  s->LS = SUNLinSolNewEmpty(s->ctx);
+  s->mem = CVodeCreate(CV_BDF, s->ctx);
+  if (!s->y || !s->LS || !s->mem) {
+    hitl_msg(c, "CVODE could not allocate its memory");
+    return -1;
+  }
+  return 0;
+}
+
+/* From CVodeInit's state at t_out[0], integrate to every t_out[k] and store the state
+   there (row-major x_out[k * nx + i]; CVODE's interpolant between its steps). CVODE
+   restarts (CVodeReInit) at every breakpoint strictly inside (t_out[0], t_out[nt-1]];
+   it stops exactly there and at the horizon (CVodeSetStopTime), never stepping beyond.
+   Returns the rows filled (>= 1); *flag is CVODE's last flag (< 0 on a failure). */
+static int hitl_cvode_outputs(hitl_cvode *s, int nx, int nt, const double *t_out, int nb,
+                              const double *breaks, double *x_out, long *acc, double *stats,
+                              int *flag) {
+  int filled = 1, ib = 0;
+  double t = t_out[0], tstop_set = NAN;
+  *flag = 0;
+  while (ib < nb && breaks[ib] <= t) ib++;
+  for (int k = 1; k < nt; ++k) {
+    double tout = t_out[k];
+    for (;;) {
+      /* CVODE may step past output times (it interpolates there) but never past the
+         next breakpoint or the horizon: the stop time */
+      double stop = ib < nb ? breaks[ib] : t_out[nt - 1];
+      if (stop != tstop_set) {
+        CVodeSetStopTime(s->mem, stop);
+        tstop_set = stop;
+      }
+      *flag = CVode(s->mem, tout < stop ? tout : stop, s->y, &t, CV_NORMAL);
+      if (*flag < 0) return filled;
+      if (t >= stop) {
+        tstop_set = NAN; /* CVODE forgets a stop time once reached */
+        if (ib < nb) {   /* a breakpoint: restart from the state reached */
+          hitl_add_counters(s->mem, acc);
+          *flag = CVodeReInit(s->mem, t, s->y);
+          if (*flag < 0) return filled;
+          stats[HITL_RESTARTS] += 1;
+          ib++;
+        }
+      }
+      if (t >= tout) break;
+    }
+    memcpy(x_out + (size_t)k * nx, N_VGetArrayPointer(s->y), (size_t)nx * sizeof(double));
+    filled = k + 1;
+  }
+  return filled;
+}
+
+/* CVODE's options after CVodeInit: user data, tolerances, linear solver, Jacobian */
+static int hitl_cvode_options(hitl_cvode *s, void *data, double rtol, double atol,
+                              CVLsJacFn jac) {
+  return CVodeSetUserData(s->mem, data) || CVodeSStolerances(s->mem, rtol, atol) ||
+         CVodeSetLinearSolver(s->mem, s->LS, s->A) || CVodeSetJacFn(s->mem, jac);
+}
+
+/* The counters (acc: hitl_add_counters' layout) and the last flag into stats[] */
+static void hitl_stats(const hitl_ctx *c, const long *acc, double last_step, int flag,
+                       double *stats) {
+  stats[HITL_STEPS] = (double)acc[0];
+  stats[HITL_RHS_EVALS] = (double)acc[1];
+  stats[HITL_JAC_EVALS] = (double)acc[2];
+  stats[HITL_LIN_SETUPS] = (double)acc[3];
+  stats[HITL_ERR_TEST_FAILS] = (double)acc[4];
+  stats[HITL_NEWTON_ITERS] = (double)acc[5];
+  stats[HITL_NEWTON_FAILS] = (double)acc[6];
+  stats[HITL_LAST_STEP] = last_step;
+  stats[HITL_LU_FACTOR] = (double)c->n_fac;
+  stats[HITL_PIVOT_FAILS] = (double)c->n_piv_fail;
+  stats[HITL_FLAG] = flag;
+}
+
+/* CVODE's flag name and the last SUNDIALS message, as "NAME: message", into c->msg */
+static void hitl_flag_message(hitl_ctx *c, int flag) {
+  char *name = CVodeGetReturnFlagName(flag);
+  char text[640];
+  snprintf(text, sizeof text, "%s: %s", name ? name : "CV_UNKNOWN", c->msg ? c->msg : "");
+  hitl_msg(c, text);
+  free(name);
+}
+
+static void hitl_cvode_free(hitl_ctx *c, hitl_cvode *s) {
+  if (s->mem) CVodeFree(&s->mem);
+  if (s->LS) SUNLinSolFree(s->LS);
+  if (s->A) SUNMatDestroy(s->A);
+  if (s->y) N_VDestroy(s->y);
+  if (s->ctx) SUNContext_Free(&s->ctx);
+  free(c->arg), free(c->res), free(c->iw), free(c->w), free(c->lu), free(c->piv);
+  free(c->jcol), free(c->jrow);
+}
+
+/* Does the SUNDIALS we run against match the headers we were compiled with? */
+CASADI_SYMBOL_EXPORT int hitl_native_check(char *msg, int msglen) {
+  char version[64] = "";
+  SUNContext ctx = NULL;
+  int ok = 1;
+  if (SUNDIALSGetVersion(version, (int)sizeof version) != SUN_SUCCESS ||
+      strcmp(version, SUNDIALS_VERSION) != 0) {
+    snprintf(msg, (size_t)msglen, "SUNDIALS library is %s, headers are %s", version,
+             SUNDIALS_VERSION);
+    return 0;
+  }
+  if (SUNContext_Create(SUN_COMM_NULL, &ctx) != SUN_SUCCESS) {
+    snprintf(msg, (size_t)msglen, "SUNContext_Create failed");
+    return 0;
+  }
+  /* the index type: a 3x5 matrix with 7 nonzeros must read back as such */
+  SUNMatrix A = SUNSparseMatrix(3, 5, 7, CSC_MAT, ctx);
+  if (!A || SM_ROWS_S(A) != 3 || SM_COLUMNS_S(A) != 5 || SM_NNZ_S(A) != 7) {
+    snprintf(msg, (size_t)msglen,
+             "SUNDIALS index type differs from the headers' (sizeof(sunindextype) = %d)",
+             (int)sizeof(sunindextype));
+    ok = 0;
+  }
+  if (A) SUNMatDestroy(A);
+  SUNContext_Free(&ctx);
+  return ok;
+}
+

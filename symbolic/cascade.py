@@ -1,0 +1,261 @@
+"""The closed loop follower by follower: one block per follower, in graph order.
+
+On an acyclic graph (every graph the paper and the benchmark use) follower i hears only
+followers that come before it in a topological order, so the closed loop is a cascade of
+per-follower blocks. The block of follower i is
+
+    x_b = (η0, s_i)         the leader's state (evaluated in every block) and the agent
+                            block s_i of :class:`symbolic.closed_loop.StateLayout`
+    ẋ_b = (η̇0, ṡ_i)         eq. (3) and the agent's own equations, exactly as in the
+                            whole closed loop (:func:`symbolic.closed_loop.agent_function`)
+
+with the neighbourhood output of eq. (6) split into the follower's own term, the
+leader's and the neighbours':
+
+    ψ_i = l̄_ii C0 η_i − a_i0 h_i y0 + Σ_{j≠i} (L+B)_ij C0 η_j.
+
+The last sum and, for the oracle derivatives (gap 9.9), its first two time derivatives
+are the block's input ``nb`` (3n numbers); the block outputs the jets
+``(C0 η_i, C0 η̇_i, C0 η̈_i, C0 η⃛_i)`` its listeners sum into their ``nb``. Evaluated in
+the order, the blocks give the whole closed loop's right-hand side exactly
+(tests/test_dag.py), and its Jacobian is block lower triangular: what the native
+integrator above N = 20 uses (:mod:`generated.dag`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from symbolic.closed_loop import (
+    StateLayout,
+    _fault_function,
+    _groups,
+    _observer_gains,
+    _param_layout,
+    _param_matrix,
+    agent_function,
+    make_layout,
+)
+from symbolic.derivatives import flow_jets
+from symbolic.errors import ScenarioError
+from symbolic.leader import leader_function
+from symbolic.network import graph_matrices
+from symbolic.observer import observer_function
+from symbolic.scenario import Scenario
+
+
+@dataclass(frozen=True)
+class Cascade:
+    """The closed loop as a cascade of per-follower blocks.
+
+    Attributes
+    ----------
+    block : casadi.Function
+        ``(t, xb, nb, cpl, prm, gf) -> (xbdot, jets)``: ``xb`` = (η0, s_i), ``nb`` the
+        neighbours' sum Σ_{j≠i} (L+B)_ij C0 η_j and its two time derivatives (3n),
+        ``cpl`` = (l̄_ii, a_i0 h_i), ``prm`` the agent's numbers (a column of
+        ``params``), ``gf`` = (g_i(t), f_i(t)); ``jets`` = (C0 η_i, C0 η̇_i, C0 η̈_i,
+        C0 η⃛_i) (4n).
+    faults : casadi.Function
+        ``t -> values``: every distinct fault expression once.
+    fault_index : ndarray
+        N × (1+n) int: ``gf`` of agent i is ``values[fault_index[i]]``.
+    params : ndarray
+        npar × N, the agents' numbers.
+    coupling : ndarray
+        N × 2: (l̄_ii, a_i0 h_i).
+    order : ndarray
+        A topological order of the followers (each after every follower it hears).
+    upstream_ptr, upstream_idx : ndarray
+        CSR lists: follower i hears ``upstream_idx[upstream_ptr[i]:upstream_ptr[i+1]]``.
+    upstream_weight : ndarray
+        The weights (L+B)_ij of those lists.
+    layout : StateLayout
+        The whole closed loop's layout (where each block's states go).
+    n : int
+        Outputs per follower (C0 has n rows).
+    depth : ndarray
+        N: the length of the longest chain of followers ending at i (0: hears only the
+        leader).
+    """
+
+    block: ca.Function
+    faults: ca.Function
+    fault_index: np.ndarray
+    params: np.ndarray
+    coupling: np.ndarray
+    order: np.ndarray
+    upstream_ptr: np.ndarray
+    upstream_idx: np.ndarray
+    upstream_weight: np.ndarray
+    layout: StateLayout
+    n: int
+    depth: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+
+    @property
+    def block_size(self) -> int:
+        """States of one block: m + the agent block."""
+        return self.layout.m + self.layout.agent_size
+
+
+def topological_order(
+    adjacency: np.ndarray, where: str = "scenario"
+) -> tuple[np.ndarray, np.ndarray]:
+    """A topological order of the followers and each one's depth (Kahn's algorithm).
+
+    Parameters
+    ----------
+    adjacency : ndarray
+        N×N, ``adjacency[i, j] != 0`` when follower i hears follower j.
+    where : str
+        The scenario file, for the error message.
+
+    Returns
+    -------
+    (order, depth) : (ndarray, ndarray)
+        Followers in an order where each comes after every follower it hears (ties by
+        index), and the longest chain of followers ending at each.
+
+    Raises
+    ------
+    ScenarioError
+        If the followers' graph has a cycle (the cascade needs an acyclic graph).
+    """
+    A = np.asarray(adjacency) != 0
+    N = A.shape[0]
+    np.fill_diagonal(A, False)
+    indeg = A.sum(axis=1)
+    depth = np.zeros(N, dtype=int)
+    ready = sorted(int(i) for i in np.flatnonzero(indeg == 0))
+    order: list[int] = []
+    while ready:
+        j = ready.pop(0)
+        order.append(j)
+        for i in np.flatnonzero(A[:, j]):
+            depth[i] = max(depth[i], depth[j] + 1)
+            indeg[i] -= 1
+            if indeg[i] == 0:
+                ready.append(int(i))
+        ready.sort()
+    if len(order) < N:
+        cyc = sorted(set(range(N)) - set(order))
+        raise ScenarioError(
+            where,
+            "graph.adjacency",
+            f"followers {', '.join(str(i + 1) for i in cyc[:6])} are on a cycle",
+            "an acyclic graph for method 'native' above N = 20 (or method 'cvodes')",
+        )
+    return np.asarray(order, dtype=np.int32), depth
+
+
+def build_cascade(scenario: Scenario, gains: Any) -> Cascade:
+    """The per-follower block of ``scenario``'s closed loop and the data that strings them.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        A validated scenario with an acyclic graph and followers of one model.
+    gains : Gains
+        Synthesised gains.
+
+    Returns
+    -------
+    Cascade
+
+    Raises
+    ------
+    ScenarioError
+        The graph has a cycle, or the followers have different models or parameters
+        (one generated block serves all followers; method 'native' above N = 20).
+    """
+    sc = scenario
+    m, n, N = sc.m, sc.n, sc.N
+    groups = _groups(sc)
+    if len(groups) > 1:
+        raise ScenarioError(
+            sc.path,
+            "followers.model",
+            f"{len(groups)} different models/parameter sets",
+            "one model and parameter set for method 'native' above N = 20 (or method 'cvodes')",
+        )
+    order, depth = topological_order(sc.graph.adjacency, sc.path)
+    filtered = sc.options.derivatives == "filtered"
+    lay = make_layout(m, n, N, filtered)
+    na = lay.agent_size
+    gm = graph_matrices(sc.graph, np.diag(np.atleast_2d(gains.H)))
+    og = _observer_gains(sc, gains)
+    C0 = ca.DM(np.atleast_2d(sc.leader.C0))
+    poff, npar = _param_layout(n)
+
+    t = ca.SX.sym("t")
+    xb = ca.SX.sym("xb", m + na)
+    nb = ca.SX.sym("nb", 3 * n)
+    cpl = ca.SX.sym("cpl", 2)
+    prm = ca.SX.sym("prm", npar)
+    gf = ca.SX.sym("gf", 1 + n)
+    eta0, s = xb[:m], xb[m:]
+    off = lay.agent_offsets
+    lii, a0h = cpl[0], cpl[1]
+    eta0dot, _, y0, y0dot, y0ddot, _, _ = leader_function(sc.leader)(t, eta0)  # eq. (3)
+    so = s[: 2 * m + 1]  # (μ_i, η_i, φ_i)
+    eta = s[off["eta"]]
+    # eq. (6), follower i's row of ψ = C0 E (L+B)ᵀ − y0 (a0 ∘ h)ᵀ
+    psi = lii * ca.mtimes(C0, eta) + nb[:n] - a0h * y0
+    if filtered:
+        dpsi = ddpsi = ca.SX.zeros(n)
+    else:  # the oracle's time derivatives of the same row (symbolic.closed_loop._network)
+        obs = observer_function(og)
+        D1, _ = flow_jets(obs)
+        Pobs = prm[poff["obs"]]
+        sod = obs(so, psi, Pobs)[0]
+        dpsi = lii * ca.mtimes(C0, sod[m : 2 * m]) + nb[n : 2 * n] - a0h * y0dot
+        sodd = D1(so, psi, Pobs, sod, dpsi)
+        ddpsi = lii * ca.mtimes(C0, sodd[m : 2 * m]) + nb[2 * n :] - a0h * y0ddot
+    agent = agent_function(sc, og, groups[0][0])
+    res = dict(
+        zip(agent.name_out(), agent(s, psi, dpsi, ddpsi, gf, ca.SX.zeros(n), prm), strict=True)
+    )
+    xbdot = ca.vertcat(eta0dot, res["sdot"])
+    if filtered:  # the filters estimate η̈_i; the listeners need only ψ's jets of order 0
+        jets = ca.vertcat(ca.mtimes(C0, eta), ca.mtimes(C0, res["etadot"]), ca.SX.zeros(2 * n))
+    else:
+        jets = ca.vertcat(
+            ca.mtimes(C0, eta),
+            ca.mtimes(C0, res["etadot"]),
+            ca.mtimes(C0, res["etaddot"]),
+            ca.mtimes(C0, res["eta3dot"]),
+        )
+    block = ca.Function(
+        "cascade_block",
+        [t, xb, nb, cpl, prm, gf],
+        [xbdot, jets],
+        ["t", "xb", "nb", "cpl", "prm", "gf"],
+        ["xbdot", "jets"],
+        {"cse": True},
+    )
+    faults, fidx = _fault_function(sc)
+    L_B = gm.L_B
+    ptr, idx, wts = [0], [], []
+    for i in range(N):
+        js = [j for j in np.flatnonzero(L_B[i]) if j != i]
+        idx += js
+        wts += [float(L_B[i, j]) for j in js]
+        ptr.append(len(idx))
+    return Cascade(
+        block=block,
+        faults=faults,
+        fault_index=np.asarray(fidx, dtype=np.int32).reshape(N, 1 + n),
+        params=_param_matrix(sc),
+        coupling=np.column_stack([np.diag(L_B), gm.a0h]).astype(float),
+        order=order,
+        upstream_ptr=np.asarray(ptr, dtype=np.int32),
+        upstream_idx=np.asarray(idx, dtype=np.int32),
+        upstream_weight=np.asarray(wts, dtype=float),
+        layout=lay,
+        n=n,
+        depth=depth,
+    )
