@@ -302,11 +302,12 @@ def build(
     settings = resolve_codegen(sc.N, settings)
     method = method or sc.integration.method
     t0 = time.perf_counter()
+    # first: a graph the native method cannot order fails before the closed loop is built
+    cascade = native_cascade(sc, gains) if method == "native" else None
     if closed_loop is None:
         from symbolic.closed_loop import build_closed_loop
 
         closed_loop = build_closed_loop(sc, gains)
-    cascade = native_cascade(sc, gains) if method == "native" else None
     return build_from_closed_loop(
         closed_loop, method, settings, t_symbolic_start=t0, cascade=cascade
     )

@@ -131,3 +131,17 @@ def test_run_converges_to_the_whole_loop_native_trajectory(setup):
         assert tr.stats["jac_evals"] < tr.stats["lin_setups"]  # CVODE reuses the Jacobian
         assert tr.stats["pivot_failures"] == 0
     assert diffs[1] < 1e-5 and diffs[1] < diffs[0] / 10
+
+
+def test_native_above_20_needs_an_acyclic_graph(tmp_path):
+    """N = 21 with a cycle: one line naming the fix, before any code is generated."""
+    sc = bench_scenario(21, horizon=0.1)
+    A = np.array(sc.graph.adjacency, dtype=float)
+    A[0, 20] = 1.0  # follower 1 now hears follower 21, which hears back through the tree
+    sc = dataclasses.replace(sc, graph=dataclasses.replace(sc.graph, adjacency=A))
+    gains = bench_gains(sc)[0]
+    cg = CodegenSettings(build_root=str(tmp_path / "b"))
+    with pytest.raises(ScenarioError, match="cycle") as ei:
+        api.build(sc, gains, "native", cg)
+    assert "\n" not in str(ei.value) and "'cvodes'" in str(ei.value)
+    assert not (tmp_path / "b").exists()
