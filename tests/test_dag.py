@@ -156,8 +156,9 @@ def test_native_above_20_needs_an_acyclic_graph(tmp_path):
 def test_breakpoints_faults_and_two_pinned_followers(tmp_path):
     """The two-follower test scenario (a fault switching at t = 0.3 s, both followers
     pinned, different fault expressions): graph order and whole loop agree."""
-    from synthesis import synthesize
     from test_sim_api import SMALL
+
+    from synthesis import synthesize
 
     path = tmp_path / "small.toml"
     path.write_text(SMALL)
