@@ -167,6 +167,28 @@ static int hitl_cvode_outputs(hitl_cvode *s, int nx, int nt, const double *t_out
   return filled;
 }
 
+/* Both drivers' linear solvers are direct, custom and freed empty: attach one, with
+   its content, set-up and solve, to s->LS */
+static SUNLinearSolver_Type hitl_ls_type(SUNLinearSolver S) {
+  (void)S;
+  return SUNLINEARSOLVER_DIRECT;
+}
+
+static SUNErrCode hitl_ls_free(SUNLinearSolver S) {
+  if (S) SUNLinSolFreeEmpty(S);
+  return SUN_SUCCESS;
+}
+
+static void hitl_ls_attach(hitl_cvode *s, void *content, int (*setup)(SUNLinearSolver, SUNMatrix),
+                           int (*solve)(SUNLinearSolver, SUNMatrix, N_Vector, N_Vector,
+                                        sunrealtype)) {
+  s->LS->content = content;
+  s->LS->ops->gettype = hitl_ls_type;
+  s->LS->ops->setup = setup;
+  s->LS->ops->solve = solve;
+  s->LS->ops->free = hitl_ls_free;
+}
+
 /* CVODE's options after CVodeInit: user data, tolerances, linear solver, Jacobian */
 static int hitl_cvode_options(hitl_cvode *s, void *data, double rtol, double atol,
                               CVLsJacFn jac) {

@@ -192,11 +192,6 @@ static int hitl_dag_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, voi
   return hitl_dag_pass(d, t, N_VGetArrayPointer(y), NULL, M->K) ? -1 : 0;
 }
 
-static SUNLinearSolver_Type hitl_dag_ls_type(SUNLinearSolver S) {
-  (void)S;
-  return SUNLINEARSOLVER_DIRECT;
-}
-
 /* Factorise the diagonal blocks of M = I + c J: the leader's (first follower's block,
    rows and columns 0..m-1) and every follower's A_ss. */
 static int hitl_dag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
@@ -263,11 +258,6 @@ static int hitl_dag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vect
   return 0;
 }
 
-static SUNErrCode hitl_dag_ls_free(SUNLinearSolver S) {
-  if (S) SUNLinSolFreeEmpty(S);
-  return SUN_SUCCESS;
-}
-
 /* Everything a run needs: sizes, problem arrays, work arrays, CVODE, the block
    matrix and the linear solver. Returns 0, or -1 with d->base.msg set. */
 static int hitl_dag_init(hitl_dag *d, hitl_cvode *s, int N, int m, int na, int n,
@@ -316,11 +306,7 @@ static int hitl_dag_init(hitl_dag *d, hitl_cvode *s, int N, int m, int na, int n
     hitl_msg(c, "out of memory");
     return -1;
   }
-  s->LS->content = d;
-  s->LS->ops->gettype = hitl_dag_ls_type;
-  s->LS->ops->setup = hitl_dag_ls_setup;
-  s->LS->ops->solve = hitl_dag_ls_solve;
-  s->LS->ops->free = hitl_dag_ls_free;
+  hitl_ls_attach(s, d, hitl_dag_ls_setup, hitl_dag_ls_solve);
   return 0;
 }
 

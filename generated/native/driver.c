@@ -33,11 +33,6 @@ static casadi_int hitl_pattern(const casadi_int *sp, casadi_int **colind, casadi
   return nnz;
 }
 
-static SUNLinearSolver_Type hitl_ls_type(SUNLinearSolver S) {
-  (void)S;
-  return SUNLINEARSOLVER_DIRECT;
-}
-
 static int hitl_ls_setup(SUNLinearSolver S, SUNMatrix M) {
   hitl_ctx *c = (hitl_ctx *)S->content;
   if (SM_INDEXPTRS_S(M)[c->nx] != c->jnnz)
@@ -62,11 +57,6 @@ static int hitl_ls_solve(SUNLinearSolver S, SUNMatrix M, N_Vector x, N_Vector b,
   c->res[0] = N_VGetArrayPointer(x);
   (void)M; (void)tol;
   return nat_lu_solve(c->arg, c->res, c->iw, c->w, 0) ? -1 : 0;
-}
-
-static SUNErrCode hitl_ls_free(SUNLinearSolver S) {
-  if (S) SUNLinSolFreeEmpty(S);
-  return SUN_SUCCESS;
 }
 
 /* Write the Jacobian's pattern into J (SUNMatZero clears it too) and point res[0] at
@@ -105,11 +95,7 @@ static int hitl_native_create(hitl_ctx *c, hitl_cvode *s, int nx, const casadi_i
     hitl_msg(c, "CVODE could not allocate its memory");
     return -1;
   }
-  s->LS->content = c;
-  s->LS->ops->gettype = hitl_ls_type;
-  s->LS->ops->setup = hitl_ls_setup;
-  s->LS->ops->solve = hitl_ls_solve;
-  s->LS->ops->free = hitl_ls_free;
+  hitl_ls_attach(s, c, hitl_ls_setup, hitl_ls_solve);
   return 0;
 }
 
