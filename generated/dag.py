@@ -58,19 +58,17 @@ def dag_functions(cas: Cascade, *, cse: bool = True) -> list[ca.Function]:
     list of casadi.Function
         ``dag_rhs`` ``(t, xb, nb, cpl, prm, gf) -> (xbdot, jets)``, ``dag_jac``
         ``(...) -> (jets, K)`` with K = ∂(xbdot, jets)/∂(xb, nb) dense, and
-        ``dag_faults`` ``t -> values``; ``jets`` are the first 3n of the block's (levels
-        0–2, what ``nb`` sums).
+        ``dag_faults`` ``t -> values``; ``jets`` (3n) are what ``nb`` sums.
     """
     b = cas.block
     args = b.sx_in()
     xbdot, jets = b.call(args)
-    jets3 = jets[: 3 * cas.n]
     xb, nb = args[1], args[2]
-    K = ca.densify(ca.jacobian(ca.vertcat(xbdot, jets3), ca.vertcat(xb, nb)))
+    K = ca.densify(ca.jacobian(ca.vertcat(xbdot, jets), ca.vertcat(xb, nb)))
     opts = {"cse": True} if cse else {}
     names = b.name_in()
-    rhs = ca.Function(RHS_NAME, args, [xbdot, jets3], names, ["xbdot", "jets"], opts)
-    jac = ca.Function(JAC_NAME, args, [jets3, K], names, ["jets", "K"], opts)
+    rhs = ca.Function(RHS_NAME, args, [xbdot, jets], names, ["xbdot", "jets"], opts)
+    jac = ca.Function(JAC_NAME, args, [jets, K], names, ["jets", "K"], opts)
     t = ca.SX.sym("t")
     flt = ca.Function(FAULTS_NAME, [t], [cas.faults(t)], ["t"], ["values"], opts)
     return [rhs, jac, flt]

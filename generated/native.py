@@ -311,7 +311,6 @@ def driver_trajectory(
     text: str,
     wall0: float,
     progress: Callable[[float], None] | None = None,
-    **extra_stats: float,
 ) -> Trajectory:
     """A :class:`Trajectory` from what a C driver returned (the native drivers).
 
@@ -331,8 +330,6 @@ def driver_trajectory(
         ``time.perf_counter()`` when the run began.
     progress : callable, optional
         Called once with the time reached.
-    **extra_stats : float
-        More entries for ``Trajectory.stats``.
 
     Raises
     ------
@@ -348,7 +345,6 @@ def driver_trajectory(
     t_reached = float(t_out[filled - 1])
     st.pop("t_reached")
     out = {k: (v if k == "last_step" else int(v)) for k, v in st.items()}
-    out.update(extra_stats)
     out.update(integrator_calls=1, jtimes_evals=0, wall_seconds=time.perf_counter() - wall0)
     message = ""
     if filled < nt:

@@ -16,7 +16,7 @@ leader's and the neighbours':
 
 The last sum and, for the oracle derivatives (gap 9.9), its first two time derivatives
 are the block's input ``nb`` (3n numbers); the block outputs the jets
-``(C0 η_i, C0 η̇_i, C0 η̈_i, C0 η⃛_i)`` its listeners sum into their ``nb``. Evaluated in
+``(C0 η_i, C0 η̇_i, C0 η̈_i)`` its listeners sum into their ``nb``. Evaluated in
 the order, the blocks give the whole closed loop's right-hand side exactly
 (tests/test_dag.py), and its Jacobian is block lower triangular: what the native
 integrator above N = 20 uses (:mod:`generated.dag`).
@@ -24,7 +24,7 @@ integrator above N = 20 uses (:mod:`generated.dag`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
@@ -58,8 +58,8 @@ class Cascade:
         ``(t, xb, nb, cpl, prm, gf) -> (xbdot, jets)``: ``xb`` = (η0, s_i), ``nb`` the
         neighbours' sum Σ_{j≠i} (L+B)_ij C0 η_j and its two time derivatives (3n),
         ``cpl`` = (l̄_ii, a_i0 h_i), ``prm`` the agent's numbers (a column of
-        ``params``), ``gf`` = (g_i(t), f_i(t)); ``jets`` = (C0 η_i, C0 η̇_i, C0 η̈_i,
-        C0 η⃛_i) (4n).
+        ``params``), ``gf`` = (g_i(t), f_i(t)); ``jets`` = (C0 η_i, C0 η̇_i, C0 η̈_i)
+        (3n).
     faults : casadi.Function
         ``t -> values``: every distinct fault expression once.
     fault_index : ndarray
@@ -78,9 +78,6 @@ class Cascade:
         The whole closed loop's layout (where each block's states go).
     n : int
         Outputs per follower (C0 has n rows).
-    depth : ndarray
-        N: the length of the longest chain of followers ending at i (0: hears only the
-        leader).
     """
 
     block: ca.Function
@@ -94,7 +91,6 @@ class Cascade:
     upstream_weight: np.ndarray
     layout: StateLayout
     n: int
-    depth: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
     @property
     def block_size(self) -> int:
@@ -102,10 +98,8 @@ class Cascade:
         return self.layout.m + self.layout.agent_size
 
 
-def topological_order(
-    adjacency: np.ndarray, where: str = "scenario"
-) -> tuple[np.ndarray, np.ndarray]:
-    """A topological order of the followers and each one's depth (Kahn's algorithm).
+def topological_order(adjacency: np.ndarray, where: str = "scenario") -> np.ndarray:
+    """A topological order of the followers (Kahn's algorithm).
 
     Parameters
     ----------
@@ -116,9 +110,9 @@ def topological_order(
 
     Returns
     -------
-    (order, depth) : (ndarray, ndarray)
+    ndarray
         Followers in an order where each comes after every follower it hears (ties by
-        index), and the longest chain of followers ending at each.
+        index).
 
     Raises
     ------
@@ -129,14 +123,12 @@ def topological_order(
     N = A.shape[0]
     np.fill_diagonal(A, False)
     indeg = A.sum(axis=1)
-    depth = np.zeros(N, dtype=int)
     ready = sorted(int(i) for i in np.flatnonzero(indeg == 0))
     order: list[int] = []
     while ready:
         j = ready.pop(0)
         order.append(j)
         for i in np.flatnonzero(A[:, j]):
-            depth[i] = max(depth[i], depth[j] + 1)
             indeg[i] -= 1
             if indeg[i] == 0:
                 ready.append(int(i))
@@ -149,7 +141,7 @@ def topological_order(
             f"followers {', '.join(str(i + 1) for i in cyc[:6])} are on a cycle",
             "an acyclic graph for method 'native' above N = 20 (or method 'cvodes')",
         )
-    return np.asarray(order, dtype=np.int32), depth
+    return np.asarray(order, dtype=np.int32)
 
 
 def build_cascade(scenario: Scenario, gains: Any) -> Cascade:
@@ -182,7 +174,7 @@ def build_cascade(scenario: Scenario, gains: Any) -> Cascade:
             f"{len(groups)} different models/parameter sets",
             "one model and parameter set for method 'native' above N = 20 (or method 'cvodes')",
         )
-    order, depth = topological_order(sc.graph.adjacency, sc.path)
+    order = topological_order(sc.graph.adjacency, sc.path)
     filtered = sc.options.derivatives == "filtered"
     lay = make_layout(m, n, N, filtered)
     na = lay.agent_size
@@ -220,15 +212,8 @@ def build_cascade(scenario: Scenario, gains: Any) -> Cascade:
         zip(agent.name_out(), agent(s, psi, dpsi, ddpsi, gf, ca.SX.zeros(n), prm), strict=True)
     )
     xbdot = ca.vertcat(eta0dot, res["sdot"])
-    if filtered:  # the filters estimate η̈_i; the listeners need only ψ's jets of order 0
-        jets = ca.vertcat(ca.mtimes(C0, eta), ca.mtimes(C0, res["etadot"]), ca.SX.zeros(2 * n))
-    else:
-        jets = ca.vertcat(
-            ca.mtimes(C0, eta),
-            ca.mtimes(C0, res["etadot"]),
-            ca.mtimes(C0, res["etaddot"]),
-            ca.mtimes(C0, res["eta3dot"]),
-        )
+    etaddot = ca.SX.zeros(m) if filtered else res["etaddot"]  # filtered: ψ alone is used
+    jets = ca.vertcat(*(ca.mtimes(C0, v) for v in (eta, res["etadot"], etaddot)))
     block = ca.Function(
         "cascade_block",
         [t, xb, nb, cpl, prm, gf],
@@ -257,5 +242,4 @@ def build_cascade(scenario: Scenario, gains: Any) -> Cascade:
         upstream_weight=np.asarray(wts, dtype=float),
         layout=lay,
         n=n,
-        depth=depth,
     )

@@ -221,6 +221,36 @@ static void hitl_flag_message(hitl_ctx *c, int flag) {
   free(name);
 }
 
+/* A whole run on a created CVODE (ok: the driver's set-up succeeded): from x0 at
+   t_out[0] through every output time (hitl_cvode_outputs), then CVODE's counters, the
+   last flag and its message into stats[] / c->msg. Returns the rows of x_out filled
+   (>= 1), or -1 if CVODE could not be started. */
+static int hitl_cvode_run(hitl_ctx *c, hitl_cvode *s, int ok, void *data, CVRhsFn rhs,
+                          CVLsJacFn jac, const double *x0, int nt, const double *t_out,
+                          int nb, const double *breaks, double rtol, double atol,
+                          long max_steps, double *x_out, double *stats) {
+  int nx = c->nx, filled = -1, flag = 0;
+  long acc[7] = {0, 0, 0, 0, 0, 0, 0};
+  sunrealtype h = 0;
+  for (int i = 0; i < HITL_NSTATS; ++i) stats[i] = 0.0;
+  if (ok) {
+    memcpy(N_VGetArrayPointer(s->y), x0, (size_t)nx * sizeof(double));
+    memcpy(x_out, x0, (size_t)nx * sizeof(double));
+    if (!CVodeInit(s->mem, rhs, t_out[0], s->y) &&
+        !hitl_cvode_options(s, data, rtol, atol, jac) &&
+        !CVodeSetMaxNumSteps(s->mem, max_steps)) /* else: msg set by the error handler */
+      filled = hitl_cvode_outputs(s, nx, nt, t_out, nb, breaks, x_out, acc, stats, &flag);
+  }
+  if (s->mem) {
+    hitl_add_counters(s->mem, acc);
+    CVodeGetLastStep(s->mem, &h);
+  }
+  hitl_stats(c, acc, h, flag, stats);
+  stats[HITL_T_REACHED] = filled >= 1 ? t_out[filled - 1] : t_out[0];
+  if (flag < 0) hitl_flag_message(c, flag);
+  return filled;
+}
+
 static void hitl_cvode_free(hitl_ctx *c, hitl_cvode *s) {
   if (s->mem) CVodeFree(&s->mem);
   if (s->LS) SUNLinSolFree(s->LS);

@@ -121,7 +121,6 @@ typedef struct {
   double *fvals, *gf, *nb, *xb, *xbdot, *jets; /* jets: N x n3 */
   double *lu, **cols, *djets, *r, *dnb;        /* linear solver */
   sunindextype *piv;
-  long n_setup_fail;
 } hitl_dag;
 
 /* nb of follower i (3n) from a per-follower array of jets (N x n3) */
@@ -214,7 +213,7 @@ static int hitl_dag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
         cols[col][row] = c * K[(size_t)(off + col) * k + off + row] + (row == col ? 1.0 : 0.0);
     }
     if (SUNDlsMat_denseGETRF(cols, sz, sz, d->piv + (size_t)na * b) != 0) {
-      d->n_setup_fail++;
+      d->base.n_piv_fail++;
       return SUNLS_LUFACT_FAIL; /* recoverable: CVODE retries with a smaller step */
     }
   }
@@ -333,33 +332,10 @@ CASADI_SYMBOL_EXPORT int hitl_dag_run(int N, int m, int na, int n, const int *or
                                       double *stats, char *msg, int msglen) {
   hitl_dag d;
   hitl_cvode s;
-  int nx = m + N * na, filled = -1, flag = 0;
-  long acc[7] = {0, 0, 0, 0, 0, 0, 0};
-
-  for (int i = 0; i < HITL_NSTATS; ++i) stats[i] = 0.0;
-  if (hitl_dag_init(&d, &s, N, m, na, n, order, up_ptr, up_idx, up_w, cpl, npar, prm, fidx,
-                    msg, msglen))
-    goto done;
-  memcpy(N_VGetArrayPointer(s.y), x0, (size_t)nx * sizeof(double));
-  memcpy(x_out, x0, (size_t)nx * sizeof(double));
-  if (CVodeInit(s.mem, hitl_dag_rhs, t_out[0], s.y) ||
-      hitl_cvode_options(&s, &d, rtol, atol, hitl_dag_jac) ||
-      CVodeSetMaxNumSteps(s.mem, max_steps))
-    goto done;
-  filled = hitl_cvode_outputs(&s, nx, nt, t_out, nb, breaks, x_out, acc, stats, &flag);
-
-done:
-  {
-    sunrealtype h = 0;
-    if (s.mem) {
-      hitl_add_counters(s.mem, acc);
-      CVodeGetLastStep(s.mem, &h);
-    }
-    d.base.n_piv_fail = d.n_setup_fail;
-    hitl_stats(&d.base, acc, h, flag, stats);
-  }
-  stats[HITL_T_REACHED] = filled >= 1 ? t_out[filled - 1] : t_out[0];
-  if (flag < 0) hitl_flag_message(&d.base, flag);
+  int ok = hitl_dag_init(&d, &s, N, m, na, n, order, up_ptr, up_idx, up_w, cpl, npar, prm,
+                         fidx, msg, msglen) == 0;
+  int filled = hitl_cvode_run(&d.base, &s, ok, &d, hitl_dag_rhs, hitl_dag_jac, x0, nt, t_out,
+                              nb, breaks, rtol, atol, max_steps, x_out, stats);
   hitl_dag_free(&d, &s);
   return filled;
 }

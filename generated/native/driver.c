@@ -141,11 +141,9 @@ CASADI_SYMBOL_EXPORT int hitl_native_run(int nx, const double *x0, int nt, const
   hitl_ctx c;
   hitl_cvode s;
   casadi_int sz[4] = {0, 0, 0, 0}, *lucol = NULL, *lurow = NULL;
-  int filled = -1, flag = 0;
-  long acc[7] = {0, 0, 0, 0, 0, 0, 0};
+  int ok, filled;
 
   memset(&c, 0, sizeof c);
-  for (int i = 0; i < HITL_NSTATS; ++i) stats[i] = 0.0;
   c.msg = msg;
   c.msglen = msglen;
   if (msglen > 0) msg[0] = '\0';
@@ -153,26 +151,9 @@ CASADI_SYMBOL_EXPORT int hitl_native_run(int nx, const double *x0, int nt, const
   hitl_work_size(nat_jac_work, sz);
   hitl_work_size(nat_lu_factor_work, sz);
   hitl_work_size(nat_lu_solve_work, sz);
-  if (hitl_native_create(&c, &s, nx, sz, &lucol, &lurow)) goto done;
-  memcpy(N_VGetArrayPointer(s.y), x0, (size_t)nx * sizeof(double));
-  memcpy(x_out, x0, (size_t)nx * sizeof(double));
-  if (CVodeInit(s.mem, hitl_rhs, t_out[0], s.y) || hitl_cvode_options(&s, &c, rtol, atol, hitl_jac) ||
-      CVodeSetMaxNumSteps(s.mem, max_steps)) {
-    goto done; /* msg set by the error handler */
-  }
-  filled = hitl_cvode_outputs(&s, nx, nt, t_out, nb, breaks, x_out, acc, stats, &flag);
-
-done:
-  {
-    sunrealtype h = 0;
-    if (s.mem) {
-      hitl_add_counters(s.mem, acc);
-      CVodeGetLastStep(s.mem, &h);
-    }
-    hitl_stats(&c, acc, h, flag, stats);
-  }
-  stats[HITL_T_REACHED] = filled >= 1 ? t_out[filled - 1] : t_out[0];
-  if (flag < 0) hitl_flag_message(&c, flag);
+  ok = hitl_native_create(&c, &s, nx, sz, &lucol, &lurow) == 0;
+  filled = hitl_cvode_run(&c, &s, ok, &c, hitl_rhs, hitl_jac, x0, nt, t_out, nb, breaks, rtol,
+                          atol, max_steps, x_out, stats);
   hitl_cvode_free(&c, &s);
   free(lucol), free(lurow);
   return filled;
