@@ -24,8 +24,10 @@ import functools
 import hashlib
 import json
 import os
+import re
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
@@ -35,6 +37,8 @@ from typing import Any
 
 import casadi as ca
 
+from symbolic import artifacts
+from symbolic.artifacts import sha256_file
 from symbolic.errors import BuildError
 
 #: default cache root (gitignored); ``HITL_BUILD_DIR`` overrides it
@@ -46,6 +50,8 @@ JACOBIAN_CHOICES = ("auto", *JACOBIAN_STRATEGIES)
 SOURCE_NAME = "model.c"
 LIBRARY_NAME = "model.so"
 MANIFEST_NAME = "manifest.json"
+#: temporary build folders: ``.tmp-<key[:12]>-<pid>-<random>``
+TMP_PREFIX = ".tmp-"
 
 
 @dataclass(frozen=True)
@@ -452,6 +458,67 @@ def compile_source(
     return time.perf_counter() - t0
 
 
+def entry_problem(folder: Path, key: str) -> str | None:
+    """Why the cache entry ``folder`` cannot be loaded for ``key`` (None: it can).
+
+    The manifest must name ``key`` and record the SHA-256 of ``model.so``, and the
+    library's bytes must have that hash: a truncated or corrupt file, or a library
+    copied in from another build, is caught before it is ever loaded.
+
+    Parameters
+    ----------
+    folder : Path
+        ``<root>/<key>/``.
+    key : str
+        The key this build needs.
+    """
+    try:
+        info = json.loads((folder / MANIFEST_NAME).read_text())
+    except FileNotFoundError:
+        return "no manifest (incomplete entry)"
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return "manifest unreadable"
+    if not isinstance(info, dict) or not isinstance(info.get("library_sha256"), str):
+        return "manifest records no library SHA-256"
+    if info.get("key") != key:
+        return f"manifest is for key {str(info.get('key'))[:12]}…, not this build"
+    try:
+        digest = sha256_file(folder / LIBRARY_NAME)
+    except OSError:
+        return f"{LIBRARY_NAME} missing or unreadable"
+    if digest != info["library_sha256"]:
+        return f"{LIBRARY_NAME} does not have the SHA-256 its manifest records (truncated, corrupt or replaced)"
+    return None
+
+
+def remove_stale_builds(root: Path, min_age: float = artifacts.STALE_SECONDS) -> list[Path]:
+    """Remove ``.tmp-<key>-<pid>-*`` build folders whose process is gone.
+
+    A folder is stale when the PID in its name is not running, or (a name without a
+    PID) when it is older than ``min_age`` seconds. A live build's folder is kept
+    whatever its age (compiling N = 50 takes over ten minutes).
+
+    Parameters
+    ----------
+    root : Path
+        The cache root.
+    min_age : float
+        Age in seconds after which a folder without a PID counts as stale.
+
+    Returns
+    -------
+    list of Path
+        The folders removed.
+    """
+    removed = []
+    for d in root.glob(f"{TMP_PREFIX}*"):
+        m = re.fullmatch(re.escape(TMP_PREFIX) + r"[0-9a-f]+-(\d+)-.*", d.name)
+        if artifacts.stale_temp(d, int(m.group(1)) if m else None, min_age):
+            shutil.rmtree(d, ignore_errors=True)
+            removed.append(d)
+    return removed
+
+
 def _install(tmp: Path, folder: Path) -> None:
     """Rename a complete build into place; a concurrent identical build may have won."""
     for _ in range(2):
@@ -459,10 +526,10 @@ def _install(tmp: Path, folder: Path) -> None:
             os.rename(tmp, folder)
             return
         except OSError:
-            if (folder / MANIFEST_NAME).is_file():  # complete entry from another process
+            if entry_problem(folder, folder.name) is None:  # complete entry, other process
                 shutil.rmtree(tmp, ignore_errors=True)
                 return
-            shutil.rmtree(folder, ignore_errors=True)  # incomplete entry: never trusted
+            shutil.rmtree(folder, ignore_errors=True)  # incomplete or bad entry: never trusted
     os.rename(tmp, folder)
 
 
@@ -504,14 +571,18 @@ def build_library(
     key = cache_key(source, settings, tc.key)
     root = settings.root()
     folder = root / key
-    manifest = folder / MANIFEST_NAME
-    if manifest.is_file() and (folder / LIBRARY_NAME).is_file():
-        return Library(
-            key, folder, folder / SOURCE_NAME, folder / LIBRARY_NAME, names, True, t_codegen, 0.0,
-            len(source),
-        )  # fmt: skip
+    if folder.exists():
+        why = entry_problem(folder, key)
+        if why is None:
+            lib = folder / LIBRARY_NAME
+            return Library(
+                key, folder, folder / SOURCE_NAME, lib, names, True, t_codegen, 0.0, len(source)
+            )
+        # never dlopen'ed: a bad entry would crash (truncated) or silently compute another model
+        print(f"build cache {folder}: {why}; rebuilding", file=sys.stderr)
     root.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=root, prefix=f".tmp-{key[:12]}-"))
+    remove_stale_builds(root)
+    tmp = Path(tempfile.mkdtemp(dir=root, prefix=f"{TMP_PREFIX}{key[:12]}-{os.getpid()}-"))
     try:
         try:
             t_compile = compile_source(source, settings, tmp, tc)
@@ -523,6 +594,8 @@ def build_library(
             raise BuildError(str(exc).replace(str(tmp), str(failed))) from None
         info = {
             "key": key,
+            "library_sha256": sha256_file(tmp / LIBRARY_NAME),
+            "source_sha256": sha256_file(tmp / SOURCE_NAME),
             "names": list(names),
             "compiler": compiler_identity(settings.compiler),
             "cflags": list(settings.cflags),

@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import tempfile
+import time
 from pathlib import Path
 
 OUT_ROOT = Path(os.environ.get("HITL_OUT", "out"))
+#: a leftover temporary file or folder whose name carries no PID is stale after this long
+STALE_SECONDS = 600.0
 
 
 def out_dir(name: str) -> Path:
@@ -26,6 +30,9 @@ def out_dir(name: str) -> Path:
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` via a temporary file in the same folder and :func:`os.replace`.
 
+    Leftover temporary files of killed writers of the same destination are removed
+    first (:func:`remove_stale_temps`).
+
     Parameters
     ----------
     path : str or Path
@@ -35,7 +42,11 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    remove_stale_temps(path)
+    # the PID in the name lets a later run tell a killed writer's leftover from a live one
+    fd, tmp = tempfile.mkstemp(
+        dir=path.parent, prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp"
+    )
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
@@ -88,3 +99,76 @@ def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
     return mask
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this PID exists (on this machine).
+
+    Parameters
+    ----------
+    pid : int
+        Process id.
+    """
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, owned by another user
+        return True
+    return True
+
+
+def stale_temp(path: Path, pid: int | None, min_age: float = STALE_SECONDS) -> bool:
+    """Whether a temporary file or folder was left by a writer that is gone.
+
+    Parameters
+    ----------
+    path : Path
+        The temporary file or folder.
+    pid : int or None
+        The writer's PID from the name: stale exactly when that process is not running
+        (a live writer's file is kept whatever its age). None (an older name without a
+        PID): stale when not modified for ``min_age`` seconds.
+    min_age : float
+        Seconds.
+    """
+    if pid is not None:
+        return not pid_alive(pid)
+    try:
+        return time.time() - path.lstat().st_mtime > min_age
+    except FileNotFoundError:
+        return False
+
+
+def remove_stale_temps(path: str | Path, min_age: float = STALE_SECONDS) -> list[Path]:
+    """Remove the stale ``.<name>.[<pid>.]<random>.tmp`` leftovers of writes to ``path``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The destination whose leftovers are looked for (in its folder).
+    min_age : float
+        See :func:`stale_temp`.
+
+    Returns
+    -------
+    list of Path
+        The files removed.
+    """
+    path = Path(path)
+    removed = []
+    pattern = re.compile(re.escape(f".{path.name}.") + r"(?:(\d+)\.)?[^/]*\.tmp")
+    try:
+        candidates = list(path.parent.glob(f".{path.name}.*.tmp"))
+    except OSError:
+        return removed
+    for f in candidates:
+        m = pattern.fullmatch(f.name)
+        if m is None or not f.is_file():
+            continue
+        if stale_temp(f, int(m.group(1)) if m.group(1) else None, min_age):
+            f.unlink(missing_ok=True)
+            removed.append(f)
+    return removed

@@ -8,13 +8,14 @@ never reach back into the synthesis code.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field, fields
+import math
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from symbolic.artifacts import atomic_write_text
+from symbolic.artifacts import atomic_write_text, sha256_bytes
 from symbolic.errors import SynthesisError
 
 _MATRICES = ("A0", "B0", "C0", "Gamma", "Phi", "Theta", "Omega", "T", "Q", "L_bar", "H", "Z")
@@ -112,8 +113,41 @@ class Gains:
         return out
 
 
-def gains_from_dict(d: dict[str, Any], *, source: str = "gains") -> Gains:
-    """Rebuild :class:`Gains` from a JSON dictionary (no re-synthesis).
+def _fix(source: str) -> str:
+    return f"(delete {source} and re-run make synth)"
+
+
+def _matrix(v: Any, name: str, source: str) -> np.ndarray:
+    """A field as a finite 2-D float array, or a one-line error naming it."""
+    try:
+        a = np.array(v, dtype=float)
+    except (ValueError, TypeError):
+        raise SynthesisError(
+            f"{source}: field {name!r} is not a rectangular array of numbers {_fix(source)}"
+        ) from None
+    if a.ndim > 2:
+        raise SynthesisError(
+            f"{source}: field {name!r} has {a.ndim} dimensions, not 2 {_fix(source)}"
+        )
+    if not np.all(np.isfinite(a)):
+        raise SynthesisError(f"{source}: field {name!r} is not finite {_fix(source)}")
+    return np.atleast_2d(a) if a.ndim < 2 else a
+
+
+def _scalar(v: Any, name: str, source: str) -> float:
+    """A field as a finite float (not a bool, string or null), or a one-line error."""
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise SynthesisError(
+            f"{source}: field {name!r} is {type(v).__name__}, not a number {_fix(source)}"
+        )
+    x = float(v)
+    if not math.isfinite(x):
+        raise SynthesisError(f"{source}: field {name!r} = {x} is not finite {_fix(source)}")
+    return x
+
+
+def gains_from_dict(d: Any, *, source: str = "gains") -> Gains:
+    """Rebuild :class:`Gains` from a JSON dictionary (no re-synthesis, no certification).
 
     Parameters
     ----------
@@ -121,22 +155,36 @@ def gains_from_dict(d: dict[str, Any], *, source: str = "gains") -> Gains:
         Parsed ``gains.json``; ``certificate`` and ``info`` may be absent.
     source : str
         Name of the source used in error messages (the file path).
+
+    Raises
+    ------
+    SynthesisError
+        One line naming the field: missing, not a rectangular array of numbers, not a
+        number, not finite, or the top level is not a JSON object.
     """
+    if not isinstance(d, dict):
+        raise SynthesisError(
+            f"{source}: top level is {type(d).__name__}, not a JSON object {_fix(source)}"
+        )
     kw: dict[str, Any] = {}
     for f in fields(Gains):
         if f.name not in d:
             if f.name in ("certificate", "info"):
                 kw[f.name] = {}
                 continue
-            raise SynthesisError(f"{source}: key {f.name!r} is missing (re-run make synth)")
+            raise SynthesisError(f"{source}: key {f.name!r} is missing {_fix(source)}")
         v = d[f.name]
         if f.name in _MATRICES:
-            a = np.array(v, dtype=float)
-            kw[f.name] = np.atleast_2d(a) if a.ndim < 2 else a
+            kw[f.name] = _matrix(v, f.name, source)
         elif f.name in ("certificate", "info"):
+            if not isinstance(v, dict):
+                raise SynthesisError(
+                    f"{source}: field {f.name!r} is {type(v).__name__}, not an object "
+                    f"{_fix(source)}"
+                )
             kw[f.name] = v
         else:
-            kw[f.name] = float(v)
+            kw[f.name] = _scalar(v, f.name, source)
     return Gains(**kw)
 
 
@@ -157,21 +205,173 @@ def save_gains(gains: Gains, path: str | Path) -> Path:
     return path
 
 
-def load_gains(path: str | Path) -> Gains:
-    """Read a ``gains.json`` written by :func:`save_gains`.
+@dataclass(frozen=True)
+class GainsFile:
+    """A ``gains.json`` parsed but not yet certified.
+
+    Attributes
+    ----------
+    gains : Gains
+        The numbers as stored (certificate not yet re-checked).
+    sha256 : str
+        SHA-256 of the bytes parsed (the ones the gains come from).
+    scenario_sha256 : str or None
+        The scenario hash the file claims.
+    """
+
+    gains: Gains
+    sha256: str
+    scenario_sha256: str | None
+
+
+def read_gains_file(path: str | Path) -> GainsFile:
+    """Read and parse a ``gains.json`` once (no certification).
 
     Parameters
     ----------
     path : str or Path
         A ``gains.json`` file.
+
+    Raises
+    ------
+    SynthesisError
+        Unreadable, not UTF-8, not JSON, or a malformed field (one line naming it).
     """
     path = Path(path)
     try:
-        d = json.loads(path.read_text())
+        data = path.read_bytes()
     except OSError as exc:
         raise SynthesisError(
             f"{path}: cannot be read ({exc.strerror}); run make synth first"
         ) from None
+    try:
+        d = json.loads(data.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise SynthesisError(f"{path}: not UTF-8 text (corrupt) {_fix(str(path))}") from None
     except json.JSONDecodeError as exc:
-        raise SynthesisError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
-    return gains_from_dict(d, source=str(path))
+        raise SynthesisError(
+            f"{path}: not valid JSON ({exc.msg} at line {exc.lineno}) {_fix(str(path))}"
+        ) from None
+    g = gains_from_dict(d, source=str(path))
+    claimed = d.get("scenario_sha256")
+    return GainsFile(g, sha256_bytes(data), claimed if isinstance(claimed, str) else None)
+
+
+def load_gains(path: str | Path, scenario: Any = None, *, recertify: bool = True) -> Gains:
+    """Read a ``gains.json`` and re-certify it from its numbers before anything uses it.
+
+    The stored certificate is not trusted: :func:`recertified` re-runs
+    :func:`synthesis.certificate.certify` (eigenvalue checks of LMIs (15)/(16),
+    λ1 > λ̄1/w, Lemma 3, k1, shapes and finiteness) and, given the scenario, checks
+    that the file was made for it.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``gains.json`` file.
+    scenario : Scenario, optional
+        The scenario the gains are for: its data fix the leader, graph, LMI
+        parameters and the gains it gives, and which gains count as given.
+    recertify : bool
+        False only to read the numbers as they are (e.g. to inspect a broken file).
+
+    Returns
+    -------
+    Gains
+        With ``certificate`` replaced by the fresh one.
+
+    Raises
+    ------
+    SynthesisError
+        One line naming the unreadable/malformed field or the failed condition, and
+        the fix. Failures are refused whatever ``STRICT`` says; failed checks that
+        involve only scenario-given gains stay warnings (as at synthesis).
+    """
+    g = read_gains_file(path).gains
+    return recertified(g, str(path), scenario) if recertify else g
+
+
+def given_by(scenario: Any) -> tuple[str, ...]:
+    """The gains the scenario gives explicitly (the rest are synthesised).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        A loaded scenario.
+    """
+    obs = scenario.observer
+    return tuple(k for k in ("Q", "Theta", "lambda1", "lambda2") if getattr(obs, k) is not None)
+
+
+def scenario_mismatch(g: Gains, scenario: Any) -> str | None:
+    """The first field of ``g`` that contradicts the scenario it claims to be for, or None.
+
+    Checked: the leader (A0, B0, C0, α), the LMI parameters (λ̄1, δ1, δ2, δ̂1, δ̂2),
+    every gain the scenario gives, and L̄ = H(L + B)H, H of the scenario's graph.
+
+    Parameters
+    ----------
+    g : Gains
+        Gains read from a file.
+    scenario : Scenario
+        The scenario.
+    """
+    from synthesis.assumptions import check_network
+
+    lead, obs = scenario.leader, scenario.observer
+    want: dict[str, Any] = {"A0": lead.A0, "B0": lead.B0, "C0": lead.C0, "alpha": lead.alpha}
+    for k in ("lambda_bar1", "delta1", "delta2", "delta1_hat", "delta2_hat"):
+        want[k] = getattr(obs, k)
+    want.update({k: getattr(obs, k) for k in given_by(scenario)})
+    for name, v in want.items():
+        a, b = np.asarray(getattr(g, name), dtype=float), np.asarray(v, dtype=float)
+        if name in _MATRICES:
+            b = np.atleast_2d(b) if b.ndim < 2 else b
+        if a.shape != b.shape or not np.array_equal(a, b):
+            return f"field {name!r} differs from the scenario's"
+    net = check_network(scenario.graph.adjacency, scenario.graph.pinning)
+    for name, v in (("L_bar", net.L_bar.toarray()), ("H", np.diag(net.h))):
+        a = getattr(g, name)
+        if a.shape != v.shape or not np.allclose(a, v, rtol=1e-12, atol=0.0):
+            return f"field {name!r} is not H(L + B)H of the scenario's graph"
+    return None
+
+
+def recertified(g: Gains, source: str, scenario: Any = None) -> Gains:
+    """``g`` with a fresh certificate, or a one-line :class:`SynthesisError`.
+
+    Parameters
+    ----------
+    g : Gains
+        Gains read from a file.
+    source : str
+        The file, for messages.
+    scenario : Scenario, optional
+        If given, :func:`scenario_mismatch` must find nothing and the given gains are
+        the scenario's (else the file's ``info["given"]``).
+    """
+    from synthesis.certificate import certify
+
+    if scenario is not None:
+        why = scenario_mismatch(g, scenario)
+        if why is not None:
+            raise SynthesisError(f"{source}: {why} (scenario {scenario.name}) {_fix(source)}")
+        given = given_by(scenario)
+    else:
+        raw = g.info.get("given", [])
+        given = tuple(x for x in raw if isinstance(x, str)) if isinstance(raw, list) else ()
+    # the file's own list of given gains is not trusted when the scenario is known
+    checked = replace(g, info={**g.info, "given": list(given)})
+    try:
+        cert = certify(checked, given=given)
+    except (ValueError, IndexError, TypeError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        raise SynthesisError(
+            f"{source}: certificate cannot evaluate the numbers ({type(exc).__name__}: {exc}) "
+            f"{_fix(source)}"
+        ) from None
+    if cert["failures"]:
+        raise SynthesisError(
+            f"{source}: certificate fails: " + "; ".join(cert["failures"]) + f" {_fix(source)}"
+        )
+    old = g.certificate if isinstance(g.certificate, dict) else {}
+    return replace(checked, certificate={**old, **cert})
