@@ -187,7 +187,10 @@ class GainsInfo:
 def ensure_gains(sc: Scenario, out_root: str | Path | None = None):
     """Read ``out/<name>/gains.json`` if it belongs to this scenario, else synthesize and write it.
 
-    The file belongs to the scenario when its ``scenario_sha256`` equals ``sc.sha256``.
+    The file belongs to the scenario when its ``scenario_sha256`` equals ``sc.sha256``;
+    it is then re-certified (:func:`synthesis.gains.recertified`: it must match the
+    scenario and pass every certificate check not confined to scenario-given gains).
+    A malformed or failing file is refused in one line, whatever ``STRICT`` says.
 
     Parameters
     ----------
@@ -200,18 +203,15 @@ def ensure_gains(sc: Scenario, out_root: str | Path | None = None):
     -------
     (Gains, GainsInfo)
     """
-    from synthesis.gains import load_gains, save_gains
+    from synthesis.gains import read_gains_file, recertified, save_gains
 
     path = Path(out_root or OUT_ROOT) / sc.name / "gains.json"
     t0 = time.perf_counter()
     if path.is_file():
-        try:
-            stored = json.loads(path.read_text()).get("scenario_sha256")
-        except (OSError, json.JSONDecodeError):
-            stored = None
-        if stored == sc.sha256:
-            gains = load_gains(path)
-            return gains, GainsInfo(path, sha256_file(path), True, time.perf_counter() - t0)
+        gf = read_gains_file(path)  # a malformed file is refused, never overwritten
+        if gf.scenario_sha256 == sc.sha256:  # reused only after a fresh certificate
+            gains = recertified(gf.gains, str(path), sc)
+            return gains, GainsInfo(path, gf.sha256, True, time.perf_counter() - t0)
     try:
         from synthesis import synthesize
     except ImportError:
