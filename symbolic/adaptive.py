@@ -1,6 +1,7 @@
 """Adaptive laws (30): θ̂ (disturbance bounds) and ĝ (estimate of 1/g_i), with the ĝ-law options.
 
-``ĝ`` law options (``options.ghat_law``), r = −γ χᵀΨ (paper-spec 6 and 9.3–9.4):
+``ĝ`` law options (``options.ghat_law``), r = −γ χᵀΨ (docs/reading.md, 'Controller'; D3, D4
+in docs/fidelity.md):
 
 - ``paper``: ĝ̇ = r (γ = 1 is the printed law, with χᵀΨ, not the printed χᵀMΨ);
 - ``sigma``: ĝ̇ = r − σ(ĝ − ĝ_ref);
@@ -69,7 +70,7 @@ def adaptive_function(n: int, law: str, g_min: float) -> ca.Function:
     thetahat_dot = ca.fabs(chi) - k2 * thetahat  # eq. (30), element-wise
     rate = -gamma * ca.dot(chi, Psi)  # eq. (30) with gain γ and χᵀΨ (paper prints χᵀMΨ)
     if "sigma" in law:
-        rate = rate - sigma * (ghat - gref)  # σ-modification (paper-spec 9.3)
+        rate = rate - sigma * (ghat - gref)  # σ-modification (docs/fidelity.md, D3)
     if "projection" in law:
         rate = projection(ghat, rate, 1.0, 1.0 / g_min)
     return ca.Function(

@@ -14,7 +14,7 @@ leader's and the neighbours':
 
     ψ_i = l̄_ii C0 η_i − a_i0 h_i y0 + Σ_{j≠i} (L+B)_ij C0 η_j.
 
-The last sum and, for the oracle derivatives (gap 9.9), its first two time derivatives
+The last sum and, for the oracle derivatives (docs/fidelity.md, D9), its first two time derivatives
 are the block's input ``nb`` (3n numbers); the block outputs the jets
 ``(C0 η_i, C0 η̇_i, C0 η̈_i)`` its listeners sum into their ``nb``. Evaluated in
 the order, the blocks give the whole closed loop's right-hand side exactly

@@ -1,4 +1,4 @@
-"""The closed loop of the paper as one CasADi model (paper-spec sections 1–7).
+"""The closed loop of the paper as one CasADi model (docs/reading.md, 'Network' to 'Formation').
 
 Data flow: Scenario + Gains -> :func:`build_closed_loop` -> :class:`ClosedLoop`,
 which the ``generated/`` stage turns into C and integrates.

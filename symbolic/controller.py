@@ -15,7 +15,7 @@ from symbolic.models.base import ELModel
 def sign_function(x: ca.SX, mode: str, width: float) -> ca.SX:
     """sgn(x) element-wise: ``exact``, ``sat`` (sat(x/ε)) or ``tanh`` (tanh(x/ε)), ε = width.
 
-    The boundary layers (paper-spec 9.5) make the right-hand side Lipschitz for
+    The boundary layers (docs/fidelity.md, D5) make the right-hand side Lipschitz for
     variable-step integrators; ``exact`` is the paper's sign function.
 
     Parameters

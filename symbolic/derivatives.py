@@ -1,4 +1,4 @@
-"""Where η̈_i, ḃ_i and b̈_i come from (paper-spec section 6, gap 9.9).
+"""Where η̈_i, ḃ_i and b̈_i come from (docs/reading.md, 'Controller'; docs/fidelity.md, D9).
 
 Eq. (29) uses η̈_i and, with a rotating formation, ḃ_i and b̈_i (hence η⃛_i).
 The paper does not say how a follower obtains them. Two options:

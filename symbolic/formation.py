@@ -1,4 +1,4 @@
-"""Time-varying formation b_i = R(τ_i) b_i0, τ_i = atan2(η̇_i⁽²⁾, η̇_i⁽¹⁾) (paper-spec section 7).
+"""Time-varying formation b_i = R(τ_i) b_i0, τ_i = atan2(η̇_i⁽²⁾, η̇_i⁽¹⁾) (docs/reading.md, 'Formation').
 
 Rule where η̇_i is near zero (the paper leaves τ_i undefined there): with
 ``d = (η̇_i⁽¹⁾, η̇_i⁽²⁾)``, ``r² = ‖d‖²`` and ``ε = options.tau_threshold``,

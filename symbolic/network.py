@@ -1,6 +1,6 @@
 """The follower network: graph matrices and agent-wise assembly.
 
-The coupling between agents is linear (paper-spec section 1): with the columns
+The coupling between agents is linear (docs/reading.md, 'Network and signed graphs'): with the columns
 ``E = [η_1 … η_N]`` (m×N), the neighbourhood error is
 ``e_η = E L_Bᵀ − η0 (a0 ∘ h)ᵀ`` and its measured output is
 ``ψ = C0 E L_Bᵀ − y0 (a0 ∘ h)ᵀ``. Both are one sparse matrix product, so the

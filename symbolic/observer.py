@@ -1,4 +1,4 @@
-"""Distributed observer of the leader, eq. (9), with the UIO (6)–(8) inside (paper-spec 4–5).
+"""Distributed observer of the leader, eq. (9), with the UIO (6)–(8) inside (docs/reading.md, 'Distributed observer').
 
 One agent's observer state is ``s_o = (μ_i, η_i, φ_i)`` (2m + 1 entries). Its flow
 depends only on ``s_o`` and on the measured neighbourhood output ψ_i, never on

@@ -1,4 +1,4 @@
-"""Unknown-input observer of the neighbourhood error, eqs. (6)–(8) (paper-spec section 4).
+"""Unknown-input observer of the neighbourhood error, eqs. (6)–(8) (docs/reading.md, 'Unknown-input observer').
 
 Sign reconstruction (the extraction lost the minus signs; see docs/closed-loop.md):
 ``Γ = B0[(C0B0)ᵀ(C0B0)]⁻¹(C0B0)ᵀ``, ``Φ = I − ΓC0`` (so ``ΦB0 = 0``),

@@ -109,7 +109,7 @@ def synthesize(scenario: Scenario, *, strict: bool = False) -> Gains:
         if lambda2 == lead.alpha:
             notes.append(
                 "lambda2 = alpha: admissible only in the non-strict reading ||u0|| <= alpha <= lambda2"
-                " (paper-spec 9.6)"
+                " (docs/fidelity.md, D6)"
             )
 
     used = [s["solver"] for s in solvers.values()]
@@ -171,7 +171,7 @@ def synthesize(scenario: Scenario, *, strict: bool = False) -> Gains:
         info=info,
     )
     kb = k1_bound(base)
-    k1 = (1.0 + margin) * kb  # k1 > λ_max(...)/(δ̂1δ̂2), paper-spec section 5
+    k1 = (1.0 + margin) * kb  # k1 > λ_max(...)/(δ̂1δ̂2), eq. (17)
     info["k1_bound"] = kb
     g = replace(base, k1=float(k1))
     cert = certify(g, tol=tol, given=tuple(given))

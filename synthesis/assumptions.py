@@ -1,4 +1,4 @@
-"""Assumptions 1 and 2 of the paper, checked on numbers (paper-spec sections 1 and 2).
+"""Assumptions 1 and 2 of the paper, checked on numbers (docs/reading.md, 'Network and signed graphs' and 'Leader').
 
 Assumption 1 (network): every follower is reachable from the leader, equivalently
 L̄ = H(L + B)H is a nonsingular M-matrix; for signed graphs the graph must be
@@ -472,7 +472,7 @@ def control_zeros(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> np.ndarray 
 
 
 def check_leader(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray) -> LeaderCheck:
-    """Assumption 2: rank conditions and invariant zeros (paper-spec section 2).
+    """Assumption 2: rank conditions and invariant zeros (docs/reading.md, 'Leader').
 
     Parameters
     ----------
@@ -548,7 +548,7 @@ def _fmt(s: complex) -> str:
 
 
 def uio_matrices(B0: np.ndarray, C0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Γ and Φ of the unknown-input observer (paper-spec section 4).
+    """Γ and Φ of the unknown-input observer (docs/reading.md, 'Unknown-input observer').
 
     Γ = B0[(C0B0)ᵀ(C0B0)]⁻¹(C0B0)ᵀ and Φ = I − ΓC0, so that ΦB0 = 0 (eq. (7), signs
     reconstructed: the paper prints Γ with the opposite sign and Φ = I + ΓC0).

@@ -36,7 +36,7 @@ MATCH_RTOL = 1e-6  # relative agreement of recomputed matrices (Γ, Φ, Q = B0�
 
 
 def k1_bound(g: Gains) -> float:
-    """λ_max((I_N ⊗ Ω⁻¹)Ēᵀ(Z⁻¹ ⊗ T)Ē)/(δ̂1δ̂2) (paper-spec section 5, V1's constant k1).
+    """λ_max((I_N ⊗ Ω⁻¹)Ēᵀ(Z⁻¹ ⊗ T)Ē)/(δ̂1δ̂2) (V1's constant k1, docs/reading.md, 'Distributed observer').
 
     With Ē = (ZH) ⊗ (T⁻¹X), X = ΦA0 − ΘC0 − A0, the product is Z ⊗ Ω⁻¹XᵀT⁻¹X
     (H Z H = Z for diagonal H, Z), so λ_max = max(z) · λ_max(XᵀT⁻¹X, Ω): per-agent sized.

@@ -1,4 +1,4 @@
-"""Lemma 3: a diagonal Z ≻ 0 with L̄ᵀZ + ZL̄ ⪰ wZ, w > 0 (paper-spec section 1).
+"""Lemma 3: a diagonal Z ≻ 0 with L̄ᵀZ + ZL̄ ⪰ wZ, w > 0 (docs/reading.md, 'Lemmas 1–3').
 
 Two variants are computed and both are reported:
 
@@ -178,7 +178,7 @@ def best_diagonal_z(
 
 
 def lemma3(L_bar: np.ndarray | sp.spmatrix) -> Lemma3Result:
-    """Both Z variants of Lemma 3 and the better one (paper-spec section 1).
+    """Both Z variants of Lemma 3 and the better one (docs/reading.md, 'Lemmas 1–3').
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The symbolic closed loop against independent truth (issue 4 acceptance list).
+"""The symbolic closed loop against independent truth.
 
 Truth used here: a plainly written numpy implementation (verify/reference.py),
 central differences of the simulated trajectory (in the test only), the exact

@@ -14,7 +14,7 @@ PAPER = {"m1": 0.5, "m2": 1.5, "r1": 1.0, "r2": 0.8, "J1": 5.0, "J2": 5.0, "g0":
 
 
 def two_link_closed_form(p, q, m1, m2, r1, r2, J1, J2, g0):
-    """Plain numpy transcription of paper-spec section 3 (the paper's printed M, C, G)."""
+    """Plain numpy transcription of docs/reading.md, 'Followers' (the paper's printed M, C, G)."""
     c2 = np.cos(p[1])
     m11 = (m1 + m2) * r1**2 + m2 * r2**2 + 2 * m2 * r1 * r2 * c2 + J1
     m12 = m2 * r2**2 + m2 * r1 * r2 * c2

@@ -76,7 +76,7 @@ def test_paper_scenario_has_table_2_values():
     assert s.leader.alpha == 2.0
     p0 = [[20, 15], [20, 20], [20, 15], [23, 14], [14, 21]]
     np.testing.assert_array_equal([f.p0 for f in s.followers], p0)
-    # |b_i0| as printed (signs were lost in extraction, paper-spec section 8)
+    # |b_i0| as printed (signs were lost in extraction, docs/reading.md, 'Table 2')
     np.testing.assert_array_equal(
         np.abs([f.b0 for f in s.followers]), [[4, 0], [1, 4], [3, 2], [2, 4], [3, 2]]
     )

@@ -62,7 +62,7 @@ def _lmin(M):
 # --------------------------------------------------------------------------- UIO / Assumption 2
 def test_uio_matrices_analytic():
     Gamma, Phi = uio_matrices(B0, C0)
-    # paper-spec section 4: Γ = B0 (C0B0)ᵀ/5, Φ = [[1, 0], [-1, 0]], ΦA0 = [[0, 1], [0, -1]]
+    # docs/reading.md, 'Unknown-input observer': Γ = B0 (C0B0)ᵀ/5, Φ = [[1, 0], [-1, 0]], ΦA0 = [[0, 1], [0, -1]]
     np.testing.assert_allclose(Gamma, [[0, 0], [0.2, 0.4]], atol=1e-15)
     np.testing.assert_allclose(Phi, [[1, 0], [-1, 0]], atol=1e-15)
     np.testing.assert_allclose(Phi @ A0, [[0, 1], [0, -1]], atol=1e-15)
@@ -161,7 +161,7 @@ def test_lmis_rechecked_by_eigenvalues(which, request):
     assert _lmax(F16) < -tol
     ev = np.linalg.eigvals(Ac)
     assert ev.real.max() < -g.delta2 / 2  # LMI (16) => decay rate δ2/2
-    # the unobservable mode at -1 survives every Θ (paper-spec section 4)
+    # the unobservable mode at -1 survives every Θ (docs/reading.md, 'Unknown-input observer')
     assert np.min(np.abs(ev + 1.0)) < 1e-9
     # Lemma 3 inequality and Theorem 1's gains
     Z = g.Z
@@ -188,7 +188,7 @@ def test_synth_scenario_no_warnings(g_synth):
 
 
 def test_k1_against_explicit_kronecker(g_paper):
-    # second implementation: the (N·m)x(N·m) matrix of paper-spec section 5, built literally
+    # second implementation: the (N·m)x(N·m) matrix of eq. (17)'s k1, built literally
     g = g_paper
     N = g.Z.shape[0]
     X = g.Phi @ g.A0 - g.Theta @ g.C0 - g.A0
@@ -255,7 +255,7 @@ def test_given_gains_violations_are_named_warnings(paper):
 
 
 def test_lmi16_infeasible_for_delta2_above_two(paper_synth):
-    # the unobservable mode at -1 caps the decay: δ2 < 2 (paper-spec section 4)
+    # the unobservable mode at -1 caps the decay: δ2 < 2 (docs/reading.md, 'Unknown-input observer')
     obs = replace(paper_synth.observer, delta2=2.2, delta2_hat=0.5)
     with pytest.raises(SynthesisError, match=r"LMI \(16\) is infeasible"):
         synthesize(replace(paper_synth, observer=obs))

@@ -76,7 +76,7 @@ def test_uio_error_is_matrix_exponential_three_state_leader():
 def test_literal_signs_do_not_remove_the_input():
     """The printed signs taken literally (Φ = I + ΓC0 with the positive Γ) leave B0 in the error.
 
-    This is why the signs are reconstructed (paper-spec section 4, gap 9.1).
+    This is why the signs are reconstructed (docs/fidelity.md, D1).
     """
     A0, B0, C0 = PAPER
     mats = uio_matrices(A0, B0, C0, _theta(A0, B0, C0))
@@ -87,7 +87,7 @@ def test_literal_signs_do_not_remove_the_input():
 
 
 def test_unobservable_mode_of_paper_leader():
-    """For C0 = [[1,1],[2,2]] the mode at −1 of ΦA0 cannot be moved by any Θ (paper-spec 4)."""
+    """For C0 = [[1,1],[2,2]] the mode at −1 of ΦA0 cannot be moved by any Θ (docs/reading.md, 'Unknown-input observer')."""
     A0, B0, C0 = PAPER
     rng = np.random.default_rng(0)
     for _ in range(5):

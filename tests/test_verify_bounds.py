@@ -1,6 +1,6 @@
 """Theorem 2 / Lemma 1 / Lemma 2 formulas and the bound-vs-actual table (no simulation).
 
-The expected numbers are recomputed here by hand from paper-spec section 6, with
+The expected numbers are recomputed here by hand from docs/reading.md, 'Theorem 2 bounds', with
 the two-link inertia matrix written out independently of the model library.
 """
 
@@ -64,7 +64,7 @@ def test_mass_bounds_are_the_configuration_extremes(paper):
     c = theorem2_constants(paper, 0)
     assert c.lam_min_M == pytest.approx(lo.min(), rel=1e-12)
     assert c.lam_max_M == pytest.approx(hi.max(), rel=1e-12)
-    assert c.lam_min_M == pytest.approx(5.0769, abs=1e-4)  # paper-spec: about 5.08
+    assert c.lam_min_M == pytest.approx(5.0769, abs=1e-4)  # docs/reading.md: about 5.08
     assert c.lam_max_M == pytest.approx(11.2431, abs=1e-4)  # and 11.24
 
 

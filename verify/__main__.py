@@ -7,7 +7,7 @@
   (simulating the eq. (42) ablation run for Fig. 13 if needed).
 - ``demo``: the whole pipeline from scratch — synthesis, simulation, ablation,
   verification, report — ending with where the report is and the table.
-- ``bench``: delegated to :mod:`generated.bench` (issue 7, ``make bench``).
+- ``bench``: delegated to :mod:`generated.bench` (``make bench``).
 """
 
 from __future__ import annotations
@@ -90,7 +90,7 @@ def main(argv: list[str]) -> int:
     args = _parser().parse_args(argv)
     if args.cmd == "bench":  # the benchmark lives in generated.bench (make bench)
         if importlib.util.find_spec("generated.bench") is None:
-            raise VerifyError("generated.bench is not available: run make bench after issue 7")
+            raise VerifyError("generated.bench is not available: reinstall the project (make venv)")
         return int(importlib.import_module("generated.bench").main(args.rest) or 0)
 
     from verify import pipeline as P

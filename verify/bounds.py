@@ -1,8 +1,8 @@
 """The paper's closed-form claims: Theorem 1's rates, Theorem 2's bounds, Lemmas 1 and 2.
 
 Everything here is a pure function of the scenario (and the synthesised gains);
-nothing reads a trajectory. The formulas follow ``paper-spec.md`` section 6 and,
-for the adaptive-law variants, section 9.3:
+nothing reads a trajectory. The formulas follow docs/reading.md, 'Theorem 2 bounds' and,
+for the adaptive-law variants, docs/fidelity.md, D3:
 
 - the paper's Theorem 2 (eq. (31)) applies Lemma 1 to V2 although V̇2 has no decay
   term in ĝ − 1/g, so its bound does not follow; it is reported as the *paper's
@@ -219,7 +219,7 @@ def mass_bounds(scenario: Scenario, agent: int) -> tuple[float, float]:
 def theorem2_constants(
     scenario: Scenario, agent: int, config: VerifyConfig | None = None
 ) -> Theorem2Constants:
-    """Theorem 2's constants for follower ``agent`` (0-based), paper-spec section 6 and 9.3.
+    """Theorem 2's constants for follower ``agent`` (0-based), eq. (31); variants: docs/fidelity.md, D3.
 
     Parameters
     ----------
@@ -294,7 +294,7 @@ def _lemma2_pair(chi_bar: float, lam: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 @dataclass(frozen=True)
 class Theorem1Rates:
-    """Theorem 1's decay rates of V1 (paper-spec section 5).
+    """Theorem 1's decay rates of V1 (docs/reading.md, 'Distributed observer').
 
     Attributes
     ----------

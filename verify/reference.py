@@ -1,6 +1,6 @@
 """An independent, plainly written numpy implementation of the closed-loop right-hand side.
 
-This is "what a user writes by hand": every equation of paper-spec sections 1–7
+This is "what a user writes by hand": every equation of docs/reading.md, 'Network' to 'Formation',
 in vectorised numpy, with the oracle derivatives (η̈_i, η⃛_i, ḃ_i, b̈_i) worked
 out with the chain rule on paper, not by automatic differentiation. It shares
 no code with ``symbolic/`` beyond the scenario loader, the expression parser's
@@ -86,7 +86,7 @@ def _dual(node: tuple, t: float) -> tuple[float, float]:
 
 # ----------------------------------------------------------------------------- models
 def _two_link(prm: dict[str, float]):
-    """The paper's closed forms (paper-spec section 3), vectorised over agents."""
+    """The paper's closed forms (docs/reading.md, 'Followers'), vectorised over agents."""
     m1, m2, r1, r2, J1, J2, g0 = (prm[k] for k in ("m1", "m2", "r1", "r2", "J1", "J2", "g0"))
 
     def mcg(p: np.ndarray, q: np.ndarray):

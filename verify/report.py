@@ -185,7 +185,7 @@ def render_markdown(v: Verification, *, strict: bool = False) -> str:
         "",
         f"Verdict ({'strict' if strict else 'default'}): **{verdict}**. `guaranteed` rows follow "
         "from the theory for this reconstruction (a failure is a bug); `paper` rows are the "
-        "paper's claims as printed, which do not all follow (paper-spec section 9); `info` rows "
+        "paper's claims as printed, which do not all follow (docs/fidelity.md, deviations); `info` rows "
         "are measurements.",
         "",
     ]

@@ -5,8 +5,8 @@ Columns: ``claim, agent, component, kind, bound, observed, ratio, holds, window,
 
 - ``guaranteed``: follows from the theory for this reconstruction (a failure is a
   bug; ``make verify`` exits 1);
-- ``paper``: the paper's own claim where it does not follow as printed (paper-spec
-  section 9); ``--strict`` makes these fail too;
+- ``paper``: the paper's own claim where it does not follow as printed
+  (docs/fidelity.md, deviations); ``--strict`` makes these fail too;
 - ``info``: a measurement with no pass/fail (``holds`` is still shown).
 """
 

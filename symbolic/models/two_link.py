@@ -14,7 +14,7 @@ def _lagrangian(prm):
         sp.nsimplify(prm[k]) for k in ("m1", "m2", "r1", "r2", "J1", "J2", "g0")
     )
     # point masses at the link ends plus rotor inertias J1 (on q1) and J2 (on q1 + q2):
-    # this reproduces the closed forms of paper-spec section 3 exactly
+    # this reproduces the closed forms of docs/reading.md, 'Followers', exactly
     T = sp.Rational(1, 2) * (m1 + m2) * r1**2 * q1**2
     T += (
         sp.Rational(1, 2)
