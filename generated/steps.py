@@ -1,6 +1,6 @@
 """What sets the step count: steps per time window, and how they move with the model's knobs.
 
-Issue 7 asks to *measure* what drives CVODES's step count. Two measurements:
+What drives the integrator's step count is measured, not guessed. Two measurements:
 
 Windows (:func:`step_profile`)
     The horizon is cut into windows (finer near t = 0); each window is integrated by
