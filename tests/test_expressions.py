@@ -135,7 +135,7 @@ def test_never_evaluates_text(tmp_path):
     assert not marker.exists()
 
 
-def test_function_list_is_the_issue_list():
+def test_function_list_is_the_documented_list():
     assert set(FUNCTIONS) == {
         "sin", "cos", "tan", "exp", "log", "sqrt", "abs", "tanh", "atan2", "min", "max",
         "step", "sat",

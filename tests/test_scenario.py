@@ -426,7 +426,7 @@ def test_cli_process_exit_status(tmp_path):
     assert "observer.lambda1" in res.stderr and "Traceback" not in res.stderr
 
 
-def test_summary_lists_what_the_issue_asks(capsys):
+def test_summary_lists_the_scenario_facts(capsys):
     assert run_cli(main, ["summary", str(PAPER)]) == 0
     out = capsys.readouterr().out
     for needle in (
