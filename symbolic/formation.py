@@ -1,16 +1,21 @@
 """Time-varying formation b_i = R(τ_i) b_i0, τ_i = atan2(η̇_i⁽²⁾, η̇_i⁽¹⁾) (docs/reading.md, 'Formation').
 
-Rule where η̇_i is near zero (the paper leaves τ_i undefined there): with
-``d = (η̇_i⁽¹⁾, η̇_i⁽²⁾)``, ``r² = ‖d‖²`` and ``ε = options.tau_threshold``,
+With ``d = (η̇_i⁽¹⁾, η̇_i⁽²⁾)``, ``s = ‖d‖²``, ``ε = options.tau_threshold`` and
+``u = s/ε²``:
 
-    b_i = [[c, −s], [s, c]] b_i0 + κ b_i0,   c = d1/√(r²+ε²), s = d2/√(r²+ε²), κ = ε²/(r²+ε²).
+    b_i = [[d1 q, −d2 q], [d2 q, d1 q]] b_i0 + κ b_i0,
 
-Since R(atan2(d2, d1)) = [[d1, −d2], [d2, d1]]/r exactly, this is
-``b_i = ρ R(τ_i) b_i0 + κ b_i0`` with ``ρ = r/√(r²+ε²)``: for r ≫ ε it is the
-paper's rotation up to a relative O(ε²/r²); at r = 0 it is b_i0 (angle faded to
-zero); in between it blends smoothly. It is C∞ in η̇_i, so ḃ_i and b̈_i exist
-everywhere (no branch cut, unlike a faded atan2 angle). For n ≠ 2 (or m < 2)
-there is no planar rotation and b_i = b_i0 is constant.
+    q(s) = 1/√s                                   for u ≥ 1,
+    q(s) = (1 + w/2 + 3w²/8 + 5w³/16)/ε, w = 1 − u  for u < 1,
+    κ(s) = max(1 − u, 0)⁴ (1 + 4u).
+
+Since R(atan2(d2, d1)) = [[d1, −d2], [d2, d1]]/‖d‖, for ‖d‖ ≥ ε this is the paper's
+rotation R(τ_i) b_i0 exactly (κ = 0). Below ε the angle is undefined at d = 0 and the
+rule blends: the inner q is the third-order Taylor polynomial of 1/√s at s = ε², and
+κ = (1 − u)⁴(1 + 4u) (Wendland's C² bump in ‖d‖/ε) has zero first three derivatives at
+u = 1 and dκ/du = 0 at u = 0, so b is C³ in d across ‖d‖ = ε
+(a polynomial in d inside, smooth outside) and ḃ_i, b̈_i by forward AD are continuous. At
+d = 0, b_i = b_i0. For n ≠ 2 (or m < 2) there is no planar rotation and b_i = b_i0.
 """
 
 from __future__ import annotations
@@ -28,16 +33,19 @@ def formation_offset(etadot: ca.SX, b0: ca.SX, eps: float) -> ca.SX:
     b0 : casadi.SX
         The formation vector b_i0 (n entries).
     eps : float
-        Fading threshold ε (``options.tau_threshold``).
+        Threshold ε (``options.tau_threshold``): exact rotation for ‖(η̇_i⁽¹⁾, η̇_i⁽²⁾)‖ ≥ ε.
     """
     n = b0.numel()
     if n != 2 or etadot.numel() < 2:
         return b0
     d1, d2 = etadot[0], etadot[1]
-    g = d1**2 + d2**2 + eps**2
-    c, s = d1 / ca.sqrt(g), d2 / ca.sqrt(g)
-    kappa = eps**2 / g
-    R = ca.vertcat(ca.horzcat(c, -s), ca.horzcat(s, c))  # ρ R(τ_i), τ_i = atan2(d2, d1)
+    s = d1**2 + d2**2
+    w = ca.fmax(1 - s / eps**2, 0)  # 0 outside the disc: both branches stay finite
+    q_in = (1 + w / 2 + 3 * w**2 / 8 + 5 * w**3 / 16) / eps  # Taylor of 1/√s at s = ε²
+    q_out = 1 / ca.sqrt(ca.fmax(s, eps**2))
+    q = ca.if_else(s < eps**2, q_in, q_out)
+    kappa = w**4 * (5 - 4 * w)  # (1 − u)⁴(1 + 4u): 1 at d = 0, flat at u = 0 and u = 1
+    R = ca.vertcat(ca.horzcat(d1 * q, -d2 * q), ca.horzcat(d2 * q, d1 * q))  # R(τ_i) for s ≥ ε²
     return R @ b0 + kappa * b0
 
 
@@ -51,7 +59,7 @@ def formation_function(m: int, n: int, eps: float) -> ca.Function:
     n : int
         Coordinates per follower.
     eps : float
-        Fading threshold ε (``options.tau_threshold``).
+        Threshold ε (``options.tau_threshold``).
 
     Returns
     -------

@@ -56,7 +56,8 @@ def find_gauge(adjacency: np.ndarray | sp.spmatrix, pinning: np.ndarray) -> np.n
     The gauge satisfies h_i h_j = sign(a_ij) on every edge, treating edges as
     undirected (structural balance is a property of the underlying signed graph).
     In each weakly connected component the lowest-indexed pinned follower (or the
-    lowest-indexed follower if none is pinned) gets h = +1.
+    lowest-indexed follower if none is pinned) gets h = +1. Every pinned follower must
+    then have h = +1: the leader's camp is the one it pins.
 
     Parameters
     ----------
@@ -74,7 +75,8 @@ def find_gauge(adjacency: np.ndarray | sp.spmatrix, pinning: np.ndarray) -> np.n
     ------
     SynthesisError
         The graph is not structurally balanced; the message names one cycle with an
-        odd number of negative edges (1-based follower numbers).
+        odd number of negative edges (1-based follower numbers). Or two pinned
+        followers lie in opposite camps (both are named).
     """
     A = sp.csr_matrix(adjacency, dtype=float)
     N = A.shape[0]
@@ -123,7 +125,23 @@ def find_gauge(adjacency: np.ndarray | sp.spmatrix, pinning: np.ndarray) -> np.n
                         f"cycle {names} (edge directions ignored) has {nneg} negative edge(s), "
                         "an odd number; flip the sign of one of its edges or remove it"
                     )
+    _check_pinned_camp(h, pinned, parent)
     return h
+
+
+def _check_pinned_camp(h: np.ndarray, pinned: np.ndarray, parent: np.ndarray) -> None:
+    """Refuse pinned followers in the camp opposite to the leader's (they would track −y0)."""
+    bad = np.flatnonzero(pinned & (h < 0))
+    if bad.size:
+        i = ref = int(bad[0])
+        while parent[ref] >= 0:  # the BFS root of i's component: a pinned follower with h = +1
+            ref = int(parent[ref])
+        raise SynthesisError(
+            f"graph.pinning: followers {ref + 1} and {i + 1} are both pinned (a_i0 > 0) but "
+            f"lie in opposite camps of the signed graph (h_{ref + 1} = +1, h_{i + 1} = -1), so "
+            f"follower {i + 1} would be driven to -y0; pin followers of one camp only "
+            f"(set pinning[{i + 1}] = 0) or flip the signs of the edges between the camps"
+        )
 
 
 def _cycle(parent: np.ndarray, depth: np.ndarray, u: int, v: int) -> list[int]:

@@ -93,6 +93,7 @@ def random_graph(N, rng, *, signed=False):
     pin[rng.integers(0, N)] = 0.7
     if signed:
         h = rng.choice([-1.0, 1.0], N)
+        h[pin > 0] = 1.0  # pinned followers in the leader's camp (the opposite is refused)
         A = A * np.outer(h, h)  # structurally balanced by construction
     return A, pin
 

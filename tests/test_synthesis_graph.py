@@ -101,6 +101,7 @@ def test_gauge_found_for_structurally_balanced_graphs(graph, data):
     A, pin = graph
     N = len(pin)
     h = np.array(data.draw(st.lists(st.sampled_from([-1.0, 1.0]), min_size=N, max_size=N)))
+    h[pin > 0] = 1.0  # pinned followers in the leader's camp (the opposite is refused)
     As = np.diag(h) @ A @ np.diag(h)  # balanced by construction
     hf = find_gauge(As, pin)
     assert set(np.unique(hf)) <= {-1.0, 1.0}

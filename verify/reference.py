@@ -291,7 +291,11 @@ class Reference:
         return nr, nd, ndd
 
     def formation(self, d, dd, ddd):
-        """b_i, ḃ_i, b̈_i of the smoothed rotation (docs/closed-loop.md), chain rule by hand.
+        """b_i, ḃ_i, b̈_i of the formation rule (docs/closed-loop.md), chain rule by hand.
+
+        b_i = q(σ) D(d) b_i0 + κ(σ) b_i0 with σ = ‖d‖², D(d) = [[d1, −d2], [d2, d1]]:
+        q = σ^(−1/2) and κ = 0 for σ ≥ ε²; below, with w = 1 − σ/ε², q is the cubic
+        Taylor polynomial of σ^(−1/2) at ε² and κ = w⁴(5 − 4w).
 
         Parameters
         ----------
@@ -302,21 +306,27 @@ class Reference:
         if self.n != 2 or self.m < 2:
             z = np.zeros_like(b0)
             return b0.copy(), z, z
-        eps2 = self.opts.tau_threshold**2
+        eps = self.opts.tau_threshold
         d, dd, ddd = d[:, :2], dd[:, :2], ddd[:, :2]
-        g = np.sum(d * d, 1) + eps2
-        gd = 2 * np.sum(d * dd, 1)
-        gdd = 2 * (np.sum(dd * dd, 1) + np.sum(d * ddd, 1))
-        r = g**-0.5
-        rd = -0.5 * g**-1.5 * gd
-        rdd = 0.75 * g**-2.5 * gd**2 - 0.5 * g**-1.5 * gdd
-        c, s = d[:, 0] * r, d[:, 1] * r
-        cd, sd = dd[:, 0] * r + d[:, 0] * rd, dd[:, 1] * r + d[:, 1] * rd
-        cdd = ddd[:, 0] * r + 2 * dd[:, 0] * rd + d[:, 0] * rdd
-        sdd = ddd[:, 1] * r + 2 * dd[:, 1] * rd + d[:, 1] * rdd
-        k = eps2 / g
-        kd = -eps2 * gd / g**2
-        kdd = eps2 * (2 * gd**2 / g**3 - gdd / g**2)
+        sg = np.sum(d * d, 1)
+        sgd = 2 * np.sum(d * dd, 1)
+        sgdd = 2 * (np.sum(dd * dd, 1) + np.sum(d * ddd, 1))
+        inner = sg < eps**2
+        # dq/dσ, d²q/dσ² and dκ/dσ, d²κ/dσ² in each branch (w = 1 − σ/ε², dw/dσ = −1/ε²)
+        w = np.where(inner, 1 - sg / eps**2, 0.0)
+        so = np.where(inner, eps**2, sg)  # outer branch evaluated only where it is used
+        q = np.where(inner, (1 + w / 2 + 3 * w**2 / 8 + 5 * w**3 / 16) / eps, so**-0.5)
+        q1 = np.where(inner, -(0.5 + 0.75 * w + 15 * w**2 / 16) / eps**3, -0.5 * so**-1.5)
+        q2 = np.where(inner, (0.75 + 15 * w / 8) / eps**5, 0.75 * so**-2.5)
+        k = w**4 * (5 - 4 * w)
+        k1 = -(20 * w**3 - 20 * w**4) / eps**2
+        k2 = (60 * w**2 - 80 * w**3) / eps**4
+        qd, qdd = q1 * sgd, q2 * sgd**2 + q1 * sgdd
+        kd, kdd = k1 * sgd, k2 * sgd**2 + k1 * sgdd
+        c, s = d[:, 0] * q, d[:, 1] * q
+        cd, sd = dd[:, 0] * q + d[:, 0] * qd, dd[:, 1] * q + d[:, 1] * qd
+        cdd = ddd[:, 0] * q + 2 * dd[:, 0] * qd + d[:, 0] * qdd
+        sdd = ddd[:, 1] * q + 2 * dd[:, 1] * qd + d[:, 1] * qdd
 
         def rot(c, s, k):
             return np.stack(
