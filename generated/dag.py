@@ -35,7 +35,7 @@ import numpy as np
 
 from generated import native
 from generated.codegen import CodegenSettings, Library, build_library
-from generated.integrate import IntegratorSettings, Trajectory
+from generated.integrate import IntegratorSettings, Trajectory, schedule
 from symbolic.cascade import Cascade
 from symbolic.errors import IntegrationError
 
@@ -150,7 +150,8 @@ def run(
     settings : IntegratorSettings
         ``rtol``, ``atol`` and ``max_steps`` (between two output times).
     breakpoints : sequence of float
-        The run restarts exactly at these times.
+        The run restarts exactly at these times, reconciled with ``t_out`` by
+        :func:`generated.integrate.schedule`.
     progress : callable, optional
         Called once with the time reached.
 
@@ -168,17 +169,16 @@ def run(
     wall0 = time.perf_counter()
     lib = native.load(Path(library))
     x = _state(cas, x0)
-    t_out = np.ascontiguousarray(t_out, dtype=float)
+    sched = schedule(t_out, breakpoints)  # rows keep t_out; the driver runs to the targets
+    t_out, tq = sched.t_out, np.ascontiguousarray(sched.targets)
+    bps = np.ascontiguousarray(sched.breaks)
     nt = len(t_out)
-    bps = np.ascontiguousarray(
-        sorted(b for b in breakpoints if t_out[0] < b <= t_out[-1]), dtype=float
-    )
     X = np.full((nt, x.size), np.nan)
     stats = np.zeros(len(native.STATS))
     msg = ctypes.create_string_buffer(native.MSG_LEN)
     args, _keep = _problem(cas)
     filled = lib.hitl_dag_run(
-        *args, _dp(x), nt, _dp(t_out), len(bps), _dp(bps), float(settings.rtol),
+        *args, _dp(x), nt, _dp(tq), len(bps), _dp(bps), float(settings.rtol),
         float(settings.atol), int(settings.max_steps), _dp(X), _dp(stats), msg, native.MSG_LEN,
     )  # fmt: skip
     return native.driver_trajectory(

@@ -212,23 +212,137 @@ def output_grid(horizon: float, output_step: float) -> np.ndarray:
     return np.linspace(0.0, horizon, n + 1)
 
 
+#: two times closer than this many machine epsilons of the run's time scale are one instant
+TIME_ULPS = 1000
+
+
+def time_tolerance(t0: float, tf: float) -> float:
+    """The time resolution of a run over ``[t0, tf]``: ``TIME_ULPS · eps · max(1, |t0|, |tf|)``.
+
+    CVODE refuses an output time within ``2 eps |t|`` of the current time (``TOO_CLOSE``)
+    and takes a stop time within ``100 eps (|t| + |h|)`` as reached; 1000 eps of the
+    time scale lies above both and far below any output step (4.4e-12 s at 20 s).
+
+    Parameters
+    ----------
+    t0, tf : float
+        First and last output time.
+    """
+    return TIME_ULPS * float(np.finfo(float).eps) * max(1.0, abs(t0), abs(tf))
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """Where every integrator of a run stops: restarts and the time integrated to per row.
+
+    Made by :func:`schedule`, the one place that reconciles output times with breakpoints
+    (the CasADi methods here, and the native drivers, which receive ``targets`` and
+    ``breaks``). Every two distinct times among ``t0``, ``breaks`` and ``targets`` are
+    more than ``tol`` apart, so no integrator is asked for a time within ``tol`` of the
+    time it stands at.
+
+    Attributes
+    ----------
+    t_out : ndarray
+        The requested output times; the trajectory's rows keep exactly these.
+    targets : ndarray
+        The time integrated to for each row: ``t_out[k]``, or the breakpoint within
+        ``tol`` of it (the row then holds the state at that breakpoint, reached by the
+        segment that ends there; it differs from the state at ``t_out[k]`` by at most
+        ``tol · |ẋ|``).
+    breaks : ndarray
+        Restart times, strictly inside ``(t0 + tol, tf - tol)``, sorted, pairwise more
+        than ``tol`` apart.
+    tol : float
+        :func:`time_tolerance` of the run.
+    """
+
+    t_out: np.ndarray
+    targets: np.ndarray
+    breaks: np.ndarray
+    tol: float
+
+    def segments(self) -> list[tuple[float, float, list[int]]]:
+        """``(start, end, rows)`` per segment between restarts; ``rows``: the output rows
+        whose target lies in ``(start, end]`` (``end`` is a breakpoint or the horizon)."""
+        ends = [*self.breaks.tolist(), float(self.targets[-1])]
+        out, k, start = [], 1, float(self.targets[0])
+        for end in ends:
+            rows = []
+            while k < len(self.targets) and self.targets[k] <= end:
+                rows.append(k)
+                k += 1
+            out.append((start, end, rows))
+            start = end
+        return out
+
+
+def schedule(t_out: np.ndarray, breakpoints: Sequence[float] = ()) -> Schedule:
+    """Reconcile output times with breakpoints (restart times) to the run's time resolution.
+
+    A breakpoint within ``tol`` (:func:`time_tolerance`) of ``t0``, of the horizon or of
+    an earlier kept breakpoint is dropped (the run starts, stops or restarts there
+    already), as is one outside ``(t0, tf)``; an output time within ``tol`` of a kept
+    breakpoint is integrated to that breakpoint (:attr:`Schedule.targets`).
+
+    Parameters
+    ----------
+    t_out : ndarray
+        Output times, increasing by more than ``2 tol`` (the first is the start).
+    breakpoints : sequence of float
+        Known discontinuity times, any order.
+
+    Returns
+    -------
+    Schedule
+
+    Raises
+    ------
+    IntegrationError
+        If the output times are not finite, or two are within ``2 tol`` of each other.
+    """
+    t_out = np.asarray(t_out, dtype=float).ravel()
+    if t_out.size < 1 or not np.all(np.isfinite(t_out)):
+        raise IntegrationError("output times: need at least one, all finite")
+    t0, tf = float(t_out[0]), float(t_out[-1])
+    tol = time_tolerance(t0, tf)
+    if t_out.size > 1 and np.diff(t_out).min() <= 2.0 * tol:
+        raise IntegrationError(
+            f"output times must increase by more than {2.0 * tol:.3g} s (the time resolution); "
+            "choose a larger integration.output_step"
+        )
+    kept: list[float] = []
+    for b in sorted(float(b) for b in breakpoints if math.isfinite(b)):
+        if t0 + tol < b < tf - tol and (not kept or b - kept[-1] > tol):
+            kept.append(b)
+    breaks = np.array(kept, dtype=float)
+    targets = t_out.copy()
+    for k in range(1, t_out.size if breaks.size else 0):
+        i = int(np.searchsorted(breaks, t_out[k]))
+        near = min(
+            (breaks[c] for c in (i - 1, i) if 0 <= c < breaks.size),
+            key=lambda b, tk=t_out[k]: abs(b - tk),
+        )
+        if abs(near - t_out[k]) <= tol:
+            targets[k] = near
+    return Schedule(t_out=t_out, targets=targets, breaks=breaks, tol=tol)
+
+
 def _plan(t_out: np.ndarray, breakpoints: Sequence[float], chunk: float) -> list[list[tuple]]:
     """Chunks of targets ``(time, output index or -1)``; a new chunk starts at every breakpoint.
 
     Each chunk is one integrator call from the previous chunk's last target.
     """
-    t0, tf = float(t_out[0]), float(t_out[-1])
-    bps = sorted({float(b) for b in breakpoints if t0 < b < tf})
+    return _chunks(schedule(t_out, breakpoints), chunk)
+
+
+def _chunks(sched: Schedule, chunk: float) -> list[list[tuple]]:
+    """:func:`_plan` on a :class:`Schedule`: its segments cut into calls of <= ``chunk`` s."""
     chunks: list[list[tuple]] = []
-    idx = 1
-    start = t0
-    for b in [*bps, tf]:
-        seg: list[tuple] = []
-        while idx < len(t_out) and t_out[idx] <= b * (1 + 1e-14) + 1e-14:
-            seg.append((float(t_out[idx]), idx))
-            idx += 1
-        if not seg or abs(seg[-1][0] - b) > 1e-12 * max(1.0, abs(b)):
-            seg.append((b, -1))  # restart point that is not an output time
+    for start, end, rows in sched.segments():
+        seg = [(float(sched.targets[k]), k) for k in rows]
+        if not seg or seg[-1][0] != end:
+            seg.append((end, -1))  # restart point that is not an output time
         cur: list[tuple] = []
         for tgt in seg:
             if cur and tgt[0] - start > chunk * (1 + 1e-12):
@@ -237,7 +351,6 @@ def _plan(t_out: np.ndarray, breakpoints: Sequence[float], chunk: float) -> list
                 cur = []
             cur.append(tgt)
         chunks.append(cur)
-        start = b
     return chunks
 
 
@@ -517,7 +630,9 @@ def integrate(
     if Z is not None:
         Z[0] = z
     acc = dict.fromkeys([*_STAT_KEYS, "restarts", "integrator_calls", "refined_intervals"], 0)
-    chunks = _plan(t_out, breakpoints, s.chunk)
+    sched = schedule(t_out, breakpoints)
+    chunks = _chunks(sched, s.chunk)
+    restarts = set(sched.breaks.tolist())  # compared exactly: the targets are these times
     stepper = _Ros2(f, s, nx) if s.method == "fixed" else _Sundials(f, s, nz)
     t_cur = float(t_out[0])
     last_idx = 0
@@ -527,7 +642,7 @@ def integrate(
             acc["restarts"] += 1
         times = [c[0] for c in chunk]
         first_dae = s.method == "idas" and ci == 0
-        new_seg = ci == 0 or any(abs(t_cur - b) <= 1e-12 * max(1.0, abs(b)) for b in breakpoints)
+        new_seg = ci == 0 or t_cur in restarts
         try:
             if first_dae:  # t0 in the grid: row 0 gets the consistent z(t0) the solve started from
                 Xc, Zc = _run_chunk(stepper, s, t_cur, x, z, [t_cur, *times], acc)

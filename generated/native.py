@@ -38,7 +38,7 @@ import casadi as ca
 import numpy as np
 
 from generated.codegen import CodegenSettings, Library, Toolchain, build_library
-from generated.integrate import IntegratorSettings, Trajectory, flag_reason
+from generated.integrate import IntegratorSettings, Trajectory, flag_reason, schedule
 from generated.largescale import DIRECT_MAX_AGENTS
 from generated.sparse_lu import SparseLU, sparse_lu
 from symbolic.errors import BuildError, IntegrationError
@@ -267,7 +267,9 @@ def run(
         ``rtol``, ``atol`` and ``max_steps`` (steps allowed between two output times,
         as CVODES' ``max_num_steps``) are used.
     breakpoints : sequence of float
-        The run restarts exactly at these times (CVODE stops there, then re-initialises).
+        The run restarts exactly at these times (CVODE stops there, then re-initialises),
+        reconciled with ``t_out`` by :func:`generated.integrate.schedule`: an output time
+        within its tolerance of a breakpoint is integrated to the breakpoint.
     progress : callable, optional
         Called once with the time reached (the run is one C call).
 
@@ -279,12 +281,11 @@ def run(
     """
     wall0 = time.perf_counter()
     lib = load(Path(library))
-    t_out = np.ascontiguousarray(t_out, dtype=float)
+    sched = schedule(t_out, breakpoints)  # rows keep t_out; the driver runs to the targets
+    t_out, tq = sched.t_out, np.ascontiguousarray(sched.targets)
+    bps = np.ascontiguousarray(sched.breaks)
     x = np.ascontiguousarray(x0, dtype=float).ravel()
     nx, nt = x.size, len(t_out)
-    bps = np.ascontiguousarray(
-        sorted(b for b in breakpoints if t_out[0] < b <= t_out[-1]), dtype=float
-    )
     X = np.full((nt, nx), np.nan)
     stats = np.zeros(len(STATS))
     msg = ctypes.create_string_buffer(MSG_LEN)
@@ -293,7 +294,7 @@ def run(
         return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
     filled = lib.hitl_native_run(
-        nx, ptr(x), nt, ptr(t_out), len(bps), ptr(bps), float(settings.rtol),
+        nx, ptr(x), nt, ptr(tq), len(bps), ptr(bps), float(settings.rtol),
         float(settings.atol), int(settings.max_steps), ptr(X), ptr(stats), msg, MSG_LEN,
     )  # fmt: skip
     return driver_trajectory(

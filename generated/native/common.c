@@ -127,8 +127,12 @@ static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx) {
 
 /* From CVodeInit's state at t_out[0], integrate to every t_out[k] and store the state
    there (row-major x_out[k * nx + i]; CVODE's interpolant between its steps). CVODE
-   restarts (CVodeReInit) at every breakpoint strictly inside (t_out[0], t_out[nt-1]];
-   it stops exactly there and at the horizon (CVodeSetStopTime), never stepping beyond.
+   restarts (CVodeReInit) at every breakpoint; it stops exactly there and at the horizon
+   (CVodeSetStopTime), never stepping beyond. t_out and breaks are the targets and
+   restart times of generated.integrate.schedule: increasing, breaks strictly inside
+   (t_out[0], t_out[nt-1]), every two distinct times more than its tolerance apart, and
+   an output time that coincides with a breakpoint to that tolerance replaced by it, so
+   CVODE is never asked for a time it already stands at (CV_TOO_CLOSE).
    Returns the rows filled (>= 1); *flag is CVODE's last flag (< 0 on a failure). */
 static int hitl_cvode_outputs(hitl_cvode *s, int nx, int nt, const double *t_out, int nb,
                               const double *breaks, double *x_out, long *acc, double *stats,
@@ -139,7 +143,7 @@ static int hitl_cvode_outputs(hitl_cvode *s, int nx, int nt, const double *t_out
   while (ib < nb && breaks[ib] <= t) ib++;
   for (int k = 1; k < nt; ++k) {
     double tout = t_out[k];
-    for (;;) {
+    while (t < tout) {
       /* CVODE may step past output times (it interpolates there) but never past the
          next breakpoint or the horizon: the stop time */
       double stop = ib < nb ? breaks[ib] : t_out[nt - 1];
@@ -159,7 +163,6 @@ static int hitl_cvode_outputs(hitl_cvode *s, int nx, int nt, const double *t_out
           ib++;
         }
       }
-      if (t >= tout) break;
     }
     memcpy(x_out + (size_t)k * nx, N_VGetArrayPointer(s->y), (size_t)nx * sizeof(double));
     filled = k + 1;

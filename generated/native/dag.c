@@ -320,7 +320,8 @@ static void hitl_dag_free(hitl_dag *d, hitl_cvode *s) {
  * the state at every t_out[k] (row-major). order[N]: a topological order; up_ptr[N+1],
  * up_idx, up_w: CSR of the followers each one hears and the weights (L+B)_ij;
  * cpl[N*2], prm[N*npar] (agent-major), fidx[N*(1+n)]: the blocks' constant inputs;
- * breaks[nb]: restart times inside (t_out[0], t_out[nt-1]]. Returns the rows filled
+ * t_out, breaks[nb]: generated.integrate.schedule's targets and restart times
+ * (hitl_cvode_outputs). Returns the rows filled
  * (>= 1), or -1 if CVODE could not be set up; stats as the native driver's.
  */
 CASADI_SYMBOL_EXPORT int hitl_dag_run(int N, int m, int na, int n, const int *order,

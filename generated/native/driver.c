@@ -127,9 +127,9 @@ static int hitl_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, void *d
 /*
  * Integrate from x0 at t_out[0] and store the state at every t_out[k] (row-major
  * x_out[k * nx + i]; CVODE's interpolant between its steps, as CVODES through
- * CasADi). The run restarts (CVodeReInit) at every breakpoint strictly inside
- * (t_out[0], t_out[nt-1]]; it stops exactly there and at the horizon
- * (CVodeSetStopTime), never stepping beyond.
+ * CasADi). The run restarts (CVodeReInit) at every breakpoint; it stops exactly there
+ * and at the horizon (CVodeSetStopTime), never stepping beyond. t_out and breaks are
+ * generated.integrate.schedule's targets and restart times (hitl_cvode_outputs).
  * Returns the number of rows of x_out filled (>= 1), or -1 if CVODE could not be set
  * up; stats[HITL_FLAG] is CVODE's last flag (< 0 on a failure) and msg its name and
  * message.
