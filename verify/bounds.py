@@ -9,8 +9,13 @@ for the adaptive-law variants, docs/fidelity.md, D3:
   claim*;
 - with the σ-modification ĝ̇ = −γχᵀΨ − σ(ĝ − ĝ0) the same argument is valid with
   Ωv2 = min{…, σ} and χv2 + σ g (1/g − ĝ0)² / (2γ);
-- with projection of ĝ onto [1, 1/g_min] (and 1/g inside), the ĝ term of V2 is
-  bounded by its value at the farther end, W_g, and V̇2 ≤ −Ωv2 V2 + χv2 + Ωv2 W_g.
+- with projection of ĝ onto [1, 1/g_min] (and 1/g inside), ĝ stays in the interval
+  widened by the projection band, the ĝ term of V2 is bounded by its value at the
+  farther end of that widened interval, W_g, and V̇2 ≤ −Ωv2 V2 + χv2 + Ωv2 W_g;
+- with a boundary layer (``sign`` = tanh or sat) both variants add the layer's
+  term n (c_s ε)² / (2 k2), c_s = sup_x (|x| − x sgn_1(x)) (:func:`layer_constant`).
+
+The derivation is in docs/verification.md ("Provable variants").
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from symbolic.adaptive import BAND
 from symbolic.errors import ToolkitError
 from symbolic.models import build_model
 from symbolic.scenario import Scenario
@@ -85,6 +91,13 @@ class Theorem2Constants:
         paper's when ``provable`` is False.
     e_bar_var, edot_bar_var : ndarray
         Lemma 2 bounds from ``chi_bar_var``.
+    layer_term : float
+        Part of ``chi_v_var`` from the boundary layer, n (c_s ε)² / (2 k2) (0 with the
+        exact sign or when not provable).
+    ghat_term : float
+        Part of ``chi_v_var`` from ĝ: σ g (1/g − ĝ0)² / (2γ), or Ωv2 W_g with projection only.
+    why_not : str
+        Why the variant's bound does not follow ('' when ``provable``).
     """
 
     lam_min_M: float
@@ -101,6 +114,38 @@ class Theorem2Constants:
     chi_bar_var: float
     e_bar_var: np.ndarray
     edot_bar_var: np.ndarray
+    layer_term: float = 0.0
+    ghat_term: float = 0.0
+    why_not: str = ""
+
+
+def layer_constant(sign: str) -> float:
+    """c_s = sup_x (|x| − x sgn_1(x)): then |χ| − χ sgn_ε(χ) ≤ c_s ε for every χ.
+
+    ``exact``: 0. ``sat``: |x| − x² on |x| ≤ 1 (0 outside), largest at |x| = ½: c = ¼.
+    ``tanh``: h(x) = x (1 − tanh x) for x ≥ 0 (even), largest where
+    h'(x) = 1 − tanh x − x sech² x = 0 (x* ≈ 0.6392): c ≈ 0.27846.
+
+    Parameters
+    ----------
+    sign : {"exact", "sat", "tanh"}
+        ``options.sign``.
+    """
+    if sign == "exact":
+        return 0.0
+    if sign == "sat":
+        return 0.25
+    if sign != "tanh":
+        raise VerifyError(f"options.sign = {sign!r}: expected exact, sat or tanh")
+    lo, hi = 0.1, 3.0  # h' > 0 at 0.1 and < 0 at 3: bisection on the unique root
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if 1.0 - math.tanh(mid) - mid / math.cosh(mid) ** 2 > 0.0:
+            lo = mid
+        else:
+            hi = mid
+    x = 0.5 * (lo + hi)
+    return x * (1.0 - math.tanh(x))
 
 
 def chi_bar_from(chi_v: float, Omega: float, lam_min_M: float, delta: float) -> float:
@@ -253,19 +298,25 @@ def theorem2_constants(
     gamma = float(ctrl.gamma[agent])
     g_lo = float(fo.g.minimum)  # constant health: g itself
     gbar = 1.0 / g_lo
-    Om_v, chi_vv, provable = Omega, chi_v, False
+    # boundary layer: θ̂ᵀ(|χ| − χ∘sgn_ε χ) − ½k2‖θ̂‖² ≤ Σ_r (c_s ε|θ̂_r| − ½k2 θ̂_r²) ≤ n(c_s ε)²/(2k2)
+    cs_eps = layer_constant(scenario.options.sign) * scenario.options.sign_width
+    layer = scenario.n * cs_eps**2 / (2.0 * k2)
+    Om_v, gterm, why_not = Omega, 0.0, ""
+    if "projection" in law:
+        why_not = _projection_why_not(scenario, agent, gbar, law == "projection")
     if "sigma" in law:  # section 9.3: σ-modification adds decay in ĝ − 1/g
         sigma = float(ctrl.sigma[agent])
         ghat0 = float(ctrl.ghat_ref[agent])
         Om_v = min(Omega, sigma)
-        chi_vv = chi_v + sigma * g_lo * (gbar - ghat0) ** 2 / (2.0 * gamma)
-        provable = True
-    elif law == "projection":  # ĝ ∈ [1, 1/g_min]: the ĝ term of V2 is bounded
-        lo, hi = 1.0, 1.0 / ctrl.g_min
-        if lo <= gbar <= hi:
-            Wg = g_lo * max(gbar - lo, hi - gbar) ** 2 / (2.0 * gamma)
-            chi_vv = chi_v + Omega * Wg
-            provable = True
+        gterm = sigma * g_lo * (gbar - ghat0) ** 2 / (2.0 * gamma)
+    elif law == "projection" and not why_not:  # ĝ stays in the band-widened interval
+        band = BAND * (1.0 / ctrl.g_min - 1.0)
+        lo, hi = 1.0 - band, 1.0 / ctrl.g_min + band
+        gterm = Omega * g_lo * max(gbar - lo, hi - gbar) ** 2 / (2.0 * gamma)
+    elif law == "paper":
+        why_not = "no decay in ghat - 1/g (section 9.3)"
+    provable = not why_not
+    chi_vv = chi_v + gterm + layer if provable else chi_v
     chi_bar_v = chi_bar_from(chi_vv, Om_v, lmin, delta) if provable else chi_bar
     e_bar_v, edot_bar_v = _lemma2_pair(chi_bar_v, lam)
     return Theorem2Constants(
@@ -283,7 +334,29 @@ def theorem2_constants(
         chi_bar_var=chi_bar_v,
         e_bar_var=e_bar_v,
         edot_bar_var=edot_bar_v,
+        layer_term=layer if provable else 0.0,
+        ghat_term=gterm if provable else 0.0,
+        why_not=why_not,
     )
+
+
+def _projection_why_not(scenario: Scenario, agent: int, gbar: float, needs_start: bool) -> str:
+    """Why the projection's term (g/γ)(ĝ − 1/g)·(removed rate) could be positive ('' if not).
+
+    The removed part points outward only at the ends of [1, 1/g_min], so its term is
+    ≤ 0 when 1/g lies in that interval. Without σ the bound also needs ĝ(0) inside the
+    band-widened interval, which the projection then keeps ĝ in.
+    """
+    hi = 1.0 / scenario.controller.g_min
+    if hi - 1.0 <= 1e-12:
+        return "controller.g_min = 1 freezes ghat: the adaptive term does not cancel"
+    if not 1.0 <= gbar <= hi:
+        return f"1/g_{agent + 1} = {gbar:.4g} outside the projection interval [1, {hi:.4g}]"
+    band = BAND * (hi - 1.0)
+    g0 = float(scenario.initial.ghat[agent])
+    if needs_start and not 1.0 - band <= g0 <= hi + band:
+        return f"initial.ghat = {g0:.4g} outside [{1 - band:.4g}, {hi + band:.4g}]"
+    return ""
 
 
 def _lemma2_pair(chi_bar: float, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
