@@ -23,6 +23,7 @@ plus the overrides, so its gains, library and outputs never mix with the base ru
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import io
 import json
@@ -696,6 +697,173 @@ def csv_text(df: pd.DataFrame) -> str:
     return buf.getvalue()
 
 
+#: first line of a trajectory.csv whose run stopped early (readers skip ``#`` lines)
+INCOMPLETE_MARK = "# incomplete: "
+#: packages whose sources shape a trajectory (their hash is part of the reuse key)
+CODE_PACKAGES = ("symbolic", "synthesis", "generated")
+
+
+def trajectory_text(df: pd.DataFrame, traj: Trajectory) -> str:
+    """The ``trajectory.csv`` text: :func:`csv_text`, led by ``# incomplete: <reason>`` if partial.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        The frame (:func:`trajectory_frame`).
+    traj : Trajectory
+        Its ``complete``, ``t_reached`` and ``message`` mark a partial run in the file itself.
+    """
+    if traj.complete:
+        return csv_text(df)
+    why = " ".join(str(traj.message or "integrator stopped").split())
+    return f"{INCOMPLETE_MARK}t = {traj.t_reached!r}: {why}\n" + csv_text(df)
+
+
+def read_trajectory(data: bytes | str | Path) -> tuple[pd.DataFrame, str | None]:
+    """Parse ``trajectory.csv`` (bytes, text or a path): the frame and the incomplete reason.
+
+    Parameters
+    ----------
+    data : bytes, str or Path
+        The file's bytes or text, or its path.
+
+    Returns
+    -------
+    (DataFrame, str or None)
+        The reason is the text after ``# incomplete: `` (None for a complete run).
+    """
+    if isinstance(data, Path):
+        data = data.read_bytes()
+    text = data.decode("utf-8") if isinstance(data, bytes) else data
+    first = text.split("\n", 1)[0]
+    reason = first[len(INCOMPLETE_MARK) :] if first.startswith(INCOMPLETE_MARK) else None
+    return pd.read_csv(io.StringIO(text), comment="#"), reason
+
+
+def _data_rows(text: str) -> int:
+    """Rows of a trajectory text: non-empty lines that are neither comments nor the header."""
+    lines = [ln for ln in text.splitlines() if ln and not ln.startswith("#")]
+    return max(len(lines) - 1, 0)
+
+
+@functools.lru_cache(maxsize=1)
+def code_sha256() -> str:
+    """SHA-256 of the sources that shape a trajectory (git-independent).
+
+    Every ``*.py``, ``*.c`` and ``*.h`` file under :data:`CODE_PACKAGES` (not the
+    build cache), by relative path and content.
+    """
+    base = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for pkg in CODE_PACKAGES:
+        for f in sorted((base / pkg).rglob("*")):
+            if f.suffix in (".py", ".c", ".h") and "build" not in f.relative_to(base).parts:
+                h.update(f.relative_to(base).as_posix().encode() + b"\0")
+                h.update(hashlib.sha256(f.read_bytes()).digest())
+    return h.hexdigest()
+
+
+def _trace_sha256(sc: Scenario) -> str | None:
+    """SHA-256 of the operator trace the scenario loaded (``u0_csv``), None without one."""
+    tr = sc.leader.u0_trace
+    if tr is None:
+        return None
+    a = np.ascontiguousarray(np.asarray(tr, dtype=float))
+    return hashlib.sha256(repr(a.shape).encode() + a.tobytes()).hexdigest()
+
+
+def run_inputs(sc: Scenario, gains_sha256: str | None, method: str) -> dict[str, Any]:
+    """What shaped a run, except the compiled library: the reuse key's scenario-side part.
+
+    Parameters
+    ----------
+    sc : Scenario
+        Its hash (the TOML and any overrides) and the data of the files it names.
+    gains_sha256 : str or None
+        SHA-256 of the ``gains.json`` bytes used.
+    method : str
+        The integration method.
+    """
+    return {
+        "scenario_sha256": sc.sha256,
+        "u0_trace_sha256": _trace_sha256(sc),
+        "gains_sha256": gains_sha256,
+        "method": method,
+        "code_sha256": code_sha256(),
+        "casadi": ca.__version__,
+    }
+
+
+def library_hashes(built: Built) -> dict[str, str]:
+    """SHA-256 of every shared library a run executes (path -> hash).
+
+    Parameters
+    ----------
+    built : Built
+        The build (its library, and the graph-ordered one above N = 20).
+    """
+    libs = [built.library] + ([built.dag[0]] if built.dag is not None else [])
+    return {str(lib.path): sha256_file(lib.path) for lib in libs}
+
+
+def reuse_problem(folder: Path, sc: Scenario, method: str | None = None) -> tuple[str | None, Any]:
+    """Whether ``folder``'s trajectory.csv and meta.json may be reused for ``sc``.
+
+    They may only if meta.json records exactly today's inputs (:func:`run_inputs`
+    with the current ``gains.json``), every library it records still has its hash,
+    the run is complete, and trajectory.csv has the SHA-256 and row count meta.json
+    records (a kill between the two renames leaves a mismatched pair: not reused).
+
+    Parameters
+    ----------
+    folder : Path
+        ``out/<name>/``.
+    sc : Scenario
+        The scenario to be verified.
+    method : str, optional
+        Default: the scenario's.
+
+    Returns
+    -------
+    (str or None, (dict, bytes) or None)
+        The reason not to reuse (None to reuse), and meta.json with the CSV bytes.
+    """
+    meta_p, csv_p = folder / "meta.json", folder / "trajectory.csv"
+    if not (meta_p.is_file() and csv_p.is_file()):
+        return "no previous run", None
+    try:
+        meta = json.loads(meta_p.read_text())
+        data = csv_p.read_bytes()
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return "meta.json unreadable", None
+    if not isinstance(meta, dict) or not isinstance(meta.get("inputs"), dict):
+        return "meta.json records no inputs (older run)", None
+    gp = folder / "gains.json"
+    want = run_inputs(
+        sc, sha256_file(gp) if gp.is_file() else None, method or sc.integration.method
+    )
+    for k, v in want.items():
+        if meta["inputs"].get(k) != v:
+            return f"{k} changed since the run", None
+    libs = meta.get("libraries")
+    if not isinstance(libs, dict) or not libs:
+        return "meta.json records no library hash", None
+    for path, digest in libs.items():
+        if not Path(path).is_file() or sha256_file(path) != digest:
+            return f"library {path} is gone or changed", None
+    if not meta.get("complete", False):
+        return "the run is incomplete", None
+    if hashlib.sha256(data).hexdigest() != meta.get("trajectory_sha256"):
+        return "trajectory.csv is not the file meta.json describes (SHA-256 differs)", None
+    try:
+        rows = _data_rows(data.decode("utf-8"))
+    except UnicodeDecodeError:
+        return "trajectory.csv is not text", None
+    if rows != meta.get("rows") or data.startswith(INCOMPLETE_MARK.encode()):
+        return f"trajectory.csv has {rows} rows, meta.json records {meta.get('rows')}", None
+    return None, (meta, data)
+
+
 # --------------------------------------------------------------------------- progress
 class ProgressBar:
     """A one-line progress bar on stderr, shown only once a run has lasted more than a second.
@@ -820,7 +988,9 @@ def run(
     folder = root / sc.name
     folder.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    csv_path = atomic_write_text(folder / "trajectory.csv", csv_text(df))
+    text = trajectory_text(df, traj)
+    # trajectory.csv first, meta.json (which records its SHA-256) last: a reader checks the pair
+    csv_path = atomic_write_text(folder / "trajectory.csv", text)
     t_write = time.perf_counter() - t0
     st = traj.stats
     meta = {
@@ -846,6 +1016,9 @@ def run(
         "output_step": sc.integration.output_step,
         "breakpoints": breakpoints(built, sc),
         "rows": len(df),
+        "trajectory_sha256": hashlib.sha256(text.encode("utf-8")).hexdigest(),
+        "inputs": run_inputs(sc, ginfo.sha256, method),
+        "libraries": library_hashes(built),
         "complete": traj.complete,
         "t_reached": traj.t_reached,
         "message": traj.message,

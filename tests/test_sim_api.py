@@ -300,7 +300,7 @@ def test_failing_integration_writes_incomplete_trajectory_and_exits_2(env, capsy
     folder = out / "small-fail"
     meta = json.loads((folder / "meta.json").read_text())
     assert meta["complete"] is False and meta["message"] in err[0]
-    df = pd.read_csv(folder / "trajectory.csv")
+    df = pd.read_csv(folder / "trajectory.csv", comment="#")  # line 1: "# incomplete: ..."
     assert len(df) == meta["rows"] < 51 and df.t.iloc[-1] == meta["t_reached"]
     assert np.isfinite(df.to_numpy()).all()
     assert sorted(p.name for p in folder.iterdir()) == ["gains.json", "meta.json", "trajectory.csv"]

@@ -10,8 +10,8 @@ when ``trajectory.csv`` is reused, are read back from its state columns
 
 from __future__ import annotations
 
-import json
 import math
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -83,16 +83,19 @@ def states_from_frame(cl: Any, sc: Scenario, df: pd.DataFrame) -> np.ndarray:
 
 
 def _fresh(folder: Path, sc: Scenario) -> dict | None:
-    meta_p, csv_p = folder / "meta.json", folder / "trajectory.csv"
-    if not (meta_p.is_file() and csv_p.is_file()):
-        return None
-    try:
-        meta = json.loads(meta_p.read_text())
-    except (OSError, json.JSONDecodeError):
-        return None
-    if meta.get("scenario_sha256") != sc.sha256 or not meta.get("complete", False):
-        return None
-    return meta
+    """meta.json of ``folder`` if its run may be reused for ``sc`` (else None).
+
+    Parameters
+    ----------
+    folder : Path
+        ``out/<name>/``.
+    sc : Scenario
+        The scenario.
+    """
+    from generated import api
+
+    why, found = api.reuse_problem(folder, sc)
+    return None if why is not None else found[0]
 
 
 def obtain_run(
@@ -104,6 +107,11 @@ def obtain_run(
     progress: bool = True,
 ) -> Run:
     """Reuse ``out/<name>/trajectory.csv`` if fresh, else simulate (and synthesize) it.
+
+    Fresh means :func:`generated.api.reuse_problem` finds nothing: same scenario,
+    trace data, gains file, method, code, CasADi and library hashes, a complete run,
+    and a CSV with the SHA-256 and row count meta.json records. Otherwise the reason
+    is printed on stderr and the scenario is simulated again.
 
     Parameters
     ----------
@@ -128,10 +136,15 @@ def obtain_run(
     folder = root / sc.name
     # the derivative filters' states are not in trajectory.csv: such runs are always re-simulated
     reusable = not force and sc.options.derivatives != "filtered"
-    meta = _fresh(folder, sc) if reusable else None
-    if meta is not None:
-        df = pd.read_csv(folder / "trajectory.csv")
-        return Run(sc, df, None, meta, folder, simulated=False)
+    if reusable:
+        # reused only when every input matches and the CSV is the one meta.json describes
+        why, found = api.reuse_problem(folder, sc)
+        if why is None:
+            meta, data = found
+            df, _ = api.read_trajectory(data)  # the bytes whose SHA-256 was checked
+            return Run(sc, df, None, meta, folder, simulated=False)
+        if why != "no previous run":
+            print(f"{folder / 'trajectory.csv'}: not reused ({why}); simulating", file=sys.stderr)
     res = api.run(path, overrides=overrides, out_root=root, progress=progress)
     return Run(sc, res.frame, res.trajectory.x, res.meta, folder, simulated=True)
 
