@@ -400,3 +400,125 @@ def theorem1_rates(scenario: Scenario, gains) -> Theorem1Rates:  # noqa: ANN001 
     sup = min(gains.delta1 - gains.delta1_hat, a1, gains.delta2 - gains.delta2_hat)
     printed = min(gains.delta1, a1, gains.delta2)
     return Theorem1Rates(supported=float(sup), printed=float(printed), alpha1_tilde=a1)
+
+
+@dataclass(frozen=True)
+class Theorem1Floor:
+    """Theorem 1 with the φ floor: V̇1 ≤ −δ̃ V1 + c_φ (docs/verification.md, "Theorem 1 with
+    the φ floor").
+
+    Attributes
+    ----------
+    rate : float
+        δ̃ = min{δ1 − δ̂1, α̃1, δ2 − δ̂2} (the supported rate).
+    c_phi : float
+        2λ2 φ_min Σ_i l̄_ii z_i (α1i + ᾱ1i)/ᾱ1i (0 without a floor).
+    h : ndarray
+        The gauge h_i = ±1.
+    l_bar, z, alpha1_bar : ndarray
+        l̄_ii, z_i and ᾱ1i: the φ term of V1 is 2λ2 Σ_i l̄_ii z_i φ_i / ᾱ1i.
+    lambda2 : float
+        λ2 of eq. (9).
+    c0_gain : ndarray
+        κ_i with ‖C0 ē_ηi‖ ≤ κ_i sqrt(ε_ηᵀ(Z ⊗ T⁻¹)ε_η + k1 ẽ_ηᵀ(I ⊗ Ω)ẽ_η).
+    """
+
+    rate: float
+    c_phi: float
+    h: np.ndarray
+    l_bar: np.ndarray
+    z: np.ndarray
+    alpha1_bar: np.ndarray
+    lambda2: float
+    c0_gain: np.ndarray
+
+    def phi_term(self, phi: np.ndarray) -> np.ndarray:
+        """2λ2 Σ_i l̄_ii z_i φ_i / ᾱ1i (eq. (17)) for φ of shape (K, N); returns (K,).
+
+        Parameters
+        ----------
+        phi : ndarray
+            (K, N) values of φ_i.
+        """
+        return 2.0 * self.lambda2 * np.asarray(phi, float) @ (self.l_bar * self.z / self.alpha1_bar)
+
+    def v1_bound(self, V1_start: float, dt: np.ndarray) -> np.ndarray:
+        """Comparison lemma: V1(ts + dt) ≤ V1(ts) e^{−δ̃ dt} + (c_φ/δ̃)(1 − e^{−δ̃ dt}).
+
+        Parameters
+        ----------
+        V1_start : float
+            V1 at the start ts of the window.
+        dt : ndarray
+            Times since ts (≥ 0).
+        """
+        decay = np.exp(-self.rate * np.asarray(dt, float))
+        return V1_start * decay + self.c_phi / self.rate * (1.0 - decay)
+
+    def c0_error_bound(self, V1_bound: np.ndarray, phi: np.ndarray) -> np.ndarray:
+        """‖C0 ē_ηi‖ ≤ κ_i sqrt(V1 bound − φ term): (K, N) from V1 bounds (K,) and φ (K, N).
+
+        Parameters
+        ----------
+        V1_bound : ndarray
+            (K,) upper bounds of V1.
+        phi : ndarray
+            (K, N) φ_i at the same times.
+        """
+        rest = np.maximum(np.asarray(V1_bound, float) - self.phi_term(phi), 0.0)
+        return np.sqrt(rest)[:, None] * self.c0_gain[None, :]
+
+
+def theorem1_floor(scenario: Scenario, gains) -> Theorem1Floor:  # noqa: ANN001 (Gains)
+    """Constants of Theorem 1 with the φ floor (docs/verification.md derives them).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its observer (α1i, ᾱ1i, φ_min) and graph.
+    gains : synthesis.gains.Gains
+        T, Ω, Z, k1, λ2, the gauge and the rates.
+
+    Returns
+    -------
+    Theorem1Floor
+    """
+    from symbolic.network import graph_matrices
+
+    o = scenario.observer
+    gm = graph_matrices(scenario.graph, gains.h)
+    z = np.diag(np.atleast_2d(gains.Z)).astype(float)
+    a1 = np.broadcast_to(np.asarray(o.alpha1, float), (scenario.N,))
+    a1b = np.broadcast_to(np.asarray(o.alpha1_bar, float), (scenario.N,))
+    lam2 = float(gains.lambda2)
+    # φ̇_i = −(α1i + ᾱ1i)(φ_i − φ_min): the φ term's derivative exceeds the floor-free one by
+    # 2λ2 Σ l̄_ii z_i (α1i + ᾱ1i) φ_min / ᾱ1i
+    c_phi = 2.0 * lam2 * float(o.phi_min) * float(np.sum(gm.l_bar * z * (a1 + a1b) / a1b))
+    # C0 ē_ηi = Σ_j (L_B⁻¹)_ij C0 (h_j ε_ηj − ẽ_ηj); max over the ellipsoid of V1's quadratic part
+    C0 = np.atleast_2d(scenario.leader.C0)
+    CTC = C0 @ np.atleast_2d(gains.T) @ C0.T
+    COC = C0 @ np.linalg.inv(np.atleast_2d(gains.Omega)) @ C0.T
+    Li2 = np.linalg.inv(gm.L_B) ** 2
+    k1 = float(gains.k1)
+    kappa = np.array(
+        [
+            # G_i P⁻¹ G_iᵀ = Σ_j (L_B⁻¹)_ij² (C0 T C0ᵀ / z_j + C0 Ω⁻¹ C0ᵀ / k1), h_j² = 1
+            math.sqrt(
+                max(
+                    np.linalg.eigvalsh(np.sum(Li2[i] / z) * CTC + np.sum(Li2[i]) * COC / k1).max(),
+                    0.0,
+                )
+            )
+            for i in range(scenario.N)
+        ]
+    )
+    return Theorem1Floor(
+        rate=theorem1_rates(scenario, gains).supported,
+        c_phi=c_phi,
+        h=np.asarray(gm.h, float),
+        l_bar=np.asarray(gm.l_bar, float),
+        z=z,
+        alpha1_bar=np.asarray(a1b, float),
+        lambda2=lam2,
+        c0_gain=kappa,
+    )

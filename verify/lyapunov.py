@@ -5,7 +5,7 @@ V̇ = ∂V/∂x · f(t, x) + ∂V/∂t is built symbolically from the closed loo
 ``jacobian``); it is then evaluated at the stored states. No sampled data is
 ever differenced here (the test suite differences V only to cross-check).
 
-Theorem 1 (eq. (27)): V̇1 ≤ −δ̃ V1.
+Theorem 1 (eq. (27)): V̇1 ≤ −δ̃ V1; with the φ floor φ_min > 0, V̇1 ≤ −δ̃ V1 + c_φ.
 Theorem 2 (eqs. (36)–(38)): per follower,
 V̇2i ≤ −χᵀKχ − ½k2‖θ̂ − d‖² + ½k2‖d‖² (+ Σ_r θ̂_r(|χ_r| − χ_r sgn_ε(χ_r)) with a boundary
 layer; + the σ-modification's exact term −(gσ/γ)(ĝ − 1/g)(ĝ − ĝ0) when that law is on).
@@ -235,8 +235,13 @@ def check_theorem1(
     *,
     claim: str = "dV1/dt <= -delta V1",
     config: VerifyConfig | None = None,
+    offset: float = 0.0,
+    ode: ca.Function | None = None,
 ) -> InequalityCheck:
-    """V̇1 ≤ −δ̃ V1 (eq. (27)) at every sample, with V̇1 exact.
+    """V̇1 ≤ −δ̃ V1 + c (eq. (27) when c = 0) at every sample, with V̇1 exact.
+
+    With the φ floor the proof gives c = c_φ (:func:`verify.bounds.theorem1_floor`,
+    derivation in docs/verification.md).
 
     Parameters
     ----------
@@ -250,16 +255,20 @@ def check_theorem1(
     claim : str
         Label.
     config : VerifyConfig, optional
+    offset : float
+        c ≥ 0 added to the right side (the φ floor's constant c_φ).
+    ode : casadi.Function, optional
+        A different vector field (tests: a deliberately wrong observer).
 
     Returns
     -------
     InequalityCheck
     """
     cfg = config or VerifyConfig()
-    V, Vd = evaluate(lyapunov_derivative(cl, "V1"), t, X)
+    V, Vd = evaluate(lyapunov_derivative(cl, "V1", ode), t, X)
     V, Vd = V[:, 0, 0], Vd[:, 0, 0]
-    rhs = -rate * V  # eq. (27)
-    scale = np.abs(Vd) + np.abs(rhs) + 1e-300
+    rhs = -rate * V + offset  # eq. (27); + c_φ with the φ floor
+    scale = np.abs(Vd) + rate * np.abs(V) + abs(offset) + 1e-300
     return _make(claim, None, np.asarray(t, float), Vd, rhs, scale, cfg.rtol)
 
 

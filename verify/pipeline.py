@@ -21,7 +21,7 @@ import pandas as pd
 
 from symbolic.artifacts import OUT_ROOT
 from symbolic.scenario import Scenario
-from verify.bounds import VerifyConfig, VerifyError, theorem1_rates
+from verify.bounds import VerifyConfig, VerifyError, theorem1_floor, theorem1_rates
 from verify.lyapunov import check_theorem1, check_theorem2
 from verify.report import Verification, ablation_statement
 from verify.table import bounds_table
@@ -194,6 +194,10 @@ def verify_run(
             check_theorem1(cl, t, X, rates.printed, claim="dV1/dt <= -delta~ V1 (printed)",
                            config=cfg),
         ]  # fmt: skip
+        if sc.observer.phi_min > 0:  # the inequality the proof gives with the floor
+            fl = theorem1_floor(sc, gains)
+            claim = "dV1/dt <= -delta~ V1 + c_phi (floor)"
+            t1.append(check_theorem1(cl, t, X, fl.rate, offset=fl.c_phi, claim=claim, config=cfg))
         t2 = check_theorem2(cl, sc, t, X, config=cfg)
     else:
         notes.append("Lyapunov derivative checks skipped (--no-lyapunov)")

@@ -217,8 +217,12 @@ def bounds_table(
             agent=i,
         )
     certified = gains is None or bool(getattr(gains, "certificate", {}).get("passed", True))
-    for chk, label in zip(theorem1 or [], ("supported", "printed"), strict=False):
-        if floor or not certified:  # the proof needs φ → 0 and gains that pass the LMIs
+    for chk, label in zip(theorem1 or [], ("supported", "printed", "floor"), strict=False):
+        if not certified:  # the proof needs gains that pass the LMIs
+            kind = "info"
+        elif label == "floor":  # V̇1 ≤ −δ̃V1 + c_φ: the proof's inequality with φ_min > 0
+            kind = "guaranteed"
+        elif floor:  # the floor leaves c_φ > 0 on the right: V̇1 ≤ −δ̃V1 does not follow
             kind = "info"
         else:
             kind = "guaranteed" if label == "supported" else "paper"
@@ -227,12 +231,16 @@ def bounds_table(
             if not chk.ok
             else "holds at every output time"
         )
-        if floor:
+        if label == "floor":
+            note += "; supported rate, c_phi from the floor (docs/verification.md)"
+        elif floor:
             note += "; phi floor > 0 breaks the proof's last step (ultimately bounded)"
         if not certified:
             note += "; the gains' certificate does not pass"
         R.add(
-            f"T1 dV1/dt <= -delta~ V1, {label} rate (fraction of time)",
+            "T1 dV1/dt <= -delta~ V1 + c_phi, phi floor (fraction of time)"
+            if label == "floor"
+            else f"T1 dV1/dt <= -delta~ V1, {label} rate (fraction of time)",
             kind,
             1.0,
             chk.fraction,
@@ -245,7 +253,6 @@ def bounds_table(
     # ---------------- Theorem 2: controller
     guaranteed, why = theorem2_guaranteed(scenario)
     _consistency_rows(R, theorem2 or [], guaranteed, why, _win(t0, t1))
-    y0 = S.leader_output(df, scenario.leader.C0)
     for i in range(dm.N):
         c = theorem2_constants(scenario, i, cfg)
         lam = np.asarray(scenario.controller.Lambda[i], float)
@@ -264,12 +271,6 @@ def bounds_table(
         if c.provable:
             V2_0 = float(df[f"V2_{i + 1}"].iloc[0]) if S.has(df, f"V2_{i + 1}") else math.nan
             _provable_rows(R, c, t, float(t[tail][0]), chin, et, V2_0, i, guaranteed, cfg)
-        # Definition 1: stated with y0, not C0 η_i
-        b = S.block(df, "b", i + 1, dm.n)
-        p = S.block(df, "p", i + 1, dm.n)
-        dev = np.linalg.norm(p - y0 - b, axis=1)
-        R.add("Def. 1 limsup |p_i - y0 - b_i| <= chi_bar, paper", "paper", c.chi_bar,
-              dev[tail].max(), tw, "uses y0 (the leader's output), not C0 eta_i", agent=i)  # fmt: skip
         # Lemma 1's reaching time on V2 with the paper's constants
         if S.has(df, f"V2_{i + 1}"):
             V2 = df[f"V2_{i + 1}"].to_numpy(float)
@@ -280,6 +281,7 @@ def bounds_table(
                   tf, te, _win(t0, t1),
                   f"V2(0) = {V2[0]:.4g}, level {level:.4g}; " + paper_note, agent=i)  # fmt: skip
 
+    definition1_rows(R, scenario, df, gains=gains, config=cfg)
     _effort_rows(R, df, dm.N, dm.n)
     if ablation is not None:
         for i in range(dm.N):
@@ -459,6 +461,184 @@ def _fig13_rows(
         "bound = FTC, observed = ablation; ratio > 1: ablation worse",
         agent=i,
         larger_is_better=True,
+    )
+
+
+def gauge(scenario: Scenario, gains=None) -> np.ndarray:  # noqa: ANN001 (Gains)
+    """The gauge h_i = ±1 of the graph: the gains' H, else found from the signed adjacency.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its graph.
+    gains : Gains, optional
+        Synthesised gains (their H is the closed loop's convention).
+    """
+    if gains is not None:
+        return np.asarray(gains.h, float)
+    from synthesis.assumptions import find_gauge
+
+    A = np.asarray(scenario.graph.adjacency, float)
+    return np.asarray(find_gauge(A, np.asarray(scenario.graph.pinning, float)), float)
+
+
+def leader_formation(scenario: Scenario, df: pd.DataFrame, h: np.ndarray) -> np.ndarray:
+    """R(τ_i⁰) b_i0 with τ_i⁰ the angle of h_i η̇0, η̇0 = A0 η0 + B0 u0(t) (eq. (3)): (K, N, n).
+
+    The formation the paper defines (section 7), referenced to the leader's own state
+    rather than to the follower's estimate η̇_i. Where ‖(η̇0⁽¹⁾, η̇0⁽²⁾)‖ is below
+    ``options.tau_threshold`` the angle is undefined and the entries are NaN. Without a
+    planar rotation (n ≠ 2 or m < 2) b_i = b_i0, as in the closed loop.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Leader model, u0(t) and the b_i0.
+    df : DataFrame
+        Trajectory with the leader's state columns ``eta0_k``.
+    h : ndarray
+        The gauge.
+    """
+    t = df["t"].to_numpy(float)
+    L = scenario.leader
+    b0 = np.array([fo.b0 for fo in scenario.followers], float)  # (N, n)
+    if scenario.n != 2 or L.m < 2:
+        return np.broadcast_to(b0, (len(t), *b0.shape)).copy()
+    eta0 = df[[f"eta0_{k}" for k in range(1, L.m + 1)]].to_numpy(float)
+    d = eta0 @ np.asarray(L.A0, float).T + (np.asarray(L.B0, float) @ L.u0_numpy(t)).T  # eq. (3)
+    d = d[:, :2]
+    c, s = d[:, 0], d[:, 1]
+    nd = np.hypot(c, s)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c, s = c / nd, s / nd  # cos τ⁰, sin τ⁰
+    out = np.empty((len(t), scenario.N, 2))
+    for i in range(scenario.N):
+        sg = 1.0 if h[i] > 0 else -1.0  # angle of h_i η̇0: R(τ⁰ + π) = −R(τ⁰)
+        bx, by = b0[i]
+        out[:, i, 0] = sg * (c * bx - s * by)
+        out[:, i, 1] = sg * (s * bx + c * by)
+    out[nd < scenario.options.tau_threshold] = np.nan
+    return out
+
+
+def definition1_rows(
+    R: Rows,
+    scenario: Scenario,
+    df: pd.DataFrame,
+    *,
+    gains=None,  # noqa: ANN001 (synthesis.gains.Gains)
+    config: VerifyConfig | None = None,
+) -> None:
+    """Definition 1 with the gauge, its derived bound, and the leader-referenced formation.
+
+    Rows per follower: the paper's limsup ‖p_i − h_i y0 − b_i‖ ≤ χ̄_si (``paper``); the
+    derived pointwise bound ‖e_ti‖ ≤ B_e plus ‖C0 ē_ηi‖ ≤ B_η(t) (``guaranteed`` when
+    Theorem 2's provable variant applies and the gains are certified; docs/verification.md,
+    "Definition 1"); ‖p_i − h_i y0 − R(τ_i⁰) b_i0‖ on the tail (``info``).
+
+    Parameters
+    ----------
+    R : Rows
+        Rows to append to.
+    scenario : Scenario
+    df : DataFrame
+        The trajectory.
+    gains : Gains, optional
+        Needed for the derived bound (T, Z, Ω, k1, the gauge).
+    config : VerifyConfig, optional
+    """
+    from verify.bounds import theorem1_floor
+
+    cfg = config or VerifyConfig()
+    dm = S.dims(df)
+    t = df["t"].to_numpy(float)
+    tail = S.tail_mask(t, cfg.tail_fraction)
+    k0 = int(np.argmax(tail))
+    ts, tend = float(t[k0]), float(t[-1])
+    tw = _win(ts, tend)
+    h = gauge(scenario, gains)
+    y0 = S.leader_output(df, scenario.leader.C0)
+    t2_ok, why2 = theorem2_guaranteed(scenario)
+    certified = gains is not None and bool(gains.certificate.get("passed", True))
+    phi_cols = [f"phi{i + 1}" for i in range(dm.N)]
+    derivable = gains is not None and S.has(df, "V1") and all(S.has(df, c) for c in phi_cols)
+    fl = theorem1_floor(scenario, gains) if derivable else None
+    lead_b = leader_formation(scenario, df, h)
+    for i in range(dm.N):
+        c = theorem2_constants(scenario, i, cfg)
+        p, b = S.block(df, "p", i + 1, dm.n), S.block(df, "b", i + 1, dm.n)
+        dev = np.linalg.norm(p - h[i] * y0 - b, axis=1)  # Definition 1 with the gauge h_i
+        note = f"h_i = {h[i]:+g}; bound as printed (31)"
+        R.add(
+            "Def. 1 limsup |p_i - h_i y0 - b_i| <= chi_bar, paper",
+            "paper",
+            c.chi_bar,
+            dev[tail].max(),
+            tw,
+            note,
+            agent=i,
+        )
+        if fl is not None and c.provable:
+            _definition1_derived(R, df, fl, c, t, k0, dev, i, t2_ok and certified, why2, cfg)
+        fd = np.linalg.norm(p - h[i] * y0 - lead_b[:, i, :], axis=1)[tail]
+        fd = fd[np.isfinite(fd)]
+        if fd.size:
+            R.add(
+                "Formation |p_i - h_i y0 - R(tau_i^0) b_i0| (tail sup)",
+                "info",
+                c.chi_bar,
+                float(fd.max()),
+                tw,
+                "tau_i^0 = angle of h_i (A0 eta0 + B0 u0); bound = the paper's chi_bar "
+                "(no derived bound)",
+                agent=i,
+            )
+
+
+def _definition1_derived(
+    R: Rows,
+    df: pd.DataFrame,
+    fl,  # noqa: ANN001 (verify.bounds.Theorem1Floor)
+    c: Theorem2Constants,
+    t: np.ndarray,
+    k0: int,
+    dev: np.ndarray,
+    i: int,
+    ok: bool,
+    why: str,
+    cfg: VerifyConfig,
+) -> None:
+    """‖p_i − h_i y0 − b_i‖ ≤ ‖e_ti‖ + ‖C0 ē_ηi‖, each bounded by its theorem, pointwise."""
+    V2_0 = float(df[f"V2_{i + 1}"].iloc[0]) if S.has(df, f"V2_{i + 1}") else math.nan
+    tc = comparison_reaching_time(c.Omega_var, c.chi_v_var, V2_0, cfg.lemma1_delta)
+    win = t >= max(float(t[k0]), tc)
+    if not win.any():
+        return
+    et = S.block(df, "et", i + 1, c.e_bar_var.size)
+    ks = int(np.argmax(win))
+    # Theorem 2 provable variant from t_s: |e_r| ≤ max(χ̄/λ_r, |e_r(t_s)|) (as _provable_rows)
+    Be = float(np.linalg.norm(np.maximum(c.e_bar_var, np.abs(et[ks]))))
+    # Theorem 1 with the floor: comparison lemma for V1 from the tail start t[k0]
+    V1b = fl.v1_bound(float(df["V1"].iloc[k0]), t[win] - t[k0])
+    phi = df.loc[win, [f"phi{j + 1}" for j in range(fl.h.size)]].to_numpy(float)
+    Bn = fl.c0_error_bound(V1b, phi)[:, i]
+    bound = Be + Bn
+    ok = ok and math.isfinite(tc)
+    note = (
+        f"pointwise; |e_ti| <= {Be:.3g} (T2 provable) + |C0 ebar_eta_i| <= {float(Bn.max()):.3g}"
+        f" (T1 with the phi floor, V1 from t = {t[k0]:g} s)"
+    )
+    if not ok:
+        note += f"; not guaranteed: {why if math.isfinite(tc) else 'no comparison-lemma time'}"
+    R.add(
+        "Def. 1 |p_i - h_i y0 - b_i| <= derived bound (pointwise)",
+        "guaranteed" if ok else "info",
+        float(bound.max()),
+        float(dev[win].max()),
+        _win(float(t[ks]), float(t[-1])),
+        note,
+        agent=i,
+        holds=bool(np.all(dev[win] <= bound)),
     )
 
 
