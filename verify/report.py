@@ -11,7 +11,7 @@ import pandas as pd
 
 from symbolic.artifacts import atomic_write_text
 from symbolic.scenario import Scenario
-from verify.bounds import VerifyConfig, theorem1_rates, theorem2_constants
+from verify.bounds import VerifyConfig, theorem1_floor, theorem1_rates, theorem2_constants
 from verify.lyapunov import InequalityCheck, theorem2_guaranteed
 from verify.table import FIG13_LEVEL_FACTOR, STARTUP, failures, to_markdown
 
@@ -147,10 +147,10 @@ def findings(v: Verification) -> list[str]:
             f"- Theorem 2's printed bounds (31): observed/bound at most {worst:.3g} on the "
             f"tail; {verdict}."
         )
-    for chk, label in zip(v.theorem1, ("supported", "printed"), strict=False):
+    for chk, label in zip(v.theorem1, ("supported", "printed", "floor"), strict=False):
+        what = "+ c_phi (phi floor, supported rate)" if label == "floor" else f"({label} rate)"
         out.append(
-            f"- dV1/dt <= -delta~ V1 ({label} rate) holds at {100 * chk.fraction:.1f}% of "
-            "output times."
+            f"- dV1/dt <= -delta~ V1 {what} holds at {100 * chk.fraction:.1f}% of output times."
         )
     ebar = tb[tb["claim"].str.startswith("T1 |ebar_eta_i| -> 0")]
     if not ebar.empty:
@@ -273,6 +273,15 @@ def render_markdown(v: Verification, *, strict: bool = False) -> str:
             "bounded away from zero: the observer is only ultimately bounded and "
             "dV1/dt <= -delta~ V1 cannot hold once V1 reaches that level (see the rows above).",
         ]
+        if v.gains is not None:
+            fl = theorem1_floor(sc, v.gains)
+            L += [
+                "",
+                f"With the floor the proof gives dV1/dt <= -delta~ V1 + c_phi, c_phi = 2 lambda2 "
+                f"phi_min sum l_ii z_i (alpha1_i + alpha1bar_i)/alpha1bar_i = {fl.c_phi:.4g} "
+                f"(delta~ = {fl.rate:.4g}, limsup V1 <= c_phi/delta~ = {fl.c_phi / fl.rate:.4g}; "
+                "docs/verification.md). It is the guaranteed Theorem 1 row.",
+            ]
     L.append("")
 
     # Theorem 2
