@@ -42,7 +42,8 @@ def formation_offset(etadot: ca.SX, b0: ca.SX, eps: float) -> ca.SX:
     s = d1**2 + d2**2
     w = ca.fmax(1 - s / eps**2, 0)  # 0 outside the disc: both branches stay finite
     q_in = (1 + w / 2 + 3 * w**2 / 8 + 5 * w**3 / 16) / eps  # Taylor of 1/√s at s = ε²
-    q_out = 1 / ca.sqrt(ca.fmax(s, eps**2))
+    # floor below ε² so that fmax is never tied where this branch is used (AD of a tie halves)
+    q_out = 1 / ca.sqrt(ca.fmax(s, eps**2 / 4))
     q = ca.if_else(s < eps**2, q_in, q_out)
     kappa = w**4 * (5 - 4 * w)  # (1 − u)⁴(1 + 4u): 1 at d = 0, flat at u = 0 and u = 1
     R = ca.vertcat(ca.horzcat(d1 * q, -d2 * q), ca.horzcat(d2 * q, d1 * q))  # R(τ_i) for s ≥ ε²

@@ -15,7 +15,6 @@ from symbolic.adaptive import projection
 from symbolic.closed_loop import build_closed_loop
 from symbolic.derivatives import filter_function
 from symbolic.errors import ScenarioError, SynthesisError
-from symbolic.formation import formation_offset
 from symbolic.models import build_model
 from symbolic.network import graph_matrices
 from symbolic.scenario import Graph, load_scenario
@@ -304,30 +303,6 @@ def test_graph_matrices_use_the_synthesis_gauge():
     with pytest.raises(SynthesisError, match="balanced"):
         graph_matrices(Graph(adjacency=np.array([[0, 1, -1], [1, 0, 1], [-1, 1, 0]], dtype=float),
                              pinning=np.ones(3)))  # fmt: skip
-
-
-def test_formation_rule():
-    d, b0 = ca.SX.sym("d", 2), ca.SX.sym("b0", 2)
-    eps = 0.1
-    f = ca.Function("f", [d, b0], [formation_offset(d, b0, eps)])
-    rng = np.random.default_rng(5)
-    for _ in range(10):
-        v, bb = rng.normal(size=2) * 20, rng.normal(size=2)
-        tau = np.arctan2(v[1], v[0])
-        R = np.array([[np.cos(tau), -np.sin(tau)], [np.sin(tau), np.cos(tau)]])
-        r2 = v @ v
-        # the paper's rotation up to O(ε²/r²)
-        assert np.linalg.norm(
-            np.array(f(v, bb)).ravel() - R @ bb
-        ) <= 2 * eps**2 / r2 * np.linalg.norm(bb)
-    assert np.allclose(np.array(f([0, 0], [3, 4])).ravel(), [3, 4])  # faded to angle 0
-    J = ca.Function("J", [d, b0], [ca.jacobian(formation_offset(d, b0, eps), d)])
-    assert np.all(np.isfinite(np.array(J([0, 0], [3, 4]))))
-    # uniform rotation of η̇ rotates b uniformly: b(η̇ = 2(sin t, cos t)) = R(π/2 − t) b0
-    t = 0.7
-    want = np.array([[np.cos(np.pi / 2 - t), -np.sin(np.pi / 2 - t)], [np.sin(np.pi / 2 - t), np.cos(np.pi / 2 - t)]]) @ [1.0, 2.0]  # fmt: skip
-    got = np.array(f(2 * np.array([np.sin(t), np.cos(t)]), [1.0, 2.0])).ravel()
-    assert np.linalg.norm(got - want) < 2 * eps**2 / 4 * np.sqrt(5)
 
 
 def test_projection_keeps_ghat_in_bounds():
