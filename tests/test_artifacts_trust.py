@@ -212,7 +212,7 @@ def test_mismatched_pair_is_not_reused_and_is_resimulated(env, base_run, capsys)
         run = P.obtain_run(env["scenario"], out_root=env["out"], progress=False)
     finally:
         del os.environ["HITL_BUILD_DIR"]
-    assert run.simulated and "not reused" in capsys.readouterr().err
+    assert run.simulated and "not reused" in capsys.readouterr().out
     assert sha256_file(folder / "trajectory.csv") == run.meta["trajectory_sha256"]
     assert len(run.frame) == len(lines) - 1
 

@@ -11,7 +11,6 @@ when ``trajectory.csv`` is reused, are read back from its state columns
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -144,7 +143,7 @@ def obtain_run(
             df, _ = api.read_trajectory(data)  # the bytes whose SHA-256 was checked
             return Run(sc, df, None, meta, folder, simulated=False)
         if why != "no previous run":
-            print(f"{folder / 'trajectory.csv'}: not reused ({why}); simulating", file=sys.stderr)
+            print(f"{folder / 'trajectory.csv'}: not reused ({why}); simulating")
     res = api.run(path, overrides=overrides, out_root=root, progress=progress)
     return Run(sc, res.frame, res.trajectory.x, res.meta, folder, simulated=True)
 
