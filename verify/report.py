@@ -139,7 +139,7 @@ def findings(v: Verification) -> list[str]:
     if not paper_t2.empty:
         worst = paper_t2["ratio"].max()
         verdict = (
-            "they hold here although they do not follow as printed (section 9.3)"
+            "they hold here although they do not follow as printed (docs/fidelity.md, D3)"
             if paper_t2["holds"].all()
             else f"{int((~paper_t2['holds']).sum())} of {len(paper_t2)} are violated"
         )
