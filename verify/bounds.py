@@ -87,7 +87,7 @@ class Theorem2Constants:
     provable : bool
         Whether the variant's constants give a bound that follows (paper's law: no).
     Omega_var, chi_v_var, chi_bar_var : float
-        The constants with the variant's correction (section 9.3); equal to the
+        The constants with the variant's correction (docs/fidelity.md, D3); equal to the
         paper's when ``provable`` is False.
     e_bar_var, edot_bar_var : ndarray
         Lemma 2 bounds from ``chi_bar_var``.
@@ -304,7 +304,7 @@ def theorem2_constants(
     Om_v, gterm, why_not = Omega, 0.0, ""
     if "projection" in law:
         why_not = _projection_why_not(scenario, agent, gbar, law == "projection")
-    if "sigma" in law:  # section 9.3: σ-modification adds decay in ĝ − 1/g
+    if "sigma" in law:  # D3 (docs/fidelity.md): σ-modification adds decay in ĝ − 1/g
         sigma = float(ctrl.sigma[agent])
         ghat0 = float(ctrl.ghat_ref[agent])
         Om_v = min(Omega, sigma)
@@ -314,7 +314,7 @@ def theorem2_constants(
         lo, hi = 1.0 - band, 1.0 / ctrl.g_min + band
         gterm = Omega * g_lo * max(gbar - lo, hi - gbar) ** 2 / (2.0 * gamma)
     elif law == "paper":
-        why_not = "no decay in ghat - 1/g (section 9.3)"
+        why_not = "no decay in ghat - 1/g (docs/fidelity.md, D3)"
     provable = not why_not
     chi_vv = chi_v + gterm + layer if provable else chi_v
     chi_bar_v = chi_bar_from(chi_vv, Om_v, lmin, delta) if provable else chi_bar

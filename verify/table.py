@@ -260,7 +260,7 @@ def bounds_table(
         et = S.block(df, "et", i + 1, dm.n)
         etd = chi - et * lam  # ė_t = χ − Λ e_t, eq. (28)
         chin = np.linalg.norm(chi, axis=1)
-        paper_note = "Lemma 1 applied with no decay in ghat (section 9.3)"
+        paper_note = "Lemma 1 applied with no decay in ghat (docs/fidelity.md, D3)"
         R.add("T2 |chi_si| <= chi_bar_si (31), paper", "paper", c.chi_bar, chin[tail].max(), tw,
               paper_note, agent=i)  # fmt: skip
         for r in range(dm.n):
