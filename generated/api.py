@@ -62,14 +62,92 @@ def parse_override(text: str) -> tuple[str, Any]:
         ``KEY=VALUE`` as given to ``--set``.
     """
     if "=" not in text:
-        raise ScenarioError("--set", text, "is not KEY=VALUE", "e.g. options.ablation=true")
+        raise ScenarioError(
+            "--set", _brief_text(text), "is not KEY=VALUE", "e.g. options.ablation=true"
+        )
     key, _, val = text.partition("=")
     key, val = key.strip(), val.strip()
+    depth = _bracket_depth(val)
+    if depth > MAX_SET_DEPTH:
+        raise ScenarioError("--set", _brief_text(key), *_too_deep(depth))
     try:
         value = tomllib.loads(f"v = {val}")["v"]
     except tomllib.TOMLDecodeError:
         value = val
+    except ValueError:  # an integer beyond Python's int-from-text digit limit
+        raise ScenarioError("--set", _brief_text(key), *_too_long_int()) from None
+    except RecursionError:  # unreachable below MAX_SET_DEPTH; kept as the last guard
+        raise ScenarioError("--set", _brief_text(key), *_too_deep(depth)) from None
+    _check_value("--set", key, value)
     return key, value
+
+
+#: deepest nesting of arrays and inline tables a --set value may have (a scenario needs 3)
+MAX_SET_DEPTH = 16
+#: largest integer magnitude a value may have: TOML's own range (64-bit signed)
+MAX_SET_INT = 2**63 - 1
+#: longest variant label (the part after ``<name>-``); longer automatic labels are
+#: shortened to a readable prefix and a hash, so out/<name>/ stays a short path component
+MAX_VARIANT_CHARS = 60
+
+
+def _brief_text(text: str, limit: int = 60) -> str:
+    """``text`` cut to ``limit`` characters for an error message."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _too_deep(depth: int) -> tuple[str, str]:
+    return (
+        f"value is nested {depth} levels deep",
+        f"at most {MAX_SET_DEPTH} levels of [ ] and {{ }}",
+    )
+
+
+def _too_long_int() -> tuple[str, str]:
+    return (
+        "value has an integer beyond 64 bits",
+        f"integers of magnitude <= {MAX_SET_INT} (19 digits); write large numbers as floats, "
+        "e.g. 1e30",
+    )
+
+
+def _bracket_depth(text: str) -> int:
+    """Deepest nesting of ``[``/``{`` in a TOML value, outside quoted strings."""
+    depth = deepest = 0
+    quote, escaped = "", False
+    for c in text:
+        if quote:
+            if escaped:
+                escaped = False
+            elif c == "\\" and quote == '"':
+                escaped = True
+            elif c == quote:
+                quote = ""
+        elif c in "\"'":
+            quote = c
+        elif c in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif c in "]}":
+            depth -= 1
+    return deepest
+
+
+def _check_value(file: str, key: str, value: Any) -> None:
+    """Refuse a value nested deeper than :data:`MAX_SET_DEPTH` or with a huge integer.
+
+    Iterative, so that the check itself cannot exhaust the stack.
+    """
+    stack = [(value, 0)]
+    while stack:
+        v, depth = stack.pop()
+        if isinstance(v, dict | list | tuple):
+            if depth + 1 > MAX_SET_DEPTH:
+                raise ScenarioError(file, _brief_text(key), *_too_deep(depth + 1))
+            items = v.values() if isinstance(v, dict) else v
+            stack.extend((x, depth + 1) for x in items)
+        elif isinstance(v, int) and not isinstance(v, bool) and abs(v) > MAX_SET_INT:
+            raise ScenarioError(file, _brief_text(key), *_too_long_int())
 
 
 def _set_path(data: dict, file: str, key: str, value: Any) -> None:
@@ -101,11 +179,25 @@ def _set_path(data: dict, file: str, key: str, value: Any) -> None:
 
 
 def _variant_label(overrides: Mapping[str, Any]) -> str:
+    """Name suffix made from the overrides (``ablation``, ``method-fixed``).
+
+    A label longer than :data:`MAX_VARIANT_CHARS` keeps a readable prefix and ends in 12
+    hex digits of the SHA-256 of the overrides, so distinct overrides stay distinct.
+    """
     parts = []
     for k, v in overrides.items():
         leaf = re.sub(r"\[\d+\]", "", k.split(".")[-1])
         parts.append(leaf if v is True else f"{leaf}-{v}")
-    return re.sub(r"[^A-Za-z0-9_.-]+", "-", "-".join(parts)).strip("-") or "variant"
+    label = re.sub(r"[^A-Za-z0-9_.-]+", "-", "-".join(parts)).strip("-") or "variant"
+    if len(label) <= MAX_VARIANT_CHARS:
+        return label
+    digest = hashlib.sha256(_canonical(overrides).encode()).hexdigest()[:12]
+    return f"{label[: MAX_VARIANT_CHARS - 13].rstrip('-.')}-{digest}"
+
+
+def _canonical(overrides: Mapping[str, Any]) -> str:
+    """The overrides as canonical JSON (sorted keys): their identity in hashes."""
+    return json.dumps({k: overrides[k] for k in sorted(overrides)}, sort_keys=True, default=str)
 
 
 def load(
@@ -135,18 +227,26 @@ def load(
     sc = load_scenario(path)
     if not overrides:
         return sc
+    for k, v in overrides.items():  # programmatic overrides get the --set bounds too
+        _check_value(str(path), k, v)
+    if variant is not None and len(variant) > MAX_VARIANT_CHARS:
+        raise ScenarioError(
+            str(path),
+            "variant",
+            f"{_brief_text(variant)!r} has {len(variant)} characters",
+            f"at most {MAX_VARIANT_CHARS} (it names the folder out/<name>-<variant>/)",
+        )
     raw = Path(path).read_bytes()
     data = tomllib.loads(raw.decode("utf-8"))
     for k, v in overrides.items():
         _set_path(data, str(path), k, v)
-    canon = json.dumps({k: overrides[k] for k in sorted(overrides)}, sort_keys=True, default=str)
-    sha = hashlib.sha256((sc.sha256 + "\n" + canon).encode()).hexdigest()
+    sha = hashlib.sha256((sc.sha256 + "\n" + _canonical(overrides)).encode()).hexdigest()
     # the loader's own validation, on the modified table
     out = scenario_from_dict(data, path=path, sha256=sha)
     label = variant or _variant_label(overrides)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", label):
         raise ScenarioError(
-            str(path), "variant", f"{label!r} is not a plain name", "[A-Za-z0-9_.-]"
+            str(path), "variant", f"{_brief_text(label)!r} is not a plain name", "[A-Za-z0-9_.-]"
         )
     return dataclasses.replace(out, name=f"{sc.name}-{label}", sha256=sha)
 

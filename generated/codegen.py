@@ -423,7 +423,7 @@ def compile_source(
     """
     folder.mkdir(parents=True, exist_ok=True)
     src = folder / SOURCE_NAME
-    src.write_text(source)
+    artifacts.atomic_write_text(src, source)  # a failed write names the file
     tc = toolchain or Toolchain()
     cmd = [
         settings.compiler,
@@ -606,7 +606,8 @@ def build_library(
             "compile_seconds": t_compile,
         }
         # the manifest is written last: its presence marks a complete entry
-        (tmp / MANIFEST_NAME).write_text(json.dumps(info, indent=2, sort_keys=True, default=str))
+        text = json.dumps(info, indent=2, sort_keys=True, default=str)
+        artifacts.atomic_write_text(tmp / MANIFEST_NAME, text)
         _install(tmp, folder)
     finally:
         if tmp.exists() and tmp != folder:

@@ -8,6 +8,7 @@ line to stderr and exit with status 2 (see :func:`run_cli`).
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import sys
 from collections.abc import Callable
@@ -97,6 +98,10 @@ class CliParser(argparse.ArgumentParser):
 def run_cli(main: Callable[[list[str]], int], argv: list[str] | None = None) -> int:
     """Run a command-line ``main`` so that toolkit errors become one line and exit 2.
 
+    An :class:`OSError` (read-only or full disk, a name too long, ...) becomes one line
+    too (:func:`os_error_line`), exit 2: the boundary where every file-system failure of
+    a command ends, so the writers need no handlers of their own.
+
     Parameters
     ----------
     main : callable
@@ -109,9 +114,48 @@ def run_cli(main: Callable[[list[str]], int], argv: list[str] | None = None) -> 
     except ToolkitError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except OSError as exc:  # the file system refused: read-only, full, name too long, ...
+        print(f"error: {os_error_line(exc)}", file=sys.stderr)
+        return ToolkitError.exit_code
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
+
+
+#: where each artifact can be redirected (named in the fix of a failed write)
+_ELSEWHERE = (
+    "or write elsewhere: --out DIR or HITL_OUT for outputs, HITL_BUILD_DIR for the build cache"
+)
+
+
+def os_error_line(exc: OSError) -> str:
+    """One line for a file-system failure: the path, the reason and the fix.
+
+    Parameters
+    ----------
+    exc : OSError
+        Raised while reading or writing a file; ``exc.filename`` names it when known.
+
+    Returns
+    -------
+    str
+        E.g. ``cannot write out/paper/trajectory.csv: Read-only file system (make
+        out/paper writable, or write elsewhere: ...)``.
+    """
+    reason = exc.strerror or type(exc).__name__
+    if exc.filename is None:
+        return " ".join(f"{reason} (errno {exc.errno}); check the output folder and disk".split())
+    path = str(exc.filename)
+    folder = os.path.dirname(path.rstrip("/")) or "."
+    if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        msg = f"cannot write {path}: {reason} (make {folder} writable, {_ELSEWHERE})"
+    elif exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        msg = f"cannot write {path}: {reason} (free space on the disk of {folder}, {_ELSEWHERE})"
+    elif exc.errno == errno.ENAMETOOLONG:
+        msg = f"{path}: {reason} (a shorter scenario name or --variant NAME)"
+    else:
+        msg = f"{path}: {reason}"
+    return " ".join(msg.split())
 
 
 def strict_mode(flag: bool = False) -> bool:

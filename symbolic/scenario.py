@@ -11,7 +11,10 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import io
 import math
+import os
+import stat
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -21,7 +24,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from symbolic.errors import ExpressionError, ScenarioError
+from symbolic.errors import ExpressionError, ScenarioError, UsageError
 from symbolic.expressions import Expr, parse_expression
 from synthesis.assumptions import unreachable_followers
 
@@ -33,8 +36,16 @@ METHODS = ("cvodes", "native", "idas", "fixed")
 START_MODES = ("given", "formation")
 MAX_TABLE_ROWS = 1000  # rows of a piecewise g_i table
 MAX_TRACE_ROWS = 1_000_000  # rows of a CSV operator trace
-MAX_OUTPUT_ROWS = 1e7
-MAX_HORIZON = 1e6  # s; far beyond any study here, and keeps time arithmetic finite  # horizon / output_step: beyond this no trajectory file is sensible
+MAX_TRACE_BYTES = 64 * 2**20  # size of a CSV operator trace (read whole)
+MAX_SCENARIO_BYTES = 64 * 2**20  # size of a scenario file (read whole)
+MAX_HORIZON = 1e6  # s; far beyond any study here, and keeps time arithmetic finite
+#: peak memory per value of trajectory.csv while it is made (state table, outputs,
+#: DataFrame, CSV text): 84.5 B measured (2026-12-01, paper.toml at 2e4 and 2e5 rows,
+#: /usr/bin/time -v), rounded up for allocator slack
+OUTPUT_BYTES_PER_VALUE = 100
+#: default memory budget of the output stage, bytes; ``HITL_OUTPUT_BUDGET`` overrides it
+DEFAULT_OUTPUT_BUDGET = 4_000_000_000
+OUTPUT_BUDGET_ENV = "HITL_OUTPUT_BUDGET"
 
 
 # --------------------------------------------------------------------------- types
@@ -441,10 +452,14 @@ def load_scenario(path: str | Path) -> Scenario:
     path = Path(path)
     ctx = _Ctx(str(path))
     try:
-        raw = path.read_bytes()
+        raw = read_regular_file(path, MAX_SCENARIO_BYTES)
     except OSError as exc:
         raise ctx.err(
             "(file)", f"cannot be read: {exc.strerror}", "an existing TOML file"
+        ) from None
+    except FileRefused as exc:
+        raise ctx.err(
+            "(file)", str(exc), f"a regular TOML file of at most {MAX_SCENARIO_BYTES >> 20} MiB"
         ) from None
     try:
         data = tomllib.loads(raw.decode("utf-8"))
@@ -577,6 +592,8 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
         names = ", ".join(str(i + 1) for i in unreachable)
         raise ctx.err("graph", f"follower(s) {names} cannot be reached from the leader (Assumption 1)",
                       "a directed spanning tree rooted at the leader: add a pinning a_i0 > 0 or an edge a_ij != 0 from a reachable agent")  # fmt: skip
+
+    _check_output_size(ctx, integ, N, n, m)
 
     # ---- followers, eq. (2)
     F = data["followers"]
@@ -751,12 +768,6 @@ def _integration(ctx: _Ctx, raw: Any) -> Integration:
             f"{integ.output_step} exceeds the horizon {integ.horizon}",
             "output_step <= horizon",
         )
-    if integ.horizon / integ.output_step > MAX_OUTPUT_ROWS:
-        raise ctx.err(
-            "integration.output_step",
-            f"horizon / output_step = {integ.horizon / integ.output_step:.3g} output rows",
-            f"at most {MAX_OUTPUT_ROWS:.0e} rows (a larger output_step or a shorter horizon)",
-        )
     if integ.fixed_step > integ.horizon:
         raise ctx.err(
             "integration.fixed_step",
@@ -764,6 +775,71 @@ def _integration(ctx: _Ctx, raw: Any) -> Integration:
             "fixed_step <= horizon",
         )
     return integ
+
+
+def output_columns(N: int, n: int, m: int) -> int:
+    """Number of columns of ``trajectory.csv`` (``generated.api.column_names``).
+
+    Parameters
+    ----------
+    N, n, m : int
+        Followers, follower coordinates, leader states.
+    """
+    # t, eta0, then per follower p q eta mu phi thetahat ghat u b et eeta chi V2, then V1
+    return 2 + m + N * (7 * n + 3 * m + 3)
+
+
+def output_rows(horizon: float, output_step: float) -> int:
+    """Number of rows of ``trajectory.csv``: the times ``0, h, ..., horizon``.
+
+    Parameters
+    ----------
+    horizon, output_step : float
+        ``integration.horizon`` and ``integration.output_step`` (s).
+    """
+    return round(horizon / output_step) + 1  # as generated.integrate.output_grid
+
+
+def output_budget() -> int:
+    """Memory budget of the output stage in bytes: ``$HITL_OUTPUT_BUDGET`` or the default.
+
+    Returns
+    -------
+    int
+        :data:`DEFAULT_OUTPUT_BUDGET` when the variable is unset or empty.
+
+    Raises
+    ------
+    UsageError
+        If the variable is not a positive number of bytes.
+    """
+    raw = os.environ.get(OUTPUT_BUDGET_ENV, "").strip()
+    if not raw:
+        return DEFAULT_OUTPUT_BUDGET
+    try:
+        value = float(raw)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise UsageError(
+            f"{OUTPUT_BUDGET_ENV}={raw[:40]!r} is not a number of bytes (e.g. "
+            f"{OUTPUT_BUDGET_ENV}=8e9, or unset for {DEFAULT_OUTPUT_BUDGET:.0e})"
+        )
+    return int(value)
+
+
+def _check_output_size(ctx: _Ctx, integ: Integration, N: int, n: int, m: int) -> None:
+    """Refuse, before any work, a trajectory whose making would exceed the memory budget."""
+    rows, cols = output_rows(integ.horizon, integ.output_step), output_columns(N, n, m)
+    need, budget = rows * cols * OUTPUT_BYTES_PER_VALUE, output_budget()
+    if need > budget:
+        raise ctx.err(
+            "integration.output_step",
+            f"{rows} output rows x {cols} columns need about {need / 1e9:.3g} GB of memory to "
+            f"write trajectory.csv, above the budget of {budget / 1e9:.3g} GB",
+            f"at most {budget // (cols * OUTPUT_BYTES_PER_VALUE)} rows: a larger output_step, a "
+            f"shorter horizon, or a larger budget {OUTPUT_BUDGET_ENV}=<bytes>",
+        )
 
 
 def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Follower:
@@ -975,18 +1051,23 @@ def _load_trace(ctx: _Ctx, scen_path: Path, rel: Any, p: int, horizon: float) ->
         raise ctx.err(key, "is not a path", "a CSV path relative to the scenario file")
     try:
         fpath = (scen_path.parent / rel).resolve()
+        text = read_regular_file(fpath, MAX_TRACE_BYTES).decode("utf-8")
         rows: list[tuple[int, list[str]]] = []
-        with fpath.open(newline="", encoding="utf-8") as fh:
-            reader = csv.reader(fh)
-            for r in reader:
-                if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#"):
-                    rows.append((reader.line_num, r))
-                if len(rows) > MAX_TRACE_ROWS:
-                    raise ctx.err(
-                        key, f"{rel} has more than {MAX_TRACE_ROWS} rows", "a shorter trace"
-                    )
+        reader = csv.reader(io.StringIO(text, newline=""))
+        for r in reader:
+            if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#"):
+                rows.append((reader.line_num, r))
+            if len(rows) > MAX_TRACE_ROWS:
+                raise ctx.err(key, f"{rel} has more than {MAX_TRACE_ROWS} rows", "a shorter trace")
     except OSError as exc:
         raise ctx.err(key, f"cannot read {rel}: {exc.strerror}", "an existing CSV file") from None
+    except FileRefused as exc:
+        raise ctx.err(
+            key,
+            f"{rel} {exc}",
+            f"a regular CSV file of at most {MAX_TRACE_BYTES >> 20} MiB: copy a recorded "
+            "stream to a file first, or use a shorter or coarser trace",
+        ) from None
     except (UnicodeDecodeError, csv.Error, ValueError) as exc:  # binary file, NUL byte, bad path
         raise ctx.err(
             key, f"{rel} is not a readable CSV text file ({type(exc).__name__})", "UTF-8 CSV text"
@@ -1023,6 +1104,61 @@ def _load_trace(ctx: _Ctx, scen_path: Path, rel: Any, p: int, horizon: float) ->
             "a trace covering [0, integration.horizon] (or a shorter horizon)",
         )
     return _freeze(arr)
+
+
+class FileRefused(Exception):
+    """A path that is not a regular file of bounded size; the message says what it is."""
+
+
+_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a named pipe (FIFO)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def read_regular_file(path: str | Path, limit: int) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes, checked before reading.
+
+    The path is stat'ed before it is opened, so a FIFO (which would block), a device
+    such as ``/dev/zero`` (endless) or a directory is refused without being opened;
+    the open file is checked again and read no further than ``limit + 1`` bytes.
+
+    Parameters
+    ----------
+    path : str or Path
+        File to read (symbolic links are followed).
+    limit : int
+        Largest accepted size in bytes.
+
+    Raises
+    ------
+    FileRefused
+        Not a regular file, or larger than ``limit``.
+    OSError
+        The file cannot be opened or read.
+    """
+
+    def check(st: os.stat_result) -> None:
+        for is_kind, kind in _KINDS:
+            if is_kind(st.st_mode):
+                raise FileRefused(f"is {kind}, not a regular file")
+        if not stat.S_ISREG(st.st_mode):
+            raise FileRefused("is not a regular file")
+        if st.st_size > limit:
+            raise FileRefused(f"has {st.st_size} bytes, above the limit of {limit}")
+
+    check(os.stat(path))
+    # O_NONBLOCK: a file swapped for a FIFO after the stat cannot block the open
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    with os.fdopen(fd, "rb") as fh:
+        check(os.fstat(fd))
+        data = fh.read(limit + 1)
+    if len(data) > limit:  # grew after the stat
+        raise FileRefused(f"has more than {limit} bytes")
+    return data
 
 
 def _is_float(s: str) -> bool:
