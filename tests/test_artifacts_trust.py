@@ -256,8 +256,8 @@ def test_changed_operator_trace_is_not_reused(env, tmp_path):
 def test_incomplete_run_says_so_in_its_csv(env):
     out = env["root"] / "out-fail"
     with pytest.raises(Exception, match="failed"):
-        api.run(env["scenario"], overrides={"integration.max_steps": 3}, variant="fail",
-                codegen=env["cg"], out_root=out, progress=False)  # fmt: skip
+        over = {"integration.max_steps": 3}
+        api.run(env["scenario"], overrides=over, variant="fail", codegen=env["cg"], out_root=out)
     folder = out / "small-fail"
     meta = json.loads((folder / "meta.json").read_text())
     first = (folder / "trajectory.csv").read_text().splitlines()[0]
@@ -327,12 +327,15 @@ def test_swapped_library_gives_the_right_trajectory(env, base_run, tmp_path):
         Path(rb.meta["library"]["path"]).read_bytes()
     )
     out = tmp_path / "again"
+    argv = [PY, "-m", "generated", "sim", str(env["scenario"]), "--opt=-O0", "--out", str(out)]
     r = subprocess.run(
-        [PY, "-m", "generated", "sim", str(env["scenario"]), "--opt=-O0", "--out", str(out),
-         "--no-progress"],
-        capture_output=True, text=True, timeout=600, cwd=Path(__file__).resolve().parent.parent,
+        [*argv, "--no-progress"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=Path(__file__).resolve().parent.parent,
         env={**os.environ, "HITL_BUILD_DIR": env["cg"].build_root},
-    )  # fmt: skip
+    )
     assert r.returncode == 0, r.stderr
     assert "rebuilding" in r.stderr
     assert (out / "small" / "trajectory.csv").read_bytes() == base_run.csv_path.read_bytes()
