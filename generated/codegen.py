@@ -571,6 +571,8 @@ def build_library(
     key = cache_key(source, settings, tc.key)
     root = settings.root()
     folder = root / key
+    if root.is_dir():
+        remove_stale_builds(root)
     if folder.exists():
         why = entry_problem(folder, key)
         if why is None:
@@ -581,7 +583,6 @@ def build_library(
         # never dlopen'ed: a bad entry would crash (truncated) or silently compute another model
         print(f"build cache {folder}: {why}; rebuilding", file=sys.stderr)
     root.mkdir(parents=True, exist_ok=True)
-    remove_stale_builds(root)
     tmp = Path(tempfile.mkdtemp(dir=root, prefix=f"{TMP_PREFIX}{key[:12]}-{os.getpid()}-"))
     try:
         try:
