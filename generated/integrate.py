@@ -340,6 +340,8 @@ def _chunks(sched: Schedule, chunk: float) -> list[list[tuple]]:
     """:func:`_plan` on a :class:`Schedule`: its segments cut into calls of <= ``chunk`` s."""
     chunks: list[list[tuple]] = []
     for start, end, rows in sched.segments():
+        if end <= start:  # a single output time: nothing to integrate
+            continue
         seg = [(float(sched.targets[k]), k) for k in rows]
         if not seg or seg[-1][0] != end:
             seg.append((end, -1))  # restart point that is not an output time
