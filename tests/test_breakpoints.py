@@ -177,7 +177,7 @@ def _run_jump(jump, method: str, t_out: np.ndarray, b: float, bps: list[float]):
 )
 def test_jump_at_drawn_times_has_the_closed_form(jump, t_out, data, method):
     """A jump at an output time moved by a few ulps, or anywhere: every method reaches the
-    horizon, every row at its requested time, with the closed form to 1e-9.
+    horizon, every row at its requested time, with the closed form to 1e-8.
 
     The fixed step evaluates its first stage at a segment's start, so its jump is drawn
     among the restarts: one within tol after the start (or after another restart) is one
@@ -193,8 +193,10 @@ def test_jump_at_drawn_times_has_the_closed_form(jump, t_out, data, method):
     assert tr.complete, tr.message
     assert np.array_equal(tr.t, t_out)
     exact = np.where(t_out < b, t_out, b - 2.0 * (t_out - b))
-    # a row merged with a restart holds the state there: off by <= 2 tol (|y'| <= 2)
-    np.testing.assert_allclose(tr.x[:, 0], exact, rtol=0, atol=1e-9)
+    # a row merged with a restart holds the state there: off by <= 2 tol (|y'| <= 2); IDAS
+    # at rtol 1e-10 drifts by 1e-9 over 2 s (measured); a step on the wrong side of the
+    # jump is off by ~h·Δ (9.4e-4 for the fixed step before the schedule)
+    np.testing.assert_allclose(tr.x[:, 0], exact, rtol=0, atol=1e-8)
 
 
 @pytest.mark.parametrize("method", ["native", "cvodes", "idas", "fixed"])
