@@ -136,7 +136,9 @@ def test_bytes_per_value_bounds_the_measured_memory(tmp_path):
     values = (40001 - 20001) * 119
     per_value = (large - small) * 1024 / values
     assert per_value <= S.OUTPUT_BYTES_PER_VALUE
-    assert per_value >= 30  # the measurement sees the output stage at all
+    # the rows exist in memory at least once as float64: a measurement below 8 B per value
+    # did not see the output stage (allocator noise moves it between about 27 and 74 B here)
+    assert per_value >= 8
 
 
 # --------------------------------------------------------------------------- traces
