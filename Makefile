@@ -37,16 +37,17 @@ report: $(STAMP)
 	$(PY) -m verify report $(SCENARIO)
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check symbolic synthesis generated verify tests
-	$(VENV)/bin/ruff format --check symbolic synthesis generated verify tests
+	$(VENV)/bin/ruff check core synthesis symbolic generated verify benchmarks tests
+	$(VENV)/bin/ruff format --check core synthesis symbolic generated verify benchmarks tests
+	$(VENV)/bin/lint-imports
 
 test: lint
 	$(PY) -m pytest
 
 bench: $(STAMP)
-	$(PY) -m generated.bench
-	$(PY) -m generated.steps
-	$(PY) -m generated.precision
+	$(PY) -m benchmarks.bench
+	$(PY) -m benchmarks.steps
+	$(PY) -m benchmarks.precision
 
 clean:
 	rm -rf out generated/build .pytest_cache

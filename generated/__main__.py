@@ -9,8 +9,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from symbolic.errors import run_cli
-from symbolic.scenario import METHODS
+from core.errors import run_cli
+from core.scenario import METHODS
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -41,11 +41,11 @@ import casadi as ca
 import numpy as np
 import pandas as pd
 
+from core.artifacts import OUT_ROOT, atomic_write_text, sha256_file
+from core.errors import BuildError, IntegrationError, ScenarioError, SynthesisError
+from core.scenario import METHODS, Scenario, load_scenario, scenario_from_dict
 from generated.codegen import CodegenSettings, Library, build_library, check_dyn_signature, renamed
 from generated.integrate import IntegratorSettings, Trajectory, integrate, output_grid
-from symbolic.artifacts import OUT_ROOT, atomic_write_text, sha256_file
-from symbolic.errors import BuildError, IntegrationError, ScenarioError, SynthesisError
-from symbolic.scenario import METHODS, Scenario, load_scenario, scenario_from_dict
 
 ODE_NAME, DAE_NAME, OUT_NAME = "cl_ode", "cl_dae", "cl_out"
 
@@ -258,7 +258,7 @@ def with_method(sc: Scenario, method: str | None) -> Scenario:
     ----------
     sc : Scenario
     method : str or None
-        One of :data:`symbolic.scenario.METHODS`.
+        One of :data:`core.scenario.METHODS`.
 
     Raises
     ------

@@ -37,9 +37,9 @@ from typing import Any
 
 import casadi as ca
 
-from symbolic import artifacts
-from symbolic.artifacts import sha256_file
-from symbolic.errors import BuildError
+from core import artifacts
+from core.artifacts import sha256_file
+from core.errors import BuildError
 
 #: default cache root (gitignored); ``HITL_BUILD_DIR`` overrides it
 DEFAULT_BUILD_ROOT = Path(__file__).resolve().parent / "build"

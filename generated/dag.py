@@ -33,11 +33,11 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from core.errors import IntegrationError
 from generated import native
 from generated.codegen import CodegenSettings, Library, build_library
 from generated.integrate import IntegratorSettings, Trajectory, schedule
 from symbolic.cascade import Cascade
-from symbolic.errors import IntegrationError
 
 DRIVER = native.NATIVE_DIR / "dag.c"
 RHS_NAME, JAC_NAME, FAULTS_NAME = "dag_rhs", "dag_jac", "dag_faults"

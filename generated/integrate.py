@@ -48,8 +48,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from symbolic.errors import IntegrationError
-from symbolic.scenario import METHODS as SCENARIO_METHODS
+from core.errors import IntegrationError
+from core.scenario import METHODS as SCENARIO_METHODS
 
 #: the integration methods (``native`` runs in :mod:`generated.native`)
 METHODS = SCENARIO_METHODS

@@ -39,9 +39,9 @@ from typing import Any
 
 import casadi as ca
 
+from core.errors import BuildError
 from generated.codegen import JACOBIAN_CHOICES, CodegenSettings
 from generated.integrate import IntegratorSettings
-from symbolic.errors import BuildError
 
 #: above this many agents ``auto`` switches to the matrix-free plan. Measured
 #: (docs/performance.md): N = 5 direct 0.67 s vs gmres 1.16 s; N = 50 direct does not

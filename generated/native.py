@@ -37,11 +37,11 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from core.errors import BuildError, IntegrationError
 from generated.codegen import CodegenSettings, Library, Toolchain, build_library
 from generated.integrate import IntegratorSettings, Trajectory, flag_reason, schedule
 from generated.largescale import DIRECT_MAX_AGENTS
 from generated.sparse_lu import SparseLU, sparse_lu
-from symbolic.errors import BuildError, IntegrationError
 
 NATIVE_DIR = Path(__file__).resolve().parent / "native"
 INCLUDE_DIR = NATIVE_DIR / "include"

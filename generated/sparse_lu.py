@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from symbolic.errors import BuildError
+from core.errors import BuildError
 
 
 @dataclass(frozen=True)

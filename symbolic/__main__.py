@@ -1,13 +1,13 @@
 """``python -m symbolic summary SCENARIO``: load, validate, derive the models, print a summary.
 
-Bad input is one line on stderr and exit status 2 (:func:`symbolic.errors.run_cli`).
+Bad input is one line on stderr and exit status 2 (:func:`core.errors.run_cli`).
 """
 
 from __future__ import annotations
 
 import sys
 
-from symbolic.errors import CliParser, run_cli
+from core.errors import CliParser, run_cli
 
 
 def main(argv: list[str]) -> int:
@@ -24,8 +24,8 @@ def main(argv: list[str]) -> int:
     p.add_argument("scenario", help="path to a scenario TOML file")
     args = parser.parse_args(argv)
 
-    from symbolic.scenario import load_scenario
-    from symbolic.summary import summarize
+    from core.scenario import load_scenario
+    from core.summary import summarize
 
     sys.stdout.write(summarize(load_scenario(args.scenario)))
     return 0

@@ -30,6 +30,8 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from core.errors import ScenarioError
+from core.scenario import Scenario
 from symbolic.closed_loop import (
     StateLayout,
     _fault_function,
@@ -41,11 +43,9 @@ from symbolic.closed_loop import (
     make_layout,
 )
 from symbolic.derivatives import flow_jets
-from symbolic.errors import ScenarioError
 from symbolic.leader import leader_function
 from symbolic.network import graph_matrices
 from symbolic.observer import observer_function
-from symbolic.scenario import Scenario
 
 
 @dataclass(frozen=True)

@@ -26,16 +26,16 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from core.errors import ScenarioError, SynthesisError
+from core.models import build_model
+from core.scenario import Scenario
 from symbolic.adaptive import adaptive_function
 from symbolic.controller import controller_function
 from symbolic.derivatives import filter_function, filter_sizes, flow_jets
-from symbolic.errors import ScenarioError, SynthesisError
 from symbolic.formation import formation_function
 from symbolic.leader import leader_function
-from symbolic.models import build_model
 from symbolic.network import ASSEMBLIES, GraphMatrices, apply_agents, coupling, graph_matrices
 from symbolic.observer import ObserverGains, observer_function
-from symbolic.scenario import Scenario
 from symbolic.uio import uio_matrices
 
 AGENT_STATES = ("mu", "eta", "phi", "p", "q", "thetahat", "ghat", "w", "z")
@@ -468,7 +468,7 @@ def build_closed_loop(scenario: Scenario, gains: Any, *, assembly: str = "map") 
     Parameters
     ----------
     scenario : Scenario
-        A validated scenario (:func:`symbolic.scenario.load_scenario`).
+        A validated scenario (:func:`core.scenario.load_scenario`).
     gains : Gains
         Synthesised (or hand-made) gains (:class:`synthesis.gains.Gains`).
     assembly : {"map", "flat"}

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from symbolic.models.base import ELModel
+from core.models.base import ELModel
 
 
 def sign_function(x: ca.SX, mode: str, width: float) -> ca.SX:

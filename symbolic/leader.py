@@ -5,7 +5,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from symbolic.scenario import Leader
+from core.scenario import Leader
 
 
 def operator_input(leader: Leader, t: ca.SX) -> ca.SX:

@@ -18,9 +18,9 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from symbolic.errors import ScenarioError
-from symbolic.scenario import Graph
-from synthesis.assumptions import find_gauge, pinned_laplacian
+from core.errors import ScenarioError
+from core.graph import find_gauge, pinned_laplacian
+from core.scenario import Graph
 
 ASSEMBLIES = ("map", "flat")
 
@@ -82,7 +82,7 @@ def graph_matrices(graph: Graph, h: np.ndarray | None = None) -> GraphMatrices:
         The scenario's graph.
     h : ndarray, optional
         Gauge signs (e.g. ``gains.h``); computed with
-        :func:`synthesis.assumptions.find_gauge` (the gains' convention) when omitted.
+        :func:`core.graph.find_gauge` (the gains' convention) when omitted.
 
     Raises
     ------

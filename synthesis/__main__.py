@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from symbolic.errors import run_cli
+from core.errors import run_cli
 from synthesis.cli import main
 
 if __name__ == "__main__":

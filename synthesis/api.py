@@ -8,9 +8,10 @@ from typing import Any
 
 import numpy as np
 
-from symbolic.errors import SynthesisError
-from symbolic.scenario import Scenario
-from synthesis.assumptions import check_leader, check_network, uio_matrices
+from core.errors import SynthesisError
+from core.graph import check_network
+from core.scenario import Scenario
+from synthesis.assumptions import check_leader, uio_matrices
 from synthesis.certificate import certify, k1_bound
 from synthesis.gains import Gains
 from synthesis.lemma3 import lemma3
@@ -37,7 +38,7 @@ def synthesize(scenario: Scenario, *, strict: bool = False) -> Gains:
     Parameters
     ----------
     scenario : Scenario
-        A loaded scenario (``symbolic.scenario.load_scenario``).
+        A loaded scenario (``core.scenario.load_scenario``).
     strict : bool
         Turn warnings about given gains into a :class:`SynthesisError`.
 

@@ -18,11 +18,11 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from core.graph import m_matrix_violation
 from synthesis.assumptions import (
     ZERO_RTOL,
     _rank,
     invariant_zeros,
-    m_matrix_violation,
     uio_matrices,
     uio_zeros,
 )

@@ -1,7 +1,7 @@
 """Command line: ``synth SCENARIO [--strict] [--out FILE]`` and ``certify GAINS [--strict]``.
 
 Exit codes: 0 ok (warnings about given gains go to stderr), 2 on failure with one
-line on stderr (via :func:`symbolic.errors.run_cli`). ``STRICT=1`` in the
+line on stderr (via :func:`core.errors.run_cli`). ``STRICT=1`` in the
 environment has the effect of ``--strict``.
 """
 
@@ -10,9 +10,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from symbolic.artifacts import out_dir
-from symbolic.errors import CliParser, SynthesisError, strict_mode
-from symbolic.scenario import load_scenario
+from core.artifacts import out_dir
+from core.errors import CliParser, SynthesisError, strict_mode
+from core.scenario import load_scenario
 from synthesis.api import synthesize
 from synthesis.certificate import certify
 from synthesis.gains import load_gains, save_gains

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from symbolic.artifacts import atomic_write_text, sha256_bytes
-from symbolic.errors import SynthesisError
+from core.artifacts import atomic_write_text, sha256_bytes
+from core.errors import SynthesisError
 
 _MATRICES = ("A0", "B0", "C0", "Gamma", "Phi", "Theta", "Omega", "T", "Q", "L_bar", "H", "Z")
 
@@ -316,7 +316,7 @@ def scenario_mismatch(g: Gains, scenario: Any) -> str | None:
     scenario : Scenario
         The scenario.
     """
-    from synthesis.assumptions import check_network
+    from core.graph import check_network
 
     lead, obs = scenario.leader, scenario.observer
     want: dict[str, Any] = {"A0": lead.A0, "B0": lead.B0, "C0": lead.C0, "alpha": lead.alpha}

@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from symbolic.errors import SynthesisError
+from core.errors import SynthesisError
 
 BEST_Z_COND = 100.0  # Z ⪰ I, Z ⪯ BEST_Z_COND·I in the maximisation of w
 BEST_Z_MAX_N = 60  # dense SDP size limit for the best diagonal Z

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from symbolic.errors import SynthesisError
+from core.errors import SynthesisError
 
 # Solver tolerances set explicitly, and the strictness margin ε >= 10 × each of them.
 SOLVER_TOL = {"CLARABEL": 1e-8, "SCS": 1e-7}

@@ -27,11 +27,11 @@ import numpy as np
 import pytest
 from test_sim_api import SMALL
 
+from core.artifacts import atomic_write_text, sha256_file
+from core.errors import SynthesisError, run_cli
 from generated import api
 from generated.__main__ import main as sim_main
 from generated.codegen import CodegenSettings, build_library
-from symbolic.artifacts import atomic_write_text, sha256_file
-from symbolic.errors import SynthesisError, run_cli
 from verify import pipeline as P
 
 PY = sys.executable

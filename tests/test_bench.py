@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from generated.bench import BenchError, bench_scenario, main, random_graph
+from benchmarks.bench import BenchError, bench_scenario, main, random_graph
+from core.errors import ToolkitError
 from generated.codegen import CodegenSettings, build_library
 from generated.integrate import IntegratorSettings, integrate
 from generated.largescale import choose_plan
-from symbolic.errors import ToolkitError
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -142,7 +142,7 @@ def test_plan_settings_failure_is_reported_not_raised() -> None:
 # ----------------------------------------------------------------------------- command line
 def test_cli_bad_method_is_one_line_exit_2() -> None:
     proc = subprocess.run(
-        [sys.executable, "-m", "generated.bench", "--methods", "nope"],
+        [sys.executable, "-m", "benchmarks.bench", "--methods", "nope"],
         cwd=ROOT, capture_output=True, text=True, timeout=120, check=False,
     )  # fmt: skip
     assert proc.returncode == 2
@@ -157,7 +157,7 @@ def test_bad_sizes_raise_bench_error() -> None:
 def test_quick_smoke_run(tmp_path: Path) -> None:
     """``--quick`` end to end on a short horizon: two methods, table, CSV and plot."""
     proc = subprocess.run(
-        [sys.executable, "-m", "generated.bench", "--quick", "--horizon", "0.02",
+        [sys.executable, "-m", "benchmarks.bench", "--quick", "--horizon", "0.02",
          "--methods", "c-cvode-native,scipy-rk45", "--out", str(tmp_path)],
         cwd=ROOT, capture_output=True, text=True, timeout=600, check=False,
     )  # fmt: skip
@@ -192,8 +192,8 @@ def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None
     import dataclasses
     import os
 
+    from benchmarks.bench import OUTPUT_STEP, bench_gains
     from generated.api import build_from_closed_loop, integrator_settings, native_cascade, simulate
-    from generated.bench import OUTPUT_STEP, bench_gains
     from symbolic.closed_loop import build_closed_loop
 
     ours = np.load(folder / "cells" / "N5-c-cvode-native.npy")
@@ -235,7 +235,7 @@ def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None
 
 
 def test_finish_ratios_and_table_from_synthetic_records() -> None:
-    from generated.bench import finish, table
+    from benchmarks.bench import finish, table
 
     x = np.array([1.0, 100.0])
     recs = [
@@ -256,7 +256,7 @@ def test_finish_ratios_and_table_from_synthetic_records() -> None:
 
 def test_ours_is_what_make_sim_runs() -> None:
     """Native CVODE at every N: the whole loop up to N = 20, graph-ordered blocks above."""
-    from generated.bench import ours_method
+    from benchmarks.bench import ours_method
     from generated.largescale import DIRECT_MAX_AGENTS
 
     assert ours_method(5) == ours_method(DIRECT_MAX_AGENTS) == "c-cvode-native"
@@ -347,6 +347,6 @@ def test_api_auto_picks_the_large_n_plan_and_agrees_with_direct(tmp_path: Path) 
 
 def synthesize_gains(sc):
     """Gains of a benchmark scenario (synthesis, as the benchmark does)."""
-    from generated.bench import bench_gains
+    from benchmarks.bench import bench_gains
 
     return bench_gains(sc)[0]

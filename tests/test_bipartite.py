@@ -16,9 +16,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from core.errors import SynthesisError
+from core.graph import check_network, find_gauge
 from generated import api
-from symbolic.errors import SynthesisError
-from synthesis.assumptions import check_network, find_gauge
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = ROOT / "scenarios" / "bipartite.toml"

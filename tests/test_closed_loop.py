@@ -11,14 +11,14 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from core.errors import ScenarioError, SynthesisError
+from core.graph import find_gauge
+from core.models import build_model
+from core.scenario import Graph, load_scenario
 from symbolic.adaptive import projection
 from symbolic.closed_loop import build_closed_loop
 from symbolic.derivatives import filter_function
-from symbolic.errors import ScenarioError, SynthesisError
-from symbolic.models import build_model
 from symbolic.network import graph_matrices
-from symbolic.scenario import Graph, load_scenario
-from synthesis.assumptions import find_gauge
 from verify.reference import Reference, hand_gains
 
 PAPER = "scenarios/paper.toml"
@@ -192,7 +192,7 @@ def replicate(sc, N):
     """
     from dataclasses import replace
 
-    from symbolic.scenario import Graph
+    from core.scenario import Graph
 
     def rows(a):
         a = np.asarray(a)
@@ -293,7 +293,7 @@ def test_bad_assembly_is_a_toolkit_error():
 
 # ----------------------------------------------------------------------------- blocks
 def test_graph_matrices_use_the_synthesis_gauge():
-    # one gauge implementation (synthesis.assumptions.find_gauge): the pinned follower 3 gets +1
+    # one gauge implementation (core.graph.find_gauge): the pinned follower 3 gets +1
     A = np.array([[0, 1, -1], [1, 0, 0], [-1, 0, 0]], dtype=float)
     pin = np.array([0.0, 0.0, 1.0])
     gm = graph_matrices(Graph(adjacency=A, pinning=pin))
@@ -478,7 +478,7 @@ def test_gains_json_round_trip_and_mismatch(tmp_path):
     """Gains read back from gains.json build the same loop; gains for another leader are refused."""
     from dataclasses import replace
 
-    from symbolic.errors import SynthesisError
+    from core.errors import SynthesisError
     from synthesis.gains import load_gains, save_gains
 
     sc = load_scenario(PAPER)

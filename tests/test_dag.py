@@ -14,13 +14,13 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from benchmarks.bench import bench_gains, bench_scenario
+from core.errors import IntegrationError, ScenarioError
 from generated import api, dag
-from generated.bench import bench_gains, bench_scenario
 from generated.codegen import CodegenSettings
 from generated.integrate import IntegratorSettings, output_grid
 from symbolic.cascade import build_cascade, topological_order
 from symbolic.closed_loop import build_closed_loop
-from symbolic.errors import IntegrationError, ScenarioError
 
 N = 6  # random acyclic benchmark graph: depth 3, pinned and unpinned followers
 

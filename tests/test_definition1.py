@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from symbolic.scenario import Graph, load_scenario
+from core.scenario import Graph, load_scenario
 from verify.bounds import theorem1_floor
 from verify.table import Rows, definition1_rows, leader_formation
 

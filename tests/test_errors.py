@@ -2,7 +2,7 @@
 
 import pytest
 
-from symbolic.errors import ScenarioError, UsageError, strict_mode
+from core.errors import ScenarioError, UsageError, strict_mode
 
 
 @pytest.mark.parametrize("value", ["1", "true", "YES", "on"])
@@ -34,7 +34,7 @@ def test_atomic_write_has_ordinary_permissions(tmp_path):
     import os
     import stat
 
-    from symbolic.artifacts import atomic_write_text
+    from core.artifacts import atomic_write_text
 
     mask = os.umask(0o022)
     os.umask(mask)

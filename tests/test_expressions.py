@@ -1,4 +1,4 @@
-"""The whitelist expression parser (symbolic/expressions.py)."""
+"""The whitelist expression parser (core/expressions.py)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from symbolic.errors import ExpressionError, ToolkitError
-from symbolic.expressions import FUNCTIONS, parse_expression
+from core.errors import ExpressionError, ToolkitError
+from core.expressions import FUNCTIONS, parse_expression
 
 WHERE = "scn.toml: followers[2].f[0]"
 

@@ -6,6 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from core.errors import BuildError
 from generated.codegen import (
     CodegenSettings,
     build_library,
@@ -13,7 +14,6 @@ from generated.codegen import (
     compile_source,
     renamed,
 )
-from symbolic.errors import BuildError
 
 
 def dyn(name: str, c: float = 0.3) -> ca.Function:

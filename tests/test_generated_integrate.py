@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
+from core.errors import IntegrationError
 from generated.codegen import CodegenSettings, build_library
 from generated.integrate import IntegratorSettings, _plan, integrate, output_grid
-from symbolic.errors import IntegrationError
 
 E = ca.SX(0, 1)
 

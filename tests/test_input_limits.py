@@ -18,10 +18,10 @@ from pathlib import Path
 
 import pytest
 
+from core import scenario as S
+from core.errors import ScenarioError, UsageError, os_error_line, run_cli
 from generated import api
 from generated.__main__ import main as sim_main
-from symbolic import scenario as S
-from symbolic.errors import ScenarioError, UsageError, os_error_line, run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "scenarios" / "paper.toml"
@@ -94,7 +94,7 @@ def _peak_rss_kib(out: Path, output_step: float) -> int:
     """Peak resident memory (KiB) of ``python -m generated sim paper.toml`` in a fresh process."""
     code = (
         "import resource, sys\n"
-        "from symbolic.errors import run_cli\n"
+        "from core.errors import run_cli\n"
         "from generated.__main__ import main\n"
         "rc = run_cli(main, sys.argv[1:])\n"
         "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from symbolic.errors import ScenarioError
-from symbolic.models import REGISTRY, ModelSpec, build_model, register
-from symbolic.models.derive import check_properties, euler_lagrange_matrices
+from core.errors import ScenarioError
+from core.models import REGISTRY, ModelSpec, build_model, register
+from core.models.derive import check_properties, euler_lagrange_matrices
 
 PAPER = {"m1": 0.5, "m2": 1.5, "r1": 1.0, "r2": 0.8, "J1": 5.0, "J2": 5.0, "g0": 9.81}
 

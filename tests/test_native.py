@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
+from core.errors import BuildError, IntegrationError
 from generated import native
 from generated.codegen import CodegenSettings, cache_key
 from generated.integrate import IntegratorSettings, output_grid
 from generated.sparse_lu import sparse_lu
-from symbolic.errors import BuildError, IntegrationError
 
 E = ca.SX(0, 1)
 

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import ExpressionError, ScenarioError, ToolkitError, run_cli
+from core.scenario import load_scenario
 from symbolic.__main__ import main
-from symbolic.errors import ExpressionError, ScenarioError, ToolkitError, run_cli
-from symbolic.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "scenarios" / "paper.toml"
@@ -452,7 +452,7 @@ def test_summary_lists_the_scenario_facts(capsys):
 def test_summary_names_the_follower_whose_model_fails_property_1(tmp_path, capsys):
     import sympy as sp
 
-    from symbolic.models import REGISTRY, ModelSpec, register
+    from core.models import REGISTRY, ModelSpec, register
 
     def lag(prm):  # M = k - 1: positive definite only for k > 1
         x, v = sp.symbols("x v", real=True)

@@ -17,8 +17,8 @@ from typing import Any
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from symbolic.errors import ToolkitError
-from symbolic.scenario import Scenario, load_scenario
+from core.errors import ToolkitError
+from core.scenario import Scenario, load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_TEXT = (ROOT / "scenarios" / "paper.toml").read_text()

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
+from core.scenario import load_scenario
 from generated import api
 from generated.codegen import CodegenSettings
-from symbolic.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted([*ROOT.glob("scenarios/*.toml"), *ROOT.glob("studies/*.toml")])

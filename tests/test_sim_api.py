@@ -17,10 +17,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from core.errors import BuildError, IntegrationError, ScenarioError, run_cli
 from generated import api
 from generated.__main__ import main as cli_main
 from generated.codegen import CodegenSettings
-from symbolic.errors import BuildError, IntegrationError, ScenarioError, run_cli
 
 SMALL = """
 name = "small"
@@ -310,7 +310,7 @@ def test_native_agrees_with_cvodes_and_runs_from_the_cli(base, env, capsys, tigh
 
 def test_precision_table_against_the_reference(env):
     """Errors shrink with the tolerance; the reference agrees with CVODES at its tolerance."""
-    from generated.precision import precision_table, state_label
+    from benchmarks.precision import precision_table, state_label
 
     sc = api.load(env["scenario"])
     df, unc = precision_table(sc, ("cvodes", "native"), (1e-5, 1e-8), 1e-11,

@@ -1,4 +1,4 @@
-"""The step-count diagnostics (generated/steps.py).
+"""The step-count diagnostics (benchmarks/steps.py).
 
 The small two-follower scenario of test_sim_api (0.5 s, a fault at 0.3 s) compiled
 with -O0 into a temporary build root keeps this fast.
@@ -12,9 +12,7 @@ import numpy as np
 import pytest
 from test_sim_api import SMALL
 
-from generated import api
-from generated.codegen import CodegenSettings
-from generated.steps import (
+from benchmarks.steps import (
     default_edges,
     knob_sensitivity,
     main,
@@ -23,8 +21,10 @@ from generated.steps import (
     u0_sign_change_times,
     windows_frame,
 )
-from symbolic.errors import IntegrationError, UsageError, run_cli
-from symbolic.scenario import load_scenario
+from core.errors import IntegrationError, UsageError, run_cli
+from core.scenario import load_scenario
+from generated import api
+from generated.codegen import CodegenSettings
 
 PAPER = "scenarios/paper.toml"
 

@@ -9,12 +9,12 @@ import cvxpy as cp
 import numpy as np
 import pytest
 
-from symbolic.errors import SynthesisError
-from symbolic.scenario import Graph, load_scenario
+from core.errors import SynthesisError
+from core.graph import check_network
+from core.scenario import Graph, load_scenario
 from synthesis import certify, synthesize
 from synthesis.assumptions import (
     check_leader,
-    check_network,
     control_zeros,
     invariant_zeros,
     system_pencil,

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from symbolic.errors import run_cli
+from core.errors import run_cli
 from synthesis.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,10 +11,10 @@ import scipy.linalg as sla
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from symbolic.errors import SynthesisError
-from symbolic.scenario import Graph, load_scenario
+from core.errors import SynthesisError
+from core.graph import check_network, find_gauge
+from core.scenario import Graph, load_scenario
 from synthesis import certify, synthesize
-from synthesis.assumptions import check_network, find_gauge
 from synthesis.lemma3 import best_diagonal_z, lemma3, lemma3_z, w_of
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -14,8 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from core.scenario import load_scenario
 from generated.api import load
-from symbolic.scenario import load_scenario
 from verify import signals as S
 from verify.bounds import (
     VerifyConfig,

@@ -81,7 +81,7 @@ def test_theorem2_inequality_holds_for_the_reconstructed_law(loop):
 
 def _printed_law_ode(sc, cl):
     """The same closed loop with the printed adaptive law ĝ̇ = −χᵀ M(p) Ψ (section 9.4)."""
-    from symbolic.models import build_model
+    from core.models import build_model
 
     t, x = ca.MX.sym("t"), ca.MX.sym("x", cl.layout.nx)
     xdot = cl.ode(t, x)

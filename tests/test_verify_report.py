@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from symbolic.errors import run_cli
-from symbolic.scenario import load_scenario
+from core.errors import run_cli
+from core.scenario import load_scenario
 from verify import figures as F
 from verify.__main__ import main
 from verify.report import Verification, ablation_statement, render_markdown, write_report
@@ -119,7 +119,7 @@ def test_cli_bad_delta_is_one_line_exit_2(capsys):
     "argv", [["frobnicate"], ["check", str(PAPER), "--tail", "half"], ["check", "--nope"]]
 )
 def test_cli_bad_arguments_are_one_line_exit_2(capsys, argv):
-    # argparse errors go through symbolic.errors.CliParser: no usage dump, one line
+    # argparse errors go through core.errors.CliParser: no usage dump, one line
     code = run_cli(main, argv)
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "see --help" in err

@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from symbolic.models import build_model
+from core.models import build_model
 from verify import signals as S
 from verify.bounds import comparison_reaching_time, theorem2_constants
 from verify.lyapunov import check_theorem2
@@ -201,7 +201,7 @@ def test_fig13_verdict_fails_when_the_ablation_is_faster(runs):
 
 
 def test_fig13_decay_rates_and_levels_on_known_exponentials():
-    from symbolic.scenario import load_scenario
+    from core.scenario import load_scenario
 
     sc = load_scenario(PAPER)
     ftc = synthetic_trajectory(track_rate=2.0)
@@ -267,7 +267,7 @@ def test_peak_u_rows_match_inverse_dynamics(runs):
 
 
 def test_peak_u_rows_find_a_known_peak():
-    from symbolic.scenario import load_scenario
+    from core.scenario import load_scenario
 
     sc = load_scenario(PAPER)
     df = synthetic_trajectory()

@@ -1,4 +1,4 @@
-"""``python -m verify demo|check|report|bench [SCENARIO]`` (``make demo|verify|report|bench``).
+"""``python -m verify demo|check|report [SCENARIO]`` (``make demo|verify|report``).
 
 - ``check``: the Theorem 1/2 checks and the bound-vs-actual table; exit 0 when every
   check the theory guarantees holds, 1 otherwise; ``--strict`` (or ``STRICT=1``)
@@ -7,19 +7,17 @@
   (simulating the eq. (42) ablation run for Fig. 13 if needed).
 - ``demo``: the whole pipeline from scratch — synthesis, simulation, ablation,
   verification, report — ending with where the report is and the table.
-- ``bench``: delegated to :mod:`generated.bench` (``make bench``).
+The performance benchmark sits above this stage: ``python -m benchmarks.bench`` (``make bench``).
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.util
 import sys
 from pathlib import Path
 
-from symbolic.artifacts import OUT_ROOT
-from symbolic.errors import CliParser, run_cli, strict_mode
+from core.artifacts import OUT_ROOT
+from core.errors import CliParser, run_cli, strict_mode
 from verify.bounds import VerifyConfig, VerifyError
 
 DEFAULT_SCENARIO = "scenarios/paper.toml"
@@ -48,8 +46,6 @@ def _parser() -> argparse.ArgumentParser:
         p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                        help="override a scenario field (e.g. options.feedforward=false); "
                        "the run goes to out/<name>-<variant>/")  # fmt: skip
-    b = sub.add_parser("bench", help="performance benchmark (generated.bench)")
-    b.add_argument("rest", nargs=argparse.REMAINDER)
     return ap
 
 
@@ -88,11 +84,6 @@ def main(argv: list[str]) -> int:
         Command-line arguments without the program name.
     """
     args = _parser().parse_args(argv)
-    if args.cmd == "bench":  # the benchmark lives in generated.bench (make bench)
-        if importlib.util.find_spec("generated.bench") is None:
-            raise VerifyError("generated.bench is not available: reinstall the project (make venv)")
-        return int(importlib.import_module("generated.bench").main(args.rest) or 0)
-
     from verify import pipeline as P
     from verify.figures import all_figures
     from verify.report import console_table, write_report
@@ -108,7 +99,7 @@ def main(argv: list[str]) -> int:
     overrides = dict(api.parse_override(x) for x in args.set) or None
     abl_over = {**(overrides or {}), **P.ABLATION}
     if args.cmd == "demo":  # what is being run, before the stages
-        from symbolic.summary import summarize
+        from core.summary import summarize
 
         print(summarize(api.load(args.scenario, overrides)), end="\n\n")
     run = P.obtain_run(args.scenario, overrides, out_root=root, force=force)
@@ -138,7 +129,7 @@ def main(argv: list[str]) -> int:
         v.figures, v.notes = files, v.notes + notes
         rpath, bpath = write_report(v, run.folder, strict=strict)
     else:
-        from symbolic.artifacts import atomic_write_text
+        from core.artifacts import atomic_write_text
 
         bpath = atomic_write_text(run.folder / "bounds.csv", v.table.to_csv(index=False))
         rpath = None

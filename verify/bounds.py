@@ -25,10 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.errors import ToolkitError
+from core.models import build_model
+from core.scenario import Scenario
 from symbolic.adaptive import BAND
-from symbolic.errors import ToolkitError
-from symbolic.models import build_model
-from symbolic.scenario import Scenario
 
 
 class VerifyError(ToolkitError):

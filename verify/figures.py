@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from symbolic.artifacts import atomic_write_bytes  # noqa: E402
+from core.artifacts import atomic_write_bytes  # noqa: E402
 from verify import signals as S  # noqa: E402
 
 SNAPSHOTS = (0.0, 1.0, 3.0, 5.0, 10.0, 13.0, 17.0, 20.0)  # Figs. 3–10

@@ -19,7 +19,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from symbolic.scenario import Scenario
+from core.scenario import Scenario
 from verify.bounds import VerifyConfig, VerifyError
 
 

@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from symbolic.artifacts import OUT_ROOT
-from symbolic.scenario import Scenario
+from core.artifacts import OUT_ROOT
+from core.scenario import Scenario
 from verify.bounds import VerifyConfig, VerifyError, theorem1_floor, theorem1_rates
 from verify.lyapunov import check_theorem1, check_theorem2
 from verify.report import Verification, ablation_statement

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg as sla
 
-from symbolic.scenario import Scenario
+from core.scenario import Scenario
 from verify.lyapunov import sgn_eps
 
 
@@ -119,7 +119,7 @@ def _generic_model(name: str, prm: dict[str, float]):
     """Other models: numpy lambdas of the model's sympy M, C, G."""
     import sympy as sp
 
-    from symbolic.models import build_model
+    from core.models import build_model
 
     mod = build_model(name, prm)
     syms = list(mod.sympy_p) + list(mod.sympy_q)
@@ -481,7 +481,8 @@ def hand_gains(sc: Scenario, *, lambda1: float | None = None, lambda2: float | N
         Override the observer gains λ1, λ2 (default: the scenario's, else 1.9 and
         max(2, α)).
     """
-    from synthesis.assumptions import check_network, uio_matrices
+    from core.graph import check_network
+    from synthesis.assumptions import uio_matrices
     from synthesis.gains import Gains
 
     L = sc.leader

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from symbolic.artifacts import atomic_write_text
-from symbolic.scenario import Scenario
+from core.artifacts import atomic_write_text
+from core.scenario import Scenario
 from verify.bounds import VerifyConfig, theorem1_floor, theorem1_rates, theorem2_constants
 from verify.lyapunov import InequalityCheck, theorem2_guaranteed
 from verify.table import FIG13_LEVEL_FACTOR, STARTUP, failures, to_markdown

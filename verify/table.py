@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from symbolic.scenario import Scenario
+from core.scenario import Scenario
 from verify import signals as S
 from verify.bounds import (
     Theorem2Constants,
@@ -476,7 +476,7 @@ def gauge(scenario: Scenario, gains=None) -> np.ndarray:  # noqa: ANN001 (Gains)
     """
     if gains is not None:
         return np.asarray(gains.h, float)
-    from synthesis.assumptions import find_gauge
+    from core.graph import find_gauge
 
     A = np.asarray(scenario.graph.adjacency, float)
     return np.asarray(find_gauge(A, np.asarray(scenario.graph.pinning, float)), float)

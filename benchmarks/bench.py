@@ -2,9 +2,9 @@
 
 ::
 
-    python -m generated.bench                 # N = 5, 50, 500, 2000; all methods
-    python -m generated.bench --quick         # N = 5, one run each (smoke test)
-    python -m generated.bench --sizes 5,50 --methods c-cvode-native,scipy-bdf --runs 3
+    python -m benchmarks.bench                 # N = 5, 50, 500, 2000; all methods
+    python -m benchmarks.bench --quick         # N = 5, one run each (smoke test)
+    python -m benchmarks.bench --sizes 5,50 --methods c-cvode-native,scipy-bdf --runs 3
 
 Every (N, method) cell runs in its own subprocess (its own peak RSS, a hard wall-clock
 limit); the parent prints the table and writes ``out/bench/bench.csv`` and
@@ -71,7 +71,7 @@ from typing import Any
 
 import numpy as np
 
-from symbolic.errors import ToolkitError, run_cli
+from core.errors import ToolkitError, run_cli
 
 SIZES = (5, 50, 500, 2000)
 METHODS = (
@@ -189,7 +189,7 @@ def bench_scenario(N: int, seed: int = BENCH_SEED, horizon: float | None = None)
     Scenario
         With ``integration.method`` that of :func:`ours_method` (``native``).
     """
-    from symbolic.scenario import Graph, load_scenario
+    from core.scenario import Graph, load_scenario
 
     base = load_scenario(PAPER)
     if N == base.N:
@@ -212,7 +212,7 @@ def bench_scenario(N: int, seed: int = BENCH_SEED, horizon: float | None = None)
         sc = dataclasses.replace(
             base,
             name=f"bench-N{N}",
-            path=f"{PAPER} (generated.bench: N = {N}, seed {seed})",
+            path=f"{PAPER} (benchmarks.bench: N = {N}, seed {seed})",
             sha256=f"bench-N{N}-seed{seed}-{base.sha256}",
             description=f"benchmark: {N} followers on a random acyclic graph (seed {seed})",
             graph=Graph(adjacency=_frozen(A), pinning=_frozen(pin)),
@@ -275,7 +275,7 @@ def _rss_mb() -> float:
 
 
 def _write(path: Path, rec: dict[str, Any]) -> None:
-    from symbolic.artifacts import atomic_write_text
+    from core.artifacts import atomic_write_text
 
     atomic_write_text(path, json.dumps(rec, default=_jsonable))
 
@@ -567,7 +567,7 @@ def run_cell(
     for p in (rec_path, rec_path.with_suffix(".npy")):
         p.unlink(missing_ok=True)
     cmd = [
-        sys.executable, "-m", "generated.bench", "--worker", str(N), method,
+        sys.executable, "-m", "benchmarks.bench", "--worker", str(N), method,
         "--runs", str(runs), "--time-limit", str(time_limit), "--horizon", str(horizon),
         "--record", str(rec_path),
     ]  # fmt: skip
@@ -659,7 +659,7 @@ def write_csv(records: list[dict[str, Any]], path: Path) -> Path:
     import csv
     import io
 
-    from symbolic.artifacts import atomic_write_text
+    from core.artifacts import atomic_write_text
 
     buf = io.StringIO()
     w = csv.writer(buf)
@@ -704,7 +704,7 @@ def table(records: list[dict[str, Any]]) -> str:
     widths = [max(len(row[k]) for row in rows) for k in range(len(head))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines) + "\n(* = ours: what make sim runs for N, generated.bench.ours_method)"
+    return "\n".join(lines) + "\n(* = ours: what make sim runs for N, benchmarks.bench.ours_method)"
 
 
 def markdown(records: list[dict[str, Any]]) -> str:
@@ -765,7 +765,7 @@ def plot(records: list[dict[str, Any]], path: Path) -> Path | None:
 
     import matplotlib.pyplot as plt
 
-    from symbolic.artifacts import atomic_write_bytes
+    from core.artifacts import atomic_write_bytes
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for meth in METHODS:
@@ -798,7 +798,7 @@ def plot(records: list[dict[str, Any]], path: Path) -> Path | None:
 
 
 def main(argv: list[str]) -> int:
-    """Command line of ``python -m generated.bench`` (see the module docstring).
+    """Command line of ``python -m benchmarks.bench`` (see the module docstring).
 
     Parameters
     ----------
@@ -806,7 +806,7 @@ def main(argv: list[str]) -> int:
         Arguments without the program name.
     """
     ap = argparse.ArgumentParser(
-        prog="python -m generated.bench", description=__doc__.split("\n")[0]
+        prog="python -m benchmarks.bench", description=__doc__.split("\n")[0]
     )
     ap.add_argument("--quick", action="store_true", help="N = 5 only, one run per method")
     ap.add_argument("--sizes", default=None, help="comma-separated N (default 5,50,500,2000)")
@@ -841,7 +841,7 @@ def main(argv: list[str]) -> int:
         raise BenchError(
             f"--methods: {', '.join(bad)} unknown (expected some of {', '.join(METHODS)})"
         )
-    from symbolic.artifacts import OUT_ROOT
+    from core.artifacts import OUT_ROOT
 
     folder = Path(a.out) if a.out else OUT_ROOT / "bench"
     folder.mkdir(parents=True, exist_ok=True)
@@ -874,7 +874,7 @@ def main(argv: list[str]) -> int:
     records = finish(records)
     csv_path = write_csv(records, folder / "bench.csv")
     png = plot(records, folder / "scaling.png")
-    from symbolic.artifacts import atomic_write_text
+    from core.artifacts import atomic_write_text
 
     atomic_write_text(folder / "bench.md", markdown(records))
     print(table(records))

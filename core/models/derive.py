@@ -10,8 +10,8 @@ import numpy as np
 import sympy as sp
 from scipy.optimize import minimize
 
-from symbolic.errors import ScenarioError
-from symbolic.models.base import REGISTRY, ELModel, ModelSpec
+from core.errors import ScenarioError
+from core.models.base import REGISTRY, ELModel, ModelSpec
 
 
 def euler_lagrange_matrices(T: sp.Expr, V: sp.Expr, p: list[sp.Symbol], q: list[sp.Symbol]):

@@ -10,9 +10,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from symbolic.errors import ScenarioError
-from symbolic.models import REGISTRY, ELModel, build_model
-from symbolic.scenario import Scenario
+from core.errors import ScenarioError
+from core.models import REGISTRY, ELModel, build_model
+from core.scenario import Scenario
 
 
 def _num(x: float) -> str:
@@ -73,7 +73,7 @@ def summarize(scenario: Scenario) -> str:
     Parameters
     ----------
     scenario : Scenario
-        A loaded scenario (:func:`symbolic.scenario.load_scenario`).
+        A loaded scenario (:func:`core.scenario.load_scenario`).
 
     Returns
     -------

@@ -19,7 +19,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from symbolic.errors import ExpressionError
+from core.errors import ExpressionError
 
 #: accepted function names and their arity
 FUNCTIONS: dict[str, tuple[int, ...]] = {

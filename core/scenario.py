@@ -2,7 +2,7 @@
 
 :func:`load_scenario` reads a file with :mod:`tomllib`, validates every field
 on load and returns a frozen :class:`Scenario`. Every problem is a
-:class:`~symbolic.errors.ScenarioError` naming the file, the key, what is wrong
+:class:`~core.errors.ScenarioError` naming the file, the key, what is wrong
 and what is expected. Every key, its type, default and meaning is documented
 in ``docs/scenario-format.md``; ``scenarios/paper.toml`` is the paper's Table 2.
 """
@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from symbolic.errors import ExpressionError, ScenarioError, UsageError
-from symbolic.expressions import Expr, parse_expression
-from synthesis.assumptions import unreachable_followers
+from core.errors import ExpressionError, ScenarioError, UsageError
+from core.expressions import Expr, parse_expression
+from core.graph import unreachable_followers
 
 SYNTH = "synthesize"
 SIGN_MODES = ("exact", "sat", "tanh")
@@ -844,7 +844,7 @@ def _check_output_size(ctx: _Ctx, integ: Integration, N: int, n: int, m: int) ->
 
 def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Follower:
     """One [[followers]] table (0-based ``i``; messages say ``followers[i+1]``)."""
-    from symbolic.models import REGISTRY
+    from core.models import REGISTRY
 
     key = f"followers[{i + 1}]"
     ctx.table(fo, key, _FOLLOWER, {"model", "p0", "b0"})

@@ -16,7 +16,7 @@ Knobs (:func:`knob_sensitivity`)
     the shipped scenarios are not changed by it (the chosen values and why are in
     ``scenarios/paper.toml`` and docs/closed-loop.md).
 
-``python -m generated.steps [SCENARIO] [--bench-n N] [--vary KEY=V1,V2 ...] [--out DIR]``
+``python -m benchmarks.steps [SCENARIO] [--bench-n N] [--vary KEY=V1,V2 ...] [--out DIR]``
 prints both tables and writes ``steps_windows.csv`` and ``steps_knobs.csv``
 (default folder ``out/steps/<scenario name>/``; the variants' gains go to its
 ``variants/`` subfolder). ``make bench`` runs it on the paper
@@ -37,9 +37,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from symbolic.artifacts import OUT_ROOT, atomic_write_text
-from symbolic.errors import CliParser, IntegrationError, UsageError, run_cli
-from symbolic.scenario import METHODS
+from core.artifacts import OUT_ROOT, atomic_write_text
+from core.errors import CliParser, IntegrationError, UsageError, run_cli
+from core.scenario import METHODS
 
 PAPER = Path(__file__).resolve().parent.parent / "scenarios" / "paper.toml"
 #: the knobs varied by default: the tanh boundary layer, the φ floor of the observer's
@@ -283,7 +283,7 @@ def parse_vary(text: str) -> tuple[str, tuple[Any, ...]]:
 
 
 def main(argv: list[str]) -> int:
-    """``python -m generated.steps``: print and write the window and knob tables.
+    """``python -m benchmarks.steps``: print and write the window and knob tables.
 
     Parameters
     ----------
@@ -297,7 +297,7 @@ def main(argv: list[str]) -> int:
     """
     from generated import api
 
-    ap = CliParser(prog="python -m generated.steps", description=__doc__.split("\n\n")[0])
+    ap = CliParser(prog="python -m benchmarks.steps", description=__doc__.split("\n\n")[0])
     ap.add_argument("scenario", nargs="?", default=str(PAPER), help="scenario (default paper)")
     ap.add_argument(
         "--bench-n",
@@ -324,7 +324,7 @@ def main(argv: list[str]) -> int:
     vary = [parse_vary(v) for v in args.vary] if args.vary else list(DEFAULT_VARY)
 
     if args.bench_n is not None:
-        from generated.bench import bench_gains, bench_scenario
+        from benchmarks.bench import bench_gains, bench_scenario
 
         if args.bench_n < 1:
             raise UsageError(f"--bench-n {args.bench_n}: must be >= 1")

@@ -1,6 +1,6 @@
 """Work against precision: how far each integrator is from the converged trajectory.
 
-``python -m generated.precision [SCENARIO] [--methods cvodes,native] [--rtols 1e-6,1e-8]
+``python -m benchmarks.precision [SCENARIO] [--methods cvodes,native] [--rtols 1e-6,1e-8]
 [--ref-rtol 1e-10] [--out out/precision]`` (also run by ``make bench``).
 
 Speed means little without accuracy: two methods at the same nominal tolerance can
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from symbolic.errors import CliParser, UsageError, run_cli
+from core.errors import CliParser, UsageError, run_cli
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "paper.toml"
 DEFAULT_METHODS = ("cvodes", "native")
@@ -168,11 +168,11 @@ def main(argv: list[str] | None = None) -> int:
     int
         Exit status 0.
     """
+    from core.artifacts import OUT_ROOT, atomic_write_text
+    from core.scenario import METHODS
     from generated import api
-    from symbolic.artifacts import OUT_ROOT, atomic_write_text
-    from symbolic.scenario import METHODS
 
-    ap = CliParser(prog="python -m generated.precision", description=__doc__)
+    ap = CliParser(prog="python -m benchmarks.precision", description=__doc__)
     ap.add_argument("scenario", nargs="?", default=str(DEFAULT_SCENARIO))
     ap.add_argument("--methods", default=",".join(DEFAULT_METHODS))
     ap.add_argument("--rtols", default=",".join(f"{r:g}" for r in DEFAULT_RTOLS))

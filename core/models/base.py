@@ -1,7 +1,7 @@
 """Euler–Lagrange follower models, eq. (2): M(p) p̈ + C(p, ṗ) ṗ + G(p) = g u + f.
 
 A model is declared by its Lagrangian (kinetic and potential energy, in sympy)
-in one small file under ``symbolic/models/`` that registers a
+in one small file under ``core/models/`` that registers a
 :class:`ModelSpec`. :func:`build_model` derives M, C (Christoffel symbols of the
 first kind) and G with sympy, checks Property 1 and Property 2, and returns an
 :class:`ELModel` carrying CasADi functions.
@@ -15,7 +15,7 @@ from typing import Any
 
 import casadi as ca
 
-#: name -> spec; filled by the model modules on import of ``symbolic.models``
+#: name -> spec; filled by the model modules on import of ``core.models``
 REGISTRY: dict[str, ModelSpec] = {}
 
 

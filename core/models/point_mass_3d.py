@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import sympy as sp
 
-from symbolic.models.base import ModelSpec, register
+from core.models.base import ModelSpec, register
 
 
 def _lagrangian(prm):
