@@ -68,17 +68,16 @@ def main(argv: list[str]) -> int:
         raise SynthesisError(
             f"{args.gains}: certify cannot evaluate the numbers ({type(exc).__name__}: {exc})"
         ) from None
-    if cert["failures"]:
-        raise SynthesisError(f"{args.gains}: certificate fails: " + "; ".join(cert["failures"]))
-    if strict and cert["warnings"]:
-        raise SynthesisError(
-            f"{args.gains}: certificate (strict) fails: " + "; ".join(cert["warnings"])
-        )
-    for wline in cert["warnings"]:
+    failures, warnings = cert.failures(), cert.warnings()
+    if failures:
+        raise SynthesisError(f"{args.gains}: certificate fails: " + "; ".join(failures))
+    if strict and warnings:
+        raise SynthesisError(f"{args.gains}: certificate (strict) fails: " + "; ".join(warnings))
+    for wline in warnings:
         print(f"warning: {wline}", file=sys.stderr)
-    npass = sum(ch["passed"] for ch in cert["checks"])
+    npass = sum(ch.passed for ch in cert.checks)
     print(
-        f"{args.gains}: {npass}/{len(cert['checks'])} checks pass"
-        + (f", {len(cert['warnings'])} warning(s) about given gains" if cert["warnings"] else "")
+        f"{args.gains}: {npass}/{len(cert.checks)} checks pass"
+        + (f", {len(warnings)} warning(s) about given gains" if warnings else "")
     )
     return 0

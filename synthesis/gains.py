@@ -17,8 +17,9 @@ import numpy as np
 
 from core.artifacts import atomic_write_text, sha256_bytes
 from core.errors import SynthesisError
+from core.scenario import Scenario
 
-_MATRICES = ("A0", "B0", "C0", "Gamma", "Phi", "Theta", "Omega", "T", "Q", "L_bar", "H", "Z")
+MATRIX_FIELDS = ("A0", "B0", "C0", "Gamma", "Phi", "Theta", "Omega", "T", "Q", "L_bar", "H", "Z")
 
 
 @dataclass(frozen=True)
@@ -52,11 +53,12 @@ class Gains:
     lambda1, lambda2, alpha, k1 : float
         Observer gains, the input bound, and V1's constant.
     certificate : dict
-        ``{"checks": [{"name", "value", "margin", "passed", "detail", "involves"}...],
-        "warnings": [...], "failures": [...], "passed": bool, "tol": float, "given": [...],
-        "notes": [...]}`` (see :func:`synthesis.certificate.certify`). ``warnings`` are
-        failed checks involving only scenario-given gains; ``failures`` is empty in any
-        file ``make synth`` writes.
+        The JSON form of a :class:`synthesis.certificate.Certificate`
+        (:meth:`~synthesis.certificate.Certificate.to_json`): ``{"checks": [{"name",
+        "value", "margin", "passed", "detail", "involves", "eq"}...], "warnings": [...],
+        "failures": [...], "passed": bool, "tol": float, "given": [...], "notes": [...]}``.
+        ``warnings`` are failed checks involving only scenario-given gains; ``failures``
+        is empty in any file ``make synth`` writes.
     info : dict
         Solver name, version and tolerance, strictness margin ε (``lmi_eps``), scenario
         SHA-256, the given gains, both Lemma 3 variants, the invariant zeros, and
@@ -174,7 +176,7 @@ def gains_from_dict(d: Any, *, source: str = "gains") -> Gains:
                 continue
             raise SynthesisError(f"{source}: key {f.name!r} is missing {_fix(source)}")
         v = d[f.name]
-        if f.name in _MATRICES:
+        if f.name in MATRIX_FIELDS:
             kw[f.name] = _matrix(v, f.name, source)
         elif f.name in ("certificate", "info"):
             if not isinstance(v, dict):
@@ -257,7 +259,9 @@ def read_gains_file(path: str | Path) -> GainsFile:
     return GainsFile(g, sha256_bytes(data), claimed if isinstance(claimed, str) else None)
 
 
-def load_gains(path: str | Path, scenario: Any = None, *, recertify: bool = True) -> Gains:
+def load_gains(
+    path: str | Path, scenario: Scenario | None = None, *, recertify: bool = True
+) -> Gains:
     """Read a ``gains.json`` and re-certify it from its numbers before anything uses it.
 
     The stored certificate is not trusted: :func:`recertified` re-runs
@@ -291,7 +295,7 @@ def load_gains(path: str | Path, scenario: Any = None, *, recertify: bool = True
     return recertified(g, str(path), scenario) if recertify else g
 
 
-def given_by(scenario: Any) -> tuple[str, ...]:
+def given_by(scenario: Scenario) -> tuple[str, ...]:
     """The gains the scenario gives explicitly (the rest are synthesised).
 
     Parameters
@@ -303,7 +307,7 @@ def given_by(scenario: Any) -> tuple[str, ...]:
     return tuple(k for k in ("Q", "Theta", "lambda1", "lambda2") if getattr(obs, k) is not None)
 
 
-def scenario_mismatch(g: Gains, scenario: Any) -> str | None:
+def scenario_mismatch(g: Gains, scenario: Scenario) -> str | None:
     """The first field of ``g`` that contradicts the scenario it claims to be for, or None.
 
     Checked: the leader (A0, B0, C0, α), the LMI parameters (λ̄1, δ1, δ2, δ̂1, δ̂2),
@@ -325,7 +329,7 @@ def scenario_mismatch(g: Gains, scenario: Any) -> str | None:
     want.update({k: getattr(obs, k) for k in given_by(scenario)})
     for name, v in want.items():
         a, b = np.asarray(getattr(g, name), dtype=float), np.asarray(v, dtype=float)
-        if name in _MATRICES:
+        if name in MATRIX_FIELDS:
             b = np.atleast_2d(b) if b.ndim < 2 else b
         if a.shape != b.shape or not np.array_equal(a, b):
             return f"field {name!r} differs from the scenario's"
@@ -337,7 +341,7 @@ def scenario_mismatch(g: Gains, scenario: Any) -> str | None:
     return None
 
 
-def recertified(g: Gains, source: str, scenario: Any = None) -> Gains:
+def recertified(g: Gains, source: str, scenario: Scenario | None = None) -> Gains:
     """``g`` with a fresh certificate, or a one-line :class:`SynthesisError`.
 
     Parameters
@@ -369,9 +373,9 @@ def recertified(g: Gains, source: str, scenario: Any = None) -> Gains:
             f"{source}: certificate cannot evaluate the numbers ({type(exc).__name__}: {exc}) "
             f"{_fix(source)}"
         ) from None
-    if cert["failures"]:
+    if cert.failures():
         raise SynthesisError(
-            f"{source}: certificate fails: " + "; ".join(cert["failures"]) + f" {_fix(source)}"
+            f"{source}: certificate fails: " + "; ".join(cert.failures()) + f" {_fix(source)}"
         )
     old = g.certificate if isinstance(g.certificate, dict) else {}
-    return replace(checked, certificate={**old, **cert})
+    return replace(checked, certificate={**old, **cert.to_json()})

@@ -274,9 +274,9 @@ def test_printed_lmi15_transposes_infeasible():
 def test_certify_catches_edited_theta(g_paper):
     bad = replace(g_paper, Theta=g_paper.Theta + np.array([[0.0, 0.0], [-3.0, -3.0]]))
     cert = certify(bad)
-    failed = {c["name"] for c in cert["checks"] if not c["passed"]}
-    assert "lmi16" in failed and cert["failures"]
-    assert certify(g_paper)["passed"]
+    failed = {c.name for c in cert.checks if not c.passed}
+    assert "lmi16" in failed and cert.failures() and not cert.passed
+    assert certify(g_paper).passed
 
 
 # --------------------------------------------------------------------------- objective, solvers

@@ -163,4 +163,4 @@ def test_thousand_followers_sparse():
     w_dense = sla.eigh(S, np.diag(z), eigvals_only=True, subset_by_index=[0, 0])[0]
     assert g.w == pytest.approx(w_dense, rel=1e-7)
     np.testing.assert_allclose(Lb.T @ z, 1.0, rtol=1e-9)
-    assert certify(g)["passed"]
+    assert certify(g).passed
