@@ -15,10 +15,15 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from core.artifacts import OUT_ROOT
 from core.errors import CliParser, run_cli, strict_mode
 from verify.bounds import VerifyConfig, VerifyError
+
+if TYPE_CHECKING:
+    from verify.pipeline import Run
+    from verify.report import Verification
 
 DEFAULT_SCENARIO = "scenarios/paper.toml"
 
@@ -33,19 +38,35 @@ def _parser() -> argparse.ArgumentParser:
     ):
         p = sub.add_parser(name, help=helptext)
         p.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO)
-        p.add_argument("--strict", action="store_true",
-                       help="also fail on the paper's own claims (or STRICT=1)")  # fmt: skip
+        p.add_argument(
+            "--strict",
+            action="store_true",
+            help="also fail on the paper's own claims (or STRICT=1)",
+        )
         p.add_argument("--out", default=None, help="output root (default out/ or $HITL_OUT)")
-        p.add_argument("--tail", type=float, default=0.5,
-                       help="asymptotic window: last fraction of the horizon (default 0.5)")  # fmt: skip
-        p.add_argument("--delta", type=float, default=0.5,
-                       help="Lemma 1's delta, 0 < delta < 1 (default 0.5)")  # fmt: skip
-        p.add_argument("--no-lyapunov", action="store_true",
-                       help="skip the exact dV/dt checks (table from the trajectory only)")  # fmt: skip
+        p.add_argument(
+            "--tail",
+            type=float,
+            default=0.5,
+            help="asymptotic window: last fraction of the horizon (default 0.5)",
+        )
+        p.add_argument(
+            "--delta", type=float, default=0.5, help="Lemma 1's delta, 0 < delta < 1 (default 0.5)"
+        )
+        p.add_argument(
+            "--no-lyapunov",
+            action="store_true",
+            help="skip the exact dV/dt checks (table from the trajectory only)",
+        )
         p.add_argument("--no-gif", action="store_true", help="skip the animation")
-        p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                       help="override a scenario field (e.g. options.feedforward=false); "
-                       "the run goes to out/<name>-<variant>/")  # fmt: skip
+        p.add_argument(
+            "--set",
+            action="append",
+            default=[],
+            metavar="KEY=VALUE",
+            help="override a scenario field (e.g. options.feedforward=false); "
+            "the run goes to out/<name>-<variant>/",
+        )
     return ap
 
 
@@ -85,15 +106,42 @@ def main(argv: list[str]) -> int:
     """
     args = _parser().parse_args(argv)
     from verify import pipeline as P
-    from verify.figures import all_figures
-    from verify.report import console_table, write_report
 
     if not Path(args.scenario).is_file():
         raise VerifyError(f"scenario {args.scenario!r} does not exist: give a TOML file path")
     strict = _strict(args.strict)
     cfg = VerifyConfig(lemma1_delta=args.delta, tail_fraction=args.tail)
     root = Path(args.out) if args.out else OUT_ROOT
+    run, ablation = _obtain_runs(args, root)
+    v = P.verify_run(
+        run, ablation=ablation, config=cfg, out_root=root, lyapunov=not args.no_lyapunov
+    )
+    if args.cmd in ("report", "demo"):
+        rpath, bpath = _write_report(args, v, run, ablation, strict)
+    else:
+        from core.artifacts import atomic_write_text
+
+        bpath = atomic_write_text(run.folder / "bounds.csv", v.table.to_csv(index=False))
+        rpath = None
+    return _print_outcome(v, bpath, rpath, strict)
+
+
+def _obtain_runs(args: argparse.Namespace, root: Path) -> tuple[Run, Run | None]:
+    """The run and the eq. (42) ablation run (None for ``check`` unless fresh on disk).
+
+    Parameters
+    ----------
+    args : Namespace
+        Parsed command line.
+    root : Path
+        Output root.
+
+    Returns
+    -------
+    (verify.pipeline.Run, verify.pipeline.Run or None)
+    """
     from generated import api
+    from verify import pipeline as P
 
     force = args.cmd == "demo"
     overrides = dict(api.parse_override(x) for x in args.set) or None
@@ -112,27 +160,61 @@ def main(argv: list[str]) -> int:
         asc = api.load(args.scenario, abl_over)
         if P._fresh(root / asc.name, asc) is not None:
             ablation = P.obtain_run(args.scenario, abl_over, out_root=root)
-    v = P.verify_run(run, ablation=ablation, config=cfg, out_root=root,
-                     lyapunov=not args.no_lyapunov)  # fmt: skip
+    return run, ablation
 
-    if args.cmd in ("report", "demo"):
-        files, notes = all_figures(
-            run.frame,
-            run.scenario.leader.C0,
-            run.folder / "figures",
-            None if ablation is None else ablation.frame,
-            gif=not args.no_gif,
-        )
-        from verify.figures import lyapunov_figures
 
-        files += lyapunov_figures(v.theorem1, v.theorem2, run.folder / "figures")
-        v.figures, v.notes = files, v.notes + notes
-        rpath, bpath = write_report(v, run.folder, strict=strict)
-    else:
-        from core.artifacts import atomic_write_text
+def _write_report(
+    args: argparse.Namespace, v: Verification, run: Run, ablation: Run | None, strict: bool
+) -> tuple[Path, Path]:
+    """Figures, ``bounds.csv`` and ``report.md`` into the run's folder.
 
-        bpath = atomic_write_text(run.folder / "bounds.csv", v.table.to_csv(index=False))
-        rpath = None
+    Parameters
+    ----------
+    args : Namespace
+        Parsed command line (``--no-gif``).
+    v : Verification
+        The verification results; the figures and their notes are added to it.
+    run : Run
+        The run.
+    ablation : Run or None
+        The eq. (42) ablation run.
+    strict : bool
+        Whether the paper's own claims count as failures.
+
+    Returns
+    -------
+    (report path, bounds path)
+    """
+    from verify.figures import all_figures, lyapunov_figures
+    from verify.report import write_report
+
+    files, notes = all_figures(
+        run.frame,
+        run.scenario.leader.C0,
+        run.folder / "figures",
+        None if ablation is None else ablation.frame,
+        gif=not args.no_gif,
+    )
+    files += lyapunov_figures(v.theorem1, v.theorem2, run.folder / "figures")
+    v.figures, v.notes = files, v.notes + notes
+    return write_report(v, run.folder, strict=strict)
+
+
+def _print_outcome(v: Verification, bpath: Path, rpath: Path | None, strict: bool) -> int:
+    """Print the checks, the table and the verdict; return the exit status (0 pass, 1 fail).
+
+    Parameters
+    ----------
+    v : Verification
+        The verification results.
+    bpath : Path
+        Where ``bounds.csv`` is.
+    rpath : Path or None
+        Where ``report.md`` is (None for ``check``).
+    strict : bool
+        Whether the paper's own claims count as failures.
+    """
+    from verify.report import console_table
 
     for chk in v.theorem1 + v.theorem2:
         print(chk.where())
@@ -146,14 +228,20 @@ def main(argv: list[str]) -> int:
     if rpath is not None:
         print(f"report: {rpath}")
     if len(paper_bad):
-        print(f"{len(paper_bad)} of the paper's own claims do not hold on these numbers"
-              + ("" if strict else " (reported; --strict or STRICT=1 makes them fail)"))  # fmt: skip
+        print(
+            f"{len(paper_bad)} of the paper's own claims do not hold on these numbers"
+            + ("" if strict else " (reported; --strict or STRICT=1 makes them fail)")
+        )
     if len(bad):
-        print(f"FAIL: {len(bad)} check(s) failed" + (" (strict)" if strict else ""),
-              file=sys.stderr)  # fmt: skip
+        print(
+            f"FAIL: {len(bad)} check(s) failed" + (" (strict)" if strict else ""), file=sys.stderr
+        )
         for r in bad.itertuples(index=False):
-            print(f"  {r.claim} [follower {r.agent}] bound {r.bound:.4g} observed "
-                  f"{r.observed:.4g}: {r.note}", file=sys.stderr)  # fmt: skip
+            print(
+                f"  {r.claim} [follower {r.agent}] bound {r.bound:.4g} observed "
+                f"{r.observed:.4g}: {r.note}",
+                file=sys.stderr,
+            )
         return 1
     print("PASS: every check the theory guarantees holds" + (" (strict)" if strict else ""))
     return 0

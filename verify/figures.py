@@ -152,11 +152,25 @@ def estimation_errors(df: pd.DataFrame, folder: Path) -> list[Path]:
         Folder the figure files are written to.
     """
     dm = S.dims(df)
-    out = _per_agent_plot(df, "eeta", dm.m, "ebar_eta,{r} (state units)",
-                          "Fig. 11: estimation errors ebar_eta_i = eta_i - eta0", folder,
-                          "fig11_estimation_errors")  # fmt: skip
-    out += _per_agent_plot(df, "eeta", dm.m, "|ebar_eta,{r}| (log)",
-                           "Fig. 11 (log scale)", folder, "fig11_estimation_errors_log", log=True)  # fmt: skip
+    out = _per_agent_plot(
+        df,
+        "eeta",
+        dm.m,
+        "ebar_eta,{r} (state units)",
+        "Fig. 11: estimation errors ebar_eta_i = eta_i - eta0",
+        folder,
+        "fig11_estimation_errors",
+    )
+    out += _per_agent_plot(
+        df,
+        "eeta",
+        dm.m,
+        "|ebar_eta,{r}| (log)",
+        "Fig. 11 (log scale)",
+        folder,
+        "fig11_estimation_errors_log",
+        log=True,
+    )
     return out
 
 
@@ -172,11 +186,25 @@ def tracking_errors(df: pd.DataFrame, folder: Path) -> list[Path]:
         Folder the figure files are written to.
     """
     dm = S.dims(df)
-    out = _per_agent_plot(df, "et", dm.n, f"e_t,{{r}} ({POS_UNIT})",
-                          "Fig. 12: tracking errors e_ti = p_i - C0 eta_i - b_i", folder,
-                          "fig12_tracking_errors")  # fmt: skip
-    out += _per_agent_plot(df, "et", dm.n, f"|e_t,{{r}}| ({POS_UNIT}, log)",
-                           "Fig. 12 (log scale)", folder, "fig12_tracking_errors_log", log=True)  # fmt: skip
+    out = _per_agent_plot(
+        df,
+        "et",
+        dm.n,
+        f"e_t,{{r}} ({POS_UNIT})",
+        "Fig. 12: tracking errors e_ti = p_i - C0 eta_i - b_i",
+        folder,
+        "fig12_tracking_errors",
+    )
+    out += _per_agent_plot(
+        df,
+        "et",
+        dm.n,
+        f"|e_t,{{r}}| ({POS_UNIT}, log)",
+        "Fig. 12 (log scale)",
+        folder,
+        "fig12_tracking_errors_log",
+        log=True,
+    )
     return out
 
 
@@ -198,10 +226,22 @@ def ablation_comparison(df: pd.DataFrame, ablation: pd.DataFrame, folder: Path) 
     for ax, log in zip(axes, (False, True), strict=True):
         for i in range(dm.N):
             c = COLORS[i % len(COLORS)]
-            ax.plot(df["t"], S.agent_norm(df, "et", i + 1, dm.n), "-", color=c, lw=1.2,
-                    label=f"FTC (29), follower {i + 1}")  # fmt: skip
-            ax.plot(ablation["t"], S.agent_norm(ablation, "et", i + 1, dm.n), "--", color=c,
-                    lw=1.2, label=f"ablation (42), follower {i + 1}")  # fmt: skip
+            ax.plot(
+                df["t"],
+                S.agent_norm(df, "et", i + 1, dm.n),
+                "-",
+                color=c,
+                lw=1.2,
+                label=f"FTC (29), follower {i + 1}",
+            )
+            ax.plot(
+                ablation["t"],
+                S.agent_norm(ablation, "et", i + 1, dm.n),
+                "--",
+                color=c,
+                lw=1.2,
+                label=f"ablation (42), follower {i + 1}",
+            )
         ax.set_xlabel("time t (s)")
         ax.set_ylabel(f"|e_ti| ({POS_UNIT})" + (" (log)" if log else ""))
         if log:

@@ -188,11 +188,13 @@ def verify_run(
         t = run.frame["t"].to_numpy(float)
         rates = theorem1_rates(sc, gains)
         t1 = [
-            check_theorem1(cl, t, X, rates.supported, claim="dV1/dt <= -delta~ V1 (supported)",
-                           config=cfg),
-            check_theorem1(cl, t, X, rates.printed, claim="dV1/dt <= -delta~ V1 (printed)",
-                           config=cfg),
-        ]  # fmt: skip
+            check_theorem1(
+                cl, t, X, rates.supported, claim="dV1/dt <= -delta~ V1 (supported)", config=cfg
+            ),
+            check_theorem1(
+                cl, t, X, rates.printed, claim="dV1/dt <= -delta~ V1 (printed)", config=cfg
+            ),
+        ]
         if sc.observer.phi_min > 0:  # the inequality the proof gives with the floor
             fl = theorem1_floor(sc, gains)
             claim = "dV1/dt <= -delta~ V1 + c_phi (floor)"

@@ -26,6 +26,11 @@ from core.scenario import Scenario
 from verify.lyapunov import sgn_eps
 
 
+def _mv(Mx: np.ndarray, vx: np.ndarray) -> np.ndarray:
+    """Row-wise matrix-vector products: (K, i, j) × (K, j) → (K, i)."""
+    return np.einsum("kij,kj->ki", Mx, vx)
+
+
 # ----------------------------------------------------------------------------- expressions
 def _dual(node: tuple, t: float) -> tuple[float, float]:
     """Value and d/dt of an expression tree (forward dual numbers, written out by hand)."""
@@ -265,8 +270,15 @@ class Reference:
         S = x[m:].reshape(self.N, self.na)
         k = 0
         out = {"eta0": x[:m]}
-        names = [("mu", m), ("eta", m), ("phi", 1), ("p", n), ("q", n), ("thetahat", n),
-                 ("ghat", 1)]  # fmt: skip
+        names = [
+            ("mu", m),
+            ("eta", m),
+            ("phi", 1),
+            ("p", n),
+            ("q", n),
+            ("thetahat", n),
+            ("ghat", 1),
+        ]
         if self.filtered:
             names += [("w", 2 * m), ("z", 3 * n)]
         for nm, s in names:
@@ -360,8 +372,43 @@ class Reference:
             Flat closed-loop state.
         """
         S = self.split(x)
-        A0, B0, C0 = self.A0, self.B0, self.C0
         u0, u0d, e0d, e0dd = self.leader(t, S["eta0"])
+        obs = self._observer(S, e0d, e0dd)
+        Ed, Edd, Eddd = obs["etadot"], obs["etaddot"], obs["eta3dot"]
+        b, bd, bdd = self.formation(Ed, Edd, Eddd)
+        out: dict[str, np.ndarray] = {}
+        if self.filtered:
+            out["wdot"], out["zdot"], Edd, bd, bdd = self._filters(S, Ed, b)
+            Eddd = np.zeros_like(Eddd)
+        q = S["q"]
+        M, C, G = self.mcg(S["p"], q)
+        ctl = self._controller(S, (M, C, G), Ed, Edd, b, bd, bdd)
+        r = self._ghat_rate(ctl["chi"], ctl["Psi"], S["ghat"])
+        g, f = self.faults(t)
+        force = g[:, None] * ctl["u"] + f - _mv(C, q) - G  # eq. (2)
+        qd = np.linalg.solve(M, force[..., None])[..., 0]
+        parts = [obs["mudot"], Ed, obs["phidot"][:, None], q, qd, ctl["thetahatdot"], r[:, None]]
+        if self.filtered:
+            parts += [out["wdot"], out["zdot"]]
+        out["xdot"] = np.concatenate([e0d, np.hstack(parts).reshape(-1)])
+        out.update(psi=obs["psi"], ehat=obs["ehat"], v=obs["v"], etadot=Ed, etaddot=Edd)
+        out.update(eta3dot=Eddd, b=b, bdot=bd, bddot=bdd, et=ctl["et"], chi=ctl["chi"])
+        out.update(Psi=ctl["Psi"], u=ctl["u"], qdot=qd, u0=u0, u0dot=u0d)
+        return out
+
+    def _observer(
+        self, S: dict[str, np.ndarray], e0d: np.ndarray, e0dd: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        """The distributed observer's rates and its oracle derivatives η̇_i, η̈_i, η⃛_i.
+
+        Parameters
+        ----------
+        S : dict
+            The state's named views (:meth:`split`).
+        e0d, e0dd : ndarray
+            η̇0 and η̈0 of the leader.
+        """
+        A0, B0, C0 = self.A0, self.B0, self.C0
         y0, y0d, y0dd = C0 @ S["eta0"], C0 @ e0d, C0 @ e0dd
         E, mu, phi = S["eta"], S["mu"], S["phi"]
         LB, a0h = self.LB, self.a0h[:, None]
@@ -386,7 +433,6 @@ class Reference:
         Edd = Ed @ A0.T + vd @ B0.T
         psidd = LB @ Edd @ C0.T - a0h * y0dd
         ydd = (mudd + psidd @ self.Gamma.T) @ self.Q.T
-        phiddd = -self.alpha_sum * phidd
         _, nd, ndd = self._norm_jets(y, yd, ydd)
         Ddd = ndd + phidd
         vdd = -self.l1 * ydd - self.l2 * (
@@ -396,33 +442,84 @@ class Reference:
             + 2 * y * (Dd**2 / D**3)[:, None]
         )
         Eddd = Edd @ A0.T + vdd @ B0.T
-        del phiddd
-        b, bd, bdd = self.formation(Ed, Edd, Eddd)
-        out: dict[str, np.ndarray] = {}
-        if self.filtered:
-            w, zf = S["w"], S["z"]
-            m, n, om = self.m, self.n, self.opts.filter_bandwidth
-            w1, w2 = w[:, :m], w[:, m:]
-            z1, z2, z3 = zf[:, :n], zf[:, n : 2 * n], zf[:, 2 * n :]
-            out["wdot"] = np.hstack([w2, om**2 * (Ed - w1) - 2 * om * w2])
-            out["zdot"] = np.hstack([z2, z3, om**3 * (b - z1) - 3 * om**2 * z2 - 3 * om * z3])
-            Edd_c, bd, bdd = w2, z2, z3
-            Edd, Eddd = w2, np.zeros_like(Eddd)
-        else:
-            Edd_c = Edd
+        return dict(
+            psi=psi, ehat=ehat, mudot=mud, v=v, phidot=phid, etadot=Ed, etaddot=Edd, eta3dot=Eddd
+        )
+
+    def _filters(
+        self, S: dict[str, np.ndarray], Ed: np.ndarray, b: np.ndarray
+    ) -> tuple[np.ndarray, ...]:
+        """``derivatives = "filtered"``: ẇ, ż and the filtered η̈_i, ḃ_i, b̈_i.
+
+        Parameters
+        ----------
+        S : dict
+            The state's named views (:meth:`split`).
+        Ed : ndarray
+            η̇_i (the filter's input for η̈_i).
+        b : ndarray
+            b_i (the filter's input for ḃ_i, b̈_i).
+        """
+        m, n, om = self.m, self.n, self.opts.filter_bandwidth
+        w1, w2 = S["w"][:, :m], S["w"][:, m:]
+        zf = S["z"]
+        z1, z2, z3 = zf[:, :n], zf[:, n : 2 * n], zf[:, 2 * n :]
+        wdot = np.hstack([w2, om**2 * (Ed - w1) - 2 * om * w2])
+        zdot = np.hstack([z2, z3, om**3 * (b - z1) - 3 * om**2 * z2 - 3 * om * z3])
+        return wdot, zdot, w2, z2, z3
+
+    def _controller(
+        self,
+        S: dict[str, np.ndarray],
+        mcg: tuple[np.ndarray, np.ndarray, np.ndarray],
+        Ed: np.ndarray,
+        Edd: np.ndarray,
+        b: np.ndarray,
+        bd: np.ndarray,
+        bdd: np.ndarray,
+    ) -> dict[str, np.ndarray]:
+        """Tracking errors, the control law and the θ̂ law (eqs. (28)–(30), (42)).
+
+        Parameters
+        ----------
+        S : dict
+            The state's named views (:meth:`split`).
+        mcg : tuple of ndarray
+            M(p_i), C(p_i, q_i), G(p_i) of every follower (:meth:`mcg`).
+        Ed, Edd : ndarray
+            η̇_i and η̈_i as the controller sees them (filtered or oracle).
+        b, bd, bdd : ndarray
+            b_i, ḃ_i, b̈_i (the derivatives are dropped without feedforward).
+        """
+        C0 = self.C0
         bd_c, bdd_c = (bd, bdd) if self.opts.feedforward else (0 * bd, 0 * bdd)
         p, q, th, gh = S["p"], S["q"], S["thetahat"], S["ghat"]
-        M, C, G = self.mcg(p, q)
-        et = p - E @ C0.T - b  # eq. (28)
+        M, C, G = mcg
+        et = p - S["eta"] @ C0.T - b  # eq. (28)
         etd = q - Ed @ C0.T - bd_c  # eq. (28)
         chi = etd + self.Lam * et  # eq. (28)
-        Mv = lambda Mx, vx: np.einsum("kij,kj->ki", Mx, vx)  # noqa: E731
-        Psi = (
-            Mv(C, q) + G + Mv(M, Edd_c @ C0.T + bdd_c - self.Lam * etd) - Mv(C, chi)
-            - th * self.sgn(chi) - self.k1 * chi
-        )  # fmt: skip  # eq. (29)
+        Psi = (  # eq. (29)
+            _mv(C, q)
+            + G
+            + _mv(M, Edd @ C0.T + bdd_c - self.Lam * etd)
+            - _mv(C, chi)
+            - th * self.sgn(chi)
+            - self.k1 * chi
+        )
         u = Psi if self.opts.ablation else gh[:, None] * Psi  # eq. (42) / eq. (29)
         thd = np.abs(chi) - self.k2[:, None] * th  # eq. (30)
+        return dict(et=et, chi=chi, Psi=Psi, u=u, thetahatdot=thd)
+
+    def _ghat_rate(self, chi: np.ndarray, Psi: np.ndarray, gh: np.ndarray) -> np.ndarray:
+        """dĝ_i/dt: eq. (30) with gain γ, plus the σ and projection terms of ``ghat_law``.
+
+        Parameters
+        ----------
+        chi, Psi : ndarray
+            χ_i and Ψ_i (N×n).
+        gh : ndarray
+            ĝ_i (N).
+        """
         r = -self.gam * np.sum(chi * Psi, 1)  # eq. (30), ĝ law with gain γ
         law = self.opts.ghat_law
         if "sigma" in law:
@@ -436,18 +533,7 @@ class Reference:
                 whi = np.clip((gh - hi) / dl, 0, 1)  # band of width dl outside [lo, hi]
                 wlo = np.clip((lo - gh) / dl, 0, 1)
                 r = r - whi * np.maximum(r, 0) - wlo * np.minimum(r, 0)
-        g, f = self.faults(t)
-        force = g[:, None] * u + f - Mv(C, q) - G  # eq. (2)
-        qd = np.linalg.solve(M, force[..., None])[..., 0]
-        parts = [mud, Ed, phid[:, None], q, qd, thd, r[:, None]]
-        if self.filtered:
-            parts += [out["wdot"], out["zdot"]]
-        xdot = np.concatenate([e0d, np.hstack(parts).reshape(-1)])
-        out.update(
-            xdot=xdot, psi=psi, ehat=ehat, v=v, etadot=Ed, etaddot=Edd, eta3dot=Eddd, b=b,
-            bdot=bd, bddot=bdd, et=et, chi=chi, Psi=Psi, u=u, qdot=qd, u0=u0, u0dot=u0d,
-        )  # fmt: skip
-        return out
+        return r
 
     def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
         """The closed-loop right-hand side ẋ = f(t, x).
@@ -518,10 +604,27 @@ def hand_gains(sc: Scenario, *, lambda1: float | None = None, lambda2: float | N
     l1 = lambda1 if lambda1 is not None else (sc.observer.lambda1 or 1.9)
     l2 = lambda2 if lambda2 is not None else (sc.observer.lambda2 or max(2.0, L.alpha))
     return Gains(
-        A0=A0, B0=B0, C0=C0, Gamma=Gamma, Phi=Phi, Theta=Theta, Omega=Omega,
-        T=np.linalg.inv(Tinv), Q=Q, lambda_bar1=sc.observer.lambda_bar1,
-        delta1=sc.observer.delta1, delta2=sc.observer.delta2,
-        delta1_hat=sc.observer.delta1_hat, delta2_hat=sc.observer.delta2_hat,
-        L_bar=Lbar, H=H, Z=Z, w=w, lambda1=float(l1), lambda2=float(l2), alpha=L.alpha, k1=1.0,
+        A0=A0,
+        B0=B0,
+        C0=C0,
+        Gamma=Gamma,
+        Phi=Phi,
+        Theta=Theta,
+        Omega=Omega,
+        T=np.linalg.inv(Tinv),
+        Q=Q,
+        lambda_bar1=sc.observer.lambda_bar1,
+        delta1=sc.observer.delta1,
+        delta2=sc.observer.delta2,
+        delta1_hat=sc.observer.delta1_hat,
+        delta2_hat=sc.observer.delta2_hat,
+        L_bar=Lbar,
+        H=H,
+        Z=Z,
+        w=w,
+        lambda1=float(l1),
+        lambda2=float(l2),
+        alpha=L.alpha,
+        k1=1.0,
         info={"solver": "hand (verify.reference.hand_gains)", "certified": False},
-    )  # fmt: skip
+    )

@@ -195,6 +195,17 @@ def effort_section(table: pd.DataFrame) -> list[str]:
     return L
 
 
+#: figures shown inline in the report (the others are linked)
+SHOWN_FIGURES = (
+    "fig03-10_formation_overview",
+    "fig11_estimation_errors_log",
+    "fig12_tracking_errors_log",
+    "fig13_ablation",
+    "lyapunov_V1",
+    "lyapunov_V2",
+)
+
+
 def render_markdown(v: Verification, *, strict: bool = False) -> str:
     """The report as Markdown text.
 
@@ -205,7 +216,36 @@ def render_markdown(v: Verification, *, strict: bool = False) -> str:
     strict : bool
         Whether the paper's own claims count as failures.
     """
-    sc, tb, cfg = v.scenario, v.table, v.config
+    L = header_section(v)
+    L += summary_section(v, strict)
+    L += theorem1_section(v)
+    L += theorem2_section(v)
+    L += effort_section(v.table)
+    L += ["", "## Ablation (Fig. 13)", "", v.ablation_summary or ablation_statement(v.table), ""]
+    L += figures_section(v.figures)
+    if v.notes:
+        L += ["## Notes", ""] + [f"- {n}" for n in v.notes] + [""]
+    L += [
+        "## Bound vs actual",
+        "",
+        f"Tail window: last {100 * v.config.tail_fraction:g}% of the horizon. "
+        "ratio = observed/bound.",
+        "",
+        to_markdown(v.table),
+        "",
+    ]
+    return "\n".join(L)
+
+
+def header_section(v: Verification) -> list[str]:
+    """Title, scenario, simulation metadata and options (report lines).
+
+    Parameters
+    ----------
+    v : Verification
+        The verification results.
+    """
+    sc = v.scenario
     L: list[str] = [f"# Verification report: `{sc.name}`", ""]
     L += [f"Scenario `{sc.path}` (sha256 `{sc.sha256[:12]}`): {sc.description}", ""]
     if v.meta:
@@ -214,14 +254,26 @@ def render_markdown(v: Verification, *, strict: bool = False) -> str:
         if info:
             L += [f"Simulation: {info}.", ""]
     o = sc.options
-    L += [
+    return L + [
         f"Options: sign = {o.sign} (width {o.sign_width:g}), ghat law = {o.ghat_law}, "
         f"feedforward = {o.feedforward}, derivatives = {o.derivatives}, ablation = {o.ablation}, "
         f"phi_min = {sc.observer.phi_min:g}.",
         "",
-        "## Summary",
-        "",
     ]
+
+
+def summary_section(v: Verification, strict: bool) -> list[str]:
+    """Row counts per kind, the verdict, the findings and the paper's claims that fail.
+
+    Parameters
+    ----------
+    v : Verification
+        The verification results.
+    strict : bool
+        Whether the paper's own claims count as failures.
+    """
+    tb = v.table
+    L = ["## Summary", ""]
     for kind in ("guaranteed", "consistency", "paper", "info"):
         sub = tb[tb["kind"] == kind]
         if sub.empty:
@@ -235,8 +287,8 @@ def render_markdown(v: Verification, *, strict: bool = False) -> str:
         f"Verdict ({'strict' if strict else 'default'}): **{verdict}**. `guaranteed` rows follow "
         "from the theory for this reconstruction (a failure is a bug); `consistency` rows cannot "
         "fail for a correct implementation, so they are no evidence for a theorem (a failure is "
-        "a bug); `paper` rows are the paper's claims as printed, which do not all follow (docs/fidelity.md, deviations); `info` rows "
-        "are measurements.",
+        "a bug); `paper` rows are the paper's claims as printed, which do not all follow "
+        "(docs/fidelity.md, deviations); `info` rows are measurements.",
         "",
     ]
     L += findings(v)
@@ -249,9 +301,19 @@ def render_markdown(v: Verification, *, strict: bool = False) -> str:
                 f" bound {r.bound:.4g}, observed {r.observed:.4g} ({r.window})"
             )
         L.append("")
+    return L
 
-    # Theorem 1
-    L += ["## Theorem 1 (distributed observer)", ""]
+
+def theorem1_section(v: Verification) -> list[str]:
+    """Theorem 1: the rates, the exact dV1/dt checks and what the phi floor changes.
+
+    Parameters
+    ----------
+    v : Verification
+        The verification results.
+    """
+    sc = v.scenario
+    L = ["## Theorem 1 (distributed observer)", ""]
     if v.gains is not None:
         r1 = theorem1_rates(sc, v.gains)
         L += [
@@ -266,27 +328,44 @@ def render_markdown(v: Verification, *, strict: bool = False) -> str:
             "dV1/dt is exact (AD of V1 along the vector field)."
         )
     if sc.observer.phi_min > 0:
+        L += _phi_floor_lines(v)
+    L.append("")
+    return L
+
+
+def _phi_floor_lines(v: Verification) -> list[str]:
+    """What the phi floor does to Theorem 1, with c_phi when the gains are known."""
+    sc = v.scenario
+    L = [
+        "",
+        f"The phi floor (phi_min = {sc.observer.phi_min:g}) keeps the oracle derivatives "
+        "finite but leaves the term 2 lambda2 sum l_ii z_i phi_i / alpha1bar_i of V1 "
+        "bounded away from zero: the observer is only ultimately bounded and "
+        "dV1/dt <= -delta~ V1 cannot hold once V1 reaches that level (see the rows above).",
+    ]
+    if v.gains is not None:
+        fl = theorem1_floor(sc, v.gains)
         L += [
             "",
-            f"The phi floor (phi_min = {sc.observer.phi_min:g}) keeps the oracle derivatives "
-            "finite but leaves the term 2 lambda2 sum l_ii z_i phi_i / alpha1bar_i of V1 "
-            "bounded away from zero: the observer is only ultimately bounded and "
-            "dV1/dt <= -delta~ V1 cannot hold once V1 reaches that level (see the rows above).",
+            f"With the floor the proof gives dV1/dt <= -delta~ V1 + c_phi, c_phi = 2 lambda2 "
+            f"phi_min sum l_ii z_i (alpha1_i + alpha1bar_i)/alpha1bar_i = {fl.c_phi:.4g} "
+            f"(delta~ = {fl.rate:.4g}, limsup V1 <= c_phi/delta~ = {fl.c_phi / fl.rate:.4g}; "
+            "docs/verification.md). It is the guaranteed Theorem 1 row.",
         ]
-        if v.gains is not None:
-            fl = theorem1_floor(sc, v.gains)
-            L += [
-                "",
-                f"With the floor the proof gives dV1/dt <= -delta~ V1 + c_phi, c_phi = 2 lambda2 "
-                f"phi_min sum l_ii z_i (alpha1_i + alpha1bar_i)/alpha1bar_i = {fl.c_phi:.4g} "
-                f"(delta~ = {fl.rate:.4g}, limsup V1 <= c_phi/delta~ = {fl.c_phi / fl.rate:.4g}; "
-                "docs/verification.md). It is the guaranteed Theorem 1 row.",
-            ]
-    L.append("")
+    return L
 
-    # Theorem 2
+
+def theorem2_section(v: Verification) -> list[str]:
+    """Theorem 2: the eq. (38) consistency checks and the constants table.
+
+    Parameters
+    ----------
+    v : Verification
+        The verification results.
+    """
+    sc, cfg = v.scenario, v.config
     guaranteed, why = theorem2_guaranteed(sc)
-    L += ["## Theorem 2 (fault-tolerant controller)", ""]
+    L = ["## Theorem 2 (fault-tolerant controller)", ""]
     L += [
         f"Implementation consistency: pointwise inequality (38) with exact dV2/dt by AD; {why}."
         + ("" if guaranteed else " It is therefore reported, not required.")
@@ -314,33 +393,30 @@ def render_markdown(v: Verification, *, strict: bool = False) -> str:
             f"| {i + 1} | {c.lam_min_M:.4g} | {c.lam_max_M:.4g} | {c.Omega:.4g} | {c.chi_v:.4g} | "
             f"{c.chi_bar:.4g} | {c.variant} | {c.ghat_term:.4g} | {c.layer_term:.4g} | {prov} |"
         )
-    L += effort_section(tb)
-    L += ["", "## Ablation (Fig. 13)", "", v.ablation_summary or ablation_statement(tb), ""]
+    return L
 
-    if v.figures:
-        L += ["## Figures", ""]
-        shown = ("fig03-10_formation_overview", "fig11_estimation_errors_log",
-                 "fig12_tracking_errors_log", "fig13_ablation", "lyapunov_V1", "lyapunov_V2")  # fmt: skip
-        for p in v.figures:
-            if p.suffix == ".png" and p.stem in shown:
-                L += [f"![{p.stem}](figures/{p.name})", ""]
-        L.append("All files (PNG and PDF):")
-        L.append("")
-        for p in v.figures:
-            if p.suffix in (".png", ".gif"):
-                L.append(f"- [{p.name}](figures/{p.name})")
-        L.append("")
-    if v.notes:
-        L += ["## Notes", ""] + [f"- {n}" for n in v.notes] + [""]
-    L += [
-        "## Bound vs actual",
-        "",
-        f"Tail window: last {100 * cfg.tail_fraction:g}% of the horizon. ratio = observed/bound.",
-        "",
-        to_markdown(tb),
-        "",
-    ]
-    return "\n".join(L)
+
+def figures_section(figures: list[Path]) -> list[str]:
+    """The :data:`SHOWN_FIGURES` inline and links to every PNG and GIF (none without figures).
+
+    Parameters
+    ----------
+    figures : list of Path
+        The figure files written.
+    """
+    if not figures:
+        return []
+    L = ["## Figures", ""]
+    for p in figures:
+        if p.suffix == ".png" and p.stem in SHOWN_FIGURES:
+            L += [f"![{p.stem}](figures/{p.name})", ""]
+    L.append("All files (PNG and PDF):")
+    L.append("")
+    for p in figures:
+        if p.suffix in (".png", ".gif"):
+            L.append(f"- [{p.name}](figures/{p.name})")
+    L.append("")
+    return L
 
 
 def write_report(v: Verification, folder: Path, *, strict: bool = False) -> tuple[Path, Path]:

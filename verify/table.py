@@ -52,6 +52,8 @@ BUG_KINDS = ("guaranteed", "consistency")
 FIG13_LEVEL_FACTOR = 3.0
 #: peak |u_i| is also reported after this start-up time (s): the t = 0 peak dominates
 STARTUP = 1.0
+#: why the printed Theorem 2 rows are the paper's claims, not guarantees
+PAPER_NOTE = "Lemma 1 applied with no decay in ghat (docs/fidelity.md, D3)"
 
 
 @dataclass
@@ -131,6 +133,61 @@ def _win(a: float, b: float) -> str:
     return f"[{a:g}, {b:g}] s"
 
 
+@dataclass(frozen=True)
+class Span:
+    """The time grid of a trajectory and the windows the rows report.
+
+    Attributes
+    ----------
+    t : ndarray
+        Output times.
+    tail : ndarray
+        Boolean mask of the asymptotic window (last ``tail_fraction`` of the horizon).
+    """
+
+    t: np.ndarray
+    tail: np.ndarray
+
+    @classmethod
+    def of(cls, df: pd.DataFrame, cfg: VerifyConfig) -> Span:
+        """The span of a trajectory.
+
+        Parameters
+        ----------
+        df : DataFrame
+            The trajectory (column ``t``).
+        cfg : VerifyConfig
+            Its tail fraction sets the tail.
+        """
+        t = df["t"].to_numpy(float)
+        return cls(t, S.tail_mask(t, cfg.tail_fraction))
+
+    @property
+    def t0(self) -> float:
+        """First output time."""
+        return float(self.t[0])
+
+    @property
+    def t1(self) -> float:
+        """Last output time."""
+        return float(self.t[-1])
+
+    @property
+    def tail_start(self) -> float:
+        """First output time in the tail."""
+        return float(self.t[self.tail][0])
+
+    @property
+    def full(self) -> str:
+        """The whole horizon as a window string."""
+        return _win(self.t0, self.t1)
+
+    @property
+    def tail_window(self) -> str:
+        """The tail as a window string."""
+        return _win(self.tail_start, self.t1)
+
+
 def bounds_table(
     scenario: Scenario,
     df: pd.DataFrame,
@@ -165,34 +222,70 @@ def bounds_table(
     """
     cfg = config or VerifyConfig()
     dm = S.dims(df)
+    _check_dims(scenario, dm)
+    span = Span.of(df, cfg)
+    R = Rows()
+    theorem1_rows(R, scenario, df, span, gains=gains, config=cfg)
+    theorem1_lyapunov_rows(R, theorem1 or [], scenario, span, gains=gains)
+    theorem2_rows(R, scenario, df, span, theorem2 or [], config=cfg)
+    definition1_rows(R, scenario, df, gains=gains, config=cfg)
+    effort_rows(R, df, dm.N, dm.n)
+    if ablation is not None:
+        for i in range(dm.N):
+            ablation_rows(R, df, ablation, i, dm.n, cfg)
+    return R.frame()
+
+
+def _check_dims(scenario: Scenario, dm: S.Dims) -> None:
+    """Raise :class:`VerifyError` when the trajectory's sizes are not the scenario's."""
     if dm.N != scenario.N or dm.n != scenario.n or dm.m != scenario.m:
         raise S.VerifyError(
             f"trajectory has N={dm.N}, n={dm.n}, m={dm.m} but scenario {scenario.name!r} has "
             f"N={scenario.N}, n={scenario.n}, m={scenario.m}: re-run the simulation"
         )
-    t = df["t"].to_numpy(float)
-    t0, t1 = float(t[0]), float(t[-1])
-    tail = S.tail_mask(t, cfg.tail_fraction)
-    tw = _win(float(t[tail][0]), t1)
-    R = Rows()
-    floor = scenario.observer.phi_min > 0
 
-    # ---------------- Theorem 1: observer
+
+def theorem1_rows(
+    R: Rows,
+    scenario: Scenario,
+    df: pd.DataFrame,
+    span: Span,
+    *,
+    gains=None,  # noqa: ANN001 (synthesis.gains.Gains)
+    config: VerifyConfig | None = None,
+) -> None:
+    """Theorem 1 (observer) from the trajectory: decay rate, entering time, tail sup (info).
+
+    Parameters
+    ----------
+    R : Rows
+        Rows to append to.
+    scenario : Scenario
+    df : DataFrame
+        The trajectory; followers without ``eeta`` columns end the rows.
+    span : Span
+        Its time grid and windows.
+    gains : Gains, optional
+        Needed for the decay-rate row (Theorem 1's supported rate).
+    config : VerifyConfig, optional
+    """
+    cfg = config or VerifyConfig()
+    dm = S.dims(df)
+    t, tail = span.t, span.tail
+    floor = scenario.observer.phi_min > 0
     for i in range(dm.N):
         if not S.has(df, f"eeta{i + 1}_1"):
             break
         e = S.agent_norm(df, "eeta", i + 1, dm.m)
-        rate = S.decay_rate(t[tail], e[tail], floor=1e-12)
         if gains is not None:
             from verify.bounds import theorem1_rates
 
-            r1 = theorem1_rates(scenario, gains)
             R.add(
                 "T1 |ebar_eta_i| decay rate >= delta~/2 (fit on tail)",
                 "info",
-                r1.supported / 2.0,
-                rate,
-                tw,
+                theorem1_rates(scenario, gains).supported / 2.0,
+                S.decay_rate(t[tail], e[tail], floor=1e-12),
+                span.tail_window,
                 "phi floor: only ultimately bounded" if floor else "V1 >= c|ebar|^2",
                 agent=i,
                 larger_is_better=True,
@@ -201,9 +294,9 @@ def bounds_table(
         R.add(
             f"T1 time |ebar_eta_i| enters {cfg.enter_level:g}",
             "info",
-            t1,
+            span.t1,
             te,
-            _win(t0, t1),
+            span.full,
             "inf = never stays inside" if not math.isfinite(te) else "",
             agent=i,
         )
@@ -212,81 +305,183 @@ def bounds_table(
             "info",
             cfg.enter_level,
             float(e[tail].max()),
-            tw,
+            span.tail_window,
             f"phi_min = {scenario.observer.phi_min:g}" if floor else "",
             agent=i,
         )
+
+
+def _theorem1_kind(label: str, certified: bool, floor: bool) -> str:
+    """What a failure of Theorem 1's ``label`` check means (see the module docstring)."""
+    if not certified:  # the proof needs gains that pass the LMIs
+        return "info"
+    if label == "floor":  # V̇1 ≤ −δ̃V1 + c_φ: the proof's inequality with φ_min > 0
+        return "guaranteed"
+    if floor:  # the floor leaves c_φ > 0 on the right: V̇1 ≤ −δ̃V1 does not follow
+        return "info"
+    return "guaranteed" if label == "supported" else "paper"
+
+
+def _theorem1_note(chk: InequalityCheck, label: str, certified: bool, floor: bool) -> str:
+    """The note of Theorem 1's ``label`` check row."""
+    note = (
+        f"worst violation {chk.worst:.3g} at t = {chk.t_worst:.3g} s"
+        if not chk.ok
+        else "holds at every output time"
+    )
+    if label == "floor":
+        note += "; supported rate, c_phi from the floor (docs/verification.md)"
+    elif floor:
+        note += "; phi floor > 0 breaks the proof's last step (ultimately bounded)"
+    if not certified:
+        note += "; the gains' certificate does not pass"
+    return note
+
+
+def theorem1_lyapunov_rows(
+    R: Rows,
+    checks: list[InequalityCheck],
+    scenario: Scenario,
+    span: Span,
+    *,
+    gains=None,  # noqa: ANN001 (synthesis.gains.Gains)
+) -> None:
+    """Theorem 1's exact dV1/dt inequalities: the fraction of output times where each holds.
+
+    Parameters
+    ----------
+    R : Rows
+        Rows to append to.
+    checks : list of InequalityCheck
+        [supported rate, printed rate, floor] (a prefix) from
+        :func:`verify.lyapunov.check_theorem1`.
+    scenario : Scenario
+    span : Span
+        The trajectory's time grid.
+    gains : Gains, optional
+        Their certificate decides whether the rows are guaranteed.
+    """
+    floor = scenario.observer.phi_min > 0
     certified = gains is None or bool(getattr(gains, "certificate", {}).get("passed", True))
-    for chk, label in zip(theorem1 or [], ("supported", "printed", "floor"), strict=False):
-        if not certified:  # the proof needs gains that pass the LMIs
-            kind = "info"
-        elif label == "floor":  # V̇1 ≤ −δ̃V1 + c_φ: the proof's inequality with φ_min > 0
-            kind = "guaranteed"
-        elif floor:  # the floor leaves c_φ > 0 on the right: V̇1 ≤ −δ̃V1 does not follow
-            kind = "info"
-        else:
-            kind = "guaranteed" if label == "supported" else "paper"
-        note = (
-            f"worst violation {chk.worst:.3g} at t = {chk.t_worst:.3g} s"
-            if not chk.ok
-            else "holds at every output time"
-        )
-        if label == "floor":
-            note += "; supported rate, c_phi from the floor (docs/verification.md)"
-        elif floor:
-            note += "; phi floor > 0 breaks the proof's last step (ultimately bounded)"
-        if not certified:
-            note += "; the gains' certificate does not pass"
+    for chk, label in zip(checks, ("supported", "printed", "floor"), strict=False):
         R.add(
             "T1 dV1/dt <= -delta~ V1 + c_phi, phi floor (fraction of time)"
             if label == "floor"
             else f"T1 dV1/dt <= -delta~ V1, {label} rate (fraction of time)",
-            kind,
+            _theorem1_kind(label, certified, floor),
             1.0,
             chk.fraction,
-            _win(t0, t1),
-            note,
+            span.full,
+            _theorem1_note(chk, label, certified, floor),
             holds=chk.ok,
             larger_is_better=True,
         )
 
-    # ---------------- Theorem 2: controller
-    guaranteed, why = theorem2_guaranteed(scenario)
-    _consistency_rows(R, theorem2 or [], guaranteed, why, _win(t0, t1))
-    for i in range(dm.N):
-        c = theorem2_constants(scenario, i, cfg)
-        lam = np.asarray(scenario.controller.Lambda[i], float)
-        chi = S.block(df, "chi", i + 1, dm.n)
-        et = S.block(df, "et", i + 1, dm.n)
-        etd = chi - et * lam  # ė_t = χ − Λ e_t, eq. (28)
-        chin = np.linalg.norm(chi, axis=1)
-        paper_note = "Lemma 1 applied with no decay in ghat (docs/fidelity.md, D3)"
-        R.add("T2 |chi_si| <= chi_bar_si (31), paper", "paper", c.chi_bar, chin[tail].max(), tw,
-              paper_note, agent=i)  # fmt: skip
-        for r in range(dm.n):
-            R.add("T2 |e_ti,r| <= chi_bar/lambda_ir (31), paper", "paper", c.e_bar[r],
-                  np.abs(et[tail, r]).max(), tw, paper_note, agent=i, component=r)  # fmt: skip
-            R.add("Lemma 2 |de_ti,r/dt| <= 2 chi_bar, paper", "paper", c.edot_bar[r],
-                  np.abs(etd[tail, r]).max(), tw, paper_note, agent=i, component=r)  # fmt: skip
-        if c.provable:
-            V2_0 = float(df[f"V2_{i + 1}"].iloc[0]) if S.has(df, f"V2_{i + 1}") else math.nan
-            _provable_rows(R, c, t, float(t[tail][0]), chin, et, V2_0, i, guaranteed, cfg)
-        # Lemma 1's reaching time on V2 with the paper's constants
-        if S.has(df, f"V2_{i + 1}"):
-            V2 = df[f"V2_{i + 1}"].to_numpy(float)
-            level = lemma1_bound(c.chi_v, c.Omega, cfg.lemma1_delta)
-            tf = lemma1_reaching_time(c.Omega, c.chi_v, float(V2[0]), cfg.lemma1_delta)
-            te = S.enter_time(t, V2, level)
-            R.add("Lemma 1 reaching time t_f (V2 enters chi_v/(Omega(1-delta))), paper", "paper",
-                  tf, te, _win(t0, t1),
-                  f"V2(0) = {V2[0]:.4g}, level {level:.4g}; " + paper_note, agent=i)  # fmt: skip
 
-    definition1_rows(R, scenario, df, gains=gains, config=cfg)
-    _effort_rows(R, df, dm.N, dm.n)
-    if ablation is not None:
-        for i in range(dm.N):
-            _fig13_rows(R, df, ablation, i, dm.n, cfg)
-    return R.frame()
+def theorem2_rows(
+    R: Rows,
+    scenario: Scenario,
+    df: pd.DataFrame,
+    span: Span,
+    checks: list[InequalityCheck],
+    *,
+    config: VerifyConfig | None = None,
+) -> None:
+    """Theorem 2 (controller): eq. (38) consistency, then per follower the printed and provable bounds.
+
+    Parameters
+    ----------
+    R : Rows
+        Rows to append to.
+    scenario : Scenario
+    df : DataFrame
+        The trajectory.
+    span : Span
+        Its time grid and windows.
+    checks : list of InequalityCheck
+        One per follower from :func:`verify.lyapunov.check_theorem2`.
+    config : VerifyConfig, optional
+    """
+    cfg = config or VerifyConfig()
+    guaranteed, why = theorem2_guaranteed(scenario)
+    _consistency_rows(R, checks, guaranteed, why, span.full)
+    dm = S.dims(df)
+    for i in range(dm.N):
+        _theorem2_agent_rows(R, scenario, df, span, i, dm.n, guaranteed, cfg)
+
+
+def _theorem2_agent_rows(
+    R: Rows,
+    scenario: Scenario,
+    df: pd.DataFrame,
+    span: Span,
+    i: int,
+    n: int,
+    guaranteed: bool,
+    cfg: VerifyConfig,
+) -> None:
+    """Theorem 2's rows for follower ``i`` (``n`` outputs): (31), Lemma 2, provable, Lemma 1."""
+    c = theorem2_constants(scenario, i, cfg)
+    lam = np.asarray(scenario.controller.Lambda[i], float)
+    chi = S.block(df, "chi", i + 1, n)
+    et = S.block(df, "et", i + 1, n)
+    etd = chi - et * lam  # ė_t = χ − Λ e_t, eq. (28)
+    chin = np.linalg.norm(chi, axis=1)
+    tail, tw = span.tail, span.tail_window
+    R.add(
+        "T2 |chi_si| <= chi_bar_si (31), paper",
+        "paper",
+        c.chi_bar,
+        chin[tail].max(),
+        tw,
+        PAPER_NOTE,
+        agent=i,
+    )
+    for r in range(n):
+        R.add(
+            "T2 |e_ti,r| <= chi_bar/lambda_ir (31), paper",
+            "paper",
+            c.e_bar[r],
+            np.abs(et[tail, r]).max(),
+            tw,
+            PAPER_NOTE,
+            agent=i,
+            component=r,
+        )
+        R.add(
+            "Lemma 2 |de_ti,r/dt| <= 2 chi_bar, paper",
+            "paper",
+            c.edot_bar[r],
+            np.abs(etd[tail, r]).max(),
+            tw,
+            PAPER_NOTE,
+            agent=i,
+            component=r,
+        )
+    has_v2 = S.has(df, f"V2_{i + 1}")
+    if c.provable:
+        V2_0 = float(df[f"V2_{i + 1}"].iloc[0]) if has_v2 else math.nan
+        _provable_rows(R, c, span.t, span.tail_start, chin, et, V2_0, i, guaranteed, cfg)
+    if has_v2:
+        _lemma1_row(R, c, span, df[f"V2_{i + 1}"].to_numpy(float), i, cfg)
+
+
+def _lemma1_row(
+    R: Rows, c: Theorem2Constants, span: Span, V2: np.ndarray, i: int, cfg: VerifyConfig
+) -> None:
+    """Lemma 1's reaching time on V2 with the paper's constants (``paper``)."""
+    level = lemma1_bound(c.chi_v, c.Omega, cfg.lemma1_delta)
+    tf = lemma1_reaching_time(c.Omega, c.chi_v, float(V2[0]), cfg.lemma1_delta)
+    te = S.enter_time(span.t, V2, level)
+    R.add(
+        "Lemma 1 reaching time t_f (V2 enters chi_v/(Omega(1-delta))), paper",
+        "paper",
+        tf,
+        te,
+        span.full,
+        f"V2(0) = {V2[0]:.4g}, level {level:.4g}; " + PAPER_NOTE,
+        agent=i,
+    )
 
 
 def _consistency_rows(
@@ -374,8 +569,18 @@ def _provable_rows(
         )
 
 
-def _effort_rows(R: Rows, df: pd.DataFrame, N: int, n: int) -> None:
-    """Peak ‖u_i‖ (Euclidean, logged torques) over the run and after :data:`STARTUP` (info)."""
+def effort_rows(R: Rows, df: pd.DataFrame, N: int, n: int) -> None:
+    """Peak ‖u_i‖ (Euclidean, logged torques) over the run and after :data:`STARTUP` (info).
+
+    Parameters
+    ----------
+    R : Rows
+        Rows to append to.
+    df : DataFrame
+        The trajectory; followers without ``u`` columns end the rows.
+    N, n : int
+        Number of followers and of outputs.
+    """
     t = df["t"].to_numpy(float)
     for i in range(N):
         if not S.has(df, f"u{i + 1}_1"):
@@ -400,7 +605,7 @@ def _effort_rows(R: Rows, df: pd.DataFrame, N: int, n: int) -> None:
             )
 
 
-def _fig13_rows(
+def ablation_rows(
     R: Rows, df: pd.DataFrame, ablation: pd.DataFrame, i: int, n: int, cfg: VerifyConfig
 ) -> None:
     """Fig. 13 (the ablation (42) converges more slowly) for follower ``i``.
@@ -409,6 +614,19 @@ def _fig13_rows(
     max(tail sup FTC, tail sup ablation), so it measures the approach, not the noise
     floor; the fixed 1e-2 reading and least-squares decay rates of ‖e_ti‖ on the
     common window [t0, min of both entering times] stand beside it.
+
+    Parameters
+    ----------
+    R : Rows
+        Rows to append to.
+    df, ablation : DataFrame
+        The FTC (29) run and the eq. (42) ablation run.
+    i : int
+        0-based follower.
+    n : int
+        Number of outputs.
+    cfg : VerifyConfig
+        Its tail fraction sets the tail suprema.
     """
     t, ta = df["t"].to_numpy(float), ablation["t"].to_numpy(float)
     ft, ab = S.agent_norm(df, "et", i + 1, n), S.agent_norm(ablation, "et", i + 1, n)
