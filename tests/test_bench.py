@@ -95,8 +95,13 @@ def _linear_dyn(A: np.ndarray) -> ca.Function:
     nx = A.shape[0]
     t, x = ca.MX.sym("t"), ca.MX.sym("x", nx)
     e = ca.MX(0, 1)
-    return ca.Function("lin", [t, x, e, e, e], [ca.mtimes(ca.sparsify(ca.DM(A)), x), e, e, e],
-                       ca.dyn_in(), ca.dyn_out())  # fmt: skip
+    return ca.Function(
+        "lin",
+        [t, x, e, e, e],
+        [ca.mtimes(ca.sparsify(ca.DM(A)), x), e, e, e],
+        ca.dyn_in(),
+        ca.dyn_out(),
+    )
 
 
 def test_gmres_companion_is_the_jacobian_vector_product() -> None:
@@ -143,8 +148,12 @@ def test_plan_settings_failure_is_reported_not_raised() -> None:
 def test_cli_bad_method_is_one_line_exit_2() -> None:
     proc = subprocess.run(
         [sys.executable, "-m", "benchmarks.bench", "--methods", "nope"],
-        cwd=ROOT, capture_output=True, text=True, timeout=120, check=False,
-    )  # fmt: skip
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "--methods" in proc.stderr
 
@@ -157,10 +166,24 @@ def test_bad_sizes_raise_bench_error() -> None:
 def test_quick_smoke_run(tmp_path: Path) -> None:
     """``--quick`` end to end on a short horizon: two methods, table, CSV and plot."""
     proc = subprocess.run(
-        [sys.executable, "-m", "benchmarks.bench", "--quick", "--horizon", "0.02",
-         "--methods", "c-cvode-native,scipy-rk45", "--out", str(tmp_path)],
-        cwd=ROOT, capture_output=True, text=True, timeout=600, check=False,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "benchmarks.bench",
+            "--quick",
+            "--horizon",
+            "0.02",
+            "--methods",
+            "c-cvode-native,scipy-rk45",
+            "--out",
+            str(tmp_path),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "c-cvode-native*" in proc.stdout
     rows = list(csv.DictReader((tmp_path / "bench.csv").open()))
@@ -239,12 +262,26 @@ def test_finish_ratios_and_table_from_synthetic_records() -> None:
 
     x = np.array([1.0, 100.0])
     recs = [
-        {"N": 5, "method": "c-cvode-native", "status": "ok", "int_median_s": 0.5,
-         "int_min_s": 0.4, "int_max_s": 0.6, "_x_final": x},
-        {"N": 5, "method": "scipy-bdf", "status": "ok", "int_median_s": 30.0,
-         "int_min_s": 30.0, "int_max_s": 30.0, "_x_final": x + np.array([0.01, 1.0])},
+        {
+            "N": 5,
+            "method": "c-cvode-native",
+            "status": "ok",
+            "int_median_s": 0.5,
+            "int_min_s": 0.4,
+            "int_max_s": 0.6,
+            "_x_final": x,
+        },
+        {
+            "N": 5,
+            "method": "scipy-bdf",
+            "status": "ok",
+            "int_median_s": 30.0,
+            "int_min_s": 30.0,
+            "int_max_s": 30.0,
+            "_x_final": x + np.array([0.01, 1.0]),
+        },
         {"N": 5, "method": "scipy-rk45", "status": "stopped at the time limit at t = 1 s"},
-    ]  # fmt: skip
+    ]
     out = finish(recs)
     assert out[0]["ours"] and out[0]["ratio_to_ours"] == 1.0
     assert out[1]["ratio_to_ours"] == pytest.approx(60.0)

@@ -143,9 +143,12 @@ def _jump_functions():
         "jump_ode", [t, x, E, E, E], [ca.vertcat(rate, 0.0), E, E, E], ca.dyn_in(), ca.dyn_out()
     )
     f_dae = ca.Function(
-        "jump_dae", [t, x, z, E, E], [ca.vertcat(z, 0.0), z - rate, E, E],
-        ca.dyn_in(), ca.dyn_out(),
-    )  # fmt: skip
+        "jump_dae",
+        [t, x, z, E, E],
+        [ca.vertcat(z, 0.0), z - rate, E, E],
+        ca.dyn_in(),
+        ca.dyn_out(),
+    )
     return f_ode, f_dae
 
 
@@ -305,9 +308,11 @@ def fault_healths(draw):
                 st.integers(1, 99).map(lambda k: k / 100),  # decimal literals: grid times
                 st.floats(0.001, 0.999),
             ),
-            min_size=1, max_size=3, unique=True,
+            min_size=1,
+            max_size=3,
+            unique=True,
         )
-    )  # fmt: skip
+    )
     values = draw(st.lists(st.floats(0.6, 1.0), min_size=len(times), max_size=len(times)))
     if draw(st.booleans()):
         return [[0.0, 1.0], *([t, v] for t, v in zip(sorted(times), values, strict=True))]

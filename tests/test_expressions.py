@@ -137,9 +137,20 @@ def test_never_evaluates_text(tmp_path):
 
 def test_function_list_is_the_documented_list():
     assert set(FUNCTIONS) == {
-        "sin", "cos", "tan", "exp", "log", "sqrt", "abs", "tanh", "atan2", "min", "max",
-        "step", "sat",
-    }  # fmt: skip
+        "sin",
+        "cos",
+        "tan",
+        "exp",
+        "log",
+        "sqrt",
+        "abs",
+        "tanh",
+        "atan2",
+        "min",
+        "max",
+        "step",
+        "sat",
+    }
 
 
 @settings(max_examples=150, deadline=None)

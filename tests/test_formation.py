@@ -79,8 +79,9 @@ def test_c3_across_threshold(order):
         for delta in (1e-3, 1e-4, 1e-5):
             inner = np.array(RULE(EPS * (1 - delta) * u, b0)[order])
             outer = np.array(RULE(EPS * (1 + delta) * u, b0)[order])
-            np.testing.assert_allclose(outer, np.array(EXACT(EPS * (1 + delta) * u, b0)[order]),
-                                       rtol=0, atol=1e-11 * scale)  # fmt: skip
+            np.testing.assert_allclose(
+                outer, np.array(EXACT(EPS * (1 + delta) * u, b0)[order]), rtol=0, atol=1e-11 * scale
+            )
             errs.append(np.abs(inner - ref).max() / scale)
         # a jump leaves an O(1) error at every δ; continuity (with a bounded next derivative
         # on each side) makes it O(δ): 100x smaller over two decades of δ

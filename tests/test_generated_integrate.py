@@ -98,8 +98,14 @@ def test_dae_with_mass_matrix_matches_matrix_exponential(cg):
     A = np.block([[np.zeros((2, 2)), np.eye(2)], [-Minv @ K_DAE, -Minv @ C_DAE]])
     x0 = np.array([1.0, -0.5, 0.0, 0.3])
     tg = output_grid(3.0, 0.05)
-    tr = integrate(dae, x0, tg, IntegratorSettings(method="idas", rtol=1e-10, atol=1e-12),
-                   z0=np.zeros(2), breakpoints=[1.5])  # fmt: skip
+    tr = integrate(
+        dae,
+        x0,
+        tg,
+        IntegratorSettings(method="idas", rtol=1e-10, atol=1e-12),
+        z0=np.zeros(2),
+        breakpoints=[1.5],
+    )
     assert tr.complete
     ex = np.array([expm(A * tt) @ x0 for tt in tg])
     assert np.abs(tr.x - ex).max() < 1e-7
@@ -128,9 +134,12 @@ def friction_ode_dae():
     force = -k * x[0] - c * x[1] - F * ca.tanh(x[1] / eps) + u
     f_ode = ode("fric_ode", t, x, ca.vertcat(x[1], force / mass))
     f_dae = ca.Function(
-        "fric_dae", [t, x, z, E, E], [ca.vertcat(x[1], z), mass * z - force, E, E],
-        ca.dyn_in(), ca.dyn_out(),
-    )  # fmt: skip
+        "fric_dae",
+        [t, x, z, E, E],
+        [ca.vertcat(x[1], z), mass * z - force, E, E],
+        ca.dyn_in(),
+        ca.dyn_out(),
+    )
     return f_ode, f_dae
 
 
@@ -152,9 +161,13 @@ def test_cvodes_idas_fixed_agree_on_tanh_switching(cg):
         u = np.sin(2 * t) + 2.0 * (t >= 0.75)
         return [y[1], (-4 * y[0] - 0.2 * y[1] - 1.5 * np.tanh(y[1] / 0.05) + u) / 2.0]
 
-    ref = np.vstack([
-        solve_ivp(rhs, (0, 0.75), x0, method="Radau", rtol=1e-11, atol=1e-13, t_eval=tg[tg <= 0.75]).y.T,
-    ])  # fmt: skip
+    ref = np.vstack(
+        [
+            solve_ivp(
+                rhs, (0, 0.75), x0, method="Radau", rtol=1e-11, atol=1e-13, t_eval=tg[tg <= 0.75]
+            ).y.T,
+        ]
+    )
     y75 = ref[-1]
     ref2 = solve_ivp(
         rhs, (0.75, 1.5), y75, method="Radau", rtol=1e-11, atol=1e-13, t_eval=tg[tg > 0.75]
@@ -259,8 +272,12 @@ def test_gmres_with_extra_options_matches_direct(cg, linear):
     lib = build_library([f], replace(cg, jacobian="jvp"), ["lin_jvp"])
     tg = output_grid(1.0, 0.1)
     x0 = np.array([1.0, 0.0, 1.0])
-    s = IntegratorSettings(rtol=1e-10, atol=1e-12, newton_scheme="gmres",
-                           extra_options=(("use_preconditioner", False), ("max_krylov", 3)))  # fmt: skip
+    s = IntegratorSettings(
+        rtol=1e-10,
+        atol=1e-12,
+        newton_scheme="gmres",
+        extra_options=(("use_preconditioner", False), ("max_krylov", 3)),
+    )
     tr = integrate(lib.function("lin_jvp"), x0, tg, s)
     assert tr.complete
     assert np.abs(tr.x - exact_linear(tg, x0)).max() < 1e-7
@@ -297,9 +314,12 @@ def noisy_friction_dae() -> ca.Function:
     noise = big * (ca.tan(x[0]) * ca.cos(x[0]) - ca.sin(x[0]))  # |x0| <= 1 < π/2
     force = -k * x[0] - c * x[1] - F * ca.tanh(x[1] / eps) + ca.sin(2 * t) + noise
     return ca.Function(
-        "noisy_dae", [t, x, z, E, E], [ca.vertcat(x[1], z), mass * z - force, E, E],
-        ca.dyn_in(), ca.dyn_out(),
-    )  # fmt: skip
+        "noisy_dae",
+        [t, x, z, E, E],
+        [ca.vertcat(x[1], z), mass * z - force, E, E],
+        ca.dyn_in(),
+        ca.dyn_out(),
+    )
 
 
 def test_idas_leaves_algebraic_states_out_of_newton_test(cg):
@@ -326,8 +346,13 @@ def test_idas_leaves_algebraic_states_out_of_newton_test(cg):
     assert tr.stats["newton_fails"] < 0.25 * tr.stats["steps"]
     # z(0) solves alg = 0 for x0 (IDACalcIC, which uses the same weights, would stop early)
     assert abs(float(dae(0.0, x0, tr.z[0], [], [])[1])) < 1e-10
-    old = integrate(dae, x0, tg, IntegratorSettings(method="idas", rtol=1e-6, atol=1e-8,
-                    algebraic_atol=1e-8), z0=np.zeros(1))  # fmt: skip
+    old = integrate(
+        dae,
+        x0,
+        tg,
+        IntegratorSettings(method="idas", rtol=1e-6, atol=1e-8, algebraic_atol=1e-8),
+        z0=np.zeros(1),
+    )
     assert old.stats["newton_fails"] > 10 * max(tr.stats["newton_fails"], 1)
 
 

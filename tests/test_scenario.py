@@ -82,8 +82,14 @@ def test_paper_scenario_has_table_2_values():
     )
     assert all(f.model == "two_link" and f.g.minimum == 0.95 for f in s.followers)
     assert s.followers[0].params == {
-        "m1": 0.5, "m2": 1.5, "r1": 1.0, "r2": 0.8, "J1": 5.0, "J2": 5.0, "g0": 9.81,
-    }  # fmt: skip
+        "m1": 0.5,
+        "m2": 1.5,
+        "r1": 1.0,
+        "r2": 0.8,
+        "J1": 5.0,
+        "J2": 5.0,
+        "g0": 9.81,
+    }
     f_text = [f.f[0].text for f in s.followers[:4]]
     assert f_text == ["4*sin(2*t) + 1", "3*cos(t) + exp(-2*t)", "2*sin(t)", "4*cos(t)"]
     # d_i = sup |f_i| over the horizon, from independent closed forms

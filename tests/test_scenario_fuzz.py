@@ -107,7 +107,7 @@ WEIRD = st.one_of(
             "9**9**9",
             "exp(exp(t))",
         ]
-    ),  # fmt: skip
+    ),
     st.floats(allow_nan=True, allow_infinity=True),
     st.integers(min_value=-(2**63), max_value=2**63 - 1),
     st.text(max_size=12),

@@ -69,13 +69,24 @@ def test_command_line_runs_paper_csv(roots):
     horizon = _horizon(path)
     proc = subprocess.run(
         [
-            sys.executable, "-m", "generated", "sim", str(path),
-            "--set", f"integration.horizon={horizon}", "--out", str(out),
-            "--opt=-O0", "--no-progress",
+            sys.executable,
+            "-m",
+            "generated",
+            "sim",
+            str(path),
+            "--set",
+            f"integration.horizon={horizon}",
+            "--out",
+            str(out),
+            "--opt=-O0",
+            "--no-progress",
         ],
-        cwd=ROOT, env={**os.environ, "HITL_BUILD_DIR": str(build)},
-        capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
+        cwd=ROOT,
+        env={**os.environ, "HITL_BUILD_DIR": str(build)},
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert proc.returncode == 0, proc.stderr
     rows = round(horizon / load_scenario(path).integration.output_step) + 1
     assert f"{rows} rows" in proc.stderr

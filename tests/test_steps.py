@@ -37,8 +37,13 @@ def small(tmp_path_factory):
     cg = CodegenSettings(optimization="-O0", build_root=str(root / "build"))
     sc = api.load(path)
     gains, _ = api.ensure_gains(sc, root / "out")
-    return {"path": path, "sc": sc, "built": api.build(sc, gains, settings=cg), "cg": cg,
-            "out": root / "out"}  # fmt: skip
+    return {
+        "path": path,
+        "sc": sc,
+        "built": api.build(sc, gains, settings=cg),
+        "cg": cg,
+        "out": root / "out",
+    }
 
 
 def test_default_edges():
@@ -97,8 +102,9 @@ def test_bad_edges_are_rejected(small):
 
 
 def test_knob_sensitivity_reruns_with_one_field_changed(small):
-    kf = knob_sensitivity(small["path"], [("integration.horizon", (0.2,))], small["out"],
-                          codegen=small["cg"])  # fmt: skip
+    kf = knob_sensitivity(
+        small["path"], [("integration.horizon", (0.2,))], small["out"], codegen=small["cg"]
+    )
     assert kf["key"].tolist() == ["(file)", "integration.horizon"]
     assert kf["complete"].all()
     assert kf["t_reached"].tolist() == [0.5, 0.2]

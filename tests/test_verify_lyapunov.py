@@ -48,8 +48,14 @@ def loop(tmp_path_factory):
     cl = build_closed_loop(sc, gains)
     grid = sorted({0.0, *T_CHECK, *(t - H for t in T_CHECK), *(t + H for t in T_CHECK)})
     grid = np.array(grid)
-    F = ca.integrator("F", "cvodes", cl.ode_dyn.expand(), 0.0, grid[1:],
-                      {"abstol": 1e-12, "reltol": 1e-12, "max_num_steps": 200000})  # fmt: skip
+    F = ca.integrator(
+        "F",
+        "cvodes",
+        cl.ode_dyn.expand(),
+        0.0,
+        grid[1:],
+        {"abstol": 1e-12, "reltol": 1e-12, "max_num_steps": 200000},
+    )
     X = np.vstack([np.asarray(cl.x0).reshape(1, -1), np.array(F(x0=cl.x0)["xf"]).T])
     return sc, gains, cl, grid, X
 
@@ -128,8 +134,14 @@ def test_theorem1_rate_holds_without_the_phi_floor(tmp_path):
     gains, _ = api.ensure_gains(sc, tmp_path)
     cl = build_closed_loop(sc, gains)
     grid = np.linspace(0.0, 1.0, 21)
-    F = ca.integrator("F", "cvodes", cl.ode_dyn.expand(), 0.0, grid[1:],
-                      {"abstol": 1e-10, "reltol": 1e-10, "max_num_steps": 200000})  # fmt: skip
+    F = ca.integrator(
+        "F",
+        "cvodes",
+        cl.ode_dyn.expand(),
+        0.0,
+        grid[1:],
+        {"abstol": 1e-10, "reltol": 1e-10, "max_num_steps": 200000},
+    )
     X = np.vstack([np.asarray(cl.x0).reshape(1, -1), np.array(F(x0=cl.x0)["xf"]).T])
     r = theorem1_rates(sc, gains)
     chk = check_theorem1(cl, grid, X, r.supported)
