@@ -36,15 +36,35 @@ def _fmt(v) -> str:
     return repr(float(v))
 
 
-def write_scenario(tmp_path, adjacency, pinning, *, models=None, options=None, controller=None,
-                   observer=None, initial=None, faults=None, u0=None, name="t", leader=None) -> object:  # fmt: skip
+def write_scenario(
+    tmp_path,
+    adjacency,
+    pinning,
+    *,
+    models=None,
+    options=None,
+    controller=None,
+    observer=None,
+    initial=None,
+    faults=None,
+    u0=None,
+    name="t",
+    leader=None,
+) -> object:
     """A two-link (or mixed-model) scenario on an arbitrary graph, written as TOML and loaded."""
     A = np.asarray(adjacency, dtype=float)
     N = A.shape[0]
     rng = np.random.default_rng(N)
-    lines = [f'name = "{name}"', "[leader]"] + (leader or [
-        "A0 = [[0.0, 1.0], [0.0, 0.0]]", "B0 = [[0.0], [1.0]]", "C0 = [[1.0, 1.0], [2.0, 2.0]]",
-        "eta0 = [0.3, -0.2]", "alpha = 2.0"])  # fmt: skip
+    lines = [f'name = "{name}"', "[leader]"] + (
+        leader
+        or [
+            "A0 = [[0.0, 1.0], [0.0, 0.0]]",
+            "B0 = [[0.0], [1.0]]",
+            "C0 = [[1.0, 1.0], [2.0, 2.0]]",
+            "eta0 = [0.3, -0.2]",
+            "alpha = 2.0",
+        ]
+    )
     if u0 is not None:
         lines.append(u0)
     elif leader is None:
@@ -53,18 +73,37 @@ def write_scenario(tmp_path, adjacency, pinning, *, models=None, options=None, c
     for i in range(N):
         model = (models or ["two_link"])[i % len(models or ["two_link"])]
         g, f = faults or ("0.95", ["4*sin(2*t) + 1", "3*cos(t)"])
-        lines += ["[[followers]]", f'model = "{model}"', f"p0 = {_fmt(rng.uniform(-2, 2, 2))}",
-                  f"q0 = {_fmt(rng.uniform(-1, 1, 2))}", f"b0 = {_fmt(rng.uniform(-4, 4, 2))}",
-                  f"g = {g}", f"f = {_fmt(f)}"]  # fmt: skip
-    obs = {"lambda1": 1.9, "lambda2": 2.0, "Q": [[35.4, 14.9]], "alpha1": 1.0,
-           "alpha1_bar": 0.5, "phi0": 1.0, "phi_min": 0.005} | (observer or {})  # fmt: skip
+        lines += [
+            "[[followers]]",
+            f'model = "{model}"',
+            f"p0 = {_fmt(rng.uniform(-2, 2, 2))}",
+            f"q0 = {_fmt(rng.uniform(-1, 1, 2))}",
+            f"b0 = {_fmt(rng.uniform(-4, 4, 2))}",
+            f"g = {g}",
+            f"f = {_fmt(f)}",
+        ]
+    obs = {
+        "lambda1": 1.9,
+        "lambda2": 2.0,
+        "Q": [[35.4, 14.9]],
+        "alpha1": 1.0,
+        "alpha1_bar": 0.5,
+        "phi0": 1.0,
+        "phi_min": 0.005,
+    } | (observer or {})
     lines.append("[observer]")
     lines += [f"{k} = {_fmt(v)}" for k, v in obs.items()]
     ctrl = {"gamma": 0.01, "sigma": 1.0, "ghat_ref": 1.0, "g_min": 0.5} | (controller or {})
     lines.append("[controller]")
     lines += [f"{k} = {_fmt(v)}" for k, v in ctrl.items()]
-    opts = {"sign": "tanh", "sign_width": 0.05, "ghat_law": "sigma+projection",
-            "feedforward": True, "derivatives": "oracle", "tau_threshold": 0.5} | (options or {})  # fmt: skip
+    opts = {
+        "sign": "tanh",
+        "sign_width": 0.05,
+        "ghat_law": "sigma+projection",
+        "feedforward": True,
+        "derivatives": "oracle",
+        "tau_threshold": 0.5,
+    } | (options or {})
     lines.append("[options]")
     lines += [f"{k} = {_fmt(v)}" for k, v in opts.items()]
     ini = {"eta": [0.1, -0.1], "mu": [0.05, 0.02], "ghat": 1.2} | (initial or {})
@@ -159,8 +198,14 @@ def test_mixed_models_and_csv_trace_match_reference(tmp_path):
     tr.write_text("t,u\n" + "\n".join(f"{a},{1.5 * np.cos(a) + 0.02 * a}" for a in ts) + "\n")
     rng = np.random.default_rng(7)
     A, pin = random_graph(5, rng)
-    sc = write_scenario(tmp_path, A, pin, models=["two_link", "point_mass_2d"],
-                        u0=f'u0_csv = "{tr.name}"', faults=("[[0.0, 1.0], [5.0, 0.6]]", ["step(t - 3)", "0.5"]))  # fmt: skip
+    sc = write_scenario(
+        tmp_path,
+        A,
+        pin,
+        models=["two_link", "point_mass_2d"],
+        u0=f'u0_csv = "{tr.name}"',
+        faults=("[[0.0, 1.0], [5.0, 0.6]]", ["step(t - 3)", "0.5"]),
+    )
     g = hand_gains(sc)
     cl = build_closed_loop(sc, g)
     ref = Reference(sc, g)
@@ -170,15 +215,27 @@ def test_mixed_models_and_csv_trace_match_reference(tmp_path):
 
 def test_three_state_leader_with_two_inputs_matches_reference(tmp_path):
     """m = 3, p = 2: the vector norm ‖Qê‖ in v_i (not |·|) and the rotation from η̇_i's first two entries."""
-    leader = ["A0 = [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]]",
-              "B0 = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]", "C0 = [[1.0, 1.0, 0.0], [0.0, 1.0, 1.0]]",
-              "eta0 = [0.3, -0.2, 0.1]", 'u0 = ["cos(t)", "0.5*sin(2*t)"]', "alpha = 2.0"]  # fmt: skip
+    leader = [
+        "A0 = [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]]",
+        "B0 = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]",
+        "C0 = [[1.0, 1.0, 0.0], [0.0, 1.0, 1.0]]",
+        "eta0 = [0.3, -0.2, 0.1]",
+        'u0 = ["cos(t)", "0.5*sin(2*t)"]',
+        "alpha = 2.0",
+    ]
     rng = np.random.default_rng(33)
     A, pin = random_graph(5, rng, signed=True)
     for deriv in ("oracle", "filtered"):
-        sc = write_scenario(tmp_path, A, pin, leader=leader, name=f"m3{deriv}",
-                            observer={"Q": "synthesize"}, options={"derivatives": deriv},
-                            initial={"eta": [0.1, -0.1, 0.2], "mu": [0.05, 0.02, -0.03]})  # fmt: skip
+        sc = write_scenario(
+            tmp_path,
+            A,
+            pin,
+            leader=leader,
+            name=f"m3{deriv}",
+            observer={"Q": "synthesize"},
+            options={"derivatives": deriv},
+            initial={"eta": [0.1, -0.1, 0.2], "mu": [0.05, 0.02, -0.03]},
+        )
         assert (sc.m, sc.p, sc.n) == (3, 2, 2)
         g = hand_gains(sc)
         assert_rhs_matches(build_closed_loop(sc, g), Reference(sc, g), rng, k=3)
@@ -204,12 +261,26 @@ def replicate(sc, N):
         sc,
         graph=Graph(adjacency=A, pinning=np.eye(1, N).ravel()),
         followers=(sc.followers[0],) * N,
-        observer=replace(o, alpha1=rows(o.alpha1), alpha1_bar=rows(o.alpha1_bar), phi0=rows(o.phi0)),
-        controller=replace(c, Lambda=rows(c.Lambda), k1=rows(c.k1), k2=rows(c.k2),
-                           gamma=rows(c.gamma), sigma=rows(c.sigma), ghat_ref=rows(c.ghat_ref)),
-        initial=replace(ini, eta=rows(ini.eta), mu=rows(ini.mu), theta_hat=rows(ini.theta_hat),
-                        ghat=rows(ini.ghat)),
-    )  # fmt: skip
+        observer=replace(
+            o, alpha1=rows(o.alpha1), alpha1_bar=rows(o.alpha1_bar), phi0=rows(o.phi0)
+        ),
+        controller=replace(
+            c,
+            Lambda=rows(c.Lambda),
+            k1=rows(c.k1),
+            k2=rows(c.k2),
+            gamma=rows(c.gamma),
+            sigma=rows(c.sigma),
+            ghat_ref=rows(c.ghat_ref),
+        ),
+        initial=replace(
+            ini,
+            eta=rows(ini.eta),
+            mu=rows(ini.mu),
+            theta_hat=rows(ini.theta_hat),
+            ghat=rows(ini.ghat),
+        ),
+    )
 
 
 def test_graph_size_independent_of_N():
@@ -218,8 +289,12 @@ def test_graph_size_independent_of_N():
     for N in (5, 500):
         scN = replicate(sc, N)
         cl = build_closed_loop(scN, hand_gains(scN))
-        sizes[N] = (cl.ode.n_instructions(), cl.ode.n_nodes(), cl.dae_dyn.n_instructions(),
-                    cl.outputs.n_instructions())  # fmt: skip
+        sizes[N] = (
+            cl.ode.n_instructions(),
+            cl.ode.n_nodes(),
+            cl.dae_dyn.n_instructions(),
+            cl.outputs.n_instructions(),
+        )
         assert cl.layout.nx == 2 + N * 12
     assert sizes[5] == sizes[500]
 
@@ -250,8 +325,10 @@ def test_ode_and_dae_give_same_accelerations(tmp_path):
         # the accelerations solving the residual (affine in z) are qd
         z0 = np.zeros_like(qd)
         r0 = np.array(cl.dae_dyn(t=t, x=x, z=z0, p=[], u=[])["alg"]).ravel()
-        cols = [np.array(cl.dae_dyn(t=t, x=x, z=np.eye(len(qd))[k], p=[], u=[])["alg"]).ravel() - r0
-                for k in range(len(qd))]  # fmt: skip
+        cols = [
+            np.array(cl.dae_dyn(t=t, x=x, z=np.eye(len(qd))[k], p=[], u=[])["alg"]).ravel() - r0
+            for k in range(len(qd))
+        ]
         z_solved = np.linalg.solve(np.column_stack(cols), -r0)
         assert np.allclose(z_solved, qd, rtol=1e-9, atol=1e-9)
         ode_dae = np.array(out["ode"]).ravel()
@@ -301,8 +378,12 @@ def test_graph_matrices_use_the_synthesis_gauge():
     np.testing.assert_array_equal(gm.h, find_gauge(A, pin))
     np.testing.assert_array_equal(gm.L_B, np.diag(np.abs(A).sum(1) + pin) - A)
     with pytest.raises(SynthesisError, match="balanced"):
-        graph_matrices(Graph(adjacency=np.array([[0, 1, -1], [1, 0, 1], [-1, 1, 0]], dtype=float),
-                             pinning=np.ones(3)))  # fmt: skip
+        graph_matrices(
+            Graph(
+                adjacency=np.array([[0, 1, -1], [1, 0, 1], [-1, 1, 0]], dtype=float),
+                pinning=np.ones(3),
+            )
+        )
 
 
 def test_projection_keeps_ghat_in_bounds():
@@ -328,8 +409,14 @@ def test_filters_converge_on_smooth_inputs():
 
     def run(sig, times):
         wdot, zdot, *_ = flt(w, z, ca.jacobian(sig(t), t), sig(t))
-        I = ca.integrator("I", "cvodes", {"t": t, "x": ca.vertcat(w, z), "ode": ca.vertcat(wdot, zdot)},
-                          0.0, times, {"reltol": 1e-11, "abstol": 1e-12})  # fmt: skip
+        I = ca.integrator(
+            "I",
+            "cvodes",
+            {"t": t, "x": ca.vertcat(w, z), "ode": ca.vertcat(wdot, zdot)},
+            0.0,
+            times,
+            {"reltol": 1e-11, "abstol": 1e-12},
+        )
         return np.array(I(x0=np.zeros(5))["xf"])
 
     times = np.array([3.0, 4.0])
@@ -357,8 +444,14 @@ def test_filters_converge_on_smooth_inputs():
 def _trajectory(cl, times, rtol=1e-10):
     t, x = ca.SX.sym("t"), ca.SX.sym("x", cl.layout.nx)
     f = cl.ode.expand()
-    I = ca.integrator("I", "cvodes", {"t": t, "x": x, "ode": f(t, x)}, 0.0, times,
-                      {"reltol": rtol, "abstol": 1e-12, "max_num_steps": 200000})  # fmt: skip
+    I = ca.integrator(
+        "I",
+        "cvodes",
+        {"t": t, "x": x, "ode": f(t, x)},
+        0.0,
+        times,
+        {"reltol": rtol, "abstol": 1e-12, "max_num_steps": 200000},
+    )
     return np.array(I(x0=cl.x0)["xf"]).T
 
 
@@ -371,8 +464,10 @@ def test_oracle_derivatives_match_central_differences(tmp_path):
     tk = np.array([0.4, 0.9, 1.3])
     times = np.sort(np.concatenate([tk - h, tk, tk + h]))
     X = _trajectory(cl, times)
-    O = [dict(zip(cl.outputs.name_out(), [np.array(v) for v in cl.outputs(t, x)], strict=True))
-         for t, x in zip(times, X, strict=True)]  # fmt: skip
+    O = [
+        dict(zip(cl.outputs.name_out(), [np.array(v) for v in cl.outputs(t, x)], strict=True))
+        for t, x in zip(times, X, strict=True)
+    ]
     for k in range(len(tk)):
         lo, mid, hi = O[3 * k], O[3 * k + 1], O[3 * k + 2]
         for val, der in (
@@ -394,16 +489,32 @@ def test_exact_cancellation_identity(tmp_path, faulty):
     """Mχ̇ = −(C + K)χ − Ĵ sgn χ (+ f + (gĝ − 1)Ψ with faults) along a trajectory, eq. (29)."""
     sc0 = load_scenario(PAPER)
     faults = ("0.8", ["2*sin(t)", "1 + cos(3*t)"]) if faulty else ("1.0", ["0", "0"])
-    sc = write_scenario(tmp_path, sc0.graph.adjacency, sc0.graph.pinning, faults=faults,
-                        options={"ablation": not faulty})  # fmt: skip
+    sc = write_scenario(
+        tmp_path,
+        sc0.graph.adjacency,
+        sc0.graph.pinning,
+        faults=faults,
+        options={"ablation": not faulty},
+    )
     cl = build_closed_loop(sc, hand_gains(sc))
     times = np.array([0.2, 0.5, 1.0])
     X = _trajectory(cl, times, rtol=1e-6)  # χ̇ is exact (AD along the vector field) at each point
     t, x = ca.MX.sym("t"), ca.MX.sym("x", cl.layout.nx)
     o = dict(zip(cl.outputs.name_out(), cl.outputs(t, x), strict=True))
     chi_dot = ca.jacobian(o["chi"], t) + ca.jtimes(ca.vec(o["chi"]), x, cl.ode(t, x))
-    F = ca.Function("F", [t, x], [ca.reshape(chi_dot, sc.N, sc.n), o["chi"], o["Psi"], o["thetahat"],
-                                  o["ghat"], o["g"], o["f"]])  # fmt: skip
+    F = ca.Function(
+        "F",
+        [t, x],
+        [
+            ca.reshape(chi_dot, sc.N, sc.n),
+            o["chi"],
+            o["Psi"],
+            o["thetahat"],
+            o["ghat"],
+            o["g"],
+            o["f"],
+        ],
+    )
     model = build_model("two_link")
     k1 = sc.controller.k1
     for tk, xk in zip(times, X, strict=True):
@@ -468,8 +579,11 @@ def test_lyapunov_outputs_match_formulas(tmp_path):
             M = np.array(model.M(P["p"][i]))
             chi = r["chi"][i]
             gam = sc.controller.gamma[i]
-            V2 = (0.5 * chi @ M @ chi + 0.5 * np.sum((P["thetahat"][i] - sc.followers[i].d) ** 2)
-                  + 0.7 / (2 * gam) * (P["ghat"][i, 0] - 1 / 0.7) ** 2)  # fmt: skip
+            V2 = (
+                0.5 * chi @ M @ chi
+                + 0.5 * np.sum((P["thetahat"][i] - sc.followers[i].d) ** 2)
+                + 0.7 / (2 * gam) * (P["ghat"][i, 0] - 1 / 0.7) ** 2
+            )
             assert np.isclose(o["V2"][i, 0], V2, rtol=1e-11)
         assert np.allclose(o["ebar"], E - np.outer(ref.h, eta0), atol=1e-14)
 

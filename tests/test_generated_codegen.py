@@ -37,9 +37,12 @@ def settings(tmp_path):
 def test_library_equals_symbolic_function_at_random_inputs(settings):
     f = dyn("toy")
     outs = ca.Function(
-        "toy_out", [f.sx_in(0), f.sx_in(1)], [ca.mtimes(f.sx_in(1), f.sx_in(1).T), ca.sumsqr(f.sx_in(1))],
-        ["t", "x"], ["xx", "n2"],
-    )  # fmt: skip
+        "toy_out",
+        [f.sx_in(0), f.sx_in(1)],
+        [ca.mtimes(f.sx_in(1), f.sx_in(1).T), ca.sumsqr(f.sx_in(1))],
+        ["t", "x"],
+        ["xx", "n2"],
+    )
     lib = build_library([f, outs], settings, with_derivatives=["toy"])
     assert set(lib.names) == {"toy", "jac_toy", "toy_out"}
     ext, jext, oext = lib.function("toy"), lib.function("jac_toy"), lib.function("toy_out")
@@ -49,9 +52,11 @@ def test_library_equals_symbolic_function_at_random_inputs(settings):
         t = rng.uniform(-5, 5)
         x = rng.normal(scale=3, size=3)
         np.testing.assert_allclose(
-            np.array(ext(t, x, [], [], [])[0]), np.array(f(t, x, [], [], [])[0]),
-            rtol=1e-12, atol=1e-12,
-        )  # fmt: skip
+            np.array(ext(t, x, [], [], [])[0]),
+            np.array(f(t, x, [], [], [])[0]),
+            rtol=1e-12,
+            atol=1e-12,
+        )
         a = jac(t, x, [], [], [], 0, 0, 0, 0)
         b = jext(t, x, [], [], [], 0, 0, 0, 0)
         assert len(a) == len(b)
@@ -66,8 +71,13 @@ def test_jacobian_is_sparse_not_dense(settings):
     t = ca.SX.sym("t")
     x = ca.SX.sym("x", 40)
     e = ca.SX(0, 1)
-    f = ca.Function("chain", [t, x, e, e, e], [-x + ca.vertcat(0, x[:-1] ** 2), e, e, e],
-                    ca.dyn_in(), ca.dyn_out())  # fmt: skip
+    f = ca.Function(
+        "chain",
+        [t, x, e, e, e],
+        [-x + ca.vertcat(0, x[:-1] ** 2), e, e, e],
+        ca.dyn_in(),
+        ca.dyn_out(),
+    )
     lib = build_library([f], settings, with_derivatives=["chain"])
     jx = lib.function("jac_chain").sparsity_out(1)  # jac_ode_x
     assert jx.size() == (40, 40)

@@ -205,14 +205,23 @@ def test_codegen_is_deterministic_across_processes(base, env):
     envv = dict(os.environ, PYTHONHASHSEED="12345")
     out = subprocess.run(
         [sys.executable, "-c", code, str(env["scenario"]), str(env["out"]), env["cg"].build_root],
-        capture_output=True, text=True, env=envv, check=True, cwd=Path(__file__).parents[1],
-    ).stdout.split()  # fmt: skip
+        capture_output=True,
+        text=True,
+        env=envv,
+        check=True,
+        cwd=Path(__file__).parents[1],
+    ).stdout.split()
     assert out == [base[0].meta["library"]["key"], "True"]
 
 
 def test_ablation_variant_goes_to_its_own_folder(base, env):
-    r = api.run(env["scenario"], overrides={"options.ablation": True}, codegen=env["cg"],
-                out_root=env["out"], progress=False)  # fmt: skip
+    r = api.run(
+        env["scenario"],
+        overrides={"options.ablation": True},
+        codegen=env["cg"],
+        out_root=env["out"],
+        progress=False,
+    )
     assert r.csv_path.parent.name == "small-ablation"
     assert r.meta["overrides"] == {"options.ablation": True}
     assert r.meta["scenario_sha256"] != base[0].meta["scenario_sha256"]
@@ -237,15 +246,25 @@ def test_idas_and_fixed_agree_with_cvodes(base, env, tight_cvodes):
     def err(frame: pd.DataFrame) -> float:
         return float((np.abs(frame[cols].to_numpy() - ref[cols].to_numpy()) / scale).max())
 
-    r = api.run(env["scenario"], method="idas", codegen=env["cg"],
-                out_root=env["root"] / "out-idas", progress=False)  # fmt: skip
+    r = api.run(
+        env["scenario"],
+        method="idas",
+        codegen=env["cg"],
+        out_root=env["root"] / "out-idas",
+        progress=False,
+    )
     assert r.meta["method"] == "idas" and r.meta["form"] == "dae" and r.trajectory.complete
     e_fixture = err(r.frame)
     e_tight = state_diff(tight_frame(env, "idas"), tight_cvodes, ref)
     assert e_tight < TIGHT_BOUND and e_tight < e_fixture / 10, (e_fixture, e_tight)
     # the fixed step (ROS2, h = 1e-3) converges to the same trajectory as its tolerance shrinks
-    r = api.run(env["scenario"], method="fixed", codegen=env["cg"],
-                out_root=env["root"] / "out-fixed", progress=False)  # fmt: skip
+    r = api.run(
+        env["scenario"],
+        method="fixed",
+        codegen=env["cg"],
+        out_root=env["root"] / "out-fixed",
+        progress=False,
+    )
     assert r.meta["method"] == "fixed" and r.meta["library"]["cache_hit"]  # the ODE library
     e3 = err(r.frame)
     sc = api.load(env["scenario"])
@@ -269,8 +288,16 @@ def test_native_agrees_with_cvodes_and_runs_from_the_cli(base, env, capsys, tigh
     cols = [c for c in ref.columns if c[:1] in ("p", "q") or c.startswith(("eta", "mu", "ghat"))]
     scale = np.abs(ref[cols].to_numpy()).max(axis=0) + 1.0
     out = env["root"] / "out-native"
-    argv = ["sim", str(env["scenario"]), "--method", "native", "--opt=-O0", "--out", str(out),
-            "--no-progress"]  # fmt: skip
+    argv = [
+        "sim",
+        str(env["scenario"]),
+        "--method",
+        "native",
+        "--opt=-O0",
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     os.environ["HITL_BUILD_DIR"] = env["cg"].build_root
     try:
         code = run_cli(cli_main, argv)
@@ -313,8 +340,9 @@ def test_precision_table_against_the_reference(env):
     from benchmarks.precision import precision_table, state_label
 
     sc = api.load(env["scenario"])
-    df, unc = precision_table(sc, ("cvodes", "native"), (1e-5, 1e-8), 1e-11,
-                              codegen=env["cg"], out_root=env["out"])  # fmt: skip
+    df, unc = precision_table(
+        sc, ("cvodes", "native"), (1e-5, 1e-8), 1e-11, codegen=env["cg"], out_root=env["out"]
+    )
     assert unc < 1e-6  # two BDF implementations at rtol 1e-11
     assert list(df.method) == ["cvodes", "cvodes", "native", "native"]
     assert df.complete.all() and (df.steps > 0).all()
@@ -329,8 +357,18 @@ def test_precision_table_against_the_reference(env):
 
 def test_failing_integration_writes_incomplete_trajectory_and_exits_2(env, capsys):
     out = env["root"] / "out-fail"
-    argv = ["sim", str(env["scenario"]), "--set", "integration.max_steps=3", "--variant", "fail",
-            "--opt=-O0", "--out", str(out), "--no-progress"]  # fmt: skip
+    argv = [
+        "sim",
+        str(env["scenario"]),
+        "--set",
+        "integration.max_steps=3",
+        "--variant",
+        "fail",
+        "--opt=-O0",
+        "--out",
+        str(out),
+        "--no-progress",
+    ]
     os.environ["HITL_BUILD_DIR"] = env["cg"].build_root
     try:
         code = run_cli(cli_main, argv)
@@ -347,13 +385,25 @@ def test_failing_integration_writes_incomplete_trajectory_and_exits_2(env, capsy
     assert np.isfinite(df.to_numpy()).all()
     assert sorted(p.name for p in folder.iterdir()) == ["gains.json", "meta.json", "trajectory.csv"]
     with pytest.raises(IntegrationError):
-        api.run(env["scenario"], overrides={"integration.max_steps": 3}, variant="fail",
-                codegen=env["cg"], out_root=out, progress=False)  # fmt: skip
+        api.run(
+            env["scenario"],
+            overrides={"integration.max_steps": 3},
+            variant="fail",
+            codegen=env["cg"],
+            out_root=out,
+            progress=False,
+        )
 
 
 def test_broken_compile_via_cli_exits_2(env, capsys):
-    argv = ["sim", str(env["scenario"]), "--opt=-fno-such-flag-hitl", "--out",
-            str(env["root"] / "out-broken"), "--no-progress"]  # fmt: skip
+    argv = [
+        "sim",
+        str(env["scenario"]),
+        "--opt=-fno-such-flag-hitl",
+        "--out",
+        str(env["root"] / "out-broken"),
+        "--no-progress",
+    ]
     os.environ["HITL_BUILD_DIR"] = env["cg"].build_root
     try:
         code = run_cli(cli_main, argv)

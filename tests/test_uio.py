@@ -37,9 +37,13 @@ def _simulate(A0, B0, C0, Theta, w, x0, mu0, times):
     mudot, _ = uio(mu, ca.DM(C0) @ x)
     ode = ca.vertcat(ca.DM(A0) @ x + ca.DM(B0) @ w(t), mudot)
     I = ca.integrator(
-        "I", "cvodes", {"t": t, "x": ca.vertcat(x, mu), "ode": ode}, 0.0, times,
+        "I",
+        "cvodes",
+        {"t": t, "x": ca.vertcat(x, mu), "ode": ode},
+        0.0,
+        times,
         {"reltol": 1e-11, "abstol": 1e-12, "max_num_steps": 100000},
-    )  # fmt: skip
+    )
     X = np.array(I(x0=np.concatenate([x0, mu0]))["xf"])
     return X[:m], X[m:]
 
