@@ -5,6 +5,13 @@ on load and returns a frozen :class:`Scenario`. Every problem is a
 :class:`~core.errors.ScenarioError` naming the file, the key, what is wrong
 and what is expected. Every key, its type, default and meaning is documented
 in ``docs/scenario-format.md``; ``scenarios/paper.toml`` is the paper's Table 2.
+
+The sections with defaults (``[observer]``, ``[controller]``, ``[options]``,
+``[initial]``, ``[integration]``) declare each key once, on its dataclass field
+(:func:`core.settings.setting`: default, shape, range checks); the loader walks
+those fields. Rules between keys live in :data:`RULES` and are checked by
+:meth:`Scenario.validate`, which runs whenever a :class:`Scenario` is made,
+including through :func:`dataclasses.replace`.
 """
 
 from __future__ import annotations
@@ -19,7 +26,7 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -27,8 +34,18 @@ from scipy.optimize import minimize_scalar
 from core.errors import ExpressionError, ScenarioError, UsageError
 from core.expressions import Expr, parse_expression
 from core.graph import unreachable_followers
+from core.settings import (
+    NONNEG,
+    POSITIVE,
+    SYNTH,
+    WHOLE,
+    Check,
+    Setting,
+    brief,
+    setting,
+    settings_of,
+)
 
-SYNTH = "synthesize"
 SIGN_MODES = ("exact", "sat", "tanh")
 GHAT_LAWS = ("paper", "sigma", "projection", "sigma+projection")
 DERIVATIVES = ("oracle", "filtered")
@@ -46,6 +63,16 @@ OUTPUT_BYTES_PER_VALUE = 100
 #: default memory budget of the output stage, bytes; ``HITL_OUTPUT_BUDGET`` overrides it
 DEFAULT_OUTPUT_BUDGET = 4_000_000_000
 OUTPUT_BUDGET_ENV = "HITL_OUTPUT_BUDGET"
+
+# range checks beyond the sign, with the messages the loader has always given
+_G_MIN_RANGE = Check("≤ 1", lambda x: x <= 1.0, "{v} is outside (0, 1]", "0 < g_min <= 1")
+_BELOW_ONE = Check("< 1", lambda x: x < 1.0, "{v} >= 1", "a relative tolerance < 1")
+_HORIZON_RANGE = Check(
+    "≤ 1e6",
+    lambda x: x <= MAX_HORIZON,
+    "{v:g} s is beyond " + f"{MAX_HORIZON:g} s",
+    f"a horizon in seconds <= {MAX_HORIZON:g}",
+)
 
 
 # --------------------------------------------------------------------------- types
@@ -131,80 +158,99 @@ class Follower:
     d: np.ndarray  # n, bound |f_ir| ≤ d_ir (given or sampled over the horizon)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Observer:
     """Distributed observer (9) and UIO (6)–(8) gains; ``None`` means ``"synthesize"``."""
 
-    lambda1: float | None
-    lambda2: float | None
-    Q: np.ndarray | None  # p×m
-    Theta: np.ndarray | None  # m×n
-    alpha1: np.ndarray  # N
-    alpha1_bar: np.ndarray  # N
-    phi0: np.ndarray  # N, φ_i(0) > 0
-    phi_min: float  # floor of φ_i (0 = the paper's law)
-    lambda_bar1: float  # LMI (15)
-    delta1: float  # LMI (15)
-    delta2: float  # LMI (16)
-    delta1_hat: float  # 0 < δ̂1 < δ1 (k1 and the supported decay rate)
-    delta2_hat: float  # 0 < δ̂2 < δ2
-    margin: float  # relative margin for λ1 > λ̄1/w and λ2 ≥ α when synthesised
+    lambda1: float | None = setting(SYNTH, "number", POSITIVE, synth=True)
+    lambda2: float | None = setting(SYNTH, "number", POSITIVE, synth=True)
+    Q: np.ndarray | None = setting(SYNTH, "matrix", dims=("p", "m"), synth=True)
+    Theta: np.ndarray | None = setting(SYNTH, "matrix", dims=("m", "n"), synth=True)
+    alpha1: np.ndarray = setting(1.0, "per_follower", POSITIVE)  # N
+    alpha1_bar: np.ndarray = setting(1.0, "per_follower", POSITIVE)  # N
+    phi0: np.ndarray = setting(1.0, "per_follower", POSITIVE)  # N, φ_i(0) > 0
+    phi_min: float = setting(0.0, "number", NONNEG)  # floor of φ_i (0 = the paper's law)
+    lambda_bar1: float = setting(1.0, "number", POSITIVE)  # LMI (15)
+    delta1: float = setting(0.5, "number", POSITIVE)  # LMI (15)
+    delta2: float = setting(1.0, "number", POSITIVE)  # LMI (16)
+    # 0 < δ̂1 < δ1 (k1 and the supported decay rate), 0 < δ̂2 < δ2
+    delta1_hat: float = setting(0.25, "number", POSITIVE)
+    delta2_hat: float = setting(0.5, "number", POSITIVE)
+    # relative margin for λ1 > λ̄1/w and λ2 ≥ α when synthesised
+    margin: float = setting(0.05, "number", NONNEG)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Controller:
     """Fault-tolerant controller (29)–(30) gains, per agent and component."""
 
-    Lambda: np.ndarray  # N×n, λ_ir
-    k1: np.ndarray  # N×n, K_i = diag(k1ir)
-    k2: np.ndarray  # N, k2i
-    gamma: np.ndarray  # N, adaptation gain of ĝ (1 = the paper's law)
-    sigma: np.ndarray  # N, σ-modification (used by ghat_law 'sigma*')
-    ghat_ref: np.ndarray  # N, ĝ0 of the σ-modification
-    g_min: float  # designer's worst health: projection onto [1, 1/g_min]
+    Lambda: np.ndarray = setting(40.0, "per_coordinate", POSITIVE)  # N×n, λ_ir
+    k1: np.ndarray = setting(20.0, "per_coordinate", POSITIVE)  # N×n, K_i = diag(k1ir)
+    k2: np.ndarray = setting(1.0, "per_follower", POSITIVE)  # N, k2i
+    gamma: np.ndarray = setting(1.0, "per_follower", POSITIVE)  # N, gain of ĝ (1 = paper)
+    sigma: np.ndarray = setting(0.0, "per_follower", NONNEG)  # N, σ-modification
+    ghat_ref: np.ndarray = setting(1.0, "per_follower", POSITIVE)  # N, ĝ0 of the σ-mod.
+    # designer's worst health: projection onto [1, 1/g_min]
+    g_min: float = setting(0.5, "number", POSITIVE, _G_MIN_RANGE)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Options:
     """Controller and model options."""
 
-    sign: str  # exact | sat | tanh
-    sign_width: float  # ε of sat(χ/ε), tanh(χ/ε)
-    ghat_law: str  # paper | sigma | projection | sigma+projection
-    feedforward: bool  # include ḃ, b̈ in (28)–(29) (False = eq. (29) as printed)
-    ablation: bool  # eq. (42): u = Ψ (no ĝ)
-    derivatives: str  # oracle | filtered
-    filter_bandwidth: float  # rad/s, filtered derivatives
-    tau_threshold: float  # ‖η̇_i‖ below which the formation angle τ_i is faded out
+    sign: str = setting("tanh", "choice", options=SIGN_MODES)
+    sign_width: float = setting(0.05, "number", POSITIVE)  # ε of sat(χ/ε), tanh(χ/ε)
+    ghat_law: str = setting("paper", "choice", options=GHAT_LAWS)
+    # include ḃ, b̈ in (28)–(29) (False = eq. (29) as printed)
+    feedforward: bool = setting(True, "boolean")
+    ablation: bool = setting(False, "boolean")  # eq. (42): u = Ψ (no ĝ)
+    derivatives: str = setting("oracle", "choice", options=DERIVATIVES)
+    filter_bandwidth: float = setting(50.0, "number", POSITIVE)  # rad/s, filtered derivatives
+    # ‖η̇_i‖ below which the formation angle τ_i is faded out
+    tau_threshold: float = setting(1e-3, "number", POSITIVE)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Initial:
     """Initial estimator states."""
 
-    eta: np.ndarray  # N×m, η_i(0)
-    mu: np.ndarray  # N×m, μ_i(0)
-    theta_hat: np.ndarray  # N×n
-    ghat: np.ndarray  # N
-    start: str  # given | formation
+    eta: np.ndarray = setting(0.0, "rows_m")  # N×m, η_i(0)
+    mu: np.ndarray = setting(0.0, "rows_m")  # N×m, μ_i(0)
+    theta_hat: np.ndarray = setting(0.0, "rows_n", NONNEG)  # N×n
+    ghat: np.ndarray = setting(1.0, "per_follower", POSITIVE)  # N
+    start: str = setting("given", "choice", options=START_MODES)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Integration:
-    """Integration settings."""
+    """Integration settings (``generated.integrate.IntegratorSettings`` takes these defaults)."""
 
-    method: str  # cvodes | native | idas | fixed
-    rtol: float
-    atol: float
-    horizon: float
-    output_step: float
-    fixed_step: float  # step of the fixed-step method
-    max_steps: int
+    method: str = setting("cvodes", "choice", options=METHODS)
+    rtol: float = setting(1e-6, "number", POSITIVE, _BELOW_ONE)
+    atol: float = setting(1e-8, "number", POSITIVE)
+    horizon: float = setting(20.0, "number", POSITIVE, _HORIZON_RANGE)
+    output_step: float = setting(0.01, "number", POSITIVE)
+    fixed_step: float = setting(1e-3, "number", POSITIVE)  # step of the fixed-step method
+    max_steps: int = setting(200000, "integer", POSITIVE, WHOLE)
+
+
+#: the sections declared with :func:`core.settings.setting`, by their table name
+SECTIONS: dict[str, type] = {
+    "observer": Observer,
+    "controller": Controller,
+    "options": Options,
+    "initial": Initial,
+    "integration": Integration,
+}
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """A fully validated scenario."""
+    """A fully validated scenario.
+
+    Making one (directly, by the loader or by :func:`dataclasses.replace`) runs
+    :meth:`validate`, so a scenario held in memory always satisfies every check.
+    """
 
     name: str
     path: str
@@ -218,6 +264,29 @@ class Scenario:
     options: Options
     initial: Initial
     integration: Integration
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Check every declared setting and every rule of :data:`RULES`.
+
+        Raises
+        ------
+        ScenarioError
+            The first violation, naming the key (and the 0-based position in a list).
+        """
+        for section, cls in SECTIONS.items():
+            obj = getattr(self, section)
+            for name, s in settings_of(cls).items():
+                bad = s.violation(getattr(obj, name))
+                if bad is not None:
+                    where, problem, expected = bad
+                    raise ScenarioError(self.path, f"{section}.{name}{where}", problem, expected)
+        for rule in RULES:
+            broken = rule.broken(self)
+            if broken is not None:
+                raise ScenarioError(self.path, rule.key, *broken)
 
     @property
     def N(self) -> int:
@@ -249,39 +318,130 @@ class Scenario:
         return tuple(sorted(t for t in times if 0.0 < t < H))
 
 
+# --------------------------------------------------------------------------- rules
+Problem = tuple[str, str]  # (what is wrong, what is expected)
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A rule between settings, checked once, by :meth:`Scenario.validate`.
+
+    Attributes
+    ----------
+    key : str
+        The setting an error names.
+    text : str
+        Its words in the type column of docs/scenario-format.md (``"< delta1"``);
+        empty for a rule that applies only in some cases.
+    broken : callable
+        ``(what is wrong, what is expected)`` for a scenario that breaks it, else None.
+    """
+
+    key: str
+    text: str
+    broken: Callable[[Scenario], Problem | None]
+
+
+def _delta_hat_below(k: int) -> Callable[[Scenario], Problem | None]:
+    def broken(s: Scenario) -> Problem | None:
+        hat, full = getattr(s.observer, f"delta{k}_hat"), getattr(s.observer, f"delta{k}")
+        if hat >= full:
+            return f"{hat} >= delta{k} = {full}", f"0 < delta{k}_hat < delta{k}"
+        return None
+
+    return broken
+
+
+def _phi0_above_floor(s: Scenario) -> Problem | None:
+    o = s.observer
+    if np.any(o.phi0 <= o.phi_min):
+        return "phi0 must exceed phi_min", f"phi0 > phi_min = {o.phi_min}"
+    return None
+
+
+def _sigma_for_sigma_laws(s: Scenario) -> Problem | None:
+    law = s.options.ghat_law
+    if "sigma" in law and np.any(s.controller.sigma <= 0):
+        return f"ghat_law {law!r} needs sigma > 0", "sigma > 0"
+    return None
+
+
+def _g_min_below_health(s: Scenario) -> Problem | None:
+    if "projection" not in s.options.ghat_law:
+        return None
+    g_min, worst = s.controller.g_min, min(fo.g.minimum for fo in s.followers)
+    if worst < g_min * (1 - 1e-12):
+        return (
+            f"{g_min:g} exceeds the smallest actuator health {worst:.4g}, so the "
+            f"projection of ghat onto [1, 1/g_min] excludes 1/g",
+            f"g_min <= {worst:.4g}, or ghat_law without projection",
+        )
+    return None
+
+
+def _exact_sign_needs_fixed_step(s: Scenario) -> Problem | None:
+    if s.options.sign == "exact" and s.integration.method != "fixed":
+        return (
+            "'exact' makes variable-step integrators chatter and fail",
+            "sign = 'tanh' or 'sat', or integration.method = 'fixed'",
+        )
+    return None
+
+
+def _step_within_horizon(key: str) -> Callable[[Scenario], Problem | None]:
+    def broken(s: Scenario) -> Problem | None:
+        step, horizon = getattr(s.integration, key), s.integration.horizon
+        if step > horizon:
+            return f"{step} exceeds the horizon {horizon}", f"{key} <= horizon"
+        return None
+
+    return broken
+
+
+#: every rule between settings, in the order they are checked
+RULES: tuple[Rule, ...] = (
+    Rule("integration.output_step", "≤ horizon", _step_within_horizon("output_step")),
+    Rule("integration.fixed_step", "≤ horizon", _step_within_horizon("fixed_step")),
+    Rule("observer.delta1_hat", "< delta1", _delta_hat_below(1)),
+    Rule("observer.delta2_hat", "< delta2", _delta_hat_below(2)),
+    Rule("observer.phi0", "> phi_min", _phi0_above_floor),
+    Rule("controller.sigma", "", _sigma_for_sigma_laws),
+    Rule("controller.g_min", "", _g_min_below_health),
+    Rule("options.sign", "", _exact_sign_needs_fixed_step),
+)
+
+
+def type_text(section: str, name: str) -> str:
+    """The documented type of ``[section].name``: its shape, checks and rules.
+
+    Parameters
+    ----------
+    section : str
+        A key of :data:`SECTIONS` (``"observer"``).
+    name : str
+        The setting (``"delta1_hat"``).
+    """
+    words = tuple(r.text for r in RULES if r.key == f"{section}.{name}" and r.text)
+    return settings_of(SECTIONS[section])[name].type_text(words)
+
+
 # --------------------------------------------------------------------------- schema
-_TOP = {
-    "name",
-    "description",
-    "leader",
-    "graph",
-    "followers",
-    "observer",
-    "controller",
-    "options",
-    "initial",
-    "integration",
-}
-_LEADER = {"A0", "B0", "C0", "eta0", "u0", "u0_csv", "alpha"}
-_GRAPH = {"adjacency", "pinning"}
-_FOLLOWER = {"model", "params", "p0", "q0", "b0", "g", "f", "d"}
-_OBSERVER = {
-    "lambda1", "lambda2", "Q", "Theta", "alpha1", "alpha1_bar", "phi0", "phi_min",
-    "lambda_bar1", "delta1", "delta2", "delta1_hat", "delta2_hat", "margin",
-}  # fmt: skip
-_CONTROLLER = {"Lambda", "k1", "k2", "gamma", "sigma", "ghat_ref", "g_min"}
-_OPTIONS = {
-    "sign",
-    "sign_width",
-    "ghat_law",
-    "feedforward",
-    "ablation",
-    "derivatives",
-    "filter_bandwidth",
-    "tau_threshold",
-}
-_INITIAL = {"eta", "mu", "theta_hat", "ghat", "start"}
-_INTEGRATION = {"method", "rtol", "atol", "horizon", "output_step", "fixed_step", "max_steps"}
+LEADER_KEYS = {"A0", "B0", "C0", "eta0", "u0", "u0_csv", "alpha"}
+LEADER_REQUIRED = {"A0", "B0", "C0", "alpha"}
+GRAPH_KEYS = GRAPH_REQUIRED = {"adjacency", "pinning"}
+FOLLOWER_KEYS = {"model", "params", "p0", "q0", "b0", "g", "f", "d"}
+FOLLOWER_REQUIRED = {"model", "p0", "b0"}
+TOP_KEYS = {"name", "description", "leader", "graph", "followers", *SECTIONS}
+TOP_REQUIRED = {"leader", "graph", "followers"}
+
+
+class Dims(NamedTuple):
+    """Sizes every list is checked against: followers, coordinates, leader states, inputs."""
+
+    N: int
+    n: int
+    m: int
+    p: int
 
 
 class _Ctx:
@@ -306,73 +466,75 @@ class _Ctx:
                     "unknown key",
                     "one of " + ", ".join(sorted(allowed)),
                 )
-        for k in required:
+        for k in sorted(required):
             if k not in obj:
                 raise self.err(f"{key}.{k}" if key else k, "missing", "a value")
         return obj
 
     # -- numbers
-    def number(self, v: Any, key: str, *, positive: bool = False, nonneg: bool = False) -> float:
+    def number(self, v: Any, key: str, checks: tuple[Check, ...] = ()) -> float:
         if isinstance(v, bool) or not isinstance(v, int | float):
-            raise self.err(key, f"{_brief(v)} is not a number", "a finite number")
+            raise self.err(key, f"{brief(v)} is not a number", "a finite number")
         try:
             x = float(v)
         except OverflowError:  # TOML integers are unbounded in tomllib
             x = math.inf
         if not math.isfinite(x):
-            raise self.err(key, f"{_brief(v)} is not finite", "a finite number")
-        if positive and x <= 0:
-            raise self.err(key, f"{x} is not positive", "a value > 0")
-        if nonneg and x < 0:
-            raise self.err(key, f"{x} is negative", "a value >= 0")
+            raise self.err(key, f"{brief(v)} is not finite", "a finite number")
+        for c in checks:
+            if not c.ok(x):
+                raise self.err(key, *c.error(x))
         return x
 
     def matrix(self, v: Any, key: str, shape: tuple[int | None, int | None]) -> np.ndarray:
+        want = f"a matrix of shape {_shape_txt(shape)}"
         if not isinstance(v, list) or not v or not all(isinstance(r, list) for r in v):
-            raise self.err(key, "is not a list of rows", f"a matrix of shape {_shape_txt(shape)}")
+            raise self.err(key, "is not a list of rows", want)
         ncols = {len(r) for r in v}
         if len(ncols) != 1:
-            raise self.err(
-                key, "rows have different lengths", f"a matrix of shape {_shape_txt(shape)}"
-            )
+            raise self.err(key, "rows have different lengths", want)
         if 0 in ncols:
-            raise self.err(key, "has empty rows", f"a matrix of shape {_shape_txt(shape)}")
+            raise self.err(key, "has empty rows", want)
         arr = np.array(
             [[self.number(x, f"{key}[{i}][{j}]") for j, x in enumerate(r)] for i, r in enumerate(v)]
         )
-        for ax, want in enumerate(shape):
-            if want is not None and arr.shape[ax] != want:
+        for ax, size in enumerate(shape):
+            if size is not None and arr.shape[ax] != size:
                 raise self.err(
                     key, f"has shape {arr.shape[0]}x{arr.shape[1]}", f"shape {_shape_txt(shape)}"
                 )
         arr.setflags(write=False)
         return arr
 
-    def vector(self, v: Any, key: str, length: int | None, **kw: bool) -> np.ndarray:
+    def vector(
+        self, v: Any, key: str, length: int | None, checks: tuple[Check, ...] = ()
+    ) -> np.ndarray:
         if not isinstance(v, list):
             raise self.err(
                 key,
-                f"{_brief(v)} is not a list",
+                f"{brief(v)} is not a list",
                 f"a list of {length if length else 'some'} numbers",
             )
         if length is not None and len(v) != length:
             raise self.err(key, f"has {len(v)} entries", f"{length} entries")
-        arr = np.array([self.number(x, f"{key}[{i}]", **kw) for i, x in enumerate(v)])
+        arr = np.array([self.number(x, f"{key}[{i}]", checks) for i, x in enumerate(v)])
         arr.setflags(write=False)
         return arr
 
-    def per_agent(self, v: Any, key: str, N: int, **kw: bool) -> np.ndarray:
+    def per_agent(self, v: Any, key: str, N: int, checks: tuple[Check, ...] = ()) -> np.ndarray:
         """A scalar broadcast to N agents, or a list of N numbers."""
         if isinstance(v, list):
-            return self.vector(v, key, N, **kw)
-        arr = np.full(N, self.number(v, key, **kw))
+            return self.vector(v, key, N, checks)
+        arr = np.full(N, self.number(v, key, checks))
         arr.setflags(write=False)
         return arr
 
-    def per_agent_comp(self, v: Any, key: str, N: int, n: int, **kw: bool) -> np.ndarray:
+    def per_agent_comp(
+        self, v: Any, key: str, N: int, n: int, checks: tuple[Check, ...] = ()
+    ) -> np.ndarray:
         """Scalar, list of N scalars, or list of N lists of n numbers -> N×n."""
         if not isinstance(v, list):
-            arr = np.full((N, n), self.number(v, key, **kw))
+            arr = np.full((N, n), self.number(v, key, checks))
         else:
             if len(v) != N:
                 raise self.err(
@@ -381,21 +543,21 @@ class _Ctx:
             rows = []
             for i, x in enumerate(v):
                 if isinstance(x, list):
-                    rows.append(self.vector(x, f"{key}[{i}]", n, **kw))
+                    rows.append(self.vector(x, f"{key}[{i}]", n, checks))
                 else:
-                    rows.append(np.full(n, self.number(x, f"{key}[{i}]", **kw)))
+                    rows.append(np.full(n, self.number(x, f"{key}[{i}]", checks)))
             arr = np.array(rows)
         arr.setflags(write=False)
         return arr
 
     def choice(self, v: Any, key: str, options: tuple[str, ...]) -> str:
         if not isinstance(v, str) or v not in options:
-            raise self.err(key, f"{_brief(v)} is not allowed", "one of " + ", ".join(options))
+            raise self.err(key, f"{brief(v)} is not allowed", "one of " + ", ".join(options))
         return v
 
     def boolean(self, v: Any, key: str) -> bool:
         if not isinstance(v, bool):
-            raise self.err(key, f"{_brief(v)} is not a boolean", "true or false")
+            raise self.err(key, f"{brief(v)} is not a boolean", "true or false")
         return v
 
     def expr(self, v: Any, key: str) -> Expr:
@@ -403,21 +565,10 @@ class _Ctx:
             return parse_expression(v, where=f"{self.file}: {key}")
         except ExpressionError:
             raise
-        except (
-            ValueError,
-            TypeError,
-            RecursionError,
-            MemoryError,
-        ) as exc:  # defensive: never a traceback
+        except (ValueError, TypeError, RecursionError, MemoryError) as exc:  # never a traceback
             raise self.err(
                 key, f"cannot parse expression ({type(exc).__name__})", "an expression of t"
             ) from None
-
-
-def _brief(v: Any) -> str:
-    """``repr`` of a user value, shortened so the message stays one readable line."""
-    r = repr(v)
-    return r if len(r) <= 60 else r[:57] + "..."
 
 
 def _shape_txt(shape: tuple[int | None, int | None]) -> str:
@@ -506,8 +657,35 @@ def scenario_from_dict(data: dict[str, Any], *, path: str | Path, sha256: str) -
 
 
 def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
-    ctx.table(data, "", _TOP, {"leader", "graph", "followers"})
-    # default: the file's stem, made into a plain folder name
+    """Read every table of ``data`` in dependency order; :class:`Scenario` checks the rules."""
+    ctx.table(data, "", TOP_KEYS, TOP_REQUIRED)
+    name, desc = _name(ctx, data, path), _description(ctx, data)
+    # integration first: u0, g_i and f_i are checked over [0, horizon]
+    integ = _section(ctx, Integration, data.get("integration", {}), "integration", None)
+    tgrid = np.linspace(0.0, integ.horizon, 4001)
+    leader = _leader(ctx, data["leader"], path, integ.horizon, tgrid)
+    graph = _graph(ctx, data["graph"])
+    dims = Dims(N=graph.N, n=leader.n, m=leader.m, p=leader.p)
+    _check_output_size(ctx, integ, dims.N, dims.n, dims.m)
+    followers = _followers(ctx, data["followers"], dims.n, dims.N, tgrid)
+    return Scenario(
+        name=name,
+        path=str(path),
+        sha256=sha,
+        description=desc,
+        leader=leader,
+        graph=graph,
+        followers=followers,
+        observer=_section(ctx, Observer, data.get("observer", {}), "observer", dims),
+        controller=_controller(ctx, data.get("controller", {}), dims),
+        options=_section(ctx, Options, data.get("options", {}), "options", dims),
+        initial=_section(ctx, Initial, data.get("initial", {}), "initial", dims),
+        integration=integ,
+    )
+
+
+def _name(ctx: _Ctx, data: dict, path: Path) -> str:
+    """``name``, by default the file's stem made into a plain folder name."""
     stem = "".join(c if c.isascii() and (c.isalnum() or c in "-_.") else "_" for c in path.stem)
     name = data.get("name", stem.lstrip(".")[:100] or "scenario")
     if (
@@ -519,19 +697,78 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     ):
         raise ctx.err(
             "name",
-            f"{_brief(name)} is not a plain name (it names the output folder out/<name>/)",
+            f"{brief(name)} is not a plain name (it names the output folder out/<name>/)",
             "ASCII letters, digits, '-', '_' or '.', not starting with '.'",
         )
+    return name
+
+
+def _description(ctx: _Ctx, data: dict) -> str:
     desc = data.get("description", "")
     if not isinstance(desc, str):
         raise ctx.err("description", "is not a string", "a string")
+    return desc
 
-    # ---- integration first: u0, g_i and f_i are checked over [0, horizon]
-    integ = _integration(ctx, data.get("integration", {}))
-    tgrid = np.linspace(0.0, integ.horizon, 4001)
 
-    # ---- leader, eq. (3)
-    L = ctx.table(data["leader"], "leader", _LEADER, {"A0", "B0", "C0", "alpha"})
+# --------------------------------------------------------------------------- declared sections
+_Section = Any  # one of the dataclasses of SECTIONS
+
+
+def _section(ctx: _Ctx, cls: type, raw: Any, key: str, dims: Dims | None) -> _Section:
+    """A table of a declared section: every field read with its :class:`Setting`.
+
+    Unknown keys are refused; an omitted key takes the field's default.
+    """
+    declared = settings_of(cls)
+    table = ctx.table(raw, key, set(declared))
+    values = {
+        name: _read(ctx, s, table.get(name, s.default), f"{key}.{name}", dims)
+        for name, s in declared.items()
+    }
+    return cls(**values)
+
+
+def _read(ctx: _Ctx, s: Setting, v: Any, key: str, dims: Dims | None) -> Any:
+    """One TOML value read as setting ``s`` says (``"synthesize"`` -> None where allowed)."""
+    if s.synth and isinstance(v, str):
+        if v == SYNTH:
+            return None
+        raise ctx.err(key, f"{brief(v)} is not a value", f"a value or {SYNTH!r}")
+    if s.shape in ("number", "integer"):
+        x = ctx.number(v, key, s.checks)
+        return int(x) if s.shape == "integer" else x
+    if s.shape == "boolean":
+        return ctx.boolean(v, key)
+    if s.shape == "choice":
+        return ctx.choice(v, key, s.options)
+    assert dims is not None, f"{key} needs the scenario's dimensions"
+    if s.shape == "matrix":
+        return ctx.matrix(v, key, (getattr(dims, s.dims[0]), getattr(dims, s.dims[1])))
+    if s.shape == "per_follower":
+        return ctx.per_agent(v, key, dims.N, s.checks)
+    if s.shape == "per_coordinate":
+        return ctx.per_agent_comp(v, key, dims.N, dims.n, s.checks)
+    k = dims.m if s.shape == "rows_m" else dims.n
+    return _rows(ctx, v, key, dims.N, k, s.checks)
+
+
+def _controller(ctx: _Ctx, raw: Any, dims: Dims) -> Controller:
+    """The [controller] table: every gain is given (none can be synthesised)."""
+    if isinstance(raw, dict):
+        for k, v in raw.items():
+            if v == SYNTH:
+                raise ctx.err(
+                    f"controller.{k}",
+                    "cannot be synthesised (the paper gives no design procedure for it)",
+                    "a number",
+                )
+    return _section(ctx, Controller, raw, "controller", dims)
+
+
+# --------------------------------------------------------------------------- leader, graph
+def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) -> Leader:
+    """The [leader] table, eq. (3); ‖u0‖ ≤ α is checked on [0, horizon]."""
+    L = ctx.table(raw, "leader", LEADER_KEYS, LEADER_REQUIRED)
     A0 = ctx.matrix(L["A0"], "leader.A0", (None, None))
     m = A0.shape[0]
     if A0.shape[1] != m:
@@ -540,32 +777,21 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
         )
     B0 = ctx.matrix(L["B0"], "leader.B0", (m, None))
     C0 = ctx.matrix(L["C0"], "leader.C0", (None, m))
-    p, n = B0.shape[1], C0.shape[0]
     eta0 = ctx.vector(L.get("eta0", [0.0] * m), "leader.eta0", m)
-    alpha = ctx.number(L["alpha"], "leader.alpha", positive=True)
+    alpha = ctx.number(L["alpha"], "leader.alpha", (POSITIVE,))
     if ("u0" in L) == ("u0_csv" in L):
         raise ctx.err(
             "leader.u0",
             "give exactly one of u0 and u0_csv",
             "u0 = [expressions of t] or u0_csv = 'file.csv'",
         )
-    u0: tuple[Expr, ...] | None = None
-    trace: np.ndarray | None = None
+    p = B0.shape[1]
     if "u0" in L:
-        u0_raw = L["u0"]
-        if not isinstance(u0_raw, list) or len(u0_raw) != p:
-            got = f"has {len(u0_raw)} entries" if isinstance(u0_raw, list) else "is not a list"
-            raise ctx.err("leader.u0", got, f"a list of {p} expressions of t (p = columns of B0)")
-        u0 = tuple(ctx.expr(e, f"leader.u0[{k}]") for k, e in enumerate(u0_raw))
-        ts = np.unique(np.concatenate([_times(e, tgrid) for e in u0]))
-        u_peak = _sup(lambda t: np.sqrt(sum(_sample(e, t) ** 2 for e in u0)), ts)
-        if not math.isfinite(u_peak):
-            raise ctx.err(
-                "leader.u0", "is not finite somewhere on [0, horizon]", "a bounded operator input"
-            )
+        u0, trace = _u0_expressions(ctx, L["u0"], p), None
+        u_peak = _u0_peak(ctx, u0, tgrid)
         where_u = "leader.u0"
     else:
-        trace = _load_trace(ctx, path, L["u0_csv"], p, integ.horizon)
+        u0, trace = None, _load_trace(ctx, path, L["u0_csv"], p, horizon)
         # piecewise linear: the norm peaks at a sample (convexity)
         u_peak = float(np.sqrt((trace[:, 1:] ** 2).sum(axis=1)).max())
         where_u = "leader.u0_csv"
@@ -575,28 +801,54 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
             f"{where_u} reaches ||u0|| = {u_peak:.6g} > alpha = {alpha:.6g}",
             "alpha >= sup ||u0(t)|| on [0, horizon] (the bound the followers design for)",
         )
+    return Leader(A0=A0, B0=B0, C0=C0, eta0=eta0, u0=u0, u0_trace=trace, alpha=alpha)
 
-    # ---- graph (section 1)
-    G = ctx.table(data["graph"], "graph", _GRAPH, {"adjacency", "pinning"})
-    Aadj = ctx.matrix(G["adjacency"], "graph.adjacency", (None, None))
-    N = Aadj.shape[0]
-    if Aadj.shape[1] != N:
+
+def _u0_expressions(ctx: _Ctx, raw: Any, p: int) -> tuple[Expr, ...]:
+    """``leader.u0``: p expressions of t."""
+    if not isinstance(raw, list) or len(raw) != p:
+        got = f"has {len(raw)} entries" if isinstance(raw, list) else "is not a list"
+        raise ctx.err("leader.u0", got, f"a list of {p} expressions of t (p = columns of B0)")
+    return tuple(ctx.expr(e, f"leader.u0[{k}]") for k, e in enumerate(raw))
+
+
+def _u0_peak(ctx: _Ctx, u0: tuple[Expr, ...], tgrid: np.ndarray) -> float:
+    """sup ‖u0(t)‖ on [0, horizon]; refused when not finite."""
+    ts = np.unique(np.concatenate([_times(e, tgrid) for e in u0]))
+    u_peak = _sup(lambda t: np.sqrt(sum(_sample(e, t) ** 2 for e in u0)), ts)
+    if not math.isfinite(u_peak):
         raise ctx.err(
-            "graph.adjacency", f"has shape {Aadj.shape[0]}x{Aadj.shape[1]}", "a square N x N matrix"
+            "leader.u0", "is not finite somewhere on [0, horizon]", "a bounded operator input"
         )
-    if np.any(np.diag(Aadj) != 0):
+    return u_peak
+
+
+def _graph(ctx: _Ctx, raw: Any) -> Graph:
+    """The [graph] table; every follower must be reachable from the leader (Assumption 1)."""
+    G = ctx.table(raw, "graph", GRAPH_KEYS, GRAPH_REQUIRED)
+    A = ctx.matrix(G["adjacency"], "graph.adjacency", (None, None))
+    N = A.shape[0]
+    if A.shape[1] != N:
+        raise ctx.err(
+            "graph.adjacency", f"has shape {A.shape[0]}x{A.shape[1]}", "a square N x N matrix"
+        )
+    if np.any(np.diag(A) != 0):
         raise ctx.err("graph.adjacency", "has a non-zero diagonal (self-loop)", "a_ii = 0")
-    pin = ctx.vector(G["pinning"], "graph.pinning", N, nonneg=True)
-    unreachable = unreachable_followers(Aadj, pin)
+    pin = ctx.vector(G["pinning"], "graph.pinning", N, (NONNEG,))
+    unreachable = unreachable_followers(A, pin)
     if unreachable:
         names = ", ".join(str(i + 1) for i in unreachable)
-        raise ctx.err("graph", f"follower(s) {names} cannot be reached from the leader (Assumption 1)",
-                      "a directed spanning tree rooted at the leader: add a pinning a_i0 > 0 or an edge a_ij != 0 from a reachable agent")  # fmt: skip
+        raise ctx.err(
+            "graph",
+            f"follower(s) {names} cannot be reached from the leader (Assumption 1)",
+            "a directed spanning tree rooted at the leader: add a pinning a_i0 > 0 "
+            "or an edge a_ij != 0 from a reachable agent",
+        )
+    return Graph(adjacency=A, pinning=pin)
 
-    _check_output_size(ctx, integ, N, n, m)
 
-    # ---- followers, eq. (2)
-    F = data["followers"]
+def _followers(ctx: _Ctx, F: Any, n: int, N: int, tgrid: np.ndarray) -> tuple[Follower, ...]:
+    """The [[followers]] tables, one per row of the adjacency matrix."""
     if not isinstance(F, list) or not all(isinstance(x, dict) for x in F):
         raise ctx.err(
             "followers", "is not an array of tables", "[[followers]] tables, one per follower"
@@ -607,174 +859,7 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
             f"has {len(F)} followers but graph.adjacency is {N}x{N}",
             "one [[followers]] table per row of the adjacency matrix",
         )
-    followers = tuple(_follower(ctx, fo, i, n, tgrid) for i, fo in enumerate(F))
-
-    # ---- observer
-    O = ctx.table(data.get("observer", {}), "observer", _OBSERVER)
-
-    def gain(key: str, default: Any, conv: Callable[[Any, str], Any]) -> Any:
-        v = O.get(key, default)
-        if v == SYNTH:
-            return None
-        if isinstance(v, str):
-            raise ctx.err(f"observer.{key}", f"{_brief(v)} is not a value", f"a value or {SYNTH!r}")
-        return conv(v, f"observer.{key}")
-
-    obs = Observer(
-        lambda1=gain("lambda1", SYNTH, lambda v, k: ctx.number(v, k, positive=True)),
-        lambda2=gain("lambda2", SYNTH, lambda v, k: ctx.number(v, k, positive=True)),
-        Q=gain("Q", SYNTH, lambda v, k: ctx.matrix(v, k, (p, m))),
-        Theta=gain("Theta", SYNTH, lambda v, k: ctx.matrix(v, k, (m, n))),
-        alpha1=ctx.per_agent(O.get("alpha1", 1.0), "observer.alpha1", N, positive=True),
-        alpha1_bar=ctx.per_agent(O.get("alpha1_bar", 1.0), "observer.alpha1_bar", N, positive=True),
-        phi0=ctx.per_agent(O.get("phi0", 1.0), "observer.phi0", N, positive=True),
-        phi_min=ctx.number(O.get("phi_min", 0.0), "observer.phi_min", nonneg=True),
-        lambda_bar1=ctx.number(O.get("lambda_bar1", 1.0), "observer.lambda_bar1", positive=True),
-        delta1=ctx.number(O.get("delta1", 0.5), "observer.delta1", positive=True),
-        delta2=ctx.number(O.get("delta2", 1.0), "observer.delta2", positive=True),
-        delta1_hat=ctx.number(O.get("delta1_hat", 0.25), "observer.delta1_hat", positive=True),
-        delta2_hat=ctx.number(O.get("delta2_hat", 0.5), "observer.delta2_hat", positive=True),
-        margin=ctx.number(O.get("margin", 0.05), "observer.margin", nonneg=True),
-    )
-    if obs.delta1_hat >= obs.delta1:
-        raise ctx.err(
-            "observer.delta1_hat",
-            f"{obs.delta1_hat} >= delta1 = {obs.delta1}",
-            "0 < delta1_hat < delta1",
-        )
-    if obs.delta2_hat >= obs.delta2:
-        raise ctx.err(
-            "observer.delta2_hat",
-            f"{obs.delta2_hat} >= delta2 = {obs.delta2}",
-            "0 < delta2_hat < delta2",
-        )
-    if np.any(obs.phi0 <= obs.phi_min):
-        raise ctx.err(
-            "observer.phi0", "phi0 must exceed phi_min", f"phi0 > phi_min = {obs.phi_min}"
-        )
-
-    # ---- controller
-    Cc = ctx.table(data.get("controller", {}), "controller", _CONTROLLER)
-    for k in _CONTROLLER:
-        if Cc.get(k) == SYNTH:
-            raise ctx.err(
-                f"controller.{k}",
-                "cannot be synthesised (the paper gives no design procedure for it)",
-                "a number",
-            )
-    ctrl = Controller(
-        Lambda=ctx.per_agent_comp(Cc.get("Lambda", 40.0), "controller.Lambda", N, n, positive=True),
-        k1=ctx.per_agent_comp(Cc.get("k1", 20.0), "controller.k1", N, n, positive=True),
-        k2=ctx.per_agent(Cc.get("k2", 1.0), "controller.k2", N, positive=True),
-        gamma=ctx.per_agent(Cc.get("gamma", 1.0), "controller.gamma", N, positive=True),
-        sigma=ctx.per_agent(Cc.get("sigma", 0.0), "controller.sigma", N, nonneg=True),
-        ghat_ref=ctx.per_agent(Cc.get("ghat_ref", 1.0), "controller.ghat_ref", N, positive=True),
-        g_min=ctx.number(Cc.get("g_min", 0.5), "controller.g_min", positive=True),
-    )
-    if not ctrl.g_min <= 1.0:
-        raise ctx.err("controller.g_min", f"{ctrl.g_min} is outside (0, 1]", "0 < g_min <= 1")
-    worst_g = min(fo.g.minimum for fo in followers)
-
-    # ---- options
-    Op = ctx.table(data.get("options", {}), "options", _OPTIONS)
-    opts = Options(
-        sign=ctx.choice(Op.get("sign", "tanh"), "options.sign", SIGN_MODES),
-        sign_width=ctx.number(Op.get("sign_width", 0.05), "options.sign_width", positive=True),
-        ghat_law=ctx.choice(Op.get("ghat_law", "paper"), "options.ghat_law", GHAT_LAWS),
-        feedforward=ctx.boolean(Op.get("feedforward", True), "options.feedforward"),
-        ablation=ctx.boolean(Op.get("ablation", False), "options.ablation"),
-        derivatives=ctx.choice(Op.get("derivatives", "oracle"), "options.derivatives", DERIVATIVES),
-        filter_bandwidth=ctx.number(
-            Op.get("filter_bandwidth", 50.0), "options.filter_bandwidth", positive=True
-        ),
-        tau_threshold=ctx.number(
-            Op.get("tau_threshold", 1e-3), "options.tau_threshold", positive=True
-        ),
-    )
-    if "sigma" in opts.ghat_law and np.any(ctrl.sigma <= 0):
-        raise ctx.err(
-            "controller.sigma", f"ghat_law {opts.ghat_law!r} needs sigma > 0", "sigma > 0"
-        )
-    if "projection" in opts.ghat_law and worst_g < ctrl.g_min * (1 - 1e-12):
-        raise ctx.err(
-            "controller.g_min",
-            f"{ctrl.g_min:g} exceeds the smallest actuator health {worst_g:.4g}, so the "
-            f"projection of ghat onto [1, 1/g_min] excludes 1/g",
-            f"g_min <= {worst_g:.4g}, or ghat_law without projection",
-        )
-    if opts.sign == "exact" and integ.method != "fixed":
-        raise ctx.err(
-            "options.sign",
-            "'exact' makes variable-step integrators chatter and fail",
-            "sign = 'tanh' or 'sat', or integration.method = 'fixed'",
-        )
-
-    # ---- initial estimator states
-    In = ctx.table(data.get("initial", {}), "initial", _INITIAL)
-    init = Initial(
-        eta=_rows(ctx, In.get("eta", 0.0), "initial.eta", N, m),
-        mu=_rows(ctx, In.get("mu", 0.0), "initial.mu", N, m),
-        theta_hat=_rows(ctx, In.get("theta_hat", 0.0), "initial.theta_hat", N, n, nonneg=True),
-        ghat=ctx.per_agent(In.get("ghat", 1.0), "initial.ghat", N, positive=True),
-        start=ctx.choice(In.get("start", "given"), "initial.start", START_MODES),
-    )
-
-    return Scenario(
-        name=name,
-        path=str(path),
-        sha256=sha,
-        description=desc,
-        leader=Leader(A0=A0, B0=B0, C0=C0, eta0=eta0, u0=u0, u0_trace=trace, alpha=alpha),
-        graph=Graph(adjacency=Aadj, pinning=pin),
-        followers=followers,
-        observer=obs,
-        controller=ctrl,
-        options=opts,
-        initial=init,
-        integration=integ,
-    )
-
-
-def _integration(ctx: _Ctx, raw: Any) -> Integration:
-    """The [integration] table."""
-    I = ctx.table(raw, "integration", _INTEGRATION)
-    max_steps = ctx.number(I.get("max_steps", 200000), "integration.max_steps", positive=True)
-    if max_steps != int(max_steps) or max_steps > 1e12:
-        raise ctx.err(
-            "integration.max_steps", f"{max_steps!r} is not a whole number", "an integer <= 1e12"
-        )
-    integ = Integration(
-        method=ctx.choice(I.get("method", "cvodes"), "integration.method", METHODS),
-        rtol=ctx.number(I.get("rtol", 1e-6), "integration.rtol", positive=True),
-        atol=ctx.number(I.get("atol", 1e-8), "integration.atol", positive=True),
-        horizon=ctx.number(I.get("horizon", 20.0), "integration.horizon", positive=True),
-        output_step=ctx.number(
-            I.get("output_step", 0.01), "integration.output_step", positive=True
-        ),
-        fixed_step=ctx.number(I.get("fixed_step", 1e-3), "integration.fixed_step", positive=True),
-        max_steps=int(max_steps),
-    )
-    if integ.horizon > MAX_HORIZON:
-        raise ctx.err(
-            "integration.horizon",
-            f"{integ.horizon:g} s is beyond {MAX_HORIZON:g} s",
-            f"a horizon in seconds <= {MAX_HORIZON:g}",
-        )
-    if integ.rtol >= 1.0:
-        raise ctx.err("integration.rtol", f"{integ.rtol} >= 1", "a relative tolerance < 1")
-    if integ.output_step > integ.horizon:
-        raise ctx.err(
-            "integration.output_step",
-            f"{integ.output_step} exceeds the horizon {integ.horizon}",
-            "output_step <= horizon",
-        )
-    if integ.fixed_step > integ.horizon:
-        raise ctx.err(
-            "integration.fixed_step",
-            f"{integ.fixed_step} exceeds the horizon {integ.horizon}",
-            "fixed_step <= horizon",
-        )
-    return integ
+    return tuple(_follower(ctx, fo, i, n, tgrid) for i, fo in enumerate(F))
 
 
 def output_columns(N: int, n: int, m: int) -> int:
@@ -847,7 +932,7 @@ def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Followe
     from core.models import REGISTRY
 
     key = f"followers[{i + 1}]"
-    ctx.table(fo, key, _FOLLOWER, {"model", "p0", "b0"})
+    ctx.table(fo, key, FOLLOWER_KEYS, FOLLOWER_REQUIRED)
     model = fo["model"]
     if not isinstance(model, str) or model not in REGISTRY:
         raise ctx.err(
@@ -867,8 +952,7 @@ def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Followe
         k: ctx.number(
             prm.get(k, v),
             f"{key}.params.{k}",
-            positive=k not in spec.nonnegative,
-            nonneg=k in spec.nonnegative,
+            (NONNEG,) if k in spec.nonnegative else (POSITIVE,),
         )
         for k, v in spec.defaults.items()
     }
@@ -892,7 +976,7 @@ def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Followe
                 "a bounded disturbance (Assumption 3)",
             )
     if "d" in fo:
-        d = ctx.vector(fo["d"], f"{key}.d", n, nonneg=True)
+        d = ctx.vector(fo["d"], f"{key}.d", n, (NONNEG,))
         if np.any(worst > d * (1 + 1e-9)):
             r = int(np.argmax(worst - d))
             raise ctx.err(
@@ -914,12 +998,14 @@ def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Followe
     )
 
 
-def _rows(ctx: _Ctx, v: Any, key: str, N: int, k: int, **kw: bool) -> np.ndarray:
+def _rows(
+    ctx: _Ctx, v: Any, key: str, N: int, k: int, checks: tuple[Check, ...] = ()
+) -> np.ndarray:
     """Scalar (all entries), one k-vector (every agent) or N k-vectors -> N×k."""
     if isinstance(v, list) and v and not isinstance(v[0], list):
-        row = ctx.vector(v, key, k, **kw)
+        row = ctx.vector(v, key, k, checks)
         return _freeze(np.tile(row, (N, 1)))
-    return ctx.per_agent_comp(v, key, N, k, **kw)
+    return ctx.per_agent_comp(v, key, N, k, checks)
 
 
 def _times(e: Expr, tgrid: np.ndarray) -> np.ndarray:
@@ -983,7 +1069,7 @@ def _health(ctx: _Ctx, v: Any, key: str, tgrid: np.ndarray) -> Health:
         if len(v) > MAX_TABLE_ROWS:
             raise ctx.err(key, f"has {len(v)} rows", f"at most {MAX_TABLE_ROWS} rows")
         rows = [
-            (ctx.number(a, f"{key}[{k}][0]", nonneg=True), ctx.number(b, f"{key}[{k}][1]"))
+            (ctx.number(a, f"{key}[{k}][0]", (NONNEG,)), ctx.number(b, f"{key}[{k}][1]"))
             for k, (a, b) in enumerate(v)
         ]
         if rows[0][0] != 0.0:

@@ -1,0 +1,221 @@
+"""Settings declared once: each dataclass field carries its file default and its checks.
+
+A section of a scenario (``[observer]``, ``[integration]``, ...) is a frozen
+dataclass whose fields are made by :func:`setting`. The field's metadata holds a
+:class:`Setting`: the value a file may omit, how a TOML value is read (its
+shape) and the range :class:`Check` objects. The loader reads a table by walking
+these fields, :meth:`core.scenario.Scenario.validate` re-applies the same checks
+to the values held, and ``tests/test_scenario_docs.py`` compares the tables of
+``docs/scenario-format.md`` with them, so the default, the checks and the
+documented type of a key have one owner.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+SYNTH = "synthesize"
+
+#: how a TOML value is read into the field (documented type words, without range)
+SHAPES = {
+    "number": "number",
+    "integer": "whole number",
+    "boolean": "boolean",
+    "choice": "",  # rendered as the list of options
+    "matrix": "matrix",
+    "per_follower": "per follower",
+    "per_coordinate": "per follower and coordinate",
+    "rows_m": "number, list of m, or N lists of m",
+    "rows_n": "number, list of n, or N lists of n",
+}
+_SCALAR_SHAPES = ("number", "integer", "boolean", "choice")
+
+
+@dataclass(frozen=True)
+class Check:
+    """A range rule on the numbers of one setting.
+
+    Attributes
+    ----------
+    text : str
+        Its words in the type column of docs/scenario-format.md (``"> 0"``); empty
+        when the shape already says it.
+    ok : callable
+        Elementwise test on a float or an array of floats.
+    problem, expected : str
+        The error's two parts; ``problem`` is formatted with the offending value ``v``.
+    """
+
+    text: str
+    ok: Callable[[Any], Any]
+    problem: str
+    expected: str
+
+    def error(self, value: float) -> tuple[str, str]:
+        """``(problem, expected)`` for the offending ``value``."""
+        return self.problem.format(v=value), self.expected
+
+
+POSITIVE = Check("> 0", lambda x: x > 0, "{v} is not positive", "a value > 0")
+NONNEG = Check("≥ 0", lambda x: x >= 0, "{v} is negative", "a value >= 0")
+WHOLE = Check(
+    "",
+    lambda x: (np.floor(x) == x) & (x <= 1e12),
+    "{v!r} is not a whole number",
+    "an integer <= 1e12",
+)
+
+
+@dataclass(frozen=True)
+class Setting:
+    """How one key of a section is read and checked.
+
+    Attributes
+    ----------
+    default : object
+        The value a file may omit, in its TOML form (``1.0``, ``"tanh"``, ``"synthesize"``).
+    shape : str
+        A key of :data:`SHAPES`: how the TOML value is read.
+    checks : tuple of Check
+        Range rules, applied in order to every number.
+    options : tuple of str
+        The allowed strings of a ``choice``.
+    dims : tuple of str
+        Symbolic shape of a ``matrix`` (``("p", "m")``).
+    synth : bool
+        The string ``"synthesize"`` is accepted and held as ``None``.
+    """
+
+    default: Any
+    shape: str
+    checks: tuple[Check, ...] = ()
+    options: tuple[str, ...] = ()
+    dims: tuple[str, str] = ("", "")
+    synth: bool = False
+
+    def type_text(self, rule_words: tuple[str, ...] = ()) -> str:
+        """The type column of docs/scenario-format.md for this setting.
+
+        Parameters
+        ----------
+        rule_words : tuple of str
+            Words of the cross-field rules on this key (``"< delta1"``).
+        """
+        if self.shape == "choice":
+            return ", ".join(f'"{o}"' for o in self.options)
+        shape = SHAPES[self.shape]
+        if self.shape == "matrix":
+            shape += f" {self.dims[0]}×{self.dims[1]}"
+        words = [c.text for c in self.checks if c.text] + list(rule_words)
+        sep = " " if self.shape in ("number", "integer") else ", "
+        text = shape + (sep + ", ".join(words) if words else "")
+        return text + f' or "{SYNTH}"' if self.synth else text
+
+    def violation(self, value: Any) -> tuple[str, str, str] | None:
+        """The first problem of a held ``value``: ``(index, problem, expected)``, or None.
+
+        ``index`` is ``""`` for a scalar, else the 0-based position (``"[2][1]"``).
+        """
+        if value is None and self.synth:
+            return None
+        if self.shape == "choice":
+            if isinstance(value, str) and value in self.options:
+                return None
+            return "", f"{brief(value)} is not allowed", "one of " + ", ".join(self.options)
+        if self.shape == "boolean":
+            if isinstance(value, bool | np.bool_):
+                return None
+            return "", f"{brief(value)} is not a boolean", "true or false"
+        return _number_violation(value, self.checks)
+
+
+def _number_violation(value: Any, checks: tuple[Check, ...]) -> tuple[str, str, str] | None:
+    """First non-finite or out-of-range entry of a number or an array of numbers."""
+    if isinstance(value, bool | str):
+        return "", f"{brief(value)} is not a number", "a finite number"
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return "", f"{brief(value)} is not a number", "a finite number"
+    tests = [(np.isfinite, ("{v} is not finite", "a finite number"))]
+    tests += [(c.ok, (c.problem, c.expected)) for c in checks]
+    for ok, (problem, expected) in tests:
+        mask = ~np.asarray(ok(arr), dtype=bool)
+        if not mask.any():
+            continue
+        if arr.ndim == 0:
+            return "", problem.format(v=float(arr)), expected
+        idx = tuple(int(i) for i in np.argwhere(mask)[0])
+        return "".join(f"[{i}]" for i in idx), problem.format(v=float(arr[idx])), expected
+    return None
+
+
+def setting(
+    default: Any,
+    shape: str,
+    *checks: Check,
+    options: tuple[str, ...] = (),
+    dims: tuple[str, str] = ("", ""),
+    synth: bool = False,
+) -> Any:
+    """A dataclass field declared with its :class:`Setting`.
+
+    Scalar settings also get ``default`` as the field's default value (``"synthesize"``
+    becomes ``None``); per-follower settings have none (their value depends on N) and
+    need ``kw_only`` sections.
+
+    Parameters
+    ----------
+    default : object
+        The TOML value a file may omit.
+    shape : str
+        A key of :data:`SHAPES`.
+    *checks : Check
+        Range rules, in order.
+    options, dims, synth
+        See :class:`Setting`.
+    """
+    if shape not in SHAPES:
+        raise ValueError(f"unknown shape {shape!r}")
+    meta = {"setting": Setting(default, shape, checks, options, dims, synth)}
+    if default == SYNTH and synth:
+        return dataclasses.field(default=None, metadata=meta)
+    if shape in _SCALAR_SHAPES:
+        value = float(default) if shape == "number" else default
+        return dataclasses.field(default=value, metadata=meta)
+    return dataclasses.field(metadata=meta)
+
+
+def settings_of(cls: type) -> dict[str, Setting]:
+    """The :class:`Setting` of every field of a section dataclass, in declaration order.
+
+    Parameters
+    ----------
+    cls : type
+        A dataclass whose fields were made by :func:`setting` (class or instance).
+    """
+    return {f.name: f.metadata["setting"] for f in dataclasses.fields(cls)}
+
+
+def default_of(cls: type, name: str) -> Any:
+    """The file default of setting ``name`` of section ``cls`` (one owner of each default).
+
+    Parameters
+    ----------
+    cls : type
+        A section dataclass, e.g. :class:`core.scenario.Integration`.
+    name : str
+        The key, e.g. ``"max_steps"``.
+    """
+    return settings_of(cls)[name].default
+
+
+def brief(v: Any) -> str:
+    """``repr`` of a user value, shortened so the message stays one readable line."""
+    r = repr(v)
+    return r if len(r) <= 60 else r[:57] + "..."
