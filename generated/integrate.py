@@ -50,6 +50,8 @@ import numpy as np
 
 from core.errors import IntegrationError
 from core.scenario import METHODS as SCENARIO_METHODS
+from core.scenario import Integration
+from core.settings import default_of
 
 #: the integration methods (``native`` runs in :mod:`generated.native`)
 METHODS = SCENARIO_METHODS
@@ -118,11 +120,12 @@ class IntegratorSettings:
         ``("max_krylov", 50)`` for GMRES at large N).
     """
 
-    method: str = "cvodes"
-    rtol: float = 1e-6
-    atol: float = 1e-8
-    max_steps: int = 100000
-    fixed_step: float = 1e-3
+    # the scenario's [integration] defaults: core.scenario.Integration owns them
+    method: str = default_of(Integration, "method")
+    rtol: float = default_of(Integration, "rtol")
+    atol: float = default_of(Integration, "atol")
+    max_steps: int = default_of(Integration, "max_steps")
+    fixed_step: float = default_of(Integration, "fixed_step")
     chunk: float = 1.0
     fixed_rtol: float = 1e-3
     fixed_atol: float = 1e-3
