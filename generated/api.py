@@ -263,7 +263,9 @@ def with_method(sc: Scenario, method: str | None) -> Scenario:
     Raises
     ------
     ScenarioError
-        For an unknown method.
+        For an unknown method, or one the scenario does not allow: the replaced
+        scenario is validated (:meth:`core.scenario.Scenario.validate`), so e.g.
+        ``options.sign = "exact"`` with a variable-step method is refused.
     """
     if method is None:
         return sc
