@@ -10,18 +10,17 @@ computes from b_i is used.
 from __future__ import annotations
 
 import tomllib
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import SCENARIOS
 
 from core.errors import SynthesisError
 from core.graph import check_network, find_gauge
 from generated import api
 
-ROOT = Path(__file__).resolve().parents[1]
-SCENARIO = ROOT / "scenarios" / "bipartite.toml"
+SCENARIO = SCENARIOS / "bipartite.toml"
 CAMPS = np.array([1.0, 1.0, -1.0, 1.0, -1.0])  # a_31 = a_43 = a_54 = -1, follower 1 pinned
 # Tail criteria the paper scenario meets (docs/closed-loop.md): controller |e_ti| <= 1e-2 per
 # component, observer |η_i − h_i η0| <= 1e-2 per component, heading error of η̇_i <= 1e-2 rad.

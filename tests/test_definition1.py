@@ -10,18 +10,16 @@ whose second camp follows +y0 instead must make the guaranteed row fail.
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import PAPER
 
-from core.scenario import Graph, load_scenario
+from core.scenario import Graph
 from verify.bounds import theorem1_floor
 from verify.table import Rows, definition1_rows, leader_formation
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "scenarios" / "paper.toml"
 H_SIGNED = np.array([1.0, -1.0, 1.0, -1.0, -1.0])  # follower 1 is pinned: h_1 = +1
 
 
@@ -50,8 +48,8 @@ def _synthetic_frame(sc, h, offsets):
     return pd.DataFrame(cols)
 
 
-def test_leader_formation_is_the_analytic_rotation():
-    sc = load_scenario(PAPER)
+def test_leader_formation_is_the_analytic_rotation(paper_scenario):
+    sc = paper_scenario
     df = _synthetic_frame(sc, H_SIGNED, np.zeros((sc.N, 2)))
     got = leader_formation(sc, df, H_SIGNED)
     t = df["t"].to_numpy()
@@ -66,8 +64,8 @@ def test_leader_formation_is_the_analytic_rotation():
     np.testing.assert_allclose(got[5:-5, 1, :], -_rot(tau, b0)[5:-5], atol=1e-3)
 
 
-def test_rows_use_the_gauge_on_a_signed_graph():
-    sc0 = load_scenario(PAPER)
+def test_rows_use_the_gauge_on_a_signed_graph(paper_scenario):
+    sc0 = paper_scenario
     sc = replace(sc0, graph=Graph(adjacency=_signed(sc0), pinning=sc0.graph.pinning))
     off = np.array([[0.01 * (i + 1), -0.02] for i in range(sc.N)])
     df = _synthetic_frame(sc, H_SIGNED, off)

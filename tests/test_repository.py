@@ -14,8 +14,8 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from helpers import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 THIS = Path(__file__).resolve().relative_to(ROOT).as_posix()
 SUFFIXES = (".py", ".md", ".toml", ".c", ".h")
 VENDORED = "generated/native/include/"  # third-party SUNDIALS headers, kept verbatim

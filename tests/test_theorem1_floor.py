@@ -10,17 +10,14 @@ term λ2 (which the proof needs to dominate the operator's input u0) violates it
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import casadi as ca
 import numpy as np
 import pytest
+from helpers import integrate, paper_loop
 
 from verify.bounds import theorem1_floor, theorem1_rates
 from verify.lyapunov import check_theorem1
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "scenarios" / "paper.toml"
 PHI_MIN = 0.05  # larger than the shipped 0.005 so the floor dominates within a few seconds
 FLOOR = {
     "initial.start": "formation",
@@ -34,17 +31,11 @@ H = 1e-5  # finite-difference half step (test only)
 
 @pytest.fixture(scope="module")
 def floor_loop(tmp_path_factory):
-    api = pytest.importorskip("generated.api")
-    from symbolic.closed_loop import build_closed_loop
-
-    sc = api.load(PAPER, FLOOR, variant="test-t1-floor")
-    gains, _ = api.ensure_gains(sc, tmp_path_factory.mktemp("out"))
-    cl = build_closed_loop(sc, gains)
+    sc, gains, cl = paper_loop(FLOOR, "test-t1-floor", tmp_path_factory.mktemp("out"))
     base = np.linspace(0.0, 4.0, 81)
     grid = np.unique(np.concatenate([base, base[1:-1] - H, base[1:-1] + H]))
     opts = {"abstol": 1e-11, "reltol": 1e-11, "max_num_steps": 400000}
-    F = ca.integrator("F", "cvodes", cl.ode_dyn.expand(), 0.0, grid[1:], opts)
-    X = np.vstack([np.asarray(cl.x0).reshape(1, -1), np.array(F(x0=cl.x0)["xf"]).T])
+    X = integrate(cl, grid, opts)
     return sc, gains, cl, grid, X
 
 

@@ -7,14 +7,13 @@ the two-link inertia matrix written out independently of the model library.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import PAPER
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from core.scenario import load_scenario
 from generated.api import load
 from verify import signals as S
 from verify.bounds import (
@@ -30,13 +29,10 @@ from verify.lyapunov import sgn_eps
 from verify.synthetic import synthetic_trajectory
 from verify.table import bounds_table, failures, to_markdown
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "scenarios" / "paper.toml"
-
 
 @pytest.fixture(scope="module")
-def paper():
-    return load_scenario(PAPER)
+def paper(paper_scenario):
+    return paper_scenario
 
 
 def _two_link_eigs(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

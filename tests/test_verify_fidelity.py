@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
+
+from helpers import ROOT
 
 from verify.fidelity import equation_map
 
-ROOT = Path(__file__).resolve().parents[1]
 DOC = (ROOT / "docs" / "fidelity.md").read_text(encoding="utf-8")
 
 

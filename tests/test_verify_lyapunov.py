@@ -9,11 +9,9 @@ and with the printed one (χᵀMΨ), which must make it fail.
 
 from __future__ import annotations
 
-from pathlib import Path
-
-import casadi as ca
 import numpy as np
 import pytest
+from helpers import integrate, paper_loop, printed_law_ode, trajectory_frame
 
 from verify.bounds import theorem1_rates
 from verify.lyapunov import (
@@ -24,8 +22,6 @@ from verify.lyapunov import (
     outputs_at,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "scenarios" / "paper.toml"
 # start on the formation with the leader moving, so the stretch is smooth (the
 # formation angle atan2(η̇_i) is defined from t = 0)
 CALM = {
@@ -40,23 +36,10 @@ T_CHECK = (0.01, 0.02, 0.03)
 
 @pytest.fixture(scope="module")
 def loop(tmp_path_factory):
-    api = pytest.importorskip("generated.api")
-    from symbolic.closed_loop import build_closed_loop
-
-    sc = api.load(PAPER, CALM, variant="test-verify")
-    gains, _ = api.ensure_gains(sc, tmp_path_factory.mktemp("out"))
-    cl = build_closed_loop(sc, gains)
+    sc, gains, cl = paper_loop(CALM, "test-verify", tmp_path_factory.mktemp("out"))
     grid = sorted({0.0, *T_CHECK, *(t - H for t in T_CHECK), *(t + H for t in T_CHECK)})
     grid = np.array(grid)
-    F = ca.integrator(
-        "F",
-        "cvodes",
-        cl.ode_dyn.expand(),
-        0.0,
-        grid[1:],
-        {"abstol": 1e-12, "reltol": 1e-12, "max_num_steps": 200000},
-    )
-    X = np.vstack([np.asarray(cl.x0).reshape(1, -1), np.array(F(x0=cl.x0)["xf"]).T])
+    X = integrate(cl, grid, {"abstol": 1e-12, "reltol": 1e-12, "max_num_steps": 200000})
     return sc, gains, cl, grid, X
 
 
@@ -85,30 +68,9 @@ def test_theorem2_inequality_holds_for_the_reconstructed_law(loop):
         assert chk.ok, chk.where()
 
 
-def _printed_law_ode(sc, cl):
-    """The same closed loop with the printed adaptive law ĝ̇ = −χᵀ M(p) Ψ (section 9.4)."""
-    from core.models import build_model
-
-    t, x = ca.MX.sym("t"), ca.MX.sym("x", cl.layout.nx)
-    xdot = cl.ode(t, x)
-    outs = dict(zip(cl.outputs.name_out(), cl.outputs(t, x), strict=True))
-    parts = []
-    pos = 0
-    for i in range(sc.N):
-        sl = cl.layout.slices[("ghat", i)]
-        parts.append(xdot[pos : sl.start])
-        fo = sc.followers[i]
-        M = build_model(fo.model, fo.params).M(x[cl.layout.slices[("p", i)]])
-        chi, Psi = outs["chi"][i, :].T, outs["Psi"][i, :].T
-        parts.append(-float(sc.controller.gamma[i]) * ca.mtimes([chi.T, M, Psi]))
-        pos = sl.stop
-    parts.append(xdot[pos:])
-    return ca.Function("ode_printed", [t, x], [ca.vertcat(*parts)])
-
-
 def test_printed_adaptive_law_makes_theorem2_fail(loop):
     sc, _, cl, grid, X = loop
-    checks = check_theorem2(cl, sc, grid, X, ode=_printed_law_ode(sc, cl))
+    checks = check_theorem2(cl, sc, grid, X, ode=printed_law_ode(sc, cl))
     failed = [c for c in checks if not c.ok]
     assert failed, "the printed law chi'M Psi should violate eq. (38)"
     assert "fails for follower" in failed[0].where()
@@ -127,22 +89,9 @@ def test_theorem1_decay_rate_supported(loop):
 
 def test_theorem1_rate_holds_without_the_phi_floor(tmp_path):
     """With φ_min = 0 (the paper's observer) V̇1 ≤ −δ̃V1 must hold with the supported rate."""
-    api = pytest.importorskip("generated.api")
-    from symbolic.closed_loop import build_closed_loop
-
-    sc = api.load(PAPER, {**CALM, "observer.phi_min": 0.0}, variant="test-verify-phi0")
-    gains, _ = api.ensure_gains(sc, tmp_path)
-    cl = build_closed_loop(sc, gains)
+    sc, gains, cl = paper_loop({**CALM, "observer.phi_min": 0.0}, "test-verify-phi0", tmp_path)
     grid = np.linspace(0.0, 1.0, 21)
-    F = ca.integrator(
-        "F",
-        "cvodes",
-        cl.ode_dyn.expand(),
-        0.0,
-        grid[1:],
-        {"abstol": 1e-10, "reltol": 1e-10, "max_num_steps": 200000},
-    )
-    X = np.vstack([np.asarray(cl.x0).reshape(1, -1), np.array(F(x0=cl.x0)["xf"]).T])
+    X = integrate(cl, grid, {"abstol": 1e-10, "reltol": 1e-10, "max_num_steps": 200000})
     r = theorem1_rates(sc, gains)
     chk = check_theorem1(cl, grid, X, r.supported)
     assert chk.ok, chk.where()
@@ -150,12 +99,8 @@ def test_theorem1_rate_holds_without_the_phi_floor(tmp_path):
 
 
 def _loop_variant(tmp_path, overrides, variant):
-    api = pytest.importorskip("generated.api")
-    from symbolic.closed_loop import build_closed_loop
-
-    sc = api.load(PAPER, {**CALM, **overrides}, variant=variant)
-    gains, _ = api.ensure_gains(sc, tmp_path)
-    return sc, build_closed_loop(sc, gains)
+    sc, _, cl = paper_loop({**CALM, **overrides}, variant, tmp_path)
+    return sc, cl
 
 
 def test_printed_controller_without_feedforward_breaks_theorem2(loop, tmp_path):
@@ -187,12 +132,8 @@ def test_lemma1_premise_does_not_follow_for_the_paper_law(loop, tmp_path):
 
 def test_states_read_back_from_the_trajectory_csv_columns(loop):
     """`verify check` reuses trajectory.csv: its state columns must rebuild x exactly."""
-    import types
-
-    from generated import api
     from verify.pipeline import states_from_frame
 
     sc, _, cl, grid, X = loop
-    built = types.SimpleNamespace(outputs=cl.outputs, closed_loop=cl)
-    df = api.trajectory_frame(built, sc, types.SimpleNamespace(t=grid, x=X))
+    df = trajectory_frame(sc, cl, grid, X)
     np.testing.assert_array_equal(states_from_frame(cl, sc, df), X)

@@ -8,23 +8,21 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import PAPER
 
 from core.errors import run_cli
-from core.scenario import load_scenario
 from verify import figures as F
 from verify.__main__ import main
 from verify.report import Verification, ablation_statement, render_markdown, write_report
 from verify.synthetic import synthetic_trajectory
 from verify.table import bounds_table
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "scenarios" / "paper.toml"
 C0 = np.array([[1.0, 1.0], [2.0, 2.0]])
 
 
 @pytest.fixture(scope="module")
-def data():
-    sc = load_scenario(PAPER)
+def data(paper_scenario):
+    sc = paper_scenario
     df = synthetic_trajectory(step=0.1)
     ab = synthetic_trajectory(step=0.1, track_rate=1.0)
     return sc, df, ab

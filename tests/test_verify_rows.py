@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import math
 import types
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 import pytest
+from helpers import printed_law_ode, simulate_paper
 
 from core.models import build_model
 from verify import signals as S
@@ -31,29 +31,18 @@ from verify.lyapunov import check_theorem2
 from verify.synthetic import synthetic_trajectory
 from verify.table import FIG13_LEVEL_FACTOR, STARTUP, bounds_table, failures
 
-api = pytest.importorskip("generated.api")
+pytest.importorskip("generated.api")
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "scenarios" / "paper.toml"
 TOL = {"abstol": 1e-8, "reltol": 1e-8, "max_num_steps": 500000}
 CONSISTENCY = "consistency: (38)"
 PROVABLE = "provable variant"
 FIG13 = "Fig. 13: time |e_ti| enters"
 
 
-def _simulate(overrides: dict, variant: str, out: Path):
-    from symbolic.closed_loop import build_closed_loop
-
-    sc = api.load(PAPER, overrides, variant=variant)
-    gains, _ = api.ensure_gains(sc, out)
-    cl = build_closed_loop(sc, gains)
-    step = sc.integration.output_step
-    grid = np.arange(0.0, sc.integration.horizon + step / 2, step)
-    F = ca.integrator("F", "cvodes", cl.ode_dyn.expand(), 0.0, grid[1:], TOL)
-    X = np.vstack([np.asarray(cl.x0).reshape(1, -1), np.array(F(x0=cl.x0)["xf"]).T])
-    built = types.SimpleNamespace(closed_loop=cl, outputs=cl.outputs)
-    df = api.trajectory_frame(built, sc, types.SimpleNamespace(t=grid, x=X))
-    return types.SimpleNamespace(sc=sc, gains=gains, cl=cl, t=grid, X=X, df=df)
+def _simulate(overrides: dict, variant: str, out):
+    """The paper's full horizon on its output grid, with the run's trajectory frame."""
+    r = simulate_paper(overrides, variant, out, None, TOL)
+    return types.SimpleNamespace(sc=r.sc, gains=r.gains, cl=r.cl, t=r.t, X=r.X, df=r.frame())
 
 
 @pytest.fixture(scope="module")
@@ -112,27 +101,9 @@ def test_eq38_reduces_to_the_bias_bound_identity(runs):
         np.testing.assert_allclose((chk.lhs - chk.rhs) / scale, (reduced + proj) / scale, atol=1e-7)
 
 
-def _printed_law_ode(sc, cl):
-    """The closed loop with the printed adaptive law ĝ̇ = −γ χᵀ M(p) Ψ."""
-    t, x = ca.MX.sym("t"), ca.MX.sym("x", cl.layout.nx)
-    xdot = cl.ode(t, x)
-    outs = dict(zip(cl.outputs.name_out(), cl.outputs(t, x), strict=True))
-    parts, pos = [], 0
-    for i in range(sc.N):
-        sl = cl.layout.slices[("ghat", i)]
-        parts.append(xdot[pos : sl.start])
-        fo = sc.followers[i]
-        M = build_model(fo.model, fo.params).M(x[cl.layout.slices[("p", i)]])
-        chi, Psi = outs["chi"][i, :].T, outs["Psi"][i, :].T
-        parts.append(-float(sc.controller.gamma[i]) * ca.mtimes([chi.T, M, Psi]))
-        pos = sl.stop
-    parts.append(xdot[pos:])
-    return ca.Function("ode_printed", [t, x], [ca.vertcat(*parts)])
-
-
 def test_eq38_consistency_row_fails_for_a_wrong_vector_field(runs):
     r = runs.ftc
-    wrong = check_theorem2(r.cl, r.sc, r.t, r.X, ode=_printed_law_ode(r.sc, r.cl))
+    wrong = check_theorem2(r.cl, r.sc, r.t, r.X, ode=printed_law_ode(r.sc, r.cl))
     tb = bounds_table(r.sc, r.df, gains=r.gains, theorem2=wrong)
     bad = failures(tb, strict=False)
     assert (bad["kind"] == "consistency").any()
@@ -200,10 +171,8 @@ def test_fig13_verdict_fails_when_the_ablation_is_faster(runs):
     assert failures(tb, strict=True)["claim"].str.startswith(FIG13).any()
 
 
-def test_fig13_decay_rates_and_levels_on_known_exponentials():
-    from core.scenario import load_scenario
-
-    sc = load_scenario(PAPER)
+def test_fig13_decay_rates_and_levels_on_known_exponentials(paper_scenario):
+    sc = paper_scenario
     ftc = synthetic_trajectory(track_rate=2.0)
     abl = synthetic_trajectory(track_rate=1.0)
     tb = bounds_table(sc, ftc, ablation=abl)
@@ -266,10 +235,8 @@ def test_peak_u_rows_match_inverse_dynamics(runs):
             assert row.observed == pytest.approx(logged[t >= t_min].max(), rel=1e-12)
 
 
-def test_peak_u_rows_find_a_known_peak():
-    from core.scenario import load_scenario
-
-    sc = load_scenario(PAPER)
+def test_peak_u_rows_find_a_known_peak(paper_scenario):
+    sc = paper_scenario
     df = synthetic_trajectory()
     t = df["t"].to_numpy(float)
     bump = 7.0 * np.exp(-(((t - 4.0) / 0.05) ** 2))  # a late peak of height 7 at t = 4 s
