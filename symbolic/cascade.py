@@ -25,7 +25,6 @@ integrator above N = 20 uses (:mod:`generated.dag`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -45,7 +44,8 @@ from symbolic.closed_loop import (
 from symbolic.derivatives import flow_jets
 from symbolic.leader import leader_function
 from symbolic.network import graph_matrices
-from symbolic.observer import observer_function
+from symbolic.observer import ObserverGains, observer_function
+from synthesis.gains import Gains
 
 
 @dataclass(frozen=True)
@@ -144,7 +144,81 @@ def topological_order(adjacency: np.ndarray, where: str = "scenario") -> np.ndar
     return np.asarray(order, dtype=np.int32)
 
 
-def build_cascade(scenario: Scenario, gains: Any) -> Cascade:
+def _one_model(sc: Scenario) -> int:
+    """The follower whose model serves all: one generated block needs one model."""
+    groups = _groups(sc)
+    if len(groups) > 1:
+        raise ScenarioError(
+            sc.path,
+            "followers.model",
+            f"{len(groups)} different models/parameter sets",
+            "one model and parameter set for method 'native' above N = 20 (or method 'cvodes')",
+        )
+    return groups[0][0]
+
+
+def _block(sc: Scenario, og: ObserverGains, lay: StateLayout) -> ca.Function:
+    """Follower i's block ``(t, xb, nb, cpl, prm, gf) -> (xbdot, jets)`` (module docstring)."""
+    m, n = sc.m, sc.n
+    filtered = sc.options.derivatives == "filtered"
+    C0 = ca.DM(np.atleast_2d(sc.leader.C0))
+    poff, npar = _param_layout(n)
+    t = ca.SX.sym("t")
+    xb = ca.SX.sym("xb", m + lay.agent_size)
+    nb = ca.SX.sym("nb", 3 * n)
+    cpl = ca.SX.sym("cpl", 2)
+    prm = ca.SX.sym("prm", npar)
+    gf = ca.SX.sym("gf", 1 + n)
+    eta0, s = xb[:m], xb[m:]
+    lii, a0h = cpl[0], cpl[1]
+    eta0dot, _, y0, y0dot, y0ddot, _, _ = leader_function(sc.leader)(t, eta0)  # eq. (3)
+    so = s[: 2 * m + 1]  # (μ_i, η_i, φ_i)
+    eta = s[lay.agent_offsets["eta"]]
+    # eq. (6), follower i's row of ψ = C0 E (L+B)ᵀ − y0 (a0 ∘ h)ᵀ
+    psi = lii * ca.mtimes(C0, eta) + nb[:n] - a0h * y0
+    if filtered:
+        dpsi = ddpsi = ca.SX.zeros(n)
+    else:  # the oracle's time derivatives of the same row (symbolic.closed_loop._network)
+        obs = observer_function(og)
+        D1, _ = flow_jets(obs)
+        Pobs = prm[poff["obs"]]
+        sod = obs(so, psi, Pobs)[0]
+        dpsi = lii * ca.mtimes(C0, sod[m : 2 * m]) + nb[n : 2 * n] - a0h * y0dot
+        sodd = D1(so, psi, Pobs, sod, dpsi)
+        ddpsi = lii * ca.mtimes(C0, sodd[m : 2 * m]) + nb[2 * n :] - a0h * y0ddot
+    agent = agent_function(sc, og, _one_model(sc))
+    res = dict(
+        zip(agent.name_out(), agent(s, psi, dpsi, ddpsi, gf, ca.SX.zeros(n), prm), strict=True)
+    )
+    xbdot = ca.vertcat(eta0dot, res["sdot"])
+    etaddot = ca.SX.zeros(m) if filtered else res["etaddot"]  # filtered: ψ alone is used
+    jets = ca.vertcat(*(ca.mtimes(C0, v) for v in (eta, res["etadot"], etaddot)))
+    return ca.Function(
+        "cascade_block",
+        [t, xb, nb, cpl, prm, gf],
+        [xbdot, jets],
+        ["t", "xb", "nb", "cpl", "prm", "gf"],
+        ["xbdot", "jets"],
+        {"cse": True},
+    )
+
+
+def _upstream(L_B: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Row i's off-diagonal (L+B)_ij in CSR form: pointers, follower indices, weights."""
+    ptr, idx, wts = [0], [], []
+    for i in range(L_B.shape[0]):
+        js = [j for j in np.flatnonzero(L_B[i]) if j != i]
+        idx += js
+        wts += [float(L_B[i, j]) for j in js]
+        ptr.append(len(idx))
+    return (
+        np.asarray(ptr, dtype=np.int32),
+        np.asarray(idx, dtype=np.int32),
+        np.asarray(wts, dtype=float),
+    )
+
+
+def build_cascade(scenario: Scenario, gains: Gains) -> Cascade:
     """The per-follower block of ``scenario``'s closed loop and the data that strings them.
 
     Parameters
@@ -165,81 +239,24 @@ def build_cascade(scenario: Scenario, gains: Any) -> Cascade:
         (one generated block serves all followers; method 'native' above N = 20).
     """
     sc = scenario
-    m, n, N = sc.m, sc.n, sc.N
-    groups = _groups(sc)
-    if len(groups) > 1:
-        raise ScenarioError(
-            sc.path,
-            "followers.model",
-            f"{len(groups)} different models/parameter sets",
-            "one model and parameter set for method 'native' above N = 20 (or method 'cvodes')",
-        )
+    n, N = sc.n, sc.N
+    _one_model(sc)
     order = topological_order(sc.graph.adjacency, sc.path)
-    filtered = sc.options.derivatives == "filtered"
-    lay = make_layout(m, n, N, filtered)
-    na = lay.agent_size
-    gm = graph_matrices(sc.graph, np.diag(np.atleast_2d(gains.H)))
-    og = _observer_gains(sc, gains)
-    C0 = ca.DM(np.atleast_2d(sc.leader.C0))
-    poff, npar = _param_layout(n)
-
-    t = ca.SX.sym("t")
-    xb = ca.SX.sym("xb", m + na)
-    nb = ca.SX.sym("nb", 3 * n)
-    cpl = ca.SX.sym("cpl", 2)
-    prm = ca.SX.sym("prm", npar)
-    gf = ca.SX.sym("gf", 1 + n)
-    eta0, s = xb[:m], xb[m:]
-    off = lay.agent_offsets
-    lii, a0h = cpl[0], cpl[1]
-    eta0dot, _, y0, y0dot, y0ddot, _, _ = leader_function(sc.leader)(t, eta0)  # eq. (3)
-    so = s[: 2 * m + 1]  # (μ_i, η_i, φ_i)
-    eta = s[off["eta"]]
-    # eq. (6), follower i's row of ψ = C0 E (L+B)ᵀ − y0 (a0 ∘ h)ᵀ
-    psi = lii * ca.mtimes(C0, eta) + nb[:n] - a0h * y0
-    if filtered:
-        dpsi = ddpsi = ca.SX.zeros(n)
-    else:  # the oracle's time derivatives of the same row (symbolic.closed_loop._network)
-        obs = observer_function(og)
-        D1, _ = flow_jets(obs)
-        Pobs = prm[poff["obs"]]
-        sod = obs(so, psi, Pobs)[0]
-        dpsi = lii * ca.mtimes(C0, sod[m : 2 * m]) + nb[n : 2 * n] - a0h * y0dot
-        sodd = D1(so, psi, Pobs, sod, dpsi)
-        ddpsi = lii * ca.mtimes(C0, sodd[m : 2 * m]) + nb[2 * n :] - a0h * y0ddot
-    agent = agent_function(sc, og, groups[0][0])
-    res = dict(
-        zip(agent.name_out(), agent(s, psi, dpsi, ddpsi, gf, ca.SX.zeros(n), prm), strict=True)
-    )
-    xbdot = ca.vertcat(eta0dot, res["sdot"])
-    etaddot = ca.SX.zeros(m) if filtered else res["etaddot"]  # filtered: ψ alone is used
-    jets = ca.vertcat(*(ca.mtimes(C0, v) for v in (eta, res["etadot"], etaddot)))
-    block = ca.Function(
-        "cascade_block",
-        [t, xb, nb, cpl, prm, gf],
-        [xbdot, jets],
-        ["t", "xb", "nb", "cpl", "prm", "gf"],
-        ["xbdot", "jets"],
-        {"cse": True},
-    )
+    lay = make_layout(sc.m, n, N, sc.options.derivatives == "filtered")
+    gm = graph_matrices(sc.graph, gains)  # h and L + B = H L̄ H from the gains
+    block = _block(sc, _observer_gains(sc, gains), lay)
     faults, fidx = _fault_function(sc)
-    L_B = gm.L_B
-    ptr, idx, wts = [0], [], []
-    for i in range(N):
-        js = [j for j in np.flatnonzero(L_B[i]) if j != i]
-        idx += js
-        wts += [float(L_B[i, j]) for j in js]
-        ptr.append(len(idx))
+    ptr, idx, wts = _upstream(gm.L_B)
     return Cascade(
         block=block,
         faults=faults,
         fault_index=np.asarray(fidx, dtype=np.int32).reshape(N, 1 + n),
         params=_param_matrix(sc),
-        coupling=np.column_stack([np.diag(L_B), gm.a0h]).astype(float),
+        coupling=np.column_stack([np.diag(gm.L_B), gm.a0h]).astype(float),
         order=order,
-        upstream_ptr=np.asarray(ptr, dtype=np.int32),
-        upstream_idx=np.asarray(idx, dtype=np.int32),
-        upstream_weight=np.asarray(wts, dtype=float),
+        upstream_ptr=ptr,
+        upstream_idx=idx,
+        upstream_weight=wts,
         layout=lay,
         n=n,
     )

@@ -27,7 +27,7 @@ import casadi as ca
 import numpy as np
 
 from core.errors import ScenarioError, SynthesisError
-from core.models import build_model
+from core.models import ELModel, build_model
 from core.scenario import Scenario
 from symbolic.adaptive import adaptive_function
 from symbolic.controller import controller_function
@@ -36,7 +36,8 @@ from symbolic.formation import formation_function
 from symbolic.leader import leader_function
 from symbolic.network import ASSEMBLIES, GraphMatrices, apply_agents, coupling, graph_matrices
 from symbolic.observer import ObserverGains, observer_function
-from symbolic.uio import uio_matrices
+from symbolic.uio import uio_of
+from synthesis.gains import Gains
 
 AGENT_STATES = ("mu", "eta", "phi", "p", "q", "thetahat", "ghat", "w", "z")
 
@@ -253,7 +254,8 @@ def _fault_function(sc: Scenario) -> tuple[ca.Function, list[int]]:
     return ca.Function("faults", [t], [ca.vertcat(*vals)], ["t"], ["values"]), idx
 
 
-def _observer_gains(sc: Scenario, gains: Any) -> ObserverGains:
+def _observer_gains(sc: Scenario, gains: Gains) -> ObserverGains:
+    """Eq. (9)'s gains and the UIO, read from ``gains`` (checked against the leader)."""
     L = sc.leader
     for name, a, b in (("A0", gains.A0, L.A0), ("B0", gains.B0, L.B0), ("C0", gains.C0, L.C0)):
         a = np.atleast_2d(np.asarray(a, dtype=float))
@@ -261,22 +263,177 @@ def _observer_gains(sc: Scenario, gains: Any) -> ObserverGains:
             raise SynthesisError(
                 f"gains.{name} differs from the scenario's leader.{name}; re-run make synth"
             )
-    uio = uio_matrices(L.A0, L.B0, L.C0, np.atleast_2d(gains.Theta))
     Q = np.atleast_2d(np.asarray(gains.Q, dtype=float)).reshape(L.p, L.m)
     return ObserverGains(
-        A0=np.asarray(L.A0), B0=np.asarray(L.B0), Q=Q,
-        lambda1=float(gains.lambda1), lambda2=float(gains.lambda2), uio=uio,
-    )  # fmt: skip
+        A0=np.asarray(L.A0),
+        B0=np.asarray(L.B0),
+        Q=Q,
+        lambda1=float(gains.lambda1),
+        lambda2=float(gains.lambda2),
+        uio=uio_of(gains),  # Γ, Φ of eq. (7) as synthesis certified them
+    )
 
 
 # ----------------------------------------------------------------------------- per agent
+AGENT_INPUTS = ("s", "psi", "dpsi", "ddpsi", "gf", "a", "prm")
+AGENT_OUTPUTS = (
+    "sdot",
+    "sdot_dae",
+    "res",
+    "et",
+    "etdot",
+    "chi",
+    "Psi",
+    "u",
+    "b",
+    "bdot",
+    "bddot",
+    "ehat",
+    "v",
+    "etadot",
+    "etaddot",
+    "eta3dot",
+    "qdot",
+    "V2",
+)
+
+
+@dataclass(frozen=True)
+class _AgentSymbols:
+    """The inputs of one follower's Function (:data:`AGENT_INPUTS`) and named views.
+
+    ``S`` names the parts of the agent block ``s``, ``P`` those of the per-agent
+    numbers ``prm``; ``g``, ``f`` are the fault values in ``gf``.
+    """
+
+    inputs: dict[str, ca.SX]
+    S: dict[str, ca.SX]
+    P: dict[str, ca.SX]
+
+    @classmethod
+    def make(cls, sc: Scenario) -> _AgentSymbols:
+        """Symbols sized for ``sc``'s leader, coordinates and derivative option."""
+        m, n = sc.m, sc.n
+        off, na = _agent_offsets(m, n, sc.options.derivatives == "filtered")
+        poff, npar = _param_layout(n)
+        s = ca.SX.sym("s", na)
+        psi, dpsi, ddpsi = (ca.SX.sym(k, n) for k in ("psi", "dpsi", "ddpsi"))
+        gf = ca.SX.sym("gf", 1 + n)
+        a = ca.SX.sym("a", n)
+        prm = ca.SX.sym("prm", npar)
+        inputs = dict(zip(AGENT_INPUTS, (s, psi, dpsi, ddpsi, gf, a, prm), strict=True))
+        P = {k: prm[sl] for k, sl in poff.items()}
+        S = {k: s[sl] for k, sl in off.items()}
+        return cls(inputs, S, P)
+
+    @property
+    def g(self) -> ca.SX:
+        return self.inputs["gf"][0]
+
+    @property
+    def f(self) -> ca.SX:
+        return self.inputs["gf"][1:]
+
+
+def _reference_signals(sc: Scenario, og: ObserverGains, sym: _AgentSymbols) -> dict[str, Any]:
+    """Observer flow, η̇_i and its derivatives, and the formation offset b_i with its own.
+
+    Oracle derivatives differentiate the observer flow along ψ's jets; ``filtered``
+    derivatives take them from the filter states (``extra`` holds their rates).
+    """
+    m, n, opts = sc.m, sc.n, sc.options
+    S, P, inp = sym.S, sym.P, sym.inputs
+    psi = inp["psi"]
+    obs = observer_function(og)
+    so = ca.vertcat(S["mu"], S["eta"], S["phi"])
+    sodot, v, ehat = obs(so, psi, P["obs"])  # eqs. (7), (9)
+    etadot = sodot[m : 2 * m]
+    form = formation_function(m, n, opts.tau_threshold)
+    extra = []
+    if opts.derivatives == "filtered":
+        filt = filter_function(m, n, opts.filter_bandwidth)
+        b = form(etadot, ca.SX.zeros(m), ca.SX.zeros(m), P["b0"])[0]
+        wdot, zdot, etaddot, bdot, bddot = filt(S["w"], S["z"], etadot, b)
+        eta3dot = ca.SX.zeros(m)
+        extra = [wdot, zdot]
+    else:
+        D1, D2 = flow_jets(obs)
+        ddso = D1(so, psi, P["obs"], sodot, inp["dpsi"])
+        dddso = D2(so, psi, P["obs"], sodot, inp["dpsi"], ddso, inp["ddpsi"])
+        etaddot, eta3dot = ddso[m : 2 * m], dddso[m : 2 * m]
+        b, bdot, bddot = form(etadot, etaddot, eta3dot, P["b0"])  # section 7
+    return dict(
+        sodot=sodot,
+        v=v,
+        ehat=ehat,
+        etadot=etadot,
+        etaddot=etaddot,
+        eta3dot=eta3dot,
+        b=b,
+        bdot=bdot,
+        bddot=bddot,
+        extra=extra,
+    )
+
+
+def _control(sc: Scenario, model: ELModel, sym: _AgentSymbols, r: dict[str, Any]) -> dict:
+    """The control law (eqs. (28)–(29), (42)) and the adaptive laws (eq. (30))."""
+    S, P, opts = sym.S, sym.P, sc.options
+    bdot_c, bddot_c = (
+        (r["bdot"], r["bddot"]) if opts.feedforward else (0 * r["bdot"], 0 * r["bddot"])
+    )
+    ctrl = controller_function(
+        model, sc.leader.C0, sign=opts.sign, sign_width=opts.sign_width, ablation=opts.ablation
+    )
+    et, etdot, chi, Psi, u = ctrl(
+        S["p"],
+        S["q"],
+        S["eta"],
+        r["etadot"],
+        r["etaddot"],
+        r["b"],
+        bdot_c,
+        bddot_c,
+        S["thetahat"],
+        S["ghat"],
+        P["Lambda"],
+        P["k1"],
+    )  # eqs. (28)-(29), (42)
+    adap = adaptive_function(sc.n, opts.ghat_law, sc.controller.g_min)
+    thd, ghd = adap(
+        chi, Psi, S["thetahat"], S["ghat"], P["k2"], P["gamma"], P["sigma"], P["ghat_ref"]
+    )  # eq. (30)
+    return dict(et=et, etdot=etdot, chi=chi, Psi=Psi, u=u, thd=thd, ghd=ghd)
+
+
+def _dynamics(model: ELModel, sym: _AgentSymbols, r: dict[str, Any], c: dict) -> dict:
+    """Eq. (2) as an ODE (q̇) and as a DAE residual, the agent's rates and V2 (eq. (32))."""
+    S, P, g = sym.S, sym.P, sym.g
+    M, Cm, G = model.M(S["p"]), model.C(S["p"], S["q"]), model.G(S["p"])
+    force = g * c["u"] + sym.f - Cm @ S["q"] - G  # eq. (2): M p̈ = g u + f − C q − G
+    qdot = ca.solve(M, force)
+    res = M @ sym.inputs["a"] - force  # eq. (2) as a DAE residual: M a + C q + G − g u − f
+    head = [r["sodot"], S["q"]]
+    tail = [c["thd"], c["ghd"], *r["extra"]]
+    sdot = ca.vertcat(*head, qdot, *tail)
+    sdot_dae = ca.vertcat(*head, sym.inputs["a"], *tail)
+    gam = P["gamma"]
+    V2 = (
+        0.5 * ca.bilin(M, c["chi"], c["chi"])
+        + 0.5 * ca.sumsqr(S["thetahat"] - P["d"])
+        + g / (2 * gam) * (S["ghat"] - 1 / g) ** 2
+    )  # eq. (32), ĝ term weighted g/(2γ)
+    return dict(sdot=sdot, sdot_dae=sdot_dae, res=res, qdot=qdot, V2=V2)
+
+
 def agent_function(sc: Scenario, og: ObserverGains, model_index: int) -> ca.Function:
     """Everything local to one follower as one SX Function.
 
     Inputs ``s`` (agent block), ``psi``, ``dpsi``, ``ddpsi`` (ψ_i and, for the oracle,
     its first two time derivatives), ``gf`` = (g_i(t), f_i(t)), ``a`` (acceleration,
     used only by the DAE residual) and ``prm`` (per-agent numbers).
-    Outputs ``sdot`` (ODE), ``sdot_dae`` (q̇ = a), ``res`` (DAE residual) and diagnostics.
+    Outputs ``sdot`` (ODE), ``sdot_dae`` (q̇ = a), ``res`` (DAE residual) and diagnostics
+    (:data:`AGENT_OUTPUTS`).
 
     Parameters
     ----------
@@ -290,75 +447,17 @@ def agent_function(sc: Scenario, og: ObserverGains, model_index: int) -> ca.Func
     """
     fo = sc.followers[model_index]
     model = build_model(fo.model, fo.params)
-    m, n = sc.m, sc.n
-    opts = sc.options
-    filtered = opts.derivatives == "filtered"
-    off, na = _agent_offsets(m, n, filtered)
-    poff, npar = _param_layout(n)
-    s = ca.SX.sym("s", na)
-    psi, dpsi, ddpsi = (ca.SX.sym(k, n) for k in ("psi", "dpsi", "ddpsi"))
-    gf = ca.SX.sym("gf", 1 + n)
-    a = ca.SX.sym("a", n)
-    prm = ca.SX.sym("prm", npar)
-    P = {k: prm[sl] for k, sl in poff.items()}
-    S = {k: s[sl] for k, sl in off.items()}
-    g, f = gf[0], gf[1:]
-
-    obs = observer_function(og)
-    so = ca.vertcat(S["mu"], S["eta"], S["phi"])
-    sodot, v, ehat = obs(so, psi, P["obs"])  # eqs. (7), (9)
-    etadot = sodot[m : 2 * m]
-    form = formation_function(m, n, opts.tau_threshold)
-    extra = []
-    if filtered:
-        filt = filter_function(m, n, opts.filter_bandwidth)
-        b = form(etadot, ca.SX.zeros(m), ca.SX.zeros(m), P["b0"])[0]
-        wdot, zdot, etaddot, bdot, bddot = filt(S["w"], S["z"], etadot, b)
-        eta3dot = ca.SX.zeros(m)
-        extra = [wdot, zdot]
-    else:
-        D1, D2 = flow_jets(obs)
-        ddso = D1(so, psi, P["obs"], sodot, dpsi)
-        dddso = D2(so, psi, P["obs"], sodot, dpsi, ddso, ddpsi)
-        etaddot, eta3dot = ddso[m : 2 * m], dddso[m : 2 * m]
-        b, bdot, bddot = form(etadot, etaddot, eta3dot, P["b0"])  # section 7
-    bdot_c, bddot_c = (bdot, bddot) if opts.feedforward else (0 * bdot, 0 * bddot)
-
-    ctrl = controller_function(
-        model, sc.leader.C0, sign=opts.sign, sign_width=opts.sign_width, ablation=opts.ablation
-    )
-    et, etdot, chi, Psi, u = ctrl(
-        S["p"], S["q"], S["eta"], etadot, etaddot, b, bdot_c, bddot_c,
-        S["thetahat"], S["ghat"], P["Lambda"], P["k1"],
-    )  # fmt: skip  # eqs. (28)-(29), (42)
-    adap = adaptive_function(n, opts.ghat_law, sc.controller.g_min)
-    thd, ghd = adap(chi, Psi, S["thetahat"], S["ghat"], P["k2"], P["gamma"], P["sigma"],
-                    P["ghat_ref"])  # fmt: skip  # eq. (30)
-
-    M, Cm, G = model.M(S["p"]), model.C(S["p"], S["q"]), model.G(S["p"])
-    force = g * u + f - Cm @ S["q"] - G  # eq. (2): M p̈ = g u + f − C q − G
-    qdot = ca.solve(M, force)
-    res = M @ a - force  # eq. (2) as a DAE residual: M a + C q + G − g u − f
-    head = [sodot, S["q"]]
-    tail = [thd, ghd, *extra]
-    sdot = ca.vertcat(*head, qdot, *tail)
-    sdot_dae = ca.vertcat(*head, a, *tail)
-    gam = P["gamma"]
-    V2 = (
-        0.5 * ca.bilin(M, chi, chi)
-        + 0.5 * ca.sumsqr(S["thetahat"] - P["d"])
-        + g / (2 * gam) * (S["ghat"] - 1 / g) ** 2
-    )  # eq. (32), ĝ term weighted g/(2γ)
-    names_out = ["sdot", "sdot_dae", "res", "et", "etdot", "chi", "Psi", "u", "b", "bdot",
-                 "bddot", "ehat", "v", "etadot", "etaddot", "eta3dot", "qdot", "V2"]  # fmt: skip
-    outs = [sdot, sdot_dae, res, et, etdot, chi, Psi, u, b, bdot, bddot, ehat, v, etadot,
-            etaddot, eta3dot, qdot, V2]  # fmt: skip
+    sym = _AgentSymbols.make(sc)
+    r = _reference_signals(sc, og, sym)
+    c = _control(sc, model, sym, r)
+    d = _dynamics(model, sym, r, c)
+    named = {**r, **c, **d}
     return ca.Function(
         f"agent_{fo.model}_{model_index}",
-        [s, psi, dpsi, ddpsi, gf, a, prm],
-        outs,
-        ["s", "psi", "dpsi", "ddpsi", "gf", "a", "prm"],
-        names_out,
+        list(sym.inputs.values()),
+        [named[k] for k in AGENT_OUTPUTS],
+        list(AGENT_INPUTS),
+        list(AGENT_OUTPUTS),
     )
 
 
@@ -396,7 +495,7 @@ def _slim(f: ca.Function, keep: Sequence[str] | None) -> ca.Function:
 
 def _network(
     sc: Scenario,
-    gains: Any,
+    gains: Gains,
     assembly: str,
     t: Any,
     x: Any,
@@ -410,7 +509,7 @@ def _network(
     m, n, N = sc.m, sc.n, sc.N
     filtered = sc.options.derivatives == "filtered"
     lay = make_layout(m, n, N, filtered)
-    gm: GraphMatrices = graph_matrices(sc.graph, np.diag(np.atleast_2d(gains.H)))
+    gm: GraphMatrices = graph_matrices(sc.graph, gains)
     og = _observer_gains(sc, gains)
     P = ca.DM(_param_matrix(sc))
     poff, _ = _param_layout(n)
@@ -456,13 +555,26 @@ def _network(
         f = funs[next(iter(funs))]
     named = dict(zip(f.name_out() if keep is None else keep, outs, strict=True))
     named.update(
-        eta0=eta0, eta0dot=eta0dot, eta0ddot=eta0ddot, y0=y0, y0dot=y0dot, u0=u0, u0dot=u0dot,
-        psi=psi, X=X, E=E, GF=GF, gm=gm, lay=lay, funs=funs, lead=lead,
-    )  # fmt: skip
+        eta0=eta0,
+        eta0dot=eta0dot,
+        eta0ddot=eta0ddot,
+        y0=y0,
+        y0dot=y0dot,
+        u0=u0,
+        u0dot=u0dot,
+        psi=psi,
+        X=X,
+        E=E,
+        GF=GF,
+        gm=gm,
+        lay=lay,
+        funs=funs,
+        lead=lead,
+    )
     return named
 
 
-def build_closed_loop(scenario: Scenario, gains: Any, *, assembly: str = "map") -> ClosedLoop:
+def build_closed_loop(scenario: Scenario, gains: Gains, *, assembly: str = "map") -> ClosedLoop:
     """Build the closed loop of ``scenario`` with ``gains``.
 
     Parameters
@@ -516,12 +628,20 @@ def build_closed_loop(scenario: Scenario, gains: Any, *, assembly: str = "map") 
     blocks = dict(net["funs"])
     blocks["leader"] = net["lead"]
     return ClosedLoop(
-        layout=lay, ode=ode, ode_dyn=ode_dyn, dae_dyn=dae_dyn, outputs=outputs, x0=x0,
-        z0=qdd0, breakpoints=sc.breakpoints(), assembly=assembly, blocks=blocks,
-    )  # fmt: skip
+        layout=lay,
+        ode=ode,
+        ode_dyn=ode_dyn,
+        dae_dyn=dae_dyn,
+        outputs=outputs,
+        x0=x0,
+        z0=qdd0,
+        breakpoints=sc.breakpoints(),
+        assembly=assembly,
+        blocks=blocks,
+    )
 
 
-def _outputs_function(sc: Scenario, gains: Any, net: dict, t: Any, x: Any, a: Any) -> ca.Function:
+def _outputs_function(sc: Scenario, gains: Gains, net: dict, t: Any, x: Any, a: Any) -> ca.Function:
     """Named outputs of (t, x); per-agent quantities as N×k matrices (row i = agent i)."""
     gm: GraphMatrices = net["gm"]
     lay: StateLayout = net["lay"]

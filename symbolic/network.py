@@ -18,9 +18,10 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
-from core.errors import ScenarioError
-from core.graph import find_gauge, pinned_laplacian
+from core.errors import ScenarioError, SynthesisError
+from core.graph import pinned_laplacian
 from core.scenario import Graph
+from synthesis.gains import Gains
 
 ASSEMBLIES = ("map", "flat")
 
@@ -73,32 +74,40 @@ def _sparse(a: np.ndarray) -> ca.DM:
     return ca.DM(sp, a[rows, cols].tolist() if rows.size else [])
 
 
-def graph_matrices(graph: Graph, h: np.ndarray | None = None) -> GraphMatrices:
-    """Build :class:`GraphMatrices` from a scenario graph.
+def graph_matrices(graph: Graph, gains: Gains) -> GraphMatrices:
+    """Build :class:`GraphMatrices` from a scenario graph and its certified gains.
+
+    The gauge h and ``L + B = H L̄ H`` are read from the gains (synthesis found and
+    certified them, Assumption 1); the adjacency and the pinning gains from the graph.
 
     Parameters
     ----------
     graph : Graph
         The scenario's graph.
-    h : ndarray, optional
-        Gauge signs (e.g. ``gains.h``); computed with
-        :func:`core.graph.find_gauge` (the gains' convention) when omitted.
+    gains : Gains
+        Gains synthesised for this graph (``gains.H``, ``gains.L_bar``).
 
     Raises
     ------
     ScenarioError
-        If ``h`` is not N signs ±1.
+        If ``gains.H`` is not N signs ±1.
     SynthesisError
-        If ``h`` is omitted and the signed graph is not structurally balanced.
+        If ``gains.L_bar`` is not H(L + B)H of this graph (gains made for another one).
     """
     A = np.asarray(graph.adjacency, dtype=float)
     a0 = np.asarray(graph.pinning, dtype=float)
-    if h is None:
-        h = find_gauge(A, a0)
-    h = np.asarray(h, dtype=float).reshape(-1)
+    h = np.diag(np.atleast_2d(gains.H)).astype(float)
     if h.shape != a0.shape or not np.all(np.abs(h) == 1.0):
         raise ScenarioError("gains", "H", f"gauge has entries {h}", f"{len(a0)} signs +1/-1")
-    L_B = pinned_laplacian(A, a0).toarray()
+    L_bar = np.atleast_2d(np.asarray(gains.L_bar, dtype=float))
+    # H = diag(±1) is its own inverse: L + B = H L̄ H exactly (+ 0.0 turns −0.0 into 0.0)
+    L_B = h[:, None] * L_bar * h[None, :] + 0.0
+    if L_B.shape != A.shape or not np.allclose(
+        L_B, pinned_laplacian(A, a0).toarray(), rtol=1e-12, atol=0.0
+    ):
+        raise SynthesisError(
+            "gains.L_bar is not H(L + B)H of the scenario's graph; re-run make synth"
+        )
     return GraphMatrices(A=A, a0=a0, h=h, L_B=L_B, l_bar=np.diag(L_B).copy())
 
 

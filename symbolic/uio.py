@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from synthesis.assumptions import uio_matrices as gamma_phi
+from synthesis.gains import Gains
 
 
 @dataclass(frozen=True)
@@ -36,21 +36,37 @@ class UIOMatrices:
     K: np.ndarray
 
 
-def uio_matrices(A0: np.ndarray, B0: np.ndarray, C0: np.ndarray, Theta: np.ndarray) -> UIOMatrices:
-    """Γ, Φ and the two system matrices of the UIO, eqs. (7)–(8).
+def uio_matrices(
+    A0: np.ndarray, C0: np.ndarray, Gamma: np.ndarray, Phi: np.ndarray, Theta: np.ndarray
+) -> UIOMatrices:
+    """The two system matrices of the UIO, eqs. (7)–(8), from Γ, Φ and Θ.
 
     Parameters
     ----------
-    A0, B0, C0 : ndarray
-        Leader matrices (m×m, m×p, n×m).
+    A0, C0 : ndarray
+        Leader matrices (m×m, n×m).
+    Gamma, Phi : ndarray
+        m×n and m×m, eq. (7) (``Φ B0 = 0``; synthesis computes and certifies them).
     Theta : ndarray
         m×n observer gain.
     """
-    A0, B0, C0, Theta = (np.asarray(a, dtype=float) for a in (A0, B0, C0, Theta))
-    Gamma, Phi = gamma_phi(B0, C0)  # eq. (7), signs reconstructed: Φ B0 = 0
+    A0, C0, Gamma, Phi, Theta = (
+        np.atleast_2d(np.asarray(a, dtype=float)) for a in (A0, C0, Gamma, Phi, Theta)
+    )
     F = Phi @ A0 - Theta @ C0  # eq. (8)
     K = Theta @ (np.eye(C0.shape[0]) - C0 @ Gamma) + Phi @ A0 @ Gamma  # eq. (7)
     return UIOMatrices(Gamma=Gamma, Phi=Phi, F=F, K=K)
+
+
+def uio_of(gains: Gains) -> UIOMatrices:
+    """The UIO of the certified gains: their A0, C0, Γ, Φ and Θ (nothing recomputed).
+
+    Parameters
+    ----------
+    gains : Gains
+        Synthesised (or hand-made) gains.
+    """
+    return uio_matrices(gains.A0, gains.C0, gains.Gamma, gains.Phi, gains.Theta)
 
 
 def uio_function(mats: UIOMatrices) -> ca.Function:

@@ -283,7 +283,13 @@ def check_shapes_finite(g: Gains) -> Check:
 
 
 def check_symmetry(c: _Numbers) -> Check:
-    """T, Ω and Z symmetric up to :data:`SYM_RTOL`."""
+    """T, Ω and Z symmetric up to :data:`SYM_RTOL`.
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     asym = max(_asym(c.g.T), _asym(c.g.Omega), _asym(c.g.Z))
     return Check(
         "symmetry", "max relative asymmetry of T, Ω, Z", asym, SYM_RTOL - asym, asym <= SYM_RTOL
@@ -291,7 +297,13 @@ def check_symmetry(c: _Numbers) -> Check:
 
 
 def check_assumption2_rank(c: _Numbers) -> Check:
-    """rank(C0B0) = rank(B0) = p (Assumption 2)."""
+    """rank(C0B0) = rank(B0) = p (Assumption 2).
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     B0, p = c.g.B0, c.g.B0.shape[1]
     r_cb, r_b = _rank(c.g.C0 @ B0), _rank(B0)
     text = f"rank(C0B0), rank(B0) must equal p = {p}"
@@ -301,7 +313,13 @@ def check_assumption2_rank(c: _Numbers) -> Check:
 
 
 def check_uio_gamma_phi(c: _Numbers) -> Check:
-    """The stored Γ, Φ are eq. (7)'s, and ΦB0 = 0 (needs rank(C0B0) = p)."""
+    """The stored Γ, Φ are eq. (7)'s, and ΦB0 = 0 (needs rank(C0B0) = p).
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     g = c.g
     Gam, Phi = uio_matrices(g.B0, g.C0)
     phi_b0 = float(np.abs(g.Phi @ g.B0).max() / max(1.0, np.abs(g.B0).max()))
@@ -317,7 +335,13 @@ def check_uio_gamma_phi(c: _Numbers) -> Check:
 
 
 def check_assumption2_zeros(c: _Numbers) -> Check:
-    """Invariant zeros of (A0, B0, C0) in the open left half-plane (two implementations)."""
+    """Invariant zeros of (A0, B0, C0) in the open left half-plane (two implementations).
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     A0, B0, C0 = c.g.A0, c.g.B0, c.g.C0
     zs = invariant_zeros(A0, B0, C0)
     zu = uio_zeros(A0, B0, C0)  # second implementation; the worst of both counts
@@ -334,7 +358,13 @@ def check_assumption2_zeros(c: _Numbers) -> Check:
 
 
 def check_uio(c: _Numbers) -> list[Check]:
-    """Assumption 2's rank and, when it holds, eq. (7)'s Γ, Φ and the zeros."""
+    """Assumption 2's rank and, when it holds, eq. (7)'s Γ, Φ and the zeros.
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     rank = check_assumption2_rank(c)
     if _rank(c.g.C0 @ c.g.B0) != c.g.B0.shape[1]:
         return [rank]
@@ -342,7 +372,13 @@ def check_uio(c: _Numbers) -> list[Check]:
 
 
 def check_gauge(c: _Numbers) -> Check:
-    """H diagonal with entries ±1 (the gauge of a structurally balanced graph)."""
+    """H diagonal with entries ±1 (the gauge of a structurally balanced graph).
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     H = c.g.H
     h = np.diag(H)
     ok = bool(np.all(np.abs(np.abs(h) - 1) == 0) and np.all(H == np.diag(h)))
@@ -350,14 +386,26 @@ def check_gauge(c: _Numbers) -> Check:
 
 
 def check_m_matrix(c: _Numbers) -> Check:
-    """L̄ = H(L + B)H is a nonsingular M-matrix (Assumption 1)."""
+    """L̄ = H(L + B)H is a nonsingular M-matrix (Assumption 1).
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     why = m_matrix_violation(c.L_bar)
     text = "L̄ = H(L+B)H a nonsingular M-matrix" + ("" if why is None else f": {why}")
     return Check("assumption1_M_matrix", text, None, None, why is None, eq="Assumption 1")
 
 
 def check_lemma3(c: _Numbers) -> list[Check]:
-    """Z diagonal positive; λ_min(L̄ᵀZ + ZL̄) > 0 (N small); w recomputed ≥ stored w."""
+    """Z diagonal positive; λ_min(L̄ᵀZ + ZL̄) > 0 (N small); w recomputed ≥ stored w.
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     g, z = c.g, c.z
     zmin = float(z.min())
     zdiag = bool(np.all(g.Z == np.diag(z)))
@@ -378,7 +426,13 @@ def check_lemma3(c: _Numbers) -> list[Check]:
 
 
 def check_lmi15(c: _Numbers) -> list[Check]:
-    """T ≻ tol·I, LMI (15) strictly, and Q = B0ᵀT⁻¹."""
+    """T ≻ tol·I, LMI (15) strictly, and Q = B0ᵀT⁻¹.
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     g, tol, lam_T, Qg = c.g, c.tol, c.lam_T, c.mark("Q")
     lam15 = _lam_max_sym(lmi15_matrix(g.A0, g.B0, c.T, g.lambda_bar1, g.delta1))  # eq. (15)
     text15 = (
@@ -396,7 +450,13 @@ def check_lmi15(c: _Numbers) -> list[Check]:
 
 
 def check_lmi16(c: _Numbers) -> list[Check]:
-    """Ω ≻ tol·I, LMI (16) strictly, and ΦA0 − ΘC0 Hurwitz (the UIO error decays)."""
+    """Ω ≻ tol·I, LMI (16) strictly, and ΦA0 − ΘC0 Hurwitz (the UIO error decays).
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     g, tol, lam_O, Tg = c.g, c.tol, c.lam_O, c.mark("Theta")
     lam16 = _lam_max_sym(lmi16_matrix(g.Phi, g.A0, g.C0, g.Theta, c.Om, g.delta2))  # eq. (16)
     text16 = f"λ_max((ΦA0−ΘC0)ᵀΩ + Ω(ΦA0−ΘC0) + δ2Ω) < −tol, δ2 = {g.delta2:g} (eq. (16))"
@@ -410,7 +470,13 @@ def check_lmi16(c: _Numbers) -> list[Check]:
 
 
 def check_deltas(c: _Numbers) -> Check:
-    """δ1, δ2, λ̄1 > 0 and 0 < δ̂1 < δ1, 0 < δ̂2 < δ2."""
+    """δ1, δ2, λ̄1 > 0 and 0 < δ̂1 < δ1, 0 < δ̂2 < δ2.
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     g = c.g
     ok = (
         g.delta1 > 0
@@ -425,7 +491,13 @@ def check_deltas(c: _Numbers) -> Check:
 
 
 def check_lambda1(c: _Numbers) -> Check:
-    """λ1·w > λ̄1 with the recomputed w (Theorem 1)."""
+    """λ1·w > λ̄1 with the recomputed w (Theorem 1).
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     g, w = c.g, c.w
     margin = g.lambda1 * w - g.lambda_bar1
     need = g.lambda_bar1 / w if w > 0 else math.inf
@@ -434,7 +506,13 @@ def check_lambda1(c: _Numbers) -> Check:
 
 
 def check_lambda2(c: _Numbers) -> Check:
-    """λ2 ≥ α (the proof needs ‖u0‖ ≤ α ≤ λ2)."""
+    """λ2 ≥ α (the proof needs ‖u0‖ ≤ α ≤ λ2).
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     g = c.g
     margin = g.lambda2 - g.alpha
     text = f"λ2 ≥ α = {g.alpha:g} (the proof needs ‖u0‖ ≤ α ≤ λ2)"
@@ -442,7 +520,13 @@ def check_lambda2(c: _Numbers) -> Check:
 
 
 def check_k1(c: _Numbers) -> Check:
-    """k1 above V1's bound :func:`k1_bound` (needs T, Ω, Z and δ̂1, δ̂2 positive)."""
+    """k1 above V1's bound :func:`k1_bound` (needs T, Ω, Z and δ̂1, δ̂2 positive).
+
+    Parameters
+    ----------
+    c : _Numbers
+        The gains and the quantities the checks share.
+    """
     g = c.g
     positive = c.lam_T > 0 and c.lam_O > 0 and float(c.z.min()) > 0
     if not (positive and g.delta1_hat > 0 and g.delta2_hat > 0):

@@ -7,12 +7,14 @@ cancellation identity of eq. (29), analytic filter responses, and graph sizes.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import casadi as ca
 import numpy as np
 import pytest
 
 from core.errors import ScenarioError, SynthesisError
-from core.graph import find_gauge
+from core.graph import check_network, find_gauge
 from core.models import build_model
 from core.scenario import Graph, load_scenario
 from symbolic.adaptive import projection
@@ -369,21 +371,24 @@ def test_bad_assembly_is_a_toolkit_error():
 
 
 # ----------------------------------------------------------------------------- blocks
-def test_graph_matrices_use_the_synthesis_gauge():
-    # one gauge implementation (core.graph.find_gauge): the pinned follower 3 gets +1
+def test_graph_matrices_read_the_gauge_and_l_plus_b_from_the_gains():
+    # the pinned follower 3 is in the leader's camp: h = (−1, −1, +1) (core.graph.find_gauge)
     A = np.array([[0, 1, -1], [1, 0, 0], [-1, 0, 0]], dtype=float)
     pin = np.array([0.0, 0.0, 1.0])
-    gm = graph_matrices(Graph(adjacency=A, pinning=pin))
+    net = check_network(A, pin)
+    gains = replace(hand_gains(load_scenario(PAPER)), H=np.diag(net.h), L_bar=net.L_bar.toarray())
+    gm = graph_matrices(Graph(adjacency=A, pinning=pin), gains)
     np.testing.assert_array_equal(gm.h, [-1.0, -1.0, 1.0])
     np.testing.assert_array_equal(gm.h, find_gauge(A, pin))
+    # L + B from its definition, D = diag(Σ_j |a_ij|), L = D − A, B = diag(a_i0)
     np.testing.assert_array_equal(gm.L_B, np.diag(np.abs(A).sum(1) + pin) - A)
-    with pytest.raises(SynthesisError, match="balanced"):
-        graph_matrices(
-            Graph(
-                adjacency=np.array([[0, 1, -1], [1, 0, 1], [-1, 1, 0]], dtype=float),
-                pinning=np.ones(3),
-            )
-        )
+    np.testing.assert_array_equal(gm.l_bar, np.abs(A).sum(1) + pin)
+    # gains made for another graph are refused
+    other = Graph(adjacency=np.abs(A), pinning=pin)
+    with pytest.raises(SynthesisError, match="not H\\(L \\+ B\\)H"):
+        graph_matrices(other, gains)
+    with pytest.raises(ScenarioError, match="gauge"):
+        graph_matrices(Graph(adjacency=A, pinning=pin), replace(gains, H=2 * gains.H))
 
 
 def test_projection_keeps_ghat_in_bounds():

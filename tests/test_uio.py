@@ -6,7 +6,9 @@ import casadi as ca
 import numpy as np
 import scipy.linalg as sla
 
-from symbolic.uio import uio_function, uio_matrices
+from symbolic.uio import UIOMatrices, uio_function
+from symbolic.uio import uio_matrices as uio_from_gamma_phi
+from synthesis.assumptions import uio_matrices as gamma_phi
 
 PAPER = (
     np.array([[0.0, 1.0], [0.0, 0.0]]),
@@ -19,6 +21,12 @@ THREE = (
     np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]),
     np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.5], [0.0, 0.0, 1.0]]),
 )
+
+
+def uio_matrices(A0, B0, C0, Theta) -> UIOMatrices:
+    """The UIO with eq. (7)'s Γ, Φ (the ones synthesis stores in the gains)."""
+    Gamma, Phi = gamma_phi(B0, C0)
+    return uio_from_gamma_phi(A0, C0, Gamma, Phi, Theta)
 
 
 def _theta(A0, B0, C0):

@@ -29,6 +29,7 @@ from core.errors import ToolkitError
 from core.models import build_model
 from core.scenario import Scenario
 from symbolic.adaptive import BAND
+from synthesis.gains import Gains
 
 
 class VerifyError(ToolkitError):
@@ -384,7 +385,7 @@ class Theorem1Rates:
     alpha1_tilde: float
 
 
-def theorem1_rates(scenario: Scenario, gains) -> Theorem1Rates:  # noqa: ANN001 (Gains)
+def theorem1_rates(scenario: Scenario, gains: Gains) -> Theorem1Rates:
     """δ̃ of Theorem 1 from the synthesised δ1, δ2, δ̂1, δ̂2 and the scenario's α1i.
 
     Parameters
@@ -469,7 +470,7 @@ class Theorem1Floor:
         return np.sqrt(rest)[:, None] * self.c0_gain[None, :]
 
 
-def theorem1_floor(scenario: Scenario, gains) -> Theorem1Floor:  # noqa: ANN001 (Gains)
+def theorem1_floor(scenario: Scenario, gains: Gains) -> Theorem1Floor:
     """Constants of Theorem 1 with the φ floor (docs/verification.md derives them).
 
     Parameters
@@ -486,7 +487,7 @@ def theorem1_floor(scenario: Scenario, gains) -> Theorem1Floor:  # noqa: ANN001 
     from symbolic.network import graph_matrices
 
     o = scenario.observer
-    gm = graph_matrices(scenario.graph, gains.h)
+    gm = graph_matrices(scenario.graph, gains)  # h and L + B = H L̄ H from the gains
     z = np.diag(np.atleast_2d(gains.Z)).astype(float)
     a1 = np.broadcast_to(np.asarray(o.alpha1, float), (scenario.N,))
     a1b = np.broadcast_to(np.asarray(o.alpha1_bar, float), (scenario.N,))
