@@ -46,6 +46,7 @@ from core.errors import BuildError, IntegrationError, ScenarioError, SynthesisEr
 from core.scenario import METHODS, Scenario, load_scenario, scenario_from_dict
 from generated.codegen import CodegenSettings, Library, build_library, check_dyn_signature, renamed
 from generated.integrate import IntegratorSettings, Trajectory, integrate, output_grid
+from synthesis.gains import Gains
 
 ODE_NAME, DAE_NAME, OUT_NAME = "cl_ode", "cl_dae", "cl_out"
 
@@ -382,7 +383,7 @@ class Built:
 
 def build(
     sc: Scenario,
-    gains: Any,
+    gains: Gains,
     method: str | None = None,
     settings: CodegenSettings | None = None,
     closed_loop: Any = None,
@@ -416,7 +417,7 @@ def build(
     )
 
 
-def native_cascade(sc: Scenario, gains: Any) -> Any:
+def native_cascade(sc: Scenario, gains: Gains) -> Any:
     """The per-follower blocks the native method needs at ``sc.N`` (None at N <= 20).
 
     Parameters

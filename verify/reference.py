@@ -23,6 +23,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from core.scenario import Scenario
+from synthesis.gains import Gains
 from verify.lyapunov import sgn_eps
 
 
@@ -161,7 +162,7 @@ class Reference:
     """
 
     sc: Scenario
-    gains: Any
+    gains: Gains
 
     def __post_init__(self) -> None:
         sc, gn = self.sc, self.gains
@@ -549,7 +550,9 @@ class Reference:
 
 
 # ----------------------------------------------------------------------------- hand gains
-def hand_gains(sc: Scenario, *, lambda1: float | None = None, lambda2: float | None = None):
+def hand_gains(
+    sc: Scenario, *, lambda1: float | None = None, lambda2: float | None = None
+) -> Gains:
     """Gains chosen by hand (no LMI solver), for tests and as the benchmark's baseline.
 
     Θ from the observer Riccati equation of (ΦA0, C0) (a stable Θ exists under
@@ -569,7 +572,6 @@ def hand_gains(sc: Scenario, *, lambda1: float | None = None, lambda2: float | N
     """
     from core.graph import check_network
     from synthesis.assumptions import uio_matrices
-    from synthesis.gains import Gains
 
     L = sc.leader
     A0, B0, C0 = (np.asarray(a, dtype=float) for a in (L.A0, L.B0, L.C0))

@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from core.scenario import Scenario
+from synthesis.gains import Gains
 from verify import signals as S
 from verify.bounds import (
     Theorem2Constants,
@@ -192,7 +193,7 @@ def bounds_table(
     scenario: Scenario,
     df: pd.DataFrame,
     *,
-    gains=None,  # noqa: ANN001 (synthesis.gains.Gains)
+    gains: Gains | None = None,
     theorem1: list[InequalityCheck] | None = None,
     theorem2: list[InequalityCheck] | None = None,
     ablation: pd.DataFrame | None = None,
@@ -251,7 +252,7 @@ def theorem1_rows(
     df: pd.DataFrame,
     span: Span,
     *,
-    gains=None,  # noqa: ANN001 (synthesis.gains.Gains)
+    gains: Gains | None = None,
     config: VerifyConfig | None = None,
 ) -> None:
     """Theorem 1 (observer) from the trajectory: decay rate, entering time, tail sup (info).
@@ -344,7 +345,7 @@ def theorem1_lyapunov_rows(
     scenario: Scenario,
     span: Span,
     *,
-    gains=None,  # noqa: ANN001 (synthesis.gains.Gains)
+    gains: Gains | None = None,
 ) -> None:
     """Theorem 1's exact dV1/dt inequalities: the fraction of output times where each holds.
 
@@ -682,7 +683,7 @@ def ablation_rows(
     )
 
 
-def gauge(scenario: Scenario, gains=None) -> np.ndarray:  # noqa: ANN001 (Gains)
+def gauge(scenario: Scenario, gains: Gains | None = None) -> np.ndarray:
     """The gauge h_i = ±1 of the graph: the gains' H, else found from the signed adjacency.
 
     Parameters
@@ -744,7 +745,7 @@ def definition1_rows(
     scenario: Scenario,
     df: pd.DataFrame,
     *,
-    gains=None,  # noqa: ANN001 (synthesis.gains.Gains)
+    gains: Gains | None = None,
     config: VerifyConfig | None = None,
 ) -> None:
     """Definition 1 with the gauge, its derived bound, and the leader-referenced formation.
