@@ -12,7 +12,7 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-PACKAGES = ("symbolic", "synthesis", "generated", "verify")
+PACKAGES = ("core", "synthesis", "symbolic", "generated", "verify", "benchmarks")
 _EQ = re.compile(r"#.*?\beqs?\.\s*\((\d+)\)(?:\s*[–-]\s*\((\d+)\))?")
 _MORE = re.compile(r"\((\d+)\)(?:\s*[–-]\s*\((\d+)\))?")
 
