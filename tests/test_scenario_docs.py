@@ -1,0 +1,144 @@
+"""docs/scenario-format.md states what the loader does: every key, type and default.
+
+The tables of the document are parsed and compared with the declarations the
+loader reads (:mod:`core.settings` fields of the sections, the rules of
+:data:`core.scenario.RULES`, the key sets of the other tables); a file that
+omits every optional table must load with exactly the documented defaults.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core import scenario as S
+from core.settings import SYNTH, settings_of
+
+ROOT = Path(__file__).resolve().parents[1]
+DOC = ROOT / "docs" / "scenario-format.md"
+
+#: tables whose keys are read by hand-written code: (keys, required keys)
+OTHER_TABLES = {
+    "top": (S.TOP_KEYS, S.TOP_REQUIRED),
+    "leader": (S.LEADER_KEYS, S.LEADER_REQUIRED),
+    "graph": (S.GRAPH_KEYS, S.GRAPH_REQUIRED),
+    "followers": (S.FOLLOWER_KEYS, S.FOLLOWER_REQUIRED),
+}
+
+
+def doc_tables(text: str) -> dict[str, list[tuple[str, str, str]]]:
+    """``{section: [(key, type, default), ...]}`` from the key/type/default/meaning tables."""
+    tables: dict[str, list[tuple[str, str, str]]] = {}
+    section = None
+    for line in text.splitlines():
+        if line.startswith("## "):
+            m = re.match(r"## `\[{1,2}(\w+)\]{1,2}`", line)
+            section = "top" if line == "## Top level" else (m.group(1) if m else None)
+            continue
+        if section is None or not line.startswith("| `"):
+            continue
+        cells = [c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]]
+        if len(cells) != 4:
+            continue
+        key = cells[0].strip("`").strip("[]")
+        tables.setdefault(section, []).append((key, cells[1].replace("`", ""), cells[2]))
+    return tables
+
+
+def _toml(cell: str) -> object:
+    return tomllib.loads(f"v = {cell.strip('`')}")["v"]
+
+
+def _same(a: object, b: object) -> bool:
+    return a == b and type(a) is type(b)
+
+
+def mismatches(text: str) -> list[str]:
+    """Every difference between the document's tables and the loader's declarations."""
+    tables, out = doc_tables(text), []
+    for section, cls in S.SECTIONS.items():
+        rows, declared = tables.get(section, []), settings_of(cls)
+        if [r[0] for r in rows] != list(declared):
+            out.append(f"[{section}] keys {[r[0] for r in rows]} != {list(declared)}")
+        for key, typ, default in rows:
+            if key not in declared:
+                continue
+            want = S.type_text(section, key)
+            if typ != want:
+                out.append(f"[{section}] {key}: type {typ!r}, declared {want!r}")
+            if not _same(_toml(default), declared[key].default):
+                out.append(
+                    f"[{section}] {key}: default {default}, declared {declared[key].default!r}"
+                )
+    for section, (keys, required) in OTHER_TABLES.items():
+        rows = tables.get(section, [])
+        if {r[0] for r in rows} != keys:
+            out.append(f"[{section}] keys {sorted(r[0] for r in rows)} != {sorted(keys)}")
+        if {r[0] for r in rows if r[2] == "required"} != required:
+            out.append(f"[{section}] required keys differ from {sorted(required)}")
+    return out
+
+
+def test_every_documented_key_type_and_default_is_the_declared_one():
+    assert mismatches(DOC.read_text()) == []
+
+
+@pytest.mark.parametrize(
+    ("old", "new"),
+    [
+        ("| `delta1` | number > 0 | `0.5` |", "| `delta1` | number > 0 | `0.6` |"),  # default
+        (
+            "| `max_steps` | whole number > 0 | `200000` |",
+            "| `max_steps` | number > 0 | `200000` |",
+        ),
+        ("| `sign_width` | number > 0 |", "| `sign_width` | number ≥ 0 |"),  # range
+        ("| `feedforward` | boolean | `true` |", "| `feedforwards` | boolean | `true` |"),  # key
+        ("| `p0` | list of n numbers | required |", "| `p0` | list of n numbers | zeros |"),
+    ],
+)
+def test_a_drifted_document_is_caught(old, new):
+    text = DOC.read_text()
+    assert old in text
+    assert mismatches(text.replace(old, new)), new
+
+
+MINIMAL = """
+[leader]
+A0 = [[0, 1], [0, 0]]
+B0 = [[0], [1]]
+C0 = [[1, 0], [0, 1]]
+u0 = ["cos(t)"]
+alpha = 1
+[graph]
+adjacency = [[0, 0], [1, 0]]
+pinning = [1, 0]
+[[followers]]
+model = "point_mass_2d"
+p0 = [0, 0]
+b0 = [1, 0]
+[[followers]]
+model = "point_mass_2d"
+p0 = [1, 0]
+b0 = [0, 1]
+"""
+
+
+def test_omitted_tables_take_the_documented_defaults(tmp_path):
+    path = tmp_path / "minimal.toml"
+    path.write_text(MINIMAL)
+    sc = S.load_scenario(path)
+    tables = doc_tables(DOC.read_text())
+    for section in S.SECTIONS:
+        obj = getattr(sc, section)
+        for key, _, default in tables[section]:
+            doc_value, held = _toml(default), getattr(obj, key)
+            if doc_value == SYNTH:
+                assert held is None, (section, key)
+            elif isinstance(held, np.ndarray):
+                assert held.shape[0] == sc.N and np.all(held == doc_value), (section, key)
+            else:
+                assert _same(held, doc_value), (section, key, held, doc_value)
