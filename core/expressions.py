@@ -208,15 +208,31 @@ def _convert(n: ast.AST, text: str, where: str, depth: int) -> tuple:
 
 
 _OP_TEXT = {
-    ast.Mod: "%", ast.FloorDiv: "//", ast.MatMult: "@", ast.LShift: "<<", ast.RShift: ">>",
-    ast.BitOr: "|", ast.BitXor: "^", ast.BitAnd: "&", ast.Not: "not", ast.Invert: "~",
-}  # fmt: skip
+    ast.Mod: "%",
+    ast.FloorDiv: "//",
+    ast.MatMult: "@",
+    ast.LShift: "<<",
+    ast.RShift: ">>",
+    ast.BitOr: "|",
+    ast.BitXor: "^",
+    ast.BitAnd: "&",
+    ast.Not: "not",
+    ast.Invert: "~",
+}
 _NODE_TEXT = {
-    ast.Lambda: "lambda", ast.ListComp: "comprehension", ast.SetComp: "comprehension",
-    ast.DictComp: "comprehension", ast.GeneratorExp: "comprehension", ast.IfExp: "if-else",
-    ast.Compare: "comparison", ast.BoolOp: "and/or", ast.Subscript: "subscript [...]",
-    ast.NamedExpr: ":=", ast.Starred: "*", ast.JoinedStr: "f-string",
-}  # fmt: skip
+    ast.Lambda: "lambda",
+    ast.ListComp: "comprehension",
+    ast.SetComp: "comprehension",
+    ast.DictComp: "comprehension",
+    ast.GeneratorExp: "comprehension",
+    ast.IfExp: "if-else",
+    ast.Compare: "comparison",
+    ast.BoolOp: "and/or",
+    ast.Subscript: "subscript [...]",
+    ast.NamedExpr: ":=",
+    ast.Starred: "*",
+    ast.JoinedStr: "f-string",
+}
 
 
 def _token(n: ast.AST, text: str) -> str:

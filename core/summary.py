@@ -85,42 +85,53 @@ def summarize(scenario: Scenario) -> str:
     ScenarioError
         If a follower model fails Property 1 or 2 with its parameters.
     """
-    s = scenario
-    L, Gr, O, C, Op, In, I = (
-        s.leader,
-        s.graph,
-        s.observer,
-        s.controller,
-        s.options,
-        s.initial,
-        s.integration,
+    models = _models(scenario)
+    parts = (
+        _header_lines(scenario),
+        _leader_lines(scenario),
+        _graph_lines(scenario),
+        _model_lines(scenario, models),
+        _follower_lines(scenario),
+        _gain_lines(scenario),
+        _option_lines(scenario),
+        _run_lines(scenario),
     )
-    models = _models(s)
-    lines: list[str] = []
-    add = lines.append
-    add(f"scenario     {s.name}  ({s.path}, sha256 {s.sha256[:12]})")
+    return "\n".join(line for part in parts for line in part) + "\n"
+
+
+def _header_lines(s: Scenario) -> list[str]:
+    lines = [f"scenario     {s.name}  ({s.path}, sha256 {s.sha256[:12]})"]
     if s.description:
-        add(f"             {s.description}")
-    add(
+        lines.append(f"             {s.description}")
+    lines.append(
         f"dimensions   N = {s.N} followers, n = {s.n} coordinates each, "
         f"m = {s.m} leader states, p = {s.p} operator inputs"
     )
+    return lines
 
-    # leader, eq. (3)
-    add(f"leader       A0 = {_mat(L.A0)}, B0 = {_mat(L.B0)}, C0 = {_mat(L.C0)}")
-    add(f"             eta0(0) = {_vec(L.eta0)}, alpha = {_num(L.alpha)} (bound on ||u0||)")
+
+def _leader_lines(s: Scenario) -> list[str]:
+    """The leader, eq. (3)."""
+    L = s.leader
+    lines = [
+        f"leader       A0 = {_mat(L.A0)}, B0 = {_mat(L.B0)}, C0 = {_mat(L.C0)}",
+        f"             eta0(0) = {_vec(L.eta0)}, alpha = {_num(L.alpha)} (bound on ||u0||)",
+    ]
     if L.u0 is not None:
-        add("             u0(t) = [" + ", ".join(e.text for e in L.u0) + "]")
+        lines.append("             u0(t) = [" + ", ".join(e.text for e in L.u0) + "]")
     else:
         tr = L.u0_trace
         assert tr is not None
-        add(
+        lines.append(
             f"             u0(t) from a CSV trace: {len(tr)} rows on "
             f"[{_num(tr[0, 0])}, {_num(tr[-1, 0])}] s, linear between rows"
         )
+    return lines
 
-    # graph (section 1); adjacency[i, j] = a_ij: i hears j
-    A = Gr.adjacency
+
+def _graph_lines(s: Scenario) -> list[str]:
+    """Edges and pinned followers (section 1); ``adjacency[i, j] = a_ij``: i hears j."""
+    A, pin = s.graph.adjacency, s.graph.pinning
     edges = [
         f"{j + 1}->{i + 1}" + ("" if A[i, j] == 1 else f" ({_num(A[i, j])})")
         for i in range(s.N)
@@ -128,19 +139,19 @@ def summarize(scenario: Scenario) -> str:
         if A[i, j] != 0
     ]
     pinned = [
-        f"{i + 1}" + ("" if Gr.pinning[i] == 1 else f" ({_num(Gr.pinning[i])})")
-        for i in range(s.N)
-        if Gr.pinning[i] > 0
+        f"{i + 1}" + ("" if pin[i] == 1 else f" ({_num(pin[i])})") for i in range(s.N) if pin[i] > 0
     ]
-    kind = "signed (antagonistic edges present)" if Gr.signed else "cooperative"
-    add(
+    kind = "signed (antagonistic edges present)" if s.graph.signed else "cooperative"
+    return [
         f"graph        {kind}; edges j->i (i hears j, weight if not 1): "
-        + (", ".join(edges) or "none")
-    )
-    add("             pinned (hear the leader, a_i0): " + ", ".join(pinned))
+        + (", ".join(edges) or "none"),
+        "             pinned (hear the leader, a_i0): " + ", ".join(pinned),
+    ]
 
-    # followers, eq. (2)
-    add("models")
+
+def _model_lines(s: Scenario, models: dict[tuple[str, tuple], ELModel]) -> list[str]:
+    """Each distinct follower model, eq. (2): its users, parameters and M bounds."""
+    lines = ["models"]
     for (name, items), mdl in models.items():
         users = [
             str(i + 1)
@@ -148,67 +159,73 @@ def summarize(scenario: Scenario) -> str:
             if (fo.model, tuple(sorted(fo.params.items()))) == (name, items)
         ]
         prm = ", ".join(f"{k} = {_num(v)}" for k, v in items)
-        add(f"  {name} (followers {', '.join(users)}): {REGISTRY[name].description}")
-        add(f"      params: {prm or 'none'}")
         lo, hi = mdl.M_bounds
-        add(
+        lines += [
+            f"  {name} (followers {', '.join(users)}): {REGISTRY[name].description}",
+            f"      params: {prm or 'none'}",
             f"      M bounds: lambda_min >= {lo:.4f}, lambda_max <= {hi:.4f}; "
             f"Property 1 {mdl.checks.get('property1', '?')}, "
-            f"Property 2 {mdl.checks.get('property2', '?')}"
-        )
-    add("followers")
+            f"Property 2 {mdl.checks.get('property2', '?')}",
+        ]
+    return lines
+
+
+def _follower_lines(s: Scenario) -> list[str]:
+    lines = ["followers"]
     for i, fo in enumerate(s.followers):
         g = fo.g.expr.text if not fo.g.expr.is_constant() else _num(fo.g.minimum)
         if fo.g.breakpoints:
             g += f"  [faults at t = {', '.join(_num(b) for b in fo.g.breakpoints)}]"
-        add(
-            f"  {i + 1}: {fo.model}, p(0) = {_vec(fo.p0)}, q(0) = {_vec(fo.q0)}, b0 = {_vec(fo.b0)}"
-        )
-        add(f"     g(t) = {g} (min {_num(fo.g.minimum)})")
-        add(f"     f(t) = [{', '.join(e.text for e in fo.f)}], |f_r| <= d = {_vec(fo.d)}")
+        lines += [
+            f"  {i + 1}: {fo.model}, p(0) = {_vec(fo.p0)}, q(0) = {_vec(fo.q0)}, b0 = {_vec(fo.b0)}",
+            f"     g(t) = {g} (min {_num(fo.g.minimum)})",
+            f"     f(t) = [{', '.join(e.text for e in fo.f)}], |f_r| <= d = {_vec(fo.d)}",
+        ]
+    return lines
 
-    # gains: given or synthesised, eqs. (9), (15), (16), (29), (30)
-    add(
+
+def _gain_lines(s: Scenario) -> list[str]:
+    """Gains, given or synthesised: eqs. (9), (15), (16), (29), (30)."""
+    O, C = s.observer, s.controller
+    return [
         f"observer     lambda1 = {_gain(O.lambda1)}, lambda2 = {_gain(O.lambda2)}, "
-        f"Q = {_gain(O.Q)}, Theta = {_gain(O.Theta)}"
-    )
-    add(
+        f"Q = {_gain(O.Q)}, Theta = {_gain(O.Theta)}",
         f"             alpha1 = {_per_agent(O.alpha1)}, alpha1_bar = {_per_agent(O.alpha1_bar)}, "
-        f"phi(0) = {_per_agent(O.phi0)}, phi_min = {_num(O.phi_min)}"
-    )
-    add(
+        f"phi(0) = {_per_agent(O.phi0)}, phi_min = {_num(O.phi_min)}",
         f"             LMI (15): lambda_bar1 = {_num(O.lambda_bar1)}, delta1 = {_num(O.delta1)}, "
         f"delta1_hat = {_num(O.delta1_hat)}; LMI (16): delta2 = {_num(O.delta2)}, "
-        f"delta2_hat = {_num(O.delta2_hat)}; margin = {_num(O.margin)}"
-    )
-    add(
+        f"delta2_hat = {_num(O.delta2_hat)}; margin = {_num(O.margin)}",
         f"controller   Lambda = {_per_agent(C.Lambda)}, k1 = {_per_agent(C.k1)}, "
-        f"k2 = {_per_agent(C.k2)} (all given)"
-    )
-    add(
+        f"k2 = {_per_agent(C.k2)} (all given)",
         f"             gamma = {_per_agent(C.gamma)}, sigma = {_per_agent(C.sigma)}, "
-        f"ghat_ref = {_per_agent(C.ghat_ref)}, g_min = {_num(C.g_min)}"
-    )
+        f"ghat_ref = {_per_agent(C.ghat_ref)}, g_min = {_num(C.g_min)}",
+    ]
+
+
+def _option_lines(s: Scenario) -> list[str]:
+    Op = s.options
     sign = Op.sign if Op.sign == "exact" else f"{Op.sign} (width {_num(Op.sign_width)})"
-    add(
-        f"options      sign = {sign}, ghat law = {Op.ghat_law}, "
-        f"feedforward = {'on' if Op.feedforward else 'off (eq. (29) as printed)'}, "
-        f"ablation (42) = {'on' if Op.ablation else 'off'}"
-    )
     deriv = Op.derivatives
     if deriv == "filtered":
         deriv += f" (bandwidth {_num(Op.filter_bandwidth)} rad/s)"
-    add(f"             derivatives = {deriv}, tau threshold = {_num(Op.tau_threshold)}")
-    add(
+    return [
+        f"options      sign = {sign}, ghat law = {Op.ghat_law}, "
+        f"feedforward = {'on' if Op.feedforward else 'off (eq. (29) as printed)'}, "
+        f"ablation (42) = {'on' if Op.ablation else 'off'}",
+        f"             derivatives = {deriv}, tau threshold = {_num(Op.tau_threshold)}",
+    ]
+
+
+def _run_lines(s: Scenario) -> list[str]:
+    """Initial estimator states, integration settings and breakpoints."""
+    In, I = s.initial, s.integration
+    bps = s.breakpoints()
+    return [
         f"initial      eta = {_per_agent(In.eta)}, mu = {_per_agent(In.mu)}, "
         f"theta_hat = {_per_agent(In.theta_hat)}, ghat = {_per_agent(In.ghat)}, "
-        f"start = {In.start}"
-    )
-    add(
+        f"start = {In.start}",
         f"integration  {I.method}, rtol = {_num(I.rtol)}, atol = {_num(I.atol)}, "
         f"horizon = {_num(I.horizon)} s, output step = {_num(I.output_step)} s, "
-        f"fixed step = {_num(I.fixed_step)} s, max steps = {I.max_steps}"
-    )
-    bps = s.breakpoints()
-    add("breakpoints  " + (", ".join(_num(b) for b in bps) if bps else "none"))
-    return "\n".join(lines) + "\n"
+        f"fixed step = {_num(I.fixed_step)} s, max steps = {I.max_steps}",
+        "breakpoints  " + (", ".join(_num(b) for b in bps) if bps else "none"),
+    ]

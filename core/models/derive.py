@@ -220,10 +220,20 @@ def _build_cached(name: str, items: tuple[tuple[str, float], ...]) -> ELModel:
     Cf = _to_casadi(C, [p, q], ["p", "q"], "C")
     Gf = _to_casadi(G, [p], ["p"], "G")
     return ELModel(
-        name=name, n=spec.n, params=params, M=Mf, C=Cf, G=Gf, M_bounds=_mass_bounds(M, p, name),
+        name=name,
+        n=spec.n,
+        params=params,
+        M=Mf,
+        C=Cf,
+        G=Gf,
+        M_bounds=_mass_bounds(M, p, name),
         checks=checks,
-        sympy_M=M, sympy_C=C, sympy_G=G, sympy_p=p, sympy_q=q,
-    )  # fmt: skip
+        sympy_M=M,
+        sympy_C=C,
+        sympy_G=G,
+        sympy_p=p,
+        sympy_q=q,
+    )
 
 
 def build_model(name: str, params: Mapping[str, float] | None = None) -> ELModel:
