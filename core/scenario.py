@@ -26,7 +26,7 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -711,10 +711,10 @@ def _description(ctx: _Ctx, data: dict) -> str:
 
 
 # --------------------------------------------------------------------------- declared sections
-_Section = Any  # one of the dataclasses of SECTIONS
+_Section = TypeVar("_Section")  # one of the dataclasses of SECTIONS
 
 
-def _section(ctx: _Ctx, cls: type, raw: Any, key: str, dims: Dims | None) -> _Section:
+def _section(ctx: _Ctx, cls: type[_Section], raw: Any, key: str, dims: Dims | None) -> _Section:
     """A table of a declared section: every field read with its :class:`Setting`.
 
     Unknown keys are refused; an omitted key takes the field's default.
