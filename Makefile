@@ -9,7 +9,7 @@ SCENARIO ?= scenarios/paper.toml
 STRICT ?= 0
 export STRICT
 
-.PHONY: all demo synth sim verify report test lint bench clean distclean
+.PHONY: all demo synth sim verify report test lint bench clean clean-cache distclean
 
 all: demo
 
@@ -51,6 +51,10 @@ bench: $(STAMP)
 
 clean:
 	rm -rf out generated/build .pytest_cache
+
+# the build cache lives outside the tree ($HITL_BUILD_DIR or ~/.cache/hitl-formation/build)
+clean-cache:
+	$(PY) -m generated cache --clear
 
 distclean: clean
 	rm -rf $(VENV)

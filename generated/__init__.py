@@ -2,7 +2,8 @@
 
 Stages (each a function in :mod:`generated.api`): load scenario -> synthesize ->
 build (symbolic closed loop, C code generation, compile, cached under
-``generated/build/<sha256>/``) -> simulate -> trajectory as a pandas DataFrame.
+``<build cache>/<sha256>/``, the user cache folder or ``$HITL_BUILD_DIR``) -> simulate
+-> trajectory as a pandas DataFrame.
 ``python -m generated sim SCENARIO`` (``make sim``) runs them all and writes
 ``out/<name>/trajectory.csv`` and ``meta.json``.
 """

@@ -2,6 +2,7 @@
 
 Writes ``out/<name>/trajectory.csv`` and ``meta.json``; exit status 2 with one line on
 stderr on any toolkit error (an incomplete trajectory is still written first).
+``python -m generated cache [--clear]`` prints (and empties) the build cache folder.
 """
 
 from __future__ import annotations
@@ -33,22 +34,32 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--opt", default="-O1", help="compiler optimisation flag (default -O1)")
     sim.add_argument("--compiler", default="gcc")
     sim.add_argument(
-        "--jacobian", choices=("auto", "sparse", "gmres", "jvp"), default="auto",
+        "--jacobian",
+        choices=("auto", "sparse", "gmres", "jvp"),
+        default="auto",
         help="Newton linear algebra: auto (default) = sparse (direct) for N <= 20, else jvp "
         "(matrix-free GMRES, generated/largescale.py)",
-    )  # fmt: skip
+    )
     sim.add_argument(
-        "--fixed-tol", type=float, default=None,
+        "--fixed-tol",
+        type=float,
+        default=None,
         help="error-test tolerance of the fixed-step method's bisection safeguard (default 1e-3)",
-    )  # fmt: skip
+    )
     sim.add_argument("--linear-solver", default="csparse")
     sim.add_argument("--out", default=None, help="output root (default out/ or $HITL_OUT)")
     sim.add_argument("--no-progress", action="store_true")
+    cache = sub.add_parser(
+        "cache", help="print the build cache folder ($HITL_BUILD_DIR or the user cache)"
+    )
+    cache.add_argument(
+        "--clear", action="store_true", help="remove its compiled libraries and temporary folders"
+    )
     return ap
 
 
 def main(argv: list[str]) -> int:
-    """Run the ``sim`` command and print a one-line summary on stderr.
+    """Run a command: ``sim`` (one-line summary on stderr) or ``cache``.
 
     Parameters
     ----------
@@ -61,6 +72,25 @@ def main(argv: list[str]) -> int:
         0 on success; toolkit errors are raised (``run_cli`` turns them into exit status 2).
     """
     args = _parser().parse_args(argv)
+    if args.cmd == "cache":
+        return _cache(args.clear)
+    return _sim(args)
+
+
+def _cache(clear: bool) -> int:
+    """Print the build cache root; with ``clear``, empty it first and say how many entries went."""
+    from generated.codegen import clear_cache, default_build_root
+
+    root = default_build_root()
+    if clear:
+        removed = clear_cache(root)
+        print(f"{root}: removed {len(removed)} cache folders", file=sys.stderr)
+    print(root)
+    return 0
+
+
+def _sim(args: argparse.Namespace) -> int:
+    """``sim``: run :func:`generated.api.run` and print a one-line summary on stderr."""
     from generated import api
     from generated.codegen import CodegenSettings
 
@@ -83,13 +113,13 @@ def main(argv: list[str]) -> int:
         progress=not args.no_progress,
         fixed_tol=args.fixed_tol,
     )
-    m = res.meta
-    w = m["wall_seconds"]
+    m = res.record
+    w = m.wall_seconds
     print(
-        f"{res.csv_path}: {m['rows']} rows, method {m['method']}, {m['steps']} steps, "
-        f"{m['rhs_evals']} RHS evaluations; library {'reused' if m['cache_hit'] else 'compiled'}; "
-        f"build {w['symbolic_build']:.2f} s + codegen {w['codegen']:.2f} s + compile "
-        f"{w['compile']:.2f} s, integration {w['integration']:.2f} s",
+        f"{res.csv_path}: {m.rows} rows, method {m.method}, {m.steps} steps, "
+        f"{m.rhs_evals} RHS evaluations; library {'reused' if m.cache_hit else 'compiled'}; "
+        f"build {w.symbolic_build:.2f} s + codegen {w.codegen:.2f} s + compile "
+        f"{w.compile:.2f} s, integration {w.integration:.2f} s",
         file=sys.stderr,
     )
     return 0

@@ -36,13 +36,18 @@ from pathlib import Path
 from typing import Any
 
 import casadi as ca
+from platformdirs import user_cache_dir
 
 from core import artifacts
 from core.artifacts import sha256_file
 from core.errors import BuildError
 
-#: default cache root (gitignored); ``HITL_BUILD_DIR`` overrides it
-DEFAULT_BUILD_ROOT = Path(__file__).resolve().parent / "build"
+#: default cache root: the user's cache folder (``$XDG_CACHE_HOME`` or ``~/.cache`` on
+#: Linux), outside the package, so an installed package never writes into site-packages;
+#: ``HITL_BUILD_DIR`` overrides it
+DEFAULT_BUILD_ROOT = Path(user_cache_dir("hitl-formation")) / "build"
+#: names of what a cache root holds: entries (64 hex digits), failed sources, temp folders
+ENTRY_PATTERN = re.compile(r"[0-9a-f]{64}|failed|\.tmp-.*")
 JACOBIAN_STRATEGIES = ("sparse", "gmres", "jvp")
 #: ``auto`` is resolved from the number of agents by :func:`generated.largescale.choose_plan`
 #: before anything is generated
@@ -86,7 +91,7 @@ class CodegenSettings:
         operands, so the same results; measured on the paper scenario (N = 5): the
         right-hand side 2,723 → 1,721 instructions, its Jacobian 27,298 → 17,557.
     build_root : str or None
-        Cache root; ``None`` = ``$HITL_BUILD_DIR`` or ``generated/build``.
+        Cache root; ``None`` = ``$HITL_BUILD_DIR`` or :data:`DEFAULT_BUILD_ROOT`.
     timeout : float
         Seconds allowed for one compilation.
     codegen_options : tuple of (str, value) pairs
@@ -123,10 +128,7 @@ class CodegenSettings:
 
     def root(self) -> Path:
         """The cache root folder."""
-        if self.build_root is not None:
-            return Path(self.build_root)
-        env = os.environ.get("HITL_BUILD_DIR")
-        return Path(env) if env else DEFAULT_BUILD_ROOT
+        return Path(self.build_root) if self.build_root is not None else default_build_root()
 
     def integrator_options(self) -> dict[str, Any]:
         """The CVODES/IDAS options that follow from the Jacobian strategy.
@@ -233,6 +235,42 @@ class Library:
 
 
 # --------------------------------------------------------------------------- helpers
+def default_build_root() -> Path:
+    """The cache root without settings: ``$HITL_BUILD_DIR``, else :data:`DEFAULT_BUILD_ROOT`."""
+    env = os.environ.get("HITL_BUILD_DIR")
+    return Path(env) if env else DEFAULT_BUILD_ROOT
+
+
+def clear_cache(root: Path | None = None) -> list[Path]:
+    """Remove the build cache's entries, failed sources and temporary folders.
+
+    Only names the cache itself creates (:data:`ENTRY_PATTERN`) are removed, so a
+    root pointed at a folder with other content loses nothing else; the root itself
+    is removed when it is left empty.
+
+    Parameters
+    ----------
+    root : Path, optional
+        Default :func:`default_build_root`.
+
+    Returns
+    -------
+    list of Path
+        What was removed.
+    """
+    root = root if root is not None else default_build_root()
+    if not root.is_dir():
+        return []
+    removed = []
+    for d in sorted(root.iterdir()):
+        if d.is_dir() and not d.is_symlink() and ENTRY_PATTERN.fullmatch(d.name):
+            shutil.rmtree(d, ignore_errors=True)
+            removed.append(d)
+    if not any(root.iterdir()):
+        root.rmdir()
+    return removed
+
+
 @functools.lru_cache(maxsize=8)
 def compiler_identity(compiler: str) -> str:
     """Resolved path and first ``--version`` line of ``compiler`` (part of the cache key).
@@ -573,17 +611,51 @@ def build_library(
     folder = root / key
     if root.is_dir():
         remove_stale_builds(root)
-    if folder.exists():
-        why = entry_problem(folder, key)
-        if why is None:
-            lib = folder / LIBRARY_NAME
-            return Library(
-                key, folder, folder / SOURCE_NAME, lib, names, True, t_codegen, 0.0, len(source)
-            )
-        # never dlopen'ed: a bad entry would crash (truncated) or silently compute another model
+    hit = _usable_entry(folder, key)
+    t_compile = 0.0 if hit else _compile_entry(root, key, source, names, settings, tc)
+    return Library(
+        key,
+        folder,
+        folder / SOURCE_NAME,
+        folder / LIBRARY_NAME,
+        names,
+        hit,
+        t_codegen,
+        t_compile,
+        len(source),
+    )
+
+
+def _usable_entry(folder: Path, key: str) -> bool:
+    """Whether the cache entry ``folder`` exists and may be loaded for ``key``.
+
+    A bad entry is reported on stderr and never dlopen'ed: it would crash (truncated)
+    or silently compute another model.
+    """
+    if not folder.exists():
+        return False
+    why = entry_problem(folder, key)
+    if why is not None:
         print(f"build cache {folder}: {why}; rebuilding", file=sys.stderr)
+    return why is None
+
+
+def _compile_entry(
+    root: Path,
+    key: str,
+    source: str,
+    names: tuple[str, ...],
+    settings: CodegenSettings,
+    tc: Toolchain,
+) -> float:
+    """Compile ``source`` in a temporary folder and install it as ``root/key``.
+
+    Returns the compile wall time. On a compile failure the source is kept under
+    ``root/failed/key/`` and the error names it.
+    """
     root.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=root, prefix=f"{TMP_PREFIX}{key[:12]}-{os.getpid()}-"))
+    folder = root / key
     try:
         try:
             t_compile = compile_source(source, settings, tmp, tc)
@@ -593,19 +665,7 @@ def build_library(
             failed.parent.mkdir(parents=True, exist_ok=True)
             os.replace(tmp, failed)
             raise BuildError(str(exc).replace(str(tmp), str(failed))) from None
-        info = {
-            "key": key,
-            "library_sha256": sha256_file(tmp / LIBRARY_NAME),
-            "source_sha256": sha256_file(tmp / SOURCE_NAME),
-            "names": list(names),
-            "compiler": compiler_identity(settings.compiler),
-            "cflags": list(settings.cflags),
-            "casadi": ca.__version__,
-            "settings": settings.key_fields(),
-            "toolchain": dict(tc.key),
-            "source_bytes": len(source),
-            "compile_seconds": t_compile,
-        }
+        info = _manifest(key, tmp, names, settings, tc, len(source), t_compile)
         # the manifest is written last: its presence marks a complete entry
         text = json.dumps(info, indent=2, sort_keys=True, default=str)
         artifacts.atomic_write_text(tmp / MANIFEST_NAME, text)
@@ -613,7 +673,29 @@ def build_library(
     finally:
         if tmp.exists() and tmp != folder:
             shutil.rmtree(tmp, ignore_errors=True)
-    return Library(
-        key, folder, folder / SOURCE_NAME, folder / LIBRARY_NAME, names, False, t_codegen,
-        t_compile, len(source),
-    )  # fmt: skip
+    return t_compile
+
+
+def _manifest(
+    key: str,
+    folder: Path,
+    names: tuple[str, ...],
+    settings: CodegenSettings,
+    tc: Toolchain,
+    source_bytes: int,
+    t_compile: float,
+) -> dict[str, Any]:
+    """The manifest of a compiled entry: its key, hashes and what built it."""
+    return {
+        "key": key,
+        "library_sha256": sha256_file(folder / LIBRARY_NAME),
+        "source_sha256": sha256_file(folder / SOURCE_NAME),
+        "names": list(names),
+        "compiler": compiler_identity(settings.compiler),
+        "cflags": list(settings.cflags),
+        "casadi": ca.__version__,
+        "settings": settings.key_fields(),
+        "toolchain": dict(tc.key),
+        "source_bytes": source_bytes,
+        "compile_seconds": t_compile,
+    }

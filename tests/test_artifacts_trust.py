@@ -29,7 +29,7 @@ from test_sim_api import SMALL
 
 from core.artifacts import atomic_write_text, sha256_file
 from core.errors import SynthesisError, run_cli
-from generated import api
+from generated import api, reuse
 from generated.__main__ import main as sim_main
 from generated.codegen import CodegenSettings, build_library
 from verify import pipeline as P
@@ -226,7 +226,7 @@ def test_changed_gains_file_or_code_is_not_reused(env, base_run, monkeypatch):
         assert api.reuse_problem(folder, sc)[0] == "gains_sha256 changed since the run"
     finally:
         gp.write_text(orig)
-    monkeypatch.setattr(api, "code_sha256", lambda: "0" * 64)
+    monkeypatch.setattr(reuse, "code_sha256", lambda: "0" * 64)
     assert api.reuse_problem(folder, sc)[0] == "code_sha256 changed since the run"
 
 

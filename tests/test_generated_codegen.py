@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 import pytest
+from platformdirs import user_cache_dir
 
 from core.errors import BuildError
+from generated import codegen
+from generated.__main__ import main as gen_main
 from generated.codegen import (
     CodegenSettings,
     build_library,
@@ -258,3 +266,41 @@ def test_cse_shrinks_the_code_and_keeps_the_values(tmp_path):
         j = [libs[k].function("jac_dup")(tt, xx, [], [], [], 0, 0, 0, 0) for k in (False, True)]
         for u, v in zip(j[0], j[1], strict=True):
             np.testing.assert_allclose(np.array(v), np.array(u), rtol=1e-14, atol=1e-14)
+
+
+def test_default_cache_is_outside_the_package_and_env_overrides_it(tmp_path, monkeypatch):
+    """The default root is the user cache (XDG_CACHE_HOME honoured), never under the package."""
+    package = Path(codegen.__file__).resolve().parent
+    monkeypatch.delenv("HITL_BUILD_DIR", raising=False)
+    root = CodegenSettings().root()
+    assert package not in root.resolve().parents and root.resolve() != package
+    assert root == Path(user_cache_dir("hitl-formation")) / "build"
+    env = subprocess.run(
+        [sys.executable, "-c", "from generated.codegen import DEFAULT_BUILD_ROOT as r; print(r)"],
+        env={**os.environ, "XDG_CACHE_HOME": str(tmp_path / "xdg")},
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert env.stdout.strip() == str(tmp_path / "xdg" / "hitl-formation" / "build")
+    monkeypatch.setenv("HITL_BUILD_DIR", str(tmp_path / "mine"))
+    assert CodegenSettings().root() == tmp_path / "mine"
+    assert CodegenSettings(build_root=str(tmp_path / "set")).root() == tmp_path / "set"
+
+
+def test_clear_cache_removes_only_what_the_cache_made(settings, tmp_path, capsys, monkeypatch):
+    root = settings.root()
+    lib = build_library([dyn("toy")], settings, ["toy"])
+    (root / "failed" / ("0" * 64)).mkdir(parents=True)
+    (root / ".tmp-abc-1-x").mkdir()
+    (root / "notes").mkdir()  # not the cache's: kept
+    (root / "notes" / "keep.txt").write_text("mine")
+    removed = codegen.clear_cache(root)
+    assert sorted(p.name for p in removed) == sorted([".tmp-abc-1-x", "failed", lib.key])
+    assert [p.name for p in root.iterdir()] == ["notes"]
+    (root / "notes" / "keep.txt").unlink()
+    (root / "notes").rmdir()
+    build_library([dyn("toy")], settings, ["toy"])
+    monkeypatch.setenv("HITL_BUILD_DIR", str(root))
+    assert gen_main(["cache", "--clear"]) == 0
+    assert capsys.readouterr().out.strip() == str(root) and not root.exists()

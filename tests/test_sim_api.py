@@ -7,6 +7,7 @@ with -O0 (3–4× faster to compile) into a temporary build root.
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import os
 import subprocess
@@ -21,6 +22,8 @@ from core.errors import BuildError, IntegrationError, ScenarioError, run_cli
 from generated import api
 from generated.__main__ import main as cli_main
 from generated.codegen import CodegenSettings
+from generated.meta import MetaFileError, RunMeta
+from generated.progress import progress_bar
 
 SMALL = """
 name = "small"
@@ -446,3 +449,97 @@ def test_method_needs_matching_build(base, env):
             CodegenSettings(compiler="no-such-cc-xyz", build_root=env["cg"].build_root),
         )
     assert r1.trajectory.complete
+
+
+#: meta.json's keys in the file's order (docs/simulation.md, 'Outputs'); verify reads them
+META_KEYS = [
+    "scenario",
+    "scenario_path",
+    "scenario_sha256",
+    "overrides",
+    "gains_path",
+    "gains_sha256",
+    "gains_reused",
+    "method",
+    "form",
+    "rtol",
+    "atol",
+    "max_steps",
+    "fixed_step",
+    "fixed_rtol",
+    "fixed_atol",
+    "newton_scheme",
+    "linear_solver",
+    "integrator_extra_options",
+    "horizon",
+    "output_step",
+    "breakpoints",
+    "rows",
+    "trajectory_sha256",
+    "inputs",
+    "libraries",
+    "complete",
+    "t_reached",
+    "message",
+    "steps",
+    "rhs_evals",
+    "stats",
+    "library",
+    "cache_hit",
+    "wall_seconds",
+]
+
+
+def test_meta_json_keeps_its_keys_and_reads_back_typed(base):
+    r1 = base[0]
+    text = r1.meta_path.read_text()
+    assert list(json.loads(text)) == META_KEYS
+    assert list(json.loads(text)["wall_seconds"]) == [
+        "load",
+        "synthesis",
+        "symbolic_build",
+        "codegen",
+        "compile",
+        "integration",
+        "outputs",
+        "write",
+        "total",
+    ]
+    rec = RunMeta.from_json(text)
+    assert rec.to_json() == text and rec.library.key == r1.meta["library"]["key"]
+    with pytest.raises(MetaFileError, match="not a run's record"):
+        RunMeta.from_json(json.dumps({k: v for k, v in json.loads(text).items() if k != "rows"}))
+
+
+def test_csv_text_is_repr():
+    """The pandas writer gives every float64 the text of Python's repr, which reads back exactly."""
+    rng = np.random.default_rng(7)
+    bits = rng.integers(0, 2**64, size=20_000, dtype=np.uint64)  # every sign and exponent
+    special = [0.0, -0.0, 1.0, 0.1, 1e16, 1e-5, 1e22, 5e-324, 2.0**-1074, np.inf, -np.inf, np.nan]
+    values = np.concatenate([bits.view(np.float64), special]).reshape(-1, 2)
+    df = pd.DataFrame(values, columns=["t", "V1"])
+    expected = "t,V1\n" + "".join(",".join(map(repr, row)) + "\n" for row in values.tolist())
+    assert api.csv_text(df) == expected
+    back = pd.read_csv(io.StringIO(api.csv_text(df))).to_numpy()
+    assert np.array_equal(back, values, equal_nan=True)
+    assert api.csv_text(df.iloc[:0]) == "t,V1\n"
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_bar_is_drawn_only_on_a_terminal_and_when_enabled(monkeypatch):
+    monkeypatch.setattr("generated.progress.DELAY_SECONDS", 0.0)
+    for stream, enabled in ((io.StringIO(), True), (_Terminal(), False)):
+        with progress_bar("sim x", 2.0, enabled, stream) as bar:
+            assert bar is None
+        assert stream.getvalue() == ""
+    term = _Terminal()
+    with progress_bar("sim x (cvodes)", 2.0, True, term) as bar:
+        bar(1.0)
+        bar(5.0)  # beyond the horizon: clipped to 100 %
+    out = term.getvalue()
+    assert out.startswith("\rsim x (cvodes) [") and out.endswith("\n")
+    assert "100.0%" in out and "t = 2.00/2 s" in out

@@ -1,0 +1,67 @@
+"""The gains a run uses: ``out/<name>/gains.json`` reused when it is this scenario's, else synthesized."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from core.artifacts import OUT_ROOT, sha256_file
+from core.errors import SynthesisError
+from core.scenario import Scenario
+
+if TYPE_CHECKING:
+    from synthesis.gains import Gains
+
+
+@dataclass(frozen=True)
+class GainsInfo:
+    """Where the gains came from: ``path``, ``sha256`` of gains.json, ``reused``, ``seconds``."""
+
+    path: Path
+    sha256: str
+    reused: bool
+    seconds: float
+
+
+def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gains, GainsInfo]:
+    """Read ``out/<name>/gains.json`` if it belongs to this scenario, else synthesize and write it.
+
+    The file belongs to the scenario when its ``scenario_sha256`` equals ``sc.sha256``;
+    it is then re-certified (:func:`synthesis.gains.recertified`: it must match the
+    scenario and pass every certificate check not confined to scenario-given gains).
+    A malformed or failing file is refused in one line, whatever ``STRICT`` says.
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario (``name`` picks the folder, ``sha256`` decides reuse).
+    out_root : str or Path, optional
+        Output root; default ``out/`` (``$HITL_OUT``).
+
+    Returns
+    -------
+    (Gains, GainsInfo)
+    """
+    from synthesis.gains import read_gains_file, recertified, save_gains
+
+    path = Path(out_root or OUT_ROOT) / sc.name / "gains.json"
+    t0 = time.perf_counter()
+    if path.is_file():
+        gf = read_gains_file(path)  # a malformed file is refused, never overwritten
+        if gf.scenario_sha256 == sc.sha256:  # reused only after a fresh certificate
+            gains = recertified(gf.gains, str(path), sc)
+            return gains, GainsInfo(path, gf.sha256, True, time.perf_counter() - t0)
+    try:
+        from synthesis import synthesize
+    except ImportError:
+        raise SynthesisError(
+            f"{path}: missing or stale and synthesis.synthesize is not available (run make synth)"
+        ) from None
+    gains = synthesize(sc)
+    if gains.info.get("scenario_sha256") != sc.sha256:  # variants carry their own hash
+        gains = dataclasses.replace(gains, info={**gains.info, "scenario_sha256": sc.sha256})
+    save_gains(gains, path)
+    return gains, GainsInfo(path, sha256_file(path), False, time.perf_counter() - t0)

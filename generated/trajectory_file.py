@@ -1,0 +1,215 @@
+"""The ``trajectory.csv`` file: its columns, the frame, writing it and reading it back.
+
+Columns (agents and components 1-based): ``t``, the leader's ``eta0_k``, then per
+follower its states and outputs (:func:`column_names`), and ``V1`` last. A run that
+stopped early is written all the same, led by ``# incomplete: t = <t>: <reason>``
+(:data:`INCOMPLETE_MARK`); readers skip ``#`` lines.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import casadi as ca
+import numpy as np
+import pandas as pd
+
+from core.errors import BuildError
+from core.scenario import Scenario
+from generated.integrate import Trajectory
+
+if TYPE_CHECKING:
+    from generated.api import Built
+
+#: first line of a trajectory.csv whose run stopped early (readers skip ``#`` lines)
+INCOMPLETE_MARK = "# incomplete: "
+
+
+def column_names(sc: Scenario) -> list[str]:
+    """The CSV columns, in order (agents and components 1-based).
+
+    Parameters
+    ----------
+    sc : Scenario
+        Supplies the sizes ``N``, ``n`` and ``m``.
+    """
+    m, n, N = sc.m, sc.n, sc.N
+    cols = ["t"] + [f"eta0_{k}" for k in range(1, m + 1)]
+    for i in range(1, N + 1):
+        cols += [f"p{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"q{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"eta{i}_{k}" for k in range(1, m + 1)]
+        cols += [f"mu{i}_{k}" for k in range(1, m + 1)]
+        cols += [f"phi{i}"]
+        cols += [f"thetahat{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"ghat{i}"]
+        cols += [f"u{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"b{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"et{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"eeta{i}_{k}" for k in range(1, m + 1)]
+        cols += [f"chi{i}_{r}" for r in range(1, n + 1)]
+        cols += [f"V2_{i}"]
+    return [*cols, "V1"]
+
+
+#: CSV prefix -> candidate names of the closed loop's outputs (first match wins)
+_OUTPUT_ALIASES = {
+    "u": ("u",),
+    "b": ("b",),
+    "et": ("e_t", "et"),
+    "eeta": ("ebar", "e_eta_bar", "eeta"),
+    "chi": ("chi",),
+    "V2": ("V2",),
+    "V1": ("V1",),
+}
+
+
+def evaluate_outputs(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:
+    """All named outputs at every output time: ``name -> array (K, rows, cols)``.
+
+    Parameters
+    ----------
+    built : Built
+        Supplies the compiled ``outputs`` Function.
+    traj : Trajectory
+        The output times and states.
+    """
+    K = len(traj.t)
+    f = built.outputs
+    if K == 0:
+        return {nm: np.zeros((0, *f.size_out(j))) for j, nm in enumerate(f.name_out())}
+    res = f.map(K)(traj.t.reshape(1, -1), traj.x.T)
+    res = res if isinstance(res, list | tuple) else [res]
+    out = {}
+    for j, nm in enumerate(f.name_out()):
+        r, c = f.size_out(j)
+        a = np.array(ca.DM(res[j]).full(), dtype=float)  # r x (c*K), time blocks side by side
+        out[nm] = a.reshape(r, K, c).transpose(1, 0, 2)
+    return out
+
+
+def _agent_rows(arr: np.ndarray, N: int, width: int, name: str) -> np.ndarray:
+    """A per-agent output (K, N, width): row i = agent i (the closed loop's convention)."""
+    if arr.shape[1:] != (N, width):
+        raise BuildError(
+            f"closed loop output {name!r} is {arr.shape[1]}x{arr.shape[2]} per time, "
+            f"expected {N}x{width} (one row per agent)"
+        )
+    return arr
+
+
+def trajectory_frame(built: Built, sc: Scenario, traj: Trajectory) -> pd.DataFrame:
+    """The trajectory as a DataFrame with exactly the columns of :func:`column_names`.
+
+    Parameters
+    ----------
+    built : Built
+        Supplies the state layout and the compiled outputs.
+    sc : Scenario
+        Supplies the sizes ``N``, ``n`` and ``m``.
+    traj : Trajectory
+        The output times and states.
+
+    Raises
+    ------
+    BuildError
+        If the closed loop's outputs or state layout do not give these columns.
+    """
+    cl = built.closed_loop
+    sl = cl.layout.slices
+    outs = evaluate_outputs(built, traj)
+
+    def out(prefix: str) -> tuple[str, np.ndarray]:
+        for nm in _OUTPUT_ALIASES[prefix]:
+            if nm in outs:
+                return nm, outs[nm]
+        raise BuildError(
+            f"closed loop outputs lack {prefix!r} (looked for {', '.join(_OUTPUT_ALIASES[prefix])}; "
+            f"it has {', '.join(outs)})"
+        )
+
+    N, n, m = sc.N, sc.n, sc.m
+    X = traj.x
+    K = len(traj.t)
+    blocks: list[np.ndarray] = [traj.t.reshape(-1, 1), X[:, sl["eta0"]]]
+    named = {}
+    for key, width in (("u", n), ("b", n), ("et", n), ("eeta", m), ("chi", n), ("V2", 1)):
+        nm, arr = out(key)
+        named[key] = _agent_rows(arr, N, width, nm)
+    for i in range(N):
+        for key in ("p", "q", "eta", "mu", "phi", "thetahat", "ghat"):
+            blocks.append(X[:, sl[(key, i)]])
+        for key in ("u", "b", "et", "eeta", "chi", "V2"):
+            blocks.append(named[key][:, i, :])
+    nm, v1 = out("V1")
+    if v1.shape[1:] != (1, 1):
+        raise BuildError(f"closed loop output {nm!r} is not a scalar")
+    blocks.append(v1.reshape(K, 1))
+    data = np.hstack(blocks)
+    cols = column_names(sc)
+    if data.shape[1] != len(cols):
+        raise BuildError(
+            f"trajectory has {data.shape[1]} columns, expected {len(cols)} (check the state layout)"
+        )
+    return pd.DataFrame(data, columns=cols)
+
+
+def csv_text(df: pd.DataFrame) -> str:
+    """Deterministic CSV: header, then every value as the shortest text that reads back exactly.
+
+    Written by :meth:`pandas.DataFrame.to_csv` without a ``float_format``, which gives
+    each float64 the same text as Python's ``repr`` (shortest round-trip form); ``nan``
+    is spelled out (pandas' default is an empty field) and lines end in ``\\n`` on
+    every platform.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        All columns numeric (written as float64); the index is not written.
+    """
+    return df.astype(float).to_csv(index=False, lineterminator="\n", na_rep="nan")
+
+
+def trajectory_text(df: pd.DataFrame, traj: Trajectory) -> str:
+    """The ``trajectory.csv`` text: :func:`csv_text`, led by ``# incomplete: <reason>`` if partial.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        The frame (:func:`trajectory_frame`).
+    traj : Trajectory
+        Its ``complete``, ``t_reached`` and ``message`` mark a partial run in the file itself.
+    """
+    if traj.complete:
+        return csv_text(df)
+    why = " ".join(str(traj.message or "integrator stopped").split())
+    return f"{INCOMPLETE_MARK}t = {traj.t_reached!r}: {why}\n" + csv_text(df)
+
+
+def read_trajectory(data: bytes | str | Path) -> tuple[pd.DataFrame, str | None]:
+    """Parse ``trajectory.csv`` (bytes, text or a path): the frame and the incomplete reason.
+
+    Parameters
+    ----------
+    data : bytes, str or Path
+        The file's bytes or text, or its path.
+
+    Returns
+    -------
+    (DataFrame, str or None)
+        The reason is the text after ``# incomplete: `` (None for a complete run).
+    """
+    if isinstance(data, Path):
+        data = data.read_bytes()
+    text = data.decode("utf-8") if isinstance(data, bytes) else data
+    first = text.split("\n", 1)[0]
+    reason = first[len(INCOMPLETE_MARK) :] if first.startswith(INCOMPLETE_MARK) else None
+    return pd.read_csv(io.StringIO(text), comment="#"), reason
+
+
+def data_rows(text: str) -> int:
+    """Rows of a trajectory text: non-empty lines that are neither comments nor the header."""
+    lines = [ln for ln in text.splitlines() if ln and not ln.startswith("#")]
+    return max(len(lines) - 1, 0)
