@@ -35,11 +35,12 @@ import numpy as np
 import pandas as pd
 
 from core.artifacts import OUT_ROOT, atomic_write_text
-from core.errors import BuildError, IntegrationError, ScenarioError
-from core.scenario import METHODS, Scenario
+from core.errors import ScenarioError
+from core.scenario import Scenario
+from generated import solvers
 from generated.codegen import CodegenSettings, Library, build_library, check_dyn_signature, renamed
 from generated.gains_cache import GainsInfo, ensure_gains
-from generated.integrate import IntegratorSettings, Trajectory, integrate, output_grid
+from generated.integrate import IntegratorSettings, Trajectory, output_grid
 from generated.meta import LibraryRecord, RunMeta, WallSeconds
 from generated.overrides import (
     MAX_SET_DEPTH,
@@ -108,7 +109,7 @@ def with_method(sc: Scenario, method: str | None) -> Scenario:
     ----------
     sc : Scenario
     method : str or None
-        One of :data:`core.scenario.METHODS`.
+        A registered method (:func:`generated.solvers.names`).
 
     Raises
     ------
@@ -119,9 +120,9 @@ def with_method(sc: Scenario, method: str | None) -> Scenario:
     """
     if method is None:
         return sc
-    if method not in METHODS:
+    if method not in solvers.names():
         raise ScenarioError(
-            str(sc.path), "integration.method", f"{method!r} is unknown", ", ".join(METHODS)
+            str(sc.path), "integration.method", f"{method!r} is unknown", ", ".join(solvers.names())
         )
     return dataclasses.replace(sc, integration=dataclasses.replace(sc.integration, method=method))
 
@@ -192,9 +193,9 @@ def build(
     sc : Scenario
     gains : Gains
     method : str, optional
-        ``cvodes``/``fixed`` build the ODE form, ``idas`` the DAE form, ``native`` the
-        ODE form plus the native driver's functions — whole-loop for N <= 20, graph-ordered
-        blocks above (:func:`native_cascade`) — (default: the scenario's method).
+        A registered method (:func:`generated.solvers.get`): its form (ODE or DAE) and
+        what it adds to the library (:meth:`~generated.solvers.Solver.build`); default:
+        the scenario's method.
     settings : CodegenSettings, optional
         ``jacobian="auto"`` is resolved from ``sc.N`` (:func:`resolve_codegen`).
     closed_loop : ClosedLoop, optional
@@ -203,8 +204,9 @@ def build(
     settings = resolve_codegen(sc.N, settings)
     method = method or sc.integration.method
     t0 = time.perf_counter()
-    # first: a graph the native method cannot order fails before the closed loop is built
-    cascade = native_cascade(sc, gains) if method == "native" else None
+    # first: what the method cannot do (e.g. order a cyclic graph) fails before the closed
+    # loop is built
+    cascade = solvers.get(method).prepare(sc, gains)
     if closed_loop is None:
         from symbolic.closed_loop import build_closed_loop
 
@@ -233,13 +235,7 @@ def native_cascade(sc: Scenario, gains: Gains) -> Any:
     ScenarioError
         Above the limit, if the graph has a cycle or the followers differ in model.
     """
-    from generated import native
-
-    if sc.N <= native.MAX_AGENTS:
-        return None
-    from symbolic.cascade import build_cascade
-
-    return build_cascade(sc, gains)
+    return solvers.get("native").prepare(sc, gains)
 
 
 def build_from_closed_loop(
@@ -257,44 +253,36 @@ def build_from_closed_loop(
     cl : ClosedLoop
         Supplies ``ode_dyn``/``dae_dyn`` and ``outputs``.
     method : str
-        ``idas`` compiles the DAE form, any other method the ODE form; ``native`` adds
-        :func:`generated.native.native_functions` and links the driver and SUNDIALS.
+        A registered method: its ``form`` picks ``dae_dyn`` or ``ode_dyn`` and its
+        :meth:`~generated.solvers.Solver.build` what else is compiled (``native``:
+        :func:`generated.native.native_functions` and the driver and SUNDIALS).
     settings : CodegenSettings, optional
         ``jacobian="auto"`` is resolved from the closed loop's N (:func:`resolve_codegen`).
     t_symbolic_start : float, optional
         ``time.perf_counter()`` when the symbolic build began, so that
         ``timings["symbolic_build"]`` includes it (default: now).
-    cascade : Cascade, optional
-        Method ``native`` above :data:`generated.native.MAX_AGENTS` followers: the
-        per-follower blocks (:func:`native_cascade`) compiled by :mod:`generated.dag`.
+    cascade : object, optional
+        What the method's :meth:`~generated.solvers.Solver.prepare` returned (method
+        ``native`` above :data:`generated.native.MAX_AGENTS` followers: the per-follower
+        blocks, :func:`native_cascade`, compiled by :mod:`generated.dag`).
     """
+    solver = solvers.get(method)
     settings = resolve_codegen(cl.layout.N, settings)
     t0 = time.perf_counter() if t_symbolic_start is None else t_symbolic_start
-    form = "dae" if method == "idas" else "ode"
+    form = solver.form
     src, name = (cl.dae_dyn, DAE_NAME) if form == "dae" else (cl.ode_dyn, ODE_NAME)
     check_dyn_signature(src, f"closed loop {form}_dyn")
     dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
     outs = renamed(cl.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
-    functions, derive, toolchain, dag_lib = [dyn, outs], [name], None, None
-    if method == "native":  # the driver's functions and SUNDIALS; CVODES' jac_ not needed
-        from generated import native
-
-        derive = []
-        if cl.layout.N <= native.MAX_AGENTS:  # whole loop, flat SX
-            functions += native.native_functions(dyn, cse=settings.cse)[0]  # dyn: SX already
-            toolchain = native.toolchain()
-        else:  # graph-ordered blocks: one block's code whatever N (generated/dag.py)
-            from generated import dag
-
-            if cascade is None:
-                raise BuildError(
-                    f"integration.method 'native' above N = {native.MAX_AGENTS} needs the "
-                    "per-follower blocks: call build(sc, gains, method='native') or pass "
-                    "cascade=native_cascade(sc, gains)"
-                )
-            dag_lib = dag.build(cascade, settings)
+    plan = solver.build(dyn, cl, settings, cascade)
+    dag_lib = plan.companion
     t_sym = time.perf_counter() - t0
-    lib = build_library(functions, settings, with_derivatives=derive, toolchain=toolchain)
+    lib = build_library(
+        [dyn, outs, *plan.functions],
+        settings,
+        with_derivatives=[name] if plan.derivatives else [],
+        toolchain=plan.toolchain,
+    )
     timings = {
         "symbolic_build": t_sym,
         "codegen": lib.codegen_seconds + (dag_lib.codegen_seconds if dag_lib else 0.0),
@@ -406,9 +394,8 @@ def integrate_built(
 ) -> Trajectory:
     """Integrate a compiled closed loop from ``x0`` with the method of ``settings``.
 
-    The one place that sends ``native`` to :func:`generated.native.run` (whole loop) or
-    :func:`generated.dag.run` (graph-ordered blocks) and the CasADi methods to
-    :func:`generated.integrate.integrate`.
+    The one place that runs a method: the registered :class:`~generated.solvers.Solver`
+    of ``settings.method`` checks the build and integrates it.
 
     Parameters
     ----------
@@ -429,27 +416,9 @@ def integrate_built(
     IntegrationError
         If the build does not fit the method.
     """
-    s = settings
-    if (s.method == "idas") != (built.form == "dae"):
-        raise IntegrationError(
-            f"method {s.method!r} needs the {'DAE' if s.method == 'idas' else 'ODE'} build "
-            f"(this one is {built.form}): call build(..., method={s.method!r})"
-        )
-    if s.method == "native" and built.dag is not None:
-        from generated import dag
-
-        lib, cascade = built.dag
-        return dag.run(lib.path, cascade, x0, t_out, s, breakpoints=bps, progress=progress)
-    if s.method == "native":
-        from generated import native
-
-        if native.RHS_NAME not in built.library.names:
-            raise IntegrationError(
-                "method 'native' needs the native build: call build(..., method='native')"
-            )
-        return native.run(built.library.path, x0, t_out, s, breakpoints=bps, progress=progress)
-    z0 = np.asarray(built.closed_loop.z0, dtype=float) if built.form == "dae" else None
-    return integrate(built.dyn, x0, t_out, s, breakpoints=bps, z0=z0, progress=progress)
+    solver = solvers.get(settings.method)
+    solver.check_built(built)
+    return solver.run(built, x0, t_out, settings, bps, progress)
 
 
 # --------------------------------------------------------------------------- whole run

@@ -28,7 +28,6 @@ import ctypes
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -36,7 +35,7 @@ import numpy as np
 from core.errors import IntegrationError
 from generated import native
 from generated.codegen import CodegenSettings, Library, build_library
-from generated.integrate import IntegratorSettings, Trajectory, schedule
+from generated.integrate import IntegratorSettings, Trajectory
 from symbolic.cascade import Cascade
 
 DRIVER = native.NATIVE_DIR / "dag.c"
@@ -94,13 +93,9 @@ def build(cas: Cascade, settings: CodegenSettings | None = None) -> Library:
     )
 
 
-def _dp(a: np.ndarray):
-    return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-
-
-def _problem(cas: Cascade) -> tuple[list[Any], list[np.ndarray]]:
-    """The driver's problem arguments (N, m, na, n, order, …, fidx) and the arrays they
-    point into (kept alive by the caller during the call)."""
+def _problem(cas: Cascade) -> tuple[native.DagProblem, list[np.ndarray]]:
+    """The driver's problem (``hitl_dag_problem``) and the arrays it points into (kept
+    alive by the caller during the call)."""
     lay = cas.layout
     ints = [
         np.ascontiguousarray(a, dtype=np.int32)
@@ -110,12 +105,24 @@ def _problem(cas: Cascade) -> tuple[list[Any], list[np.ndarray]]:
     cpl = np.ascontiguousarray(cas.coupling, dtype=float)
     prm = np.ascontiguousarray(cas.params.T, dtype=float)  # agent-major
 
-    def ip(a: np.ndarray):
+    def ip(a: np.ndarray) -> ctypes._Pointer:
         return a.ctypes.data_as(ctypes.POINTER(ctypes.c_int))
 
-    args = [lay.N, lay.m, lay.agent_size, cas.n, ip(ints[0]), ip(ints[1]), ip(ints[2]),
-            _dp(w), _dp(cpl), prm.shape[1], _dp(prm), ip(ints[3])]  # fmt: skip
-    return args, [*ints, w, cpl, prm]
+    problem = native.DagProblem(
+        N=lay.N,
+        m=lay.m,
+        na=lay.agent_size,
+        n=cas.n,
+        order=ip(ints[0]),
+        up_ptr=ip(ints[1]),
+        up_idx=ip(ints[2]),
+        up_w=native.dptr(w),
+        cpl=native.dptr(cpl),
+        npar=prm.shape[1],
+        prm=native.dptr(prm),
+        fidx=ip(ints[3]),
+    )
+    return problem, [*ints, w, cpl, prm]
 
 
 def _state(cas: Cascade, x: np.ndarray) -> np.ndarray:
@@ -169,22 +176,15 @@ def run(
     wall0 = time.perf_counter()
     lib = native.load(Path(library))
     x = _state(cas, x0)
-    sched = schedule(t_out, breakpoints)  # rows keep t_out; the driver runs to the targets
-    t_out, tq = sched.t_out, np.ascontiguousarray(sched.targets)
-    bps = np.ascontiguousarray(sched.breaks)
-    nt = len(t_out)
-    X = np.full((nt, x.size), np.nan)
-    stats = np.zeros(len(native.STATS))
-    msg = ctypes.create_string_buffer(native.MSG_LEN)
-    args, _keep = _problem(cas)
-    filled = lib.hitl_dag_run(
-        *args, _dp(x), nt, _dp(tq), len(bps), _dp(bps), float(settings.rtol),
-        float(settings.atol), int(settings.max_steps), _dp(X), _dp(stats), msg, native.MSG_LEN,
-    )  # fmt: skip
-    return native.driver_trajectory(
-        "native", filled, t_out, X, dict(zip(native.STATS, stats.tolist(), strict=True)),
-        msg.value.decode(errors="replace"), wall0, progress,
-    )  # fmt: skip
+    call = native.DriverCall.of(x.size, t_out, settings, breakpoints)
+    problem, _keep = _problem(cas)
+    lib.hitl_dag_run(
+        ctypes.byref(problem),
+        native.dptr(x),
+        ctypes.byref(call.options),
+        ctypes.byref(call.result),
+    )
+    return call.trajectory("native", wall0, progress)
 
 
 def probe(
@@ -219,9 +219,18 @@ def probe(
     x, b = _state(cas, x), _state(cas, b)
     xdot, sol = np.zeros_like(x), np.zeros_like(x)
     msg = ctypes.create_string_buffer(native.MSG_LEN)
-    args, _keep = _problem(cas)
+    problem, _keep = _problem(cas)
+    dp = native.dptr
     ret = lib.hitl_dag_probe(
-        *args, float(t), _dp(x), float(gamma), _dp(b), _dp(xdot), _dp(sol), msg, native.MSG_LEN
+        ctypes.byref(problem),
+        float(t),
+        dp(x),
+        float(gamma),
+        dp(b),
+        dp(xdot),
+        dp(sol),
+        msg,
+        native.MSG_LEN,
     )
     if ret != 0:
         raise IntegrationError(

@@ -52,8 +52,11 @@ from core.errors import IntegrationError
 from core.scenario import METHODS as SCENARIO_METHODS
 from core.scenario import Integration
 from core.settings import default_of
+from generated import solvers
+from generated.solvers import Status, flag_status
 
-#: the integration methods (``native`` runs in :mod:`generated.native`)
+#: the methods a scenario file may name (any registered method works through the API:
+#: :func:`generated.solvers.names`)
 METHODS = SCENARIO_METHODS
 GAMMA_ROS2 = 1.0 + 1.0 / math.sqrt(2.0)
 
@@ -84,8 +87,9 @@ class IntegratorSettings:
     Attributes
     ----------
     method : str
-        ``cvodes`` (BDF through CasADi, default), ``native`` (BDF, SUNDIALS CVODE driven
-        from C: :mod:`generated.native`), ``idas`` (the DAE form) or ``fixed`` (ROS2).
+        A registered method (:func:`generated.solvers.names`): ``cvodes`` (BDF through
+        CasADi, default), ``native`` (BDF, SUNDIALS CVODE driven from C:
+        :mod:`generated.native`), ``idas`` (the DAE form) or ``fixed`` (ROS2).
     rtol, atol : float
         Relative and absolute tolerances (CVODES, IDAS).
     max_steps : int
@@ -136,9 +140,10 @@ class IntegratorSettings:
     extra_options: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
-        if self.method not in METHODS:
+        if self.method not in solvers.names():
             raise IntegrationError(
-                f"IntegratorSettings.method: {self.method!r} is not one of {', '.join(METHODS)}"
+                f"IntegratorSettings.method: {self.method!r} is not one of "
+                f"{', '.join(solvers.names())}"
             )
         positive = ("rtol", "atol", "fixed_step", "chunk", "fixed_rtol", "fixed_atol")
         for name in (*positive, "algebraic_atol"):
@@ -164,8 +169,9 @@ class Trajectory:
     z : ndarray or None, shape (K, nz)
         Algebraic states (IDAS only).
     method : str
-    complete : bool
-        False when the integrator gave up before the last output time.
+    status : Status
+        ``Status.OK`` for a complete run, else why the integrator gave up before the
+        last output time (test this, not the message).
     t_reached : float
         Last output time integrated successfully.
     message : str
@@ -180,10 +186,15 @@ class Trajectory:
     x: np.ndarray
     z: np.ndarray | None
     method: str
-    complete: bool
+    status: Status
     t_reached: float
     message: str
     stats: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def complete(self) -> bool:
+        """True when every output time was reached (``status is Status.OK``)."""
+        return self.status is Status.OK
 
     def raise_if_incomplete(self) -> None:
         """Raise :class:`IntegrationError` (with ``t_reached``) when incomplete."""
@@ -371,12 +382,13 @@ def flag_reason(flag: str) -> str:
     return f"{flag}: {_REASONS.get(flag, 'solver failure')}"
 
 
-def _reason(exc: Exception) -> str:
+def _reason(exc: Exception) -> tuple[str, Status]:
+    """The readable reason and the :class:`Status` of a CasADi integrator's exception."""
     m = re.search(r'returned "((?:CV|IDA)_\w+)"', str(exc))
     if m:
-        return flag_reason(m.group(1))
+        return flag_reason(m.group(1)), flag_status(m.group(1))
     lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
-    return lines[-1] if lines else type(exc).__name__
+    return (lines[-1] if lines else type(exc).__name__), Status.FAILED
 
 
 _STAT_KEYS = {
@@ -403,12 +415,22 @@ def _add_stats(acc: dict[str, Any], st: dict[str, Any]) -> None:
                 break
 
 
-class _Sundials:
-    """One CVODES/IDAS call per chunk (a fresh integrator: a restart)."""
+class SundialsStepper:
+    """One CVODES/IDAS call per chunk (a fresh integrator: a restart).
 
-    def __init__(self, f: ca.Function, s: IntegratorSettings, nz: int) -> None:
+    Parameters
+    ----------
+    f : casadi.Function
+        Integrator form; ``nz`` algebraic states for IDAS, none for CVODES.
+    s : IntegratorSettings
+    nz : int
+    plugin : str
+        CasADi's integrator plugin, ``"cvodes"`` or ``"idas"``.
+    """
+
+    def __init__(self, f: ca.Function, s: IntegratorSettings, nz: int, plugin: str) -> None:
         self.f, self.s, self.nz = f, s, nz
-        self.plugin = "idas" if s.method == "idas" else "cvodes"
+        self.plugin = plugin
         opts: dict[str, Any] = {
             "abstol": s.atol,
             "reltol": s.rtol,
@@ -437,6 +459,12 @@ class _Sundials:
 
         Replaces IDACalcIC, whose convergence test uses the same weights: with z out of
         it, IDACalcIC stops with z(0) off by 5e-8 relative (friction DAE of the tests).
+
+        Parameters
+        ----------
+        t0 : float
+        x, z : ndarray
+            The state and the guess of the algebraic states.
         """
         if self._znewton is None:
             return None
@@ -453,37 +481,58 @@ class _Sundials:
                 return z
         return None
 
-    def __call__(
-        self, t0: float, x: np.ndarray, z: np.ndarray, times: list[float], acc: dict,
-        new_segment: bool = True,
-    ):  # fmt: skip
-        opts = self.opts
-        if self.plugin == "idas" and self.nz:
-            # at t0 and at breakpoints z is solved from alg = 0 here; at other chunk
-            # boundaries it is carried over (consistent already). IDACalcIC only as a
-            # fallback (it failed once with a line search at t = 14.08 s on the paper run)
-            zc = self.consistent_z(t0, x, z) if new_segment else np.asarray(z, dtype=float)
-            if zc is None:
-                opts = {**opts, "calc_ic": True}
-            else:
-                z = zc
-                xdot = np.array(self.f(t0, x, z, [], [])[0], dtype=float).ravel()
-                opts = {**opts, "calc_ic": False, "init_xdot": xdot.tolist()}
+    def _call_options(
+        self, t0: float, x: np.ndarray, z: np.ndarray, new_segment: bool
+    ) -> tuple[dict[str, Any], np.ndarray]:
+        """The options of one call and the z it starts from."""
+        if self.plugin != "idas" or not self.nz:
+            return self.opts, z
+        # at t0 and at breakpoints z is solved from alg = 0 here; at other chunk
+        # boundaries it is carried over (consistent already). IDACalcIC only as a
+        # fallback (it failed once with a line search at t = 14.08 s on the paper run)
+        zc = self.consistent_z(t0, x, z) if new_segment else np.asarray(z, dtype=float)
+        if zc is None:
+            return {**self.opts, "calc_ic": True}, z
+        xdot = np.array(self.f(t0, x, zc, [], [])[0], dtype=float).ravel()
+        return {**self.opts, "calc_ic": False, "init_xdot": xdot.tolist()}, zc
+
+    def _solve(
+        self, t0: float, x: np.ndarray, z: np.ndarray, times: list[float], acc: dict, new: bool
+    ) -> dict[str, Any]:
+        """One CasADi integrator call (its counters added to ``acc`` even on a failure)."""
+        opts, z = self._call_options(t0, x, z, new)
         integ = ca.integrator("sim", self.plugin, self.f, t0, times, opts)
         acc["integrator_calls"] += 1
         try:
-            res = integ(x0=x, z0=z)
+            return integ(x0=x, z0=z)
         finally:
             try:
                 _add_stats(acc, integ.stats())
             except RuntimeError:  # no stats when the call failed before the solver ran
                 pass
+
+    def __call__(
+        self,
+        t0: float,
+        x: np.ndarray,
+        z: np.ndarray,
+        times: list[float],
+        acc: dict,
+        new_segment: bool = True,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """States (and algebraic states) at ``times``; raises :class:`_ChunkFailure`."""
+        try:
+            res = self._solve(t0, x, z, times, acc, new_segment)
+        except RuntimeError as exc:
+            raise _ChunkFailure(*_reason(exc), times[-1]) from None
         X = np.array(res["xf"], dtype=float).reshape(len(x), len(times), order="F").T
         Z = (
             np.array(res["zf"], dtype=float).reshape(self.nz, len(times), order="F").T
             if self.nz
             else np.zeros((len(times), 0))
         )
+        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Z))):
+            raise _ChunkFailure("state is not finite (NaN or Inf)", Status.NOT_FINITE, times[-1])
         return X, Z
 
 
@@ -500,8 +549,17 @@ def _z_newton_step(f: ca.Function, nz: int, linear_solver: str) -> ca.Function |
         return None
 
 
-class _Ros2:
-    """The fixed-step ROS2 method over a compiled ``(t, x, ...) -> ode`` with its Jacobian."""
+class Ros2Stepper:
+    """The fixed-step ROS2 method over a compiled ``(t, x, ...) -> ode`` with its Jacobian.
+
+    Parameters
+    ----------
+    f : casadi.Function
+        Integrator form of an ODE (its library has ``jac_<name>``).
+    s : IntegratorSettings
+        ``fixed_step``, the safeguard tolerances and the sparse linear solver.
+    nx : int
+    """
 
     def __init__(self, f: ca.Function, s: IntegratorSettings, nx: int) -> None:
         self.s = s
@@ -534,7 +592,16 @@ class _Ros2:
         return f
 
     def advance(self, t0: float, t1: float, x: np.ndarray, acc: dict) -> np.ndarray:
-        """Advance over [t0, t1] in equal steps <= fixed_step; bisect where the error test fails."""
+        """Advance over [t0, t1] in equal steps <= fixed_step; bisect where the error test fails.
+
+        Parameters
+        ----------
+        t0, t1 : float
+        x : ndarray
+            The state at t0.
+        acc : dict
+            Statistics, updated.
+        """
         K = max(1, math.ceil((t1 - t0) / self.s.fixed_step - 1e-9))
         return self._advance(t0, t1, x, K, 0, acc)
 
@@ -562,6 +629,7 @@ class _Ros2:
             raise _ChunkFailure(
                 f"error test still fails with steps {2**depth} times smaller "
                 f"(estimate {err:.3g}; raise fixed_rtol/fixed_atol or lower fixed_step)",
+                Status.ERROR_TEST,
                 t1,
             )
         # the same number of steps on each half: the step is halved where needed only
@@ -569,6 +637,77 @@ class _Ros2:
         tm = 0.5 * (t0 + t1)
         xm = self._advance(t0, tm, x, K, depth + 1, acc)
         return self._advance(tm, t1, xm, K, depth + 1, acc)
+
+    def __call__(
+        self,
+        t0: float,
+        x: np.ndarray,
+        z: np.ndarray,
+        times: list[float],
+        acc: dict,
+        new_segment: bool = True,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """States at ``times`` (no algebraic states); raises :class:`_ChunkFailure`."""
+        out = []
+        tp, xp = t0, x
+        for tt in times:
+            try:
+                xp = self.advance(tp, tt, xp, acc)
+            except RuntimeError as exc:  # singular iteration matrix, NaN in the factorisation
+                raise _ChunkFailure(*_reason(exc), tt) from None
+            if not np.all(np.isfinite(xp)):
+                raise _ChunkFailure(
+                    "state is not finite (NaN or Inf): unstable step", Status.NOT_FINITE, tt
+                )
+            out.append(xp)
+            tp = tt
+        return np.array(out), np.zeros((len(times), 0))
+
+
+class _ChunkFailure(Exception):
+    def __init__(self, reason: str, status: Status, t_target: float) -> None:
+        super().__init__(reason)
+        self.reason, self.status, self.t_target = reason, status, t_target
+
+
+@dataclass
+class _Rows:
+    """The output rows of a run as they are reached (states, algebraic states, last row)."""
+
+    t_out: np.ndarray
+    X: np.ndarray
+    Z: np.ndarray | None
+    last: int = 0
+
+    @classmethod
+    def empty(cls, t_out: np.ndarray, nx: int, nz: int, keep_z: bool) -> _Rows:
+        K = len(t_out)
+        return cls(t_out, np.full((K, nx), np.nan), np.full((K, nz), np.nan) if keep_z else None)
+
+    def store(self, idx: int, x: np.ndarray, z: np.ndarray) -> None:
+        self.X[idx] = x
+        if self.Z is not None:
+            self.Z[idx] = z
+        self.last = idx
+
+    def trajectory(self, method: str, failure: _ChunkFailure | None, acc: dict) -> Trajectory:
+        n = self.last + 1
+        message = ""
+        if failure is not None:
+            message = (
+                f"{method} failed after t = {float(self.t_out[self.last]):.6g} s "
+                f"(working towards t = {failure.t_target:.6g} s): {failure.reason}"
+            )
+        return Trajectory(
+            t=self.t_out[:n].copy(),
+            x=self.X[:n],
+            z=None if self.Z is None else self.Z[:n],
+            method=method,
+            status=Status.OK if failure is None else failure.status,
+            t_reached=float(self.t_out[self.last]),
+            message=message,
+            stats=acc,
+        )
 
 
 def integrate(
@@ -586,14 +725,16 @@ def integrate(
     Parameters
     ----------
     f : casadi.Function
-        Integrator form ``(t, x, z, p, u) -> (ode, alg, quad, zero)``; for ``idas``
-        the DAE form with algebraic states z, for ``cvodes``/``fixed`` an ODE (nz = 0).
-        p and u must be empty.
+        Integrator form ``(t, x, z, p, u) -> (ode, alg, quad, zero)``; for a DAE
+        method (``idas``) with algebraic states z, for an ODE method (``cvodes``,
+        ``fixed``) nz = 0. p and u must be empty.
     x0 : ndarray
         Initial state at ``t_out[0]``.
     t_out : ndarray
         Increasing output times (see :func:`output_grid`).
     settings : IntegratorSettings
+        Its method must have a stepper over a ``casadi.Function``
+        (:class:`generated.solvers.engine.CasadiSolver`).
     breakpoints : sequence of float
         Known discontinuity times: the run restarts there.
     z0 : ndarray, optional
@@ -605,138 +746,108 @@ def integrate(
     -------
     Trajectory
         Never raises on an integrator failure: the result is then marked
-        incomplete (``complete=False``, ``message``, ``t_reached``); call
+        incomplete (``status``, ``message``, ``t_reached``); call
         :meth:`Trajectory.raise_if_incomplete` to turn it into an error.
     """
     wall0 = time.perf_counter()
     s = settings
-    if s.method == "native":
+    solver = solvers.get(s.method)
+    make_stepper = getattr(solver, "stepper", None)
+    if make_stepper is None:
         raise IntegrationError(
-            "method 'native' integrates a native library, not a casadi.Function: "
-            "use generated.api.integrate_built or generated.native.run"
+            f"method {s.method!r} does not integrate a casadi.Function: "
+            "use generated.api.integrate_built"
         )
-    nx = int(f.size1_in(1))
-    nz = int(f.size1_in(2))
-    if f.nnz_in(3) or f.nnz_in(4):
-        raise IntegrationError(f"{f.name()}: parameters p and controls u must be empty")
-    if s.method != "idas" and nz:
-        raise IntegrationError(
-            f"method {s.method!r} needs the ODE form (nz = 0); {f.name()} has nz = {nz}"
-        )
+    nx, nz = _sizes(f, solver.form)
     x = np.asarray(x0, dtype=float).ravel()
     if x.size != nx:
         raise IntegrationError(f"x0 has {x.size} entries, {f.name()} expects {nx}")
     z = np.zeros(nz) if z0 is None else np.asarray(z0, dtype=float).ravel()
-    t_out = np.asarray(t_out, dtype=float)
-    K = len(t_out)
-    X = np.full((K, nx), np.nan)
-    Z = np.full((K, nz), np.nan) if s.method == "idas" else None
-    X[0] = x
-    if Z is not None:
-        Z[0] = z
+    rows = _Rows.empty(np.asarray(t_out, dtype=float), nx, nz, keep_z=solver.form == "dae")
+    rows.store(0, x, z)
     acc = dict.fromkeys([*_STAT_KEYS, "restarts", "integrator_calls", "refined_intervals"], 0)
-    sched = schedule(t_out, breakpoints)
-    chunks = _chunks(sched, s.chunk)
-    restarts = set(sched.breaks.tolist())  # compared exactly: the targets are these times
-    stepper = _Ros2(f, s, nx) if s.method == "fixed" else _Sundials(f, s, nz)
-    t_cur = float(t_out[0])
-    last_idx = 0
-    message = ""
-    for ci, chunk in enumerate(chunks):
-        if ci:
-            acc["restarts"] += 1
-        times = [c[0] for c in chunk]
-        first_dae = s.method == "idas" and ci == 0
-        new_seg = ci == 0 or t_cur in restarts
+    run = _Run(make_stepper(f, s, nx, nz), schedule(rows.t_out, breakpoints), rows, acc)
+    failure = run.chunks(s.chunk, x, z, solver.form == "dae", progress)
+    acc["wall_seconds"] = time.perf_counter() - wall0
+    return rows.trajectory(s.method, failure, acc)
+
+
+def _sizes(f: ca.Function, form: str) -> tuple[int, int]:
+    """``(nx, nz)`` of ``f``, checked against the method's form."""
+    nx = int(f.size1_in(1))
+    nz = int(f.size1_in(2))
+    if f.nnz_in(3) or f.nnz_in(4):
+        raise IntegrationError(f"{f.name()}: parameters p and controls u must be empty")
+    if form != "dae" and nz:
+        raise IntegrationError(
+            f"an ODE method needs the ODE form (nz = 0); {f.name()} has nz = {nz}"
+        )
+    return nx, nz
+
+
+@dataclass
+class _Run:
+    """The chunk loop of :func:`integrate` over one stepper."""
+
+    stepper: Any
+    sched: Schedule
+    rows: _Rows
+    acc: dict
+
+    def chunks(
+        self,
+        chunk: float,
+        x: np.ndarray,
+        z: np.ndarray,
+        dae: bool,
+        progress: Callable[[float], None] | None,
+    ) -> _ChunkFailure | None:
+        """Integrate every chunk; return the failure that stopped the run, or None."""
+        restarts = set(self.sched.breaks.tolist())  # compared exactly: targets are these times
+        t_cur = float(self.sched.t_out[0])
+        for ci, chunk_targets in enumerate(_chunks(self.sched, chunk)):
+            if ci:
+                self.acc["restarts"] += 1
+            times = [c[0] for c in chunk_targets]
+            new_seg = ci == 0 or t_cur in restarts
+            Xc, Zc, failure = self._advance(t_cur, x, z, times, new_seg, dae and ci == 0)
+            for k in range(len(Xc)):
+                tgt, idx = chunk_targets[k]
+                x, t_cur = Xc[k], tgt
+                if len(z):
+                    z = Zc[k]
+                if idx >= 0:
+                    self.rows.store(idx, x, z)
+            if failure is not None:
+                return failure
+            if progress is not None:
+                progress(t_cur)
+        return None
+
+    def _advance(
+        self, t0: float, x, z, times: list[float], new_seg: bool, first_dae: bool
+    ) -> tuple[Any, Any, _ChunkFailure | None]:
+        """One chunk, replayed target by target after a failure to keep what was reached."""
         try:
             if first_dae:  # t0 in the grid: row 0 gets the consistent z(t0) the solve started from
-                Xc, Zc = _run_chunk(stepper, s, t_cur, x, z, [t_cur, *times], acc)
-                Z[0], Xc, Zc = Zc[0], Xc[1:], Zc[1:]
-            else:
-                Xc, Zc = _run_chunk(stepper, s, t_cur, x, z, times, acc, new_seg)
+                Xc, Zc = self.stepper(t0, x, z, [t0, *times], self.acc)
+                self.rows.Z[0], Xc, Zc = Zc[0], Xc[1:], Zc[1:]
+                return Xc, Zc, None
+            Xc, Zc = self.stepper(t0, x, z, times, self.acc, new_seg)
+            return Xc, Zc, None
         except _ChunkFailure:
-            # replay one target at a time (restarting each) to keep every output time reached
-            Xc, Zc, failure = _replay(stepper, s, t_cur, x, z, times, acc, new_seg)
-        else:
-            failure = None
-        for k in range(len(Xc)):
-            tgt, idx = chunk[k]
-            x, t_cur = Xc[k], tgt
-            if nz:
-                z = Zc[k]
-            if idx >= 0:
-                X[idx] = x
-                if Z is not None:
-                    Z[idx] = z
-                last_idx = idx
-        if failure is not None:
-            message = (
-                f"{s.method} failed after t = {float(t_out[last_idx]):.6g} s "
-                f"(working towards t = {failure.t_target:.6g} s): {failure.reason}"
-            )
-            break
-        if progress is not None:
-            progress(t_cur)
-    n = last_idx + 1
-    acc["wall_seconds"] = time.perf_counter() - wall0
-    return Trajectory(
-        t=t_out[:n].copy(),
-        x=X[:n],
-        z=None if Z is None else Z[:n],
-        method=s.method,
-        complete=not message,
-        t_reached=float(t_out[last_idx]),
-        message=message,
-        stats=acc,
-    )
+            return self._replay(t0, x, z, times, new_seg)
 
-
-class _ChunkFailure(Exception):
-    def __init__(self, reason: str, t_target: float) -> None:
-        super().__init__(reason)
-        self.reason, self.t_target = reason, t_target
-
-
-def _replay(
-    stepper, s: IntegratorSettings, t0: float, x, z, times: list[float], acc: dict,
-    new_segment: bool = True,
-):  # fmt: skip
-    """Advance target by target; return the states reached and the failure (or None)."""
-    xs, zs = [], []
-    for k, tt in enumerate(times):
-        try:
-            Xi, Zi = _run_chunk(stepper, s, t0, x, z, [tt], acc, new_segment and k == 0)
-        except _ChunkFailure as fail:
-            return xs, zs, fail
-        x, t0 = Xi[-1], tt
-        z = Zi[-1] if len(Zi[-1]) else z
-        xs.append(x)
-        zs.append(z)
-    return xs, zs, None
-
-
-def _run_chunk(
-    stepper, s: IntegratorSettings, t0: float, x, z, times: list[float], acc: dict,
-    new_segment: bool = True,
-):  # fmt: skip
-    """Advance over ``times``; raise :class:`_ChunkFailure` on a solver failure or NaN."""
-    if isinstance(stepper, _Ros2):
-        out = []
-        tp, xp = t0, x
-        for tt in times:
+    def _replay(self, t0: float, x, z, times: list[float], new_segment: bool):
+        """Advance target by target; return the states reached and the failure (or None)."""
+        xs, zs = [], []
+        for k, tt in enumerate(times):
             try:
-                xp = stepper.advance(tp, tt, xp, acc)
-            except RuntimeError as exc:  # singular iteration matrix, NaN in the factorisation
-                raise _ChunkFailure(_reason(exc), tt) from None
-            if not np.all(np.isfinite(xp)):
-                raise _ChunkFailure("state is not finite (NaN or Inf): unstable step", tt)
-            out.append(xp)
-            tp = tt
-        return np.array(out), np.zeros((len(times), 0))
-    try:
-        X, Z = stepper(t0, x, z, times, acc, new_segment)
-    except RuntimeError as exc:
-        raise _ChunkFailure(_reason(exc), times[-1]) from None
-    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Z))):
-        raise _ChunkFailure("state is not finite (NaN or Inf)", times[-1])
-    return X, Z
+                Xi, Zi = self.stepper(t0, x, z, [tt], self.acc, new_segment and k == 0)
+            except _ChunkFailure as fail:
+                return xs, zs, fail
+            x, t0 = Xi[-1], tt
+            z = Zi[-1] if len(Zi[-1]) else z
+            xs.append(x)
+            zs.append(z)
+        return xs, zs, None

@@ -22,6 +22,11 @@ official ``sundials4py`` 7.9.0 wheel; only ``sundials_config.h``'s index type is
 to match scikit-sundae's build). Before every run ``hitl_native_check`` compares the
 library's version with the headers' and reads back a matrix's dimensions, so a
 mismatched SUNDIALS fails with a clear error instead of corrupting memory.
+
+The drivers take one options struct and fill one result struct, defined once in
+``generated/native/hitl_native.h`` and mirrored here (:class:`Options`,
+:class:`Result`, :class:`DagProblem`); a library reports the sizes it was compiled
+with (``hitl_struct_size``) and :func:`load` refuses one that differs from the mirror.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ import hashlib
 import importlib.util
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import casadi as ca
@@ -39,14 +45,17 @@ import numpy as np
 
 from core.errors import BuildError, IntegrationError
 from generated.codegen import CodegenSettings, Library, Toolchain, build_library
-from generated.integrate import IntegratorSettings, Trajectory, flag_reason, schedule
+from generated.integrate import IntegratorSettings, Schedule, Trajectory, flag_reason, schedule
 from generated.largescale import DIRECT_MAX_AGENTS
+from generated.solvers import Status, flag_status
 from generated.sparse_lu import SparseLU, sparse_lu
 
 NATIVE_DIR = Path(__file__).resolve().parent / "native"
 INCLUDE_DIR = NATIVE_DIR / "include"
 COMMON = NATIVE_DIR / "common.c"
 DRIVER = NATIVE_DIR / "driver.c"
+#: the drivers' calling convention (options, result, graph-ordered problem)
+HEADER = NATIVE_DIR / "hitl_native.h"
 #: the SUNDIALS libraries the driver links, from the scikit-sundae wheel
 SUNDIALS_LIBRARIES = (
     "sundials_core",
@@ -59,8 +68,27 @@ RHS_NAME, JAC_NAME, LU_PREFIX = "nat_rhs", "nat_jac", "nat_lu"
 #: build is flat SX code; N = 20: 4.4 MB of C, gcc -O1 150–165 s; N = 50: 13 MB, gcc
 #: unfinished after 13 min and 6 GB (docs/performance.md)
 MAX_AGENTS = DIRECT_MAX_AGENTS
-#: the driver's stats[] layout (enum in driver.c)
-STATS = (
+#: the result's message buffer (HITL_MSG_LEN in hitl_native.h)
+MSG_LEN = 1024
+_DP, _IP = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+
+
+class Options(ctypes.Structure):
+    """``hitl_options`` of ``hitl_native.h``: what a driver run is asked to do."""
+
+    _fields_ = [
+        ("rtol", ctypes.c_double),
+        ("atol", ctypes.c_double),
+        ("max_steps", ctypes.c_long),
+        ("nt", ctypes.c_int),
+        ("t_out", _DP),
+        ("nb", ctypes.c_int),
+        ("breaks", _DP),
+    ]
+
+
+#: the result's counters, in ``hitl_result`` order (Trajectory.stats keys)
+COUNTERS = (
     "steps",
     "rhs_evals",
     "jac_evals",
@@ -68,14 +96,47 @@ STATS = (
     "error_test_fails",
     "newton_iters",
     "newton_fails",
-    "last_step",
     "lu_factorizations",
     "pivot_failures",
     "restarts",
-    "flag",
-    "t_reached",
 )
-MSG_LEN = 1024
+
+
+class Result(ctypes.Structure):
+    """``hitl_result`` of ``hitl_native.h``: the output rows, counters, flag and message."""
+
+    _fields_ = [
+        ("x_out", _DP),
+        ("filled", ctypes.c_int),
+        ("flag", ctypes.c_int),
+        ("t_reached", ctypes.c_double),
+        ("last_step", ctypes.c_double),
+        *((name, ctypes.c_long) for name in COUNTERS),
+        ("msg", ctypes.c_char * MSG_LEN),
+    ]
+
+
+class DagProblem(ctypes.Structure):
+    """``hitl_dag_problem`` of ``hitl_native.h``: the graph-ordered driver's problem."""
+
+    _fields_ = [
+        ("N", ctypes.c_int),
+        ("m", ctypes.c_int),
+        ("na", ctypes.c_int),
+        ("n", ctypes.c_int),
+        ("order", _IP),
+        ("up_ptr", _IP),
+        ("up_idx", _IP),
+        ("up_w", _DP),
+        ("cpl", _DP),
+        ("npar", ctypes.c_int),
+        ("prm", _DP),
+        ("fidx", _IP),
+    ]
+
+
+#: the mirrored structs, by ``hitl_struct_size``'s argument (HITL_*_SIZE)
+STRUCTS = (Options, Result, DagProblem)
 
 
 def _sha256_file(path: Path) -> str:
@@ -124,9 +185,10 @@ def toolchain(driver: Path = DRIVER) -> Toolchain:
     key = {
         "headers": {str(p.relative_to(INCLUDE_DIR)): _sha256_file(p) for p in headers},
         "libraries": {p.name: _sha256_file(p) for p in libs},
+        "interface": {HEADER.name: _sha256_file(HEADER)},
     }
     source = COMMON.read_text() + "\n" + Path(driver).read_text()
-    return Toolchain(source, (INCLUDE_DIR,), tuple(libs), key)
+    return Toolchain(source, (NATIVE_DIR, INCLUDE_DIR), tuple(libs), key)
 
 
 def native_functions(
@@ -199,7 +261,7 @@ def build(ode_dyn: ca.Function, settings: CodegenSettings | None = None) -> Libr
 
 @functools.lru_cache(maxsize=16)
 def load(path: Path) -> ctypes.CDLL:
-    """Load a native (whole-loop or graph-ordered) library once per process and check its SUNDIALS.
+    """Load a native (whole-loop or graph-ordered) library once per process and check it.
 
     The path names a content-hashed cache entry, so what is loaded there never changes.
 
@@ -211,30 +273,19 @@ def load(path: Path) -> ctypes.CDLL:
     Raises
     ------
     BuildError
-        If the SUNDIALS it runs against differs from the vendored headers.
+        If the SUNDIALS it runs against differs from the vendored headers, or its
+        structs differ in size from the ctypes mirror (:data:`STRUCTS`).
     """
     lib = ctypes.CDLL(str(path))
-    lib.hitl_native_check.restype = ctypes.c_int
-    lib.hitl_native_check.argtypes = [ctypes.c_char_p, ctypes.c_int]
-    dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
-    if hasattr(lib, "hitl_native_run"):
-        lib.hitl_native_run.restype = ctypes.c_int
-        lib.hitl_native_run.argtypes = [
-            ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_int, dp, ctypes.c_double,
-            ctypes.c_double, ctypes.c_long, dp, dp, ctypes.c_char_p, ctypes.c_int,
-        ]  # fmt: skip
-    if hasattr(lib, "hitl_dag_run"):
-        ci = ctypes.c_int
-        lib.hitl_dag_run.restype = ci
-        lib.hitl_dag_run.argtypes = [
-            ci, ci, ci, ci, ip, ip, ip, dp, dp, ci, dp, ip, dp, ci, dp, ci, dp,
-            ctypes.c_double, ctypes.c_double, ctypes.c_long, dp, dp, ctypes.c_char_p, ci,
-        ]  # fmt: skip
-        lib.hitl_dag_probe.restype = ci
-        lib.hitl_dag_probe.argtypes = [
-            ci, ci, ci, ci, ip, ip, ip, dp, dp, ci, dp, ip, ctypes.c_double, dp,
-            ctypes.c_double, dp, dp, dp, ctypes.c_char_p, ci,
-        ]  # fmt: skip
+    _declare(lib)
+    for which, struct in enumerate(STRUCTS):
+        size = lib.hitl_struct_size(which)
+        if size != ctypes.sizeof(struct):
+            raise BuildError(
+                f"native integrator: {path.name} has a {size}-byte {struct.__name__}, "
+                f"generated/native.py expects {ctypes.sizeof(struct)} "
+                "(hitl_native.h and its ctypes mirror disagree; update the mirror)"
+            )
     msg = ctypes.create_string_buffer(MSG_LEN)
     if not lib.hitl_native_check(msg, MSG_LEN):
         raise BuildError(
@@ -242,6 +293,101 @@ def load(path: Path) -> ctypes.CDLL:
             "(install scikit-sundae==1.2.*, whose SUNDIALS 7.9 the vendored headers match)"
         )
     return lib
+
+
+def _declare(lib: ctypes.CDLL) -> None:
+    """The entry points' signatures (hitl_native.h's structs passed by pointer)."""
+    ci, cd = ctypes.c_int, ctypes.c_double
+    opts, res = ctypes.POINTER(Options), ctypes.POINTER(Result)
+    lib.hitl_native_check.restype = ci
+    lib.hitl_native_check.argtypes = [ctypes.c_char_p, ci]
+    lib.hitl_struct_size.restype = ctypes.c_long
+    lib.hitl_struct_size.argtypes = [ci]
+    if hasattr(lib, "hitl_native_run"):
+        lib.hitl_native_run.restype = ci
+        lib.hitl_native_run.argtypes = [ci, _DP, opts, res]
+    if hasattr(lib, "hitl_dag_run"):
+        prob = ctypes.POINTER(DagProblem)
+        lib.hitl_dag_run.restype = ci
+        lib.hitl_dag_run.argtypes = [prob, _DP, opts, res]
+        lib.hitl_dag_probe.restype = ci
+        lib.hitl_dag_probe.argtypes = [prob, cd, _DP, cd, _DP, _DP, _DP, ctypes.c_char_p, ci]
+
+
+def dptr(a: np.ndarray) -> ctypes._Pointer:
+    """A ``double *`` into a C-contiguous float64 array (the caller keeps it alive).
+
+    Parameters
+    ----------
+    a : ndarray
+    """
+    return a.ctypes.data_as(_DP)
+
+
+@dataclass
+class DriverCall:
+    """The options and result of one driver run, with the arrays they point into.
+
+    Attributes
+    ----------
+    sched : Schedule
+        The run's output times, targets and restart times.
+    options : Options
+    result : Result
+        ``result.x_out`` points into :attr:`X`.
+    X : ndarray, shape (len(t_out), nx)
+        The output rows, NaN where not filled.
+    """
+
+    sched: Schedule
+    options: Options
+    result: Result
+    X: np.ndarray
+    _keep: tuple[np.ndarray, ...]
+
+    @classmethod
+    def of(
+        cls, nx: int, t_out: np.ndarray, settings: IntegratorSettings, breakpoints: Sequence[float]
+    ) -> DriverCall:
+        """Options from the settings and the schedule; a result with an empty output buffer.
+
+        Parameters
+        ----------
+        nx : int
+            States per row.
+        t_out : ndarray
+            Output times (rows keep them; the driver runs to the schedule's targets).
+        settings : IntegratorSettings
+            ``rtol``, ``atol`` and ``max_steps``.
+        breakpoints : sequence of float
+            Restart times, reconciled with ``t_out`` by :func:`~generated.integrate.schedule`.
+        """
+        sched = schedule(t_out, breakpoints)
+        tq = np.ascontiguousarray(sched.targets, dtype=float)
+        bps = np.ascontiguousarray(sched.breaks, dtype=float)
+        X = np.full((len(sched.t_out), nx), np.nan)
+        options = Options(
+            rtol=float(settings.rtol),
+            atol=float(settings.atol),
+            max_steps=int(settings.max_steps),
+            nt=len(tq),
+            t_out=dptr(tq),
+            nb=len(bps),
+            breaks=dptr(bps),
+        )
+        return cls(sched, options, Result(x_out=dptr(X)), X, (tq, bps))
+
+    def trajectory(
+        self, method: str, wall0: float, progress: Callable[[float], None] | None = None
+    ) -> Trajectory:
+        """:func:`driver_trajectory` of the filled result.
+
+        Parameters
+        ----------
+        method, wall0, progress
+            As :func:`driver_trajectory`.
+        """
+        return driver_trajectory(method, self.sched.t_out, self.X, self.result, wall0, progress)
 
 
 def run(
@@ -281,35 +427,17 @@ def run(
     """
     wall0 = time.perf_counter()
     lib = load(Path(library))
-    sched = schedule(t_out, breakpoints)  # rows keep t_out; the driver runs to the targets
-    t_out, tq = sched.t_out, np.ascontiguousarray(sched.targets)
-    bps = np.ascontiguousarray(sched.breaks)
     x = np.ascontiguousarray(x0, dtype=float).ravel()
-    nx, nt = x.size, len(t_out)
-    X = np.full((nt, nx), np.nan)
-    stats = np.zeros(len(STATS))
-    msg = ctypes.create_string_buffer(MSG_LEN)
-
-    def ptr(a: np.ndarray):
-        return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-
-    filled = lib.hitl_native_run(
-        nx, ptr(x), nt, ptr(tq), len(bps), ptr(bps), float(settings.rtol),
-        float(settings.atol), int(settings.max_steps), ptr(X), ptr(stats), msg, MSG_LEN,
-    )  # fmt: skip
-    return driver_trajectory(
-        "native", filled, t_out, X, dict(zip(STATS, stats.tolist(), strict=True)),
-        msg.value.decode(errors="replace"), wall0, progress,
-    )  # fmt: skip
+    call = DriverCall.of(x.size, t_out, settings, breakpoints)
+    lib.hitl_native_run(x.size, dptr(x), ctypes.byref(call.options), ctypes.byref(call.result))
+    return call.trajectory("native", wall0, progress)
 
 
 def driver_trajectory(
     method: str,
-    filled: int,
     t_out: np.ndarray,
     X: np.ndarray,
-    stats: dict[str, float],
-    text: str,
+    result: Result,
     wall0: float,
     progress: Callable[[float], None] | None = None,
 ) -> Trajectory:
@@ -319,14 +447,11 @@ def driver_trajectory(
     ----------
     method : str
         ``"native"``.
-    filled : int
-        Rows of ``X`` the driver filled (< 1: it could not start).
     t_out, X : ndarray
         Output times and the driver's output rows.
-    stats : dict
-        The driver's stats by name (:data:`STATS` and any extras).
-    text : str
-        The driver's message (``"FLAG_NAME: SUNDIALS message"`` on a failure).
+    result : Result
+        The driver's counters, last flag and message (``"FLAG_NAME: SUNDIALS message"``
+        on a failure); ``filled`` < 1: it could not start.
     wall0 : float
         ``time.perf_counter()`` when the run began.
     progress : callable, optional
@@ -337,22 +462,22 @@ def driver_trajectory(
     IntegrationError
         If the driver could not start.
     """
-    text = text.strip()
-    nt = len(t_out)
+    text = result.msg.decode(errors="replace").strip()
+    filled, nt = int(result.filled), len(t_out)
     if filled < 1:
         raise IntegrationError(f"{method} integrator could not start: {text or 'unknown error'}")
-    st = dict(stats)
-    flag = int(st.pop("flag"))
+    stats: dict[str, float | int] = {k: int(getattr(result, k)) for k in COUNTERS}
+    stats.update(last_step=float(result.last_step), integrator_calls=1, jtimes_evals=0)
+    stats["wall_seconds"] = time.perf_counter() - wall0
     t_reached = float(t_out[filled - 1])
-    st.pop("t_reached")
-    out = {k: (v if k == "last_step" else int(v)) for k, v in st.items()}
-    out.update(integrator_calls=1, jtimes_evals=0, wall_seconds=time.perf_counter() - wall0)
-    message = ""
+    message, status = "", Status.OK
     if filled < nt:
         name, _, detail = text.partition(":")
+        flag = name.strip() or str(int(result.flag))
+        status = flag_status(flag)
         message = (
             f"{method} failed after t = {t_reached:.6g} s (working towards t = "
-            f"{float(t_out[filled]):.6g} s): {flag_reason(name.strip() or str(flag))}"
+            f"{float(t_out[filled]):.6g} s): {flag_reason(flag)}"
             + (f" ({detail.strip()})" if detail.strip() else "")
         )
     if progress is not None:
@@ -362,8 +487,8 @@ def driver_trajectory(
         x=X[:filled],
         z=None,
         method=method,
-        complete=filled == nt,
+        status=status,
         t_reached=t_reached,
         message=message,
-        stats=out,
+        stats=stats,
     )

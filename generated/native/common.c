@@ -3,8 +3,9 @@
  * includes, the context shared by the drivers, the custom direct SUNLinearSolver that
  * factorises M = I - gamma J with the generated nat_lu_factor / nat_lu_solve (sparse
  * LU without pivoting, generated/sparse_lu.py), CVODE's counters and the SUNDIALS
- * version/index check. Prepended to driver.c (whole closed loop, method 'native') or
- * cascade.c (follower by follower, method 'cascade'); the generated C comes first.
+ * version/index check. Prepended to driver.c (whole closed loop) or dag.c (follower by
+ * follower in graph order), both method 'native'; the generated C comes first. The
+ * drivers' entry points take hitl_options and fill hitl_result (hitl_native.h).
  */
 #include <math.h>
 #include <stdio.h>
@@ -17,12 +18,7 @@
 #include <sundials/sundials_version.h>
 #include <sunmatrix/sunmatrix_sparse.h>
 
-/* stats[] layout, read by generated/native.py (STATS) */
-enum {
-  HITL_STEPS, HITL_RHS_EVALS, HITL_JAC_EVALS, HITL_LIN_SETUPS, HITL_ERR_TEST_FAILS,
-  HITL_NEWTON_ITERS, HITL_NEWTON_FAILS, HITL_LAST_STEP, HITL_LU_FACTOR, HITL_PIVOT_FAILS,
-  HITL_RESTARTS, HITL_FLAG, HITL_T_REACHED, HITL_NSTATS
-};
+#include "hitl_native.h"
 
 /* a pivot below this (or not finite) makes the setup fail recoverably */
 #define HITL_PIVOT_MIN 1e-13
@@ -134,10 +130,10 @@ static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx) {
    an output time that coincides with a breakpoint to that tolerance replaced by it, so
    CVODE is never asked for a time it already stands at (CV_TOO_CLOSE).
    Returns the rows filled (>= 1); *flag is CVODE's last flag (< 0 on a failure). */
-static int hitl_cvode_outputs(hitl_cvode *s, int nx, int nt, const double *t_out, int nb,
-                              const double *breaks, double *x_out, long *acc, double *stats,
-                              int *flag) {
-  int filled = 1, ib = 0;
+static int hitl_cvode_outputs(hitl_cvode *s, int nx, const hitl_options *o, hitl_result *r,
+                              long *acc, int *flag) {
+  int filled = 1, ib = 0, nt = o->nt, nb = o->nb;
+  const double *t_out = o->t_out, *breaks = o->breaks;
   double t = t_out[0], tstop_set = NAN;
   *flag = 0;
   while (ib < nb && breaks[ib] <= t) ib++;
@@ -159,12 +155,12 @@ static int hitl_cvode_outputs(hitl_cvode *s, int nx, int nt, const double *t_out
           hitl_add_counters(s->mem, acc);
           *flag = CVodeReInit(s->mem, t, s->y);
           if (*flag < 0) return filled;
-          stats[HITL_RESTARTS] += 1;
+          r->restarts += 1;
           ib++;
         }
       }
     }
-    memcpy(x_out + (size_t)k * nx, N_VGetArrayPointer(s->y), (size_t)nx * sizeof(double));
+    memcpy(r->x_out + (size_t)k * nx, N_VGetArrayPointer(s->y), (size_t)nx * sizeof(double));
     filled = k + 1;
   }
   return filled;
@@ -193,26 +189,35 @@ static void hitl_ls_attach(hitl_cvode *s, void *content, int (*setup)(SUNLinearS
 }
 
 /* CVODE's options after CVodeInit: user data, tolerances, linear solver, Jacobian */
-static int hitl_cvode_options(hitl_cvode *s, void *data, double rtol, double atol,
+static int hitl_cvode_options(hitl_cvode *s, void *data, const hitl_options *o,
                               CVLsJacFn jac) {
-  return CVodeSetUserData(s->mem, data) || CVodeSStolerances(s->mem, rtol, atol) ||
-         CVodeSetLinearSolver(s->mem, s->LS, s->A) || CVodeSetJacFn(s->mem, jac);
+  return CVodeSetUserData(s->mem, data) || CVodeSStolerances(s->mem, o->rtol, o->atol) ||
+         CVodeSetLinearSolver(s->mem, s->LS, s->A) || CVodeSetJacFn(s->mem, jac) ||
+         CVodeSetMaxNumSteps(s->mem, o->max_steps);
 }
 
-/* The counters (acc: hitl_add_counters' layout) and the last flag into stats[] */
+/* The counters (acc: hitl_add_counters' layout) and the last flag into the result */
 static void hitl_stats(const hitl_ctx *c, const long *acc, double last_step, int flag,
-                       double *stats) {
-  stats[HITL_STEPS] = (double)acc[0];
-  stats[HITL_RHS_EVALS] = (double)acc[1];
-  stats[HITL_JAC_EVALS] = (double)acc[2];
-  stats[HITL_LIN_SETUPS] = (double)acc[3];
-  stats[HITL_ERR_TEST_FAILS] = (double)acc[4];
-  stats[HITL_NEWTON_ITERS] = (double)acc[5];
-  stats[HITL_NEWTON_FAILS] = (double)acc[6];
-  stats[HITL_LAST_STEP] = last_step;
-  stats[HITL_LU_FACTOR] = (double)c->n_fac;
-  stats[HITL_PIVOT_FAILS] = (double)c->n_piv_fail;
-  stats[HITL_FLAG] = flag;
+                       hitl_result *r) {
+  r->steps = acc[0];
+  r->rhs_evals = acc[1];
+  r->jac_evals = acc[2];
+  r->lin_setups = acc[3];
+  r->error_test_fails = acc[4];
+  r->newton_iters = acc[5];
+  r->newton_fails = acc[6];
+  r->last_step = last_step;
+  r->lu_factorizations = c->n_fac;
+  r->pivot_failures = c->n_piv_fail;
+  r->flag = flag;
+}
+
+/* A driver's result before the run: zero counters, an empty message, x_out kept */
+static void hitl_result_start(hitl_result *r) {
+  double *x_out = r->x_out;
+  memset(r, 0, sizeof *r);
+  r->x_out = x_out;
+  r->filled = -1;
 }
 
 /* CVODE's flag name and the last SUNDIALS message, as "NAME: message", into c->msg */
@@ -226,30 +231,28 @@ static void hitl_flag_message(hitl_ctx *c, int flag) {
 
 /* A whole run on a created CVODE (ok: the driver's set-up succeeded): from x0 at
    t_out[0] through every output time (hitl_cvode_outputs), then CVODE's counters, the
-   last flag and its message into stats[] / c->msg. Returns the rows of x_out filled
-   (>= 1), or -1 if CVODE could not be started. */
+   last flag and its message into the result (reset by hitl_result_start first). Returns
+   the rows of x_out filled (>= 1), or -1 if CVODE could not be started. */
 static int hitl_cvode_run(hitl_ctx *c, hitl_cvode *s, int ok, void *data, CVRhsFn rhs,
-                          CVLsJacFn jac, const double *x0, int nt, const double *t_out,
-                          int nb, const double *breaks, double rtol, double atol,
-                          long max_steps, double *x_out, double *stats) {
+                          CVLsJacFn jac, const double *x0, const hitl_options *o,
+                          hitl_result *r) {
   int nx = c->nx, filled = -1, flag = 0;
   long acc[7] = {0, 0, 0, 0, 0, 0, 0};
   sunrealtype h = 0;
-  for (int i = 0; i < HITL_NSTATS; ++i) stats[i] = 0.0;
   if (ok) {
     memcpy(N_VGetArrayPointer(s->y), x0, (size_t)nx * sizeof(double));
-    memcpy(x_out, x0, (size_t)nx * sizeof(double));
-    if (!CVodeInit(s->mem, rhs, t_out[0], s->y) &&
-        !hitl_cvode_options(s, data, rtol, atol, jac) &&
-        !CVodeSetMaxNumSteps(s->mem, max_steps)) /* else: msg set by the error handler */
-      filled = hitl_cvode_outputs(s, nx, nt, t_out, nb, breaks, x_out, acc, stats, &flag);
+    memcpy(r->x_out, x0, (size_t)nx * sizeof(double));
+    if (!CVodeInit(s->mem, rhs, o->t_out[0], s->y) &&
+        !hitl_cvode_options(s, data, o, jac)) /* else: msg set by the error handler */
+      filled = hitl_cvode_outputs(s, nx, o, r, acc, &flag);
   }
   if (s->mem) {
     hitl_add_counters(s->mem, acc);
     CVodeGetLastStep(s->mem, &h);
   }
-  hitl_stats(c, acc, h, flag, stats);
-  stats[HITL_T_REACHED] = filled >= 1 ? t_out[filled - 1] : t_out[0];
+  hitl_stats(c, acc, h, flag, r);
+  r->filled = filled;
+  r->t_reached = filled >= 1 ? o->t_out[filled - 1] : o->t_out[0];
   if (flag < 0) hitl_flag_message(c, flag);
   return filled;
 }
@@ -262,6 +265,17 @@ static void hitl_cvode_free(hitl_ctx *c, hitl_cvode *s) {
   if (s->ctx) SUNContext_Free(&s->ctx);
   free(c->arg), free(c->res), free(c->iw), free(c->w), free(c->lu), free(c->piv);
   free(c->jcol), free(c->jrow);
+}
+
+/* sizeof of the structs of hitl_native.h as compiled here (which: HITL_*_SIZE), or -1:
+   the loader compares them with its ctypes mirror before any call */
+CASADI_SYMBOL_EXPORT long hitl_struct_size(int which) {
+  switch (which) {
+    case HITL_OPTIONS_SIZE: return (long)sizeof(hitl_options);
+    case HITL_RESULT_SIZE: return (long)sizeof(hitl_result);
+    case HITL_DAG_PROBLEM_SIZE: return (long)sizeof(hitl_dag_problem);
+    default: return -1;
+  }
 }
 
 /* Does the SUNDIALS we run against match the headers we were compiled with? */

@@ -259,12 +259,11 @@ static int hitl_dag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vect
 
 /* Everything a run needs: sizes, problem arrays, work arrays, CVODE, the block
    matrix and the linear solver. Returns 0, or -1 with d->base.msg set. */
-static int hitl_dag_init(hitl_dag *d, hitl_cvode *s, int N, int m, int na, int n,
-                         const int *order, const int *up_ptr, const int *up_idx,
-                         const double *up_w, const double *cpl, int npar, const double *prm,
-                         const int *fidx, char *msg, int msglen) {
+static int hitl_dag_init(hitl_dag *d, hitl_cvode *s, const hitl_dag_problem *p, char *msg,
+                         int msglen) {
   hitl_ctx *c = &d->base;
   casadi_int sz[4] = {0, 0, 0, 0};
+  int N = p->N, m = p->m, na = p->na, n = p->n, npar = p->npar;
   int nx = m + N * na;
   memset(d, 0, sizeof *d);
   memset(s, 0, sizeof *s);
@@ -272,8 +271,8 @@ static int hitl_dag_init(hitl_dag *d, hitl_cvode *s, int N, int m, int na, int n
   c->msglen = msglen;
   if (msglen > 0) msg[0] = '\0';
   d->N = N, d->m = m, d->na = na, d->n = n, d->n3 = 3 * n, d->k = m + na + 3 * n;
-  d->npar = npar, d->order = order, d->up_ptr = up_ptr, d->up_idx = up_idx, d->up_w = up_w;
-  d->cpl = cpl, d->prm = prm, d->fidx = fidx;
+  d->npar = npar, d->order = p->order, d->up_ptr = p->up_ptr, d->up_idx = p->up_idx;
+  d->up_w = p->up_w, d->cpl = p->cpl, d->prm = p->prm, d->fidx = p->fidx;
   if (dag_rhs_sparsity_in(1)[0] != m + na || dag_rhs_sparsity_in(2)[0] != 3 * n ||
       dag_rhs_sparsity_in(4)[0] != npar || dag_jac_sparsity_out(1)[0] != d->k) {
     hitl_msg(c, "block sizes do not match the generated block");
@@ -316,27 +315,19 @@ static void hitl_dag_free(hitl_dag *d, hitl_cvode *s) {
 }
 
 /*
- * Integrate the whole closed loop (nx = m + N*na states) from x0 at t_out[0] and store
- * the state at every t_out[k] (row-major). order[N]: a topological order; up_ptr[N+1],
- * up_idx, up_w: CSR of the followers each one hears and the weights (L+B)_ij;
- * cpl[N*2], prm[N*npar] (agent-major), fidx[N*(1+n)]: the blocks' constant inputs;
- * t_out, breaks[nb]: generated.integrate.schedule's targets and restart times
- * (hitl_cvode_outputs). Returns the rows filled
- * (>= 1), or -1 if CVODE could not be set up; stats as the native driver's.
+ * Integrate the whole closed loop (nx = m + N*na states of the problem p, hitl_native.h)
+ * from x0 at o->t_out[0] and store the state at every output time in r->x_out
+ * (row-major); options and result as the whole-loop driver's (hitl_native_run).
+ * Returns r->filled: the rows filled (>= 1), or -1 if CVODE could not be set up.
  */
-CASADI_SYMBOL_EXPORT int hitl_dag_run(int N, int m, int na, int n, const int *order,
-                                      const int *up_ptr, const int *up_idx, const double *up_w,
-                                      const double *cpl, int npar, const double *prm,
-                                      const int *fidx, const double *x0, int nt,
-                                      const double *t_out, int nb, const double *breaks,
-                                      double rtol, double atol, long max_steps, double *x_out,
-                                      double *stats, char *msg, int msglen) {
+CASADI_SYMBOL_EXPORT int hitl_dag_run(const hitl_dag_problem *p, const double *x0,
+                                      const hitl_options *o, hitl_result *r) {
   hitl_dag d;
   hitl_cvode s;
-  int ok = hitl_dag_init(&d, &s, N, m, na, n, order, up_ptr, up_idx, up_w, cpl, npar, prm,
-                         fidx, msg, msglen) == 0;
-  int filled = hitl_cvode_run(&d.base, &s, ok, &d, hitl_dag_rhs, hitl_dag_jac, x0, nt, t_out,
-                              nb, breaks, rtol, atol, max_steps, x_out, stats);
+  int ok, filled;
+  hitl_result_start(r);
+  ok = hitl_dag_init(&d, &s, p, r->msg, HITL_MSG_LEN) == 0;
+  filled = hitl_cvode_run(&d.base, &s, ok, &d, hitl_dag_rhs, hitl_dag_jac, x0, o, r);
   hitl_dag_free(&d, &s);
   return filled;
 }
@@ -346,19 +337,14 @@ CASADI_SYMBOL_EXPORT int hitl_dag_run(int N, int m, int na, int n, const int *or
  * solution of (I - gamma J) sol = b, exactly as a run evaluates and solves them.
  * Returns 0, or -1 with msg set.
  */
-CASADI_SYMBOL_EXPORT int hitl_dag_probe(int N, int m, int na, int n, const int *order,
-                                        const int *up_ptr, const int *up_idx,
-                                        const double *up_w, const double *cpl, int npar,
-                                        const double *prm, const int *fidx, double t,
-                                        const double *x, double gamma, const double *b,
-                                        double *xdot, double *sol, char *msg, int msglen) {
+CASADI_SYMBOL_EXPORT int hitl_dag_probe(const hitl_dag_problem *p, double t, const double *x,
+                                        double gamma, const double *b, double *xdot, double *sol,
+                                        char *msg, int msglen) {
   hitl_dag d;
   hitl_cvode s;
-  int nx = m + N * na, ret = -1;
+  int nx = p->m + p->N * p->na, ret = -1;
   N_Vector bv = NULL, xv = NULL;
-  if (hitl_dag_init(&d, &s, N, m, na, n, order, up_ptr, up_idx, up_w, cpl, npar, prm, fidx,
-                    msg, msglen))
-    goto done;
+  if (hitl_dag_init(&d, &s, p, msg, msglen)) goto done;
   bv = N_VNew_Serial(nx, s.ctx);
   xv = N_VNew_Serial(nx, s.ctx);
   if (!bv || !xv) goto done;

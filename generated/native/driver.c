@@ -125,35 +125,32 @@ static int hitl_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, void *d
 }
 
 /*
- * Integrate from x0 at t_out[0] and store the state at every t_out[k] (row-major
- * x_out[k * nx + i]; CVODE's interpolant between its steps, as CVODES through
- * CasADi). The run restarts (CVodeReInit) at every breakpoint; it stops exactly there
- * and at the horizon (CVodeSetStopTime), never stepping beyond. t_out and breaks are
- * generated.integrate.schedule's targets and restart times (hitl_cvode_outputs).
- * Returns the number of rows of x_out filled (>= 1), or -1 if CVODE could not be set
- * up; stats[HITL_FLAG] is CVODE's last flag (< 0 on a failure) and msg its name and
- * message.
+ * Integrate from x0 at o->t_out[0] and store the state at every output time in
+ * r->x_out (row-major x_out[k * nx + i]; CVODE's interpolant between its steps, as
+ * CVODES through CasADi). The run restarts (CVodeReInit) at every breakpoint; it stops
+ * exactly there and at the horizon (CVodeSetStopTime), never stepping beyond. The
+ * options' t_out and breaks are generated.integrate.schedule's targets and restart
+ * times (hitl_cvode_outputs). Returns r->filled: the rows of x_out filled (>= 1), or -1
+ * if CVODE could not be set up; r->flag is CVODE's last flag (< 0 on a failure) and
+ * r->msg its name and message.
  */
-CASADI_SYMBOL_EXPORT int hitl_native_run(int nx, const double *x0, int nt, const double *t_out,
-                                         int nb, const double *breaks, double rtol, double atol,
-                                         long max_steps, double *x_out, double *stats, char *msg,
-                                         int msglen) {
+CASADI_SYMBOL_EXPORT int hitl_native_run(int nx, const double *x0, const hitl_options *o,
+                                         hitl_result *r) {
   hitl_ctx c;
   hitl_cvode s;
   casadi_int sz[4] = {0, 0, 0, 0}, *lucol = NULL, *lurow = NULL;
   int ok, filled;
 
   memset(&c, 0, sizeof c);
-  c.msg = msg;
-  c.msglen = msglen;
-  if (msglen > 0) msg[0] = '\0';
+  hitl_result_start(r);
+  c.msg = r->msg;
+  c.msglen = HITL_MSG_LEN;
   hitl_work_size(nat_rhs_work, sz);
   hitl_work_size(nat_jac_work, sz);
   hitl_work_size(nat_lu_factor_work, sz);
   hitl_work_size(nat_lu_solve_work, sz);
   ok = hitl_native_create(&c, &s, nx, sz, &lucol, &lurow) == 0;
-  filled = hitl_cvode_run(&c, &s, ok, &c, hitl_rhs, hitl_jac, x0, nt, t_out, nb, breaks, rtol,
-                          atol, max_steps, x_out, stats);
+  filled = hitl_cvode_run(&c, &s, ok, &c, hitl_rhs, hitl_jac, x0, o, r);
   hitl_cvode_free(&c, &s);
   free(lucol), free(lurow);
   return filled;

@@ -1,0 +1,68 @@
+/*
+ * The native drivers' calling convention (generated/native/driver.c, dag.c): a run takes
+ * one options struct and fills one result struct. Defined here once; mirrored once in
+ * Python as ctypes Structures (generated/native.py: Options, Result, DagProblem).
+ * tests/test_solver_interface.py compiles this header and compares every field's
+ * offset and every struct's size with the ctypes mirror, and every library reports
+ * its sizes (hitl_struct_size) when it is loaded.
+ *
+ * Plain C types only: the header needs neither SUNDIALS nor CasADi.
+ */
+#ifndef HITL_NATIVE_H
+#define HITL_NATIVE_H
+
+/* length of the result's message buffer (with its terminating NUL) */
+#define HITL_MSG_LEN 1024
+
+/* What a run is asked to do: tolerances, steps, output and restart times. t_out and
+   breaks are generated.integrate.schedule's targets and restart times. */
+typedef struct {
+  double rtol;
+  double atol;
+  long max_steps;       /* steps allowed between two output times (CVodeSetMaxNumSteps) */
+  int nt;               /* number of output times */
+  const double *t_out;  /* nt output times, t_out[0] the start */
+  int nb;               /* number of restart times */
+  const double *breaks; /* nb restart times, strictly inside (t_out[0], t_out[nt-1]) */
+} hitl_options;
+
+/* What a run returns: the output rows, CVODE's counters, its last flag and message. */
+typedef struct {
+  double *x_out;           /* caller's nt x nx buffer, row-major (x_out[k * nx + i]) */
+  int filled;              /* rows of x_out filled (>= 1), or -1 if CVODE could not start */
+  int flag;                /* CVODE's last flag (< 0 on a failure) */
+  double t_reached;        /* t_out[filled - 1] */
+  double last_step;        /* the last step size taken */
+  long steps;
+  long rhs_evals;
+  long jac_evals;
+  long lin_setups;
+  long error_test_fails;
+  long newton_iters;
+  long newton_fails;
+  long lu_factorizations;  /* set-ups of the driver's linear solver */
+  long pivot_failures;     /* set-ups refused for a small pivot or a singular block */
+  long restarts;           /* CVodeReInit at breakpoints */
+  char msg[HITL_MSG_LEN];  /* "FLAG_NAME: SUNDIALS message" on a failure */
+} hitl_result;
+
+/* The graph-ordered driver's problem (dag.c): sizes, graph lists and per-agent data. */
+typedef struct {
+  int N;               /* followers */
+  int m;               /* leader states */
+  int na;              /* states per follower */
+  int n;               /* joint-space dimension */
+  const int *order;    /* N: a topological order of the graph */
+  const int *up_ptr;   /* N + 1: CSR of the followers each one hears */
+  const int *up_idx;
+  const double *up_w;  /* weights (L + B)_ij */
+  const double *cpl;   /* N x 2 coupling constants */
+  int npar;            /* parameters per follower */
+  const double *prm;   /* N x npar, agent-major */
+  const int *fidx;     /* N x (1 + n) indices into the fault values */
+} hitl_dag_problem;
+
+/* which argument of hitl_struct_size */
+enum { HITL_OPTIONS_SIZE, HITL_RESULT_SIZE, HITL_DAG_PROBLEM_SIZE };
+
+#endif

@@ -1,0 +1,218 @@
+"""What every integration method provides: the :class:`Solver` interface and :class:`Status`.
+
+A method is one :class:`Solver` subclass, registered by name
+(:func:`generated.solvers.register`). The pipeline (:mod:`generated.api`) asks the
+registry for the scenario's method and then only calls the interface: ``prepare``
+before the closed loop is built, ``build`` for what goes into the compiled library,
+``run`` for the trajectory. It never compares method names.
+"""
+
+from __future__ import annotations
+
+import enum
+import re
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar
+
+if TYPE_CHECKING:
+    import casadi as ca
+    import numpy as np
+
+    from core.scenario import Scenario
+    from generated.api import Built
+    from generated.codegen import CodegenSettings, Library, Toolchain
+    from generated.integrate import IntegratorSettings, Trajectory
+    from symbolic.closed_loop import ClosedLoop
+    from synthesis.gains import Gains
+
+#: the two forms a closed loop is compiled in
+FORMS = ("ode", "dae")
+
+
+class Status(enum.Enum):
+    """Why a run ended: callers test this, never the text of the message.
+
+    ``OK`` is a complete run; every other member is an incomplete one.
+    """
+
+    OK = "complete"
+    STEP_LIMIT = "too many steps before the next output time"
+    ERROR_TEST = "error test failed repeatedly"
+    CONV_FAIL = "Newton iteration failed repeatedly"
+    ACCURACY = "tolerances too small for machine precision"
+    RHS_FAIL = "right-hand side or residual not finite"
+    LINEAR_FAIL = "linear solver failed"
+    NOT_FINITE = "state is not finite"
+    TOO_CLOSE = "output time too close to the current time"
+    INIT_FAIL = "consistent initial conditions not found"
+    TIME_LIMIT = "wall-clock time limit reached"
+    FAILED = "solver failure"
+
+
+#: SUNDIALS return-flag names (without CV_/IDA_) -> status
+_FLAG_STATUS = {
+    "TOO_MUCH_WORK": Status.STEP_LIMIT,
+    "TOO_MUCH_ACC": Status.ACCURACY,
+    "ERR_FAIL": Status.ERROR_TEST,
+    "ERR_FAILURE": Status.ERROR_TEST,
+    "CONV_FAIL": Status.CONV_FAIL,
+    "CONV_FAILURE": Status.CONV_FAIL,
+    "RHSFUNC_FAIL": Status.RHS_FAIL,
+    "REPTD_RHSFUNC_ERR": Status.RHS_FAIL,
+    "UNREC_RHSFUNC_ERR": Status.RHS_FAIL,
+    "FIRST_RHSFUNC_ERR": Status.RHS_FAIL,
+    "RES_FAIL": Status.RHS_FAIL,
+    "REP_RES_ERR": Status.RHS_FAIL,
+    "FIRST_RES_FAIL": Status.RHS_FAIL,
+    "LSETUP_FAIL": Status.LINEAR_FAIL,
+    "LSOLVE_FAIL": Status.LINEAR_FAIL,
+    "TOO_CLOSE": Status.TOO_CLOSE,
+    "LINESEARCH_FAIL": Status.INIT_FAIL,
+    "NO_RECOVERY": Status.INIT_FAIL,
+}
+
+
+def flag_status(flag: str) -> Status:
+    """The :class:`Status` of a SUNDIALS return flag (``CV_TOO_MUCH_WORK``, ``ERR_FAIL``).
+
+    Parameters
+    ----------
+    flag : str
+        The flag's name with or without its ``CV_``/``IDA_`` prefix.
+    """
+    return _FLAG_STATUS.get(re.sub(r"^(?:CV|IDA)_", "", flag.strip()), Status.FAILED)
+
+
+@dataclass(frozen=True)
+class BuildPlan:
+    """What a method adds to the closed loop's compiled library.
+
+    Attributes
+    ----------
+    functions : tuple of casadi.Function
+        Compiled next to the right-hand side and the outputs.
+    derivatives : bool
+        Generate ``jac_<dyn>`` (the CasADi integrators' Jacobian).
+    toolchain : Toolchain or None
+        Extra C sources, include dirs and libraries linked in (the native drivers).
+    companion : Library or None
+        A second library the method runs instead (the graph-ordered native driver).
+    data : object
+        Whatever ``run`` needs besides the libraries (the graph-ordered blocks).
+    """
+
+    functions: tuple[ca.Function, ...] = ()
+    derivatives: bool = True
+    toolchain: Toolchain | None = None
+    companion: Library | None = None
+    data: Any = None
+
+
+class Solver(ABC):
+    """One integration method.
+
+    Attributes
+    ----------
+    name : str
+        The ``integration.method`` (and ``IntegratorSettings.method``) that selects it.
+    form : str
+        ``"ode"`` (right-hand side ``(t, x) -> ẋ``) or ``"dae"`` (semi-explicit, with
+        algebraic states z): the closed-loop form it integrates.
+    summary : str
+        One line for listings and errors.
+    """
+
+    name: ClassVar[str]
+    form: ClassVar[str] = "ode"
+    summary: ClassVar[str] = ""
+
+    def prepare(self, sc: Scenario, gains: Gains) -> Any:
+        """Checks and data needed before the closed loop is built (default: none).
+
+        Parameters
+        ----------
+        sc : Scenario
+        gains : Gains
+
+        Returns
+        -------
+        object
+            Passed to :meth:`build` as ``prepared``.
+        """
+        return None
+
+    def build(
+        self, dyn: ca.Function, cl: ClosedLoop, settings: CodegenSettings, prepared: Any = None
+    ) -> BuildPlan:
+        """What to compile for this method besides ``dyn`` and the outputs.
+
+        Parameters
+        ----------
+        dyn : casadi.Function
+            The closed loop's right-hand side in :attr:`form`, as it is compiled.
+        cl : ClosedLoop
+        settings : CodegenSettings
+            Resolved for the closed loop's N.
+        prepared : object
+            What :meth:`prepare` returned (None when the caller skipped it).
+        """
+        return BuildPlan()
+
+    def check_built(self, built: Built) -> None:
+        """Raise :class:`~core.errors.IntegrationError` if ``built`` was compiled for
+        another method (default: the form must match).
+
+        Parameters
+        ----------
+        built : Built
+        """
+        from core.errors import IntegrationError
+
+        if built.form != self.form:
+            raise IntegrationError(
+                f"method {self.name!r} needs the {self.form.upper()} build "
+                f"(this one is {built.form}): call build(..., method={self.name!r})"
+            )
+
+    @abstractmethod
+    def run(
+        self,
+        built: Built,
+        x0: np.ndarray,
+        t_out: np.ndarray,
+        settings: IntegratorSettings,
+        breakpoints: Sequence[float] = (),
+        progress: Callable[[float], None] | None = None,
+    ) -> Trajectory:
+        """Integrate ``built`` from ``x0`` at ``t_out[0]`` through ``t_out``.
+
+        Parameters
+        ----------
+        built : Built
+            Compiled for this method (:meth:`check_built` has passed).
+        x0 : ndarray
+            Initial state.
+        t_out : ndarray
+            Increasing output times.
+        settings : IntegratorSettings
+        breakpoints : sequence of float
+            Known discontinuity times: the run restarts there.
+        progress : callable, optional
+            Called with the simulated time reached.
+
+        Returns
+        -------
+        Trajectory
+            Incomplete (``status`` not ``OK``), not raised, on an integrator failure.
+        """
+
+    def settings_used(self, settings: IntegratorSettings) -> dict[str, Any]:
+        """The method-specific settings a run record lists (default: none).
+
+        Parameters
+        ----------
+        settings : IntegratorSettings
+        """
+        return {}
