@@ -21,6 +21,7 @@ on random patterns and the native run against CVODES.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 
@@ -67,19 +68,50 @@ def sparse_lu(pattern: ca.Sparsity, prefix: str = "lu", *, cse: bool = True) -> 
     BuildError
         If the pattern is not square or lacks a diagonal entry.
     """
+    n = _check_pattern(pattern)
+    M = ca.SX.sym("M", pattern)
+    rows = _rows_by_index(M.nz, pattern, n)
+    pivots = _eliminate(rows, n)
+    lu_sp = _lu_pattern(rows, n)
+    lci, lrow = lu_sp.colind(), lu_sp.row()
+    values = [rows[lrow[k]][c] for c in range(n) for k in range(lci[c], lci[c + 1])]
+    opts = {"cse": True} if cse else {}
+    factor = ca.Function(
+        f"{prefix}_factor",
+        [M],
+        [ca.SX(lu_sp, ca.vertcat(*values)), ca.vertcat(*pivots)],
+        ["M"],
+        ["LU", "pivots"],
+        opts,
+    )
+    solve = _solve_function(f"{prefix}_solve", lu_sp, n, opts)
+    return SparseLU(pattern, factor, solve, lu_sp.nnz() - pattern.nnz())
+
+
+def _check_pattern(pattern: ca.Sparsity) -> int:
+    """The size n of a square pattern with its whole diagonal (else :class:`BuildError`)."""
     n = pattern.size1()
     if pattern.size2() != n:
         raise BuildError(f"sparse_lu: pattern is {n}x{pattern.size2()}, expected square")
     diag = ca.Sparsity.diag(n)
     if (pattern + diag).nnz() != pattern.nnz():
         raise BuildError("sparse_lu: pattern lacks diagonal entries (add ca.Sparsity.diag(n))")
-    M = ca.SX.sym("M", pattern)
+    return n
+
+
+def _rows_by_index(nz: Any, pattern: ca.Sparsity, n: int) -> list[dict[int, ca.SX]]:
+    """``rows[i][j]``: the nonzero (i, j) of a matrix on ``pattern`` (``nz``: its nonzeros)."""
     colind, row = pattern.colind(), pattern.row()
-    # rows[i][j] = current entry (i, j); elimination updates them in place
     rows: list[dict[int, ca.SX]] = [{} for _ in range(n)]
     for c in range(n):
         for k in range(colind[c], colind[c + 1]):
-            rows[row[k]][c] = M.nz[k]
+            rows[row[k]][c] = nz[k]
+    return rows
+
+
+def _eliminate(rows: list[dict[int, ca.SX]], n: int) -> list[ca.SX]:
+    """Gaussian elimination without pivoting, in place: ``rows`` becomes L (below the
+    diagonal, unit diagonal implied) and U (on and above it), with fill-in; the pivots."""
     below: list[list[int]] = [[] for _ in range(n)]  # below[k] = rows i > k with (i, k) set
     for i in range(n):
         for j in rows[i]:
@@ -97,30 +129,24 @@ def sparse_lu(pattern: ca.Sparsity, prefix: str = "lu", *, cse: bool = True) -> 
                 if j not in rows[i] and j < i:
                     below[j].append(i)  # fill-in below the diagonal, eliminated later
                 rows[i][j] = rows[i].get(j, 0) - lik * v
-    # the LU pattern in column-major (CCS) order
+    return pivots
+
+
+def _lu_pattern(rows: list[dict[int, ca.SX]], n: int) -> ca.Sparsity:
+    """The pattern of the eliminated rows (column-major, CCS)."""
     trip_r, trip_c = [], []
     for i in range(n):
         for j in rows[i]:
             trip_r.append(i)
             trip_c.append(j)
-    lu_sp = ca.Sparsity.triplet(n, n, trip_r, trip_c)
-    lci, lrow = lu_sp.colind(), lu_sp.row()
-    values = [rows[lrow[k]][c] for c in range(n) for k in range(lci[c], lci[c + 1])]
-    opts = {"cse": True} if cse else {}
-    factor = ca.Function(
-        f"{prefix}_factor",
-        [M],
-        [ca.SX(lu_sp, ca.vertcat(*values)), ca.vertcat(*pivots)],
-        ["M"],
-        ["LU", "pivots"],
-        opts,
-    )
+    return ca.Sparsity.triplet(n, n, trip_r, trip_c)
+
+
+def _solve_function(name: str, lu_sp: ca.Sparsity, n: int, opts: dict) -> ca.Function:
+    """``(LU, b) -> x`` with ``M x = b``: forward (L, unit) then backward (U) substitution."""
     LU = ca.SX.sym("LU", lu_sp)
     b = ca.SX.sym("b", n)
-    lrows: list[dict[int, ca.SX]] = [{} for _ in range(n)]
-    for c in range(n):
-        for k in range(lci[c], lci[c + 1]):
-            lrows[lrow[k]][c] = LU.nz[k]
+    lrows = _rows_by_index(LU.nz, lu_sp, n)
     y: list[ca.SX] = []
     for i in range(n):  # L y = b, L unit lower triangular
         s = b[i]
@@ -135,5 +161,4 @@ def sparse_lu(pattern: ca.Sparsity, prefix: str = "lu", *, cse: bool = True) -> 
             if j > i:
                 s = s - v * x[j]
         x[i] = s / lrows[i][i]
-    solve = ca.Function(f"{prefix}_solve", [LU, b], [ca.vertcat(*x)], ["LU", "b"], ["x"], opts)
-    return SparseLU(pattern, factor, solve, lu_sp.nnz() - pattern.nnz())
+    return ca.Function(name, [LU, b], [ca.vertcat(*x)], ["LU", "b"], ["x"], opts)
