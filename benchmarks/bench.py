@@ -66,53 +66,88 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from core.errors import ToolkitError, run_cli
+from generated.solvers import Status
 
 SIZES = (5, 50, 500, 2000)
-METHODS = (
-    "scipy-bdf",
-    "scipy-rk45",
-    "casadi-vm",
-    "c-cvode-native",
-    "c-cvodes-direct",
-    "c-cvodes-gmres",
-    "c-idas",
-    "fixed",
-)
+
+
+@dataclass(frozen=True)
+class BenchMethod:
+    """A benchmark method: what it runs and how.
+
+    Attributes
+    ----------
+    name : str
+        The benchmark's name (``c-cvode-native``).
+    kind : str
+        How the worker sets it up: ``scipy`` (hand-written numpy RHS), ``vm`` (CasADi's
+        virtual machine, no code generation), ``ours`` (the functions of ``make sim``) or
+        ``exact`` (``ours`` with the exact sign function).
+    solver : str or None
+        The registered integration method it runs (:func:`generated.solvers.get`).
+    jacobian : str or None
+        ``CodegenSettings.jacobian`` (``auto``: the plan of ``make sim``).
+    cheap_build : bool
+        Its build is cheap at any N: after it hits the time limit, larger N still get a
+        build-only cell (build times, C size, RHS time) instead of nothing.
+    """
+
+    name: str
+    kind: str
+    solver: str | None = None
+    jacobian: str | None = None
+    cheap_build: bool = True
+
+
+#: the benchmark's methods, in table order
+BENCH_METHODS = {
+    m.name: m
+    for m in (
+        BenchMethod("scipy-bdf", "scipy"),
+        BenchMethod("scipy-rk45", "scipy"),
+        BenchMethod("casadi-vm", "vm", "cvodes", "sparse"),
+        BenchMethod("c-cvode-native", "ours", "native", "auto"),
+        BenchMethod("c-cvodes-direct", "ours", "cvodes", "sparse", cheap_build=False),
+        BenchMethod("c-cvodes-gmres", "ours", "cvodes", "jvp"),
+        BenchMethod("c-idas", "ours", "idas", "auto"),
+        BenchMethod("fixed", "exact", "fixed", cheap_build=False),
+    )
+}
+METHODS = tuple(BENCH_METHODS)
 BENCH_SEED = 20260121
 PAPER = Path(__file__).resolve().parent.parent / "scenarios" / "paper.toml"
 OUTPUT_STEP = 0.1  # output grid of every method (states stored there)
-#: methods whose build is cheap at any N: after they hit the time limit, larger N still
-#: get a build-only cell (build times, C size, RHS time) instead of nothing
-CHEAP_BUILDS = (
-    "scipy-bdf",
-    "scipy-rk45",
-    "casadi-vm",
-    "c-cvode-native",
-    "c-cvodes-gmres",
-    "c-idas",
-)
-#: ``CodegenSettings.jacobian`` of the CasADi methods (``auto``: the plan of ``make sim``)
-JACOBIAN_OF = {"casadi-vm": "sparse", "c-cvode-native": "auto", "c-cvodes-direct": "sparse",
-               "c-cvodes-gmres": "jvp", "c-idas": "auto"}  # fmt: skip
-#: ``integration.method`` of our methods (the rest of JACOBIAN_OF: ``cvodes``)
-INTEGRATION_METHOD_OF = {"c-cvode-native": "native", "c-idas": "idas"}
+#: methods whose build is cheap at any N (:attr:`BenchMethod.cheap_build`)
+CHEAP_BUILDS = tuple(m.name for m in BENCH_METHODS.values() if m.cheap_build)
 
 
 def integration_method(method: str) -> str:
-    """``integration.method`` that a benchmark method of ours runs (``cvodes`` by default).
+    """The registered integration method a benchmark method runs.
 
     Parameters
     ----------
     method : str
         One of the CasADi/generated-C methods of :data:`METHODS`.
+
+    Raises
+    ------
+    BenchError
+        For a benchmark method without one (the scipy methods) or an unknown name.
     """
-    return INTEGRATION_METHOD_OF.get(method, "cvodes")
+    m = BENCH_METHODS.get(method)
+    if m is None or m.solver is None:
+        raise BenchError(f"{method!r} runs no registered integration method")
+    from generated import solvers
+
+    return solvers.get(m.solver).name
 
 
 def ours_method(N: int) -> str:
@@ -225,7 +260,7 @@ def bench_scenario(N: int, seed: int = BENCH_SEED, horizon: float | None = None)
                 **{
                     k: rep(getattr(c, k))
                     for k in ("Lambda", "k1", "k2", "gamma", "sigma", "ghat_ref")
-                },  # fmt: skip
+                },
             ),
             initial=dataclasses.replace(
                 ini,
@@ -233,7 +268,7 @@ def bench_scenario(N: int, seed: int = BENCH_SEED, horizon: float | None = None)
                 mu=rep(ini.mu),
                 theta_hat=rep(ini.theta_hat),
                 ghat=rep(ini.ghat),
-            ),  # fmt: skip
+            ),
         )
     # the method make sim would use at this N
     ig = dataclasses.replace(sc.integration, method=integration_method(ours_method(N)))
@@ -339,12 +374,12 @@ def _scipy_run(rhs, x0, t_out, method: str, sparsity, deadline: float) -> dict[s
     t0 = time.perf_counter()
     solver = cls(rhs, float(t_out[0]), x0, float(t_out[-1]), **kw)
     steps, k, out = 0, 1, [x0]
-    status = "ok"
+    status, code = "ok", Status.OK
     while solver.status == "running":
         msg = solver.step()
         steps += 1
         if solver.status == "failed":
-            status = f"failed at t = {solver.t:.4g} s: {msg}"
+            status, code = f"failed at t = {solver.t:.4g} s: {msg}", Status.FAILED
             break
         if k < len(t_out) and solver.t >= t_out[k]:
             dense = solver.dense_output()
@@ -353,17 +388,54 @@ def _scipy_run(rhs, x0, t_out, method: str, sparsity, deadline: float) -> dict[s
                 k += 1
         if time.perf_counter() > deadline:
             status = f"stopped at the time limit at t = {solver.t:.4g} s"
+            code = Status.TIME_LIMIT
             break
     wall = time.perf_counter() - t0
     return {
         "wall": wall,
         "status": status,
+        "status_code": code.name,
         "t_reached": float(solver.t),
         "steps": steps,
         "rhs_evals": int(solver.nfev),
         "jac_evals": int(getattr(solver, "njev", 0)),
         "x_final": out[-1],
     }
+
+
+@dataclass
+class Cell:
+    """What every set-up of one (N, method) cell starts from.
+
+    Attributes
+    ----------
+    N : int
+    method : BenchMethod
+    sc : Scenario
+        The benchmark scenario with the common output grid.
+    gains : Gains
+    cl : ClosedLoop
+    t_out : ndarray
+        Output times.
+    bps : list of float
+        Breakpoints (scenario and closed loop).
+    deadline : float
+        ``time.perf_counter()`` after which no further run is started.
+    """
+
+    N: int
+    method: BenchMethod
+    sc: Any
+    gains: Any
+    cl: Any
+    t_out: np.ndarray
+    bps: list[float]
+    deadline: float
+
+    @property
+    def x0(self) -> np.ndarray:
+        """The closed loop's initial state."""
+        return np.asarray(self.cl.x0, dtype=float)
 
 
 def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, out: Path) -> int:
@@ -389,135 +461,165 @@ def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, ou
     int
         Exit status 0.
     """
-
-    from generated.integrate import output_grid
-    from generated.largescale import choose_plan
-    from symbolic.closed_loop import build_closed_loop
-
-    t_start = time.perf_counter()
-    deadline = t_start + time_limit
+    if method not in BENCH_METHODS:
+        raise BenchError(f"--worker: {method!r} unknown (expected one of {', '.join(METHODS)})")
+    deadline = time.perf_counter() + time_limit
     rec: dict[str, Any] = {"N": N, "method": method, "status": "started", "runs": 0}
-    sc = bench_scenario(N, horizon=horizon)
-    gains, gsrc = bench_gains(sc)
-    rec["gains"] = gsrc
-    H = sc.integration.horizon
-    step = H / max(1, round(H / OUTPUT_STEP))
-    # every method stores the same grid; api.simulate reads it from the scenario
-    sc = dataclasses.replace(sc, integration=dataclasses.replace(sc.integration, output_step=step))
-    t_out = output_grid(H, step)
-    rec["base_rss_mb"] = _rss_mb()
-    _write(out, rec)
-
-    t0 = time.perf_counter()
-    cl = build_closed_loop(sc, gains)
-    rec["symbolic_s"] = time.perf_counter() - t0
-    x0 = np.asarray(cl.x0, dtype=float)
-    rec["nx"] = int(x0.size)
-    bps = sorted(set(sc.breakpoints()) | set(cl.breakpoints))
-    _write(out, rec)
-
-    run_once = None
-    if method.startswith("scipy"):
-        from verify.reference import Reference
-
-        t0 = time.perf_counter()
-        ref = Reference(sc, gains)
-        rec["symbolic_s"] = time.perf_counter() - t0  # the hand-written RHS needs no build
-        sparsity = None
-        if method == "scipy-bdf":
-            import scipy.sparse as sps
-
-            spc = cl.ode.sparsity_jac(1, 0)
-            r, c = spc.get_triplet()
-            sparsity = sps.csc_matrix((np.ones(len(r)), (r, c)), shape=(x0.size, x0.size))
-        rec["plan"] = "numpy RHS" + (", jac_sparsity" if sparsity is not None else "")
-        rec["rhs_us"] = 1e6 * _time_py_rhs(ref.rhs, x0)
-        kind = method.split("-")[1]
-
-        def run_once():
-            return _scipy_run(ref.rhs, x0, t_out, kind, sparsity, deadline)
-
-    elif method == "fixed":
-        from generated.api import build_from_closed_loop
-        from generated.integrate import IntegratorSettings, integrate
-
-        scx = dataclasses.replace(
-            sc,
-            options=dataclasses.replace(sc.options, sign="exact"),
-            integration=dataclasses.replace(sc.integration, method="fixed"),
-        )
-        t0 = time.perf_counter()
-        clx = build_closed_loop(scx, gains)
-        rec["symbolic_s"] = time.perf_counter() - t0
-        built = build_from_closed_loop(clx, "fixed")
-        rec.update(codegen_s=built.timings["codegen"], compile_s=built.timings["compile"],
-                   c_bytes=built.library.source_bytes, plan=f"ROS2 h = {sc.integration.fixed_step:g} s, exact sign")  # fmt: skip
-        rec["rhs_us"] = 1e6 * _time_casadi_rhs(built.dyn, x0)
-        s = IntegratorSettings(method="fixed", fixed_step=sc.integration.fixed_step, chunk=1e9)
-
-        def run_once():
-            tr = integrate(built.dyn, x0, t_out, s, breakpoints=bps)
-            st = tr.stats
-            return {
-                "wall": st["wall_seconds"], "status": "ok" if tr.complete else tr.message,
-                "t_reached": tr.t_reached, "steps": st["steps"], "rhs_evals": st["rhs_evals"],
-                "jac_evals": st["jac_evals"], "x_final": tr.x[-1],
-            }  # fmt: skip
-
-    else:
-        # ours and its variants: the functions of ``make sim`` (generated.api), with the
-        # Jacobian strategy of the method (c-idas: the one choose_plan picks for N)
-        from generated.api import build_from_closed_loop, integrator_settings, simulate
-        from generated.codegen import CodegenSettings
-        from generated.integrate import integrate
-
-        meth = integration_method(method)
-        cg = CodegenSettings(jacobian=JACOBIAN_OF[method])
-        plan = choose_plan(N, cg.jacobian)
-        s = integrator_settings(sc, meth, cg)
-        from generated import native
-
-        if meth != "native":
-            label = f"{plan.jacobian}: {plan.strategy} Newton ({plan.reason})"
-        elif N <= native.MAX_AGENTS:
-            label = "native CVODE: generated J (reused by CVODE) and sparse LU without pivoting"
-        else:
-            label = "native CVODE, graph-ordered blocks: block forward substitution"
-        if method == "casadi-vm":
-            dyn = cl.ode_dyn
-            rec.update(codegen_s=0.0, compile_s=0.0, c_bytes=0,
-                       plan=f"CasADi VM, CasADi AD Jacobian, {label}")  # fmt: skip
-        else:
-            from generated.api import native_cascade
-
-            cascade = native_cascade(sc, gains) if meth == "native" else None
-            built = build_from_closed_loop(cl, meth, cg, cascade=cascade)
-            dyn = built.dyn
-            dag_bytes = built.dag[0].source_bytes if built.dag else 0  # second library
-            rec.update(codegen_s=built.timings["codegen"], compile_s=built.timings["compile"],
-                       c_bytes=built.library.source_bytes + dag_bytes,
-                       cache_hit=built.library.cache_hit, plan=label)  # fmt: skip
-        nz = int(dyn.size1_in(2))
-        rec["rhs_us"] = 1e6 * _time_casadi_rhs(dyn, x0, nz)
-
-        def run_once():
-            if method == "casadi-vm":
-                tr = integrate(dyn, x0, t_out, s, breakpoints=bps)
-            else:
-                tr = simulate(built, sc, s)  # exactly what make sim integrates
-            st = tr.stats
-            return {
-                "wall": st["wall_seconds"], "status": "ok" if tr.complete else tr.message,
-                "t_reached": tr.t_reached, "steps": st["steps"], "rhs_evals": st["rhs_evals"],
-                "jac_evals": st["jac_evals"], "jtimes_evals": st.get("jtimes_evals"),
-                "x_final": tr.x[-1],
-            }  # fmt: skip
-
+    cell = _cell(N, BENCH_METHODS[method], horizon, deadline, rec, out)
+    run_once = _SETUP[cell.method.kind](cell, rec)
     _write(out, rec)
     if runs == 0:  # build-only cell
         rec.update(status="built", peak_rss_mb=_rss_mb(), done=True)
         _write(out, rec)
         return 0
+    _measure(run_once, runs, time_limit, deadline, rec, out)
+    return 0
+
+
+def _cell(
+    N: int, method: BenchMethod, horizon: float, deadline: float, rec: dict[str, Any], out: Path
+) -> Cell:
+    """The scenario, gains and closed loop of a cell (their times and sizes into ``rec``)."""
+    from generated.integrate import output_grid
+    from symbolic.closed_loop import build_closed_loop
+
+    sc = bench_scenario(N, horizon=horizon)
+    gains, rec["gains"] = bench_gains(sc)
+    H = sc.integration.horizon
+    step = H / max(1, round(H / OUTPUT_STEP))
+    # every method stores the same grid; api.simulate reads it from the scenario
+    sc = dataclasses.replace(sc, integration=dataclasses.replace(sc.integration, output_step=step))
+    rec["base_rss_mb"] = _rss_mb()
+    _write(out, rec)
+    t0 = time.perf_counter()
+    cl = build_closed_loop(sc, gains)
+    rec["symbolic_s"] = time.perf_counter() - t0
+    rec["nx"] = int(np.asarray(cl.x0).size)
+    bps = sorted(set(sc.breakpoints()) | set(cl.breakpoints))
+    _write(out, rec)
+    return Cell(N, method, sc, gains, cl, output_grid(H, step), bps, deadline)
+
+
+def _traj_result(tr: Any, jtimes: bool = False) -> dict[str, Any]:
+    """One run's record entries from a :class:`~generated.integrate.Trajectory`."""
+    st = tr.stats
+    res = {
+        "wall": st["wall_seconds"],
+        "status": "ok" if tr.complete else tr.message,
+        "status_code": tr.status.name,
+        "t_reached": tr.t_reached,
+        "steps": st["steps"],
+        "rhs_evals": st["rhs_evals"],
+        "jac_evals": st["jac_evals"],
+        "x_final": tr.x[-1],
+    }
+    if jtimes:
+        res["jtimes_evals"] = st.get("jtimes_evals")
+    return res
+
+
+def _setup_scipy(cell: Cell, rec: dict[str, Any]) -> Callable[[], dict[str, Any]]:
+    """scipy's BDF/RK45 on the hand-written numpy right-hand side."""
+    from verify.reference import Reference
+
+    t0 = time.perf_counter()
+    ref = Reference(cell.sc, cell.gains)
+    rec["symbolic_s"] = time.perf_counter() - t0  # the hand-written RHS needs no build
+    x0, kind = cell.x0, cell.method.name.split("-")[1]
+    sparsity = None
+    if kind == "bdf":
+        import scipy.sparse as sps
+
+        r, c = cell.cl.ode.sparsity_jac(1, 0).get_triplet()
+        sparsity = sps.csc_matrix((np.ones(len(r)), (r, c)), shape=(x0.size, x0.size))
+    rec["plan"] = "numpy RHS" + (", jac_sparsity" if sparsity is not None else "")
+    rec["rhs_us"] = 1e6 * _time_py_rhs(ref.rhs, x0)
+    return lambda: _scipy_run(ref.rhs, x0, cell.t_out, kind, sparsity, cell.deadline)
+
+
+def _setup_exact(cell: Cell, rec: dict[str, Any]) -> Callable[[], dict[str, Any]]:
+    """Our generated C with the exact sign function and the fixed-step method."""
+    from generated.api import build_from_closed_loop, integrate_built
+    from generated.integrate import IntegratorSettings
+    from symbolic.closed_loop import build_closed_loop
+
+    sc, meth = cell.sc, integration_method(cell.method.name)
+    scx = dataclasses.replace(
+        sc,
+        options=dataclasses.replace(sc.options, sign="exact"),
+        integration=dataclasses.replace(sc.integration, method=meth),
+    )
+    t0 = time.perf_counter()
+    clx = build_closed_loop(scx, cell.gains)
+    rec["symbolic_s"] = time.perf_counter() - t0
+    built = build_from_closed_loop(clx, meth)
+    h = sc.integration.fixed_step
+    rec.update(
+        codegen_s=built.timings["codegen"],
+        compile_s=built.timings["compile"],
+        c_bytes=built.library.source_bytes,
+        plan=f"ROS2 h = {h:g} s, exact sign",
+    )
+    rec["rhs_us"] = 1e6 * _time_casadi_rhs(built.dyn, cell.x0)
+    s = IntegratorSettings(method=meth, fixed_step=h, chunk=1e9)
+    return lambda: _traj_result(integrate_built(built, cell.x0, cell.t_out, s, cell.bps))
+
+
+def _setup_ours(cell: Cell, rec: dict[str, Any]) -> Callable[[], dict[str, Any]]:
+    """Ours and its variants: the functions of ``make sim`` (generated.api) with the
+    method's Jacobian strategy (c-idas: the one choose_plan picks for N); ``casadi-vm``
+    integrates the symbolic closed loop with the same settings, no code generation."""
+    from generated import solvers
+    from generated.api import build_from_closed_loop, integrator_settings, simulate
+    from generated.codegen import CodegenSettings
+    from generated.integrate import integrate
+    from generated.largescale import choose_plan
+
+    meth = integration_method(cell.method.name)
+    cg = CodegenSettings(jacobian=cell.method.jacobian)
+    label = solvers.get(meth).linear_algebra(cell.N, choose_plan(cell.N, cg.jacobian))
+    s = integrator_settings(cell.sc, meth, cg)
+    if cell.method.kind == "vm":
+        dyn = cell.cl.ode_dyn
+        rec.update(codegen_s=0.0, compile_s=0.0, c_bytes=0)
+        rec["plan"] = f"CasADi VM, CasADi AD Jacobian, {label}"
+    else:
+        cascade = solvers.get(meth).prepare(cell.sc, cell.gains)
+        built = build_from_closed_loop(cell.cl, meth, cg, cascade=cascade)
+        dyn = built.dyn
+        dag_bytes = built.dag[0].source_bytes if built.dag else 0  # second library
+        rec.update(
+            codegen_s=built.timings["codegen"],
+            compile_s=built.timings["compile"],
+            c_bytes=built.library.source_bytes + dag_bytes,
+            cache_hit=built.library.cache_hit,
+            plan=label,
+        )
+    rec["rhs_us"] = 1e6 * _time_casadi_rhs(dyn, cell.x0, int(dyn.size1_in(2)))
+
+    def run_once() -> dict[str, Any]:
+        if cell.method.kind == "vm":
+            tr = integrate(dyn, cell.x0, cell.t_out, s, breakpoints=cell.bps)
+        else:
+            tr = simulate(built, cell.sc, s)  # exactly what make sim integrates
+        return _traj_result(tr, jtimes=True)
+
+    return run_once
+
+
+#: the set-up of each :attr:`BenchMethod.kind`
+_SETUP = {"scipy": _setup_scipy, "exact": _setup_exact, "ours": _setup_ours, "vm": _setup_ours}
+
+
+def _measure(
+    run_once: Callable[[], dict[str, Any]],
+    runs: int,
+    time_limit: float,
+    deadline: float,
+    rec: dict[str, Any],
+    out: Path,
+) -> None:
+    """Up to ``runs`` runs while they fit before the deadline; the record rewritten after each."""
     walls: list[float] = []
     for k in range(runs):
         res = run_once()
@@ -529,7 +631,7 @@ def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, ou
         if k == 0:
             np.save(out.with_suffix(".npy"), np.asarray(xf, dtype=float))
         _write(out, rec)
-        if res["status"] != "ok":
+        if res["status_code"] != Status.OK.name:
             break
         left = deadline - time.perf_counter()
         if k + 1 < runs and walls[-1] > left:  # the next run would not fit
@@ -538,7 +640,6 @@ def worker(N: int, method: str, runs: int, time_limit: float, horizon: float, ou
     rec["peak_rss_mb"] = _rss_mb()
     rec["done"] = True
     _write(out, rec)
-    return 0
 
 
 # ----------------------------------------------------------------------------- parent
@@ -566,14 +667,12 @@ def run_cell(
     rec_path.parent.mkdir(parents=True, exist_ok=True)
     for p in (rec_path, rec_path.with_suffix(".npy")):
         p.unlink(missing_ok=True)
-    cmd = [
-        sys.executable, "-m", "benchmarks.bench", "--worker", str(N), method,
-        "--runs", str(runs), "--time-limit", str(time_limit), "--horizon", str(horizon),
-        "--record", str(rec_path),
-    ]  # fmt: skip
+    cmd = [sys.executable, "-m", "benchmarks.bench", "--worker", str(N), method]
+    cmd += ["--runs", str(runs), "--time-limit", str(time_limit), "--horizon", str(horizon)]
+    cmd += ["--record", str(rec_path)]
     t0 = time.perf_counter()
     hard = time_limit + 60.0  # grace for interpreter start, synthesis and builds
-    status = None
+    status, code = None, Status.FAILED
     # own session: on the time limit the whole group (the worker and its gcc) is killed
     proc = subprocess.Popen(
         cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
@@ -587,6 +686,7 @@ def run_cell(
         os.killpg(proc.pid, signal.SIGKILL)
         proc.communicate()
         status = f"stopped at the time limit ({hard:.0f} s wall incl. build)"
+        code = Status.TIME_LIMIT
     rec: dict[str, Any] = {"N": N, "method": method}
     if rec_path.is_file():
         try:
@@ -595,8 +695,10 @@ def run_cell(
             pass
     if status is not None:
         rec["status"] = status if not rec.get("runs") else f"{rec.get('status')}; {status}"
+        rec["status_code"] = code.name
     elif not rec.get("done"):
         rec["status"] = "error: worker ended without a result"
+        rec["status_code"] = Status.FAILED.name
     rec["cell_wall_s"] = time.perf_counter() - t0
     walls = rec.get("walls") or []
     if walls:
@@ -612,11 +714,32 @@ def run_cell(
 
 
 COLUMNS = [
-    "N", "nx", "method", "plan", "status", "runs", "int_median_s", "int_min_s", "int_max_s",
-    "ratio_to_ours", "symbolic_s", "codegen_s", "compile_s", "cache_hit", "c_bytes", "steps",
-    "rhs_evals", "jac_evals", "jtimes_evals", "rhs_us", "peak_rss_mb", "base_rss_mb", "t_reached",
-    "rel_dx_final_vs_ours", "gains",
-]  # fmt: skip
+    "N",
+    "nx",
+    "method",
+    "plan",
+    "status",
+    "runs",
+    "int_median_s",
+    "int_min_s",
+    "int_max_s",
+    "ratio_to_ours",
+    "symbolic_s",
+    "codegen_s",
+    "compile_s",
+    "cache_hit",
+    "c_bytes",
+    "steps",
+    "rhs_evals",
+    "jac_evals",
+    "jtimes_evals",
+    "rhs_us",
+    "peak_rss_mb",
+    "base_rss_mb",
+    "t_reached",
+    "rel_dx_final_vs_ours",
+    "gains",
+]
 
 
 def finish(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -685,22 +808,44 @@ def table(records: list[dict[str, Any]]) -> str:
     records : list of dict
         Cell records after :func:`finish`.
     """
-    head = ("N", "method", "int med [s]", "min–max [s]", "×ours", "steps", "RHS ev", "µs/RHS",
-            "sym [s]", "cg+cc [s]", "C [kB]", "RSS [MB]", "status")  # fmt: skip
+    head = (
+        "N",
+        "method",
+        "int med [s]",
+        "min–max [s]",
+        "×ours",
+        "steps",
+        "RHS ev",
+        "µs/RHS",
+        "sym [s]",
+        "cg+cc [s]",
+        "C [kB]",
+        "RSS [MB]",
+        "status",
+    )
     rows = [head]
     for r in records:
         med = r.get("int_median_s")
         mm = f"{r['int_min_s']:.3g}–{r['int_max_s']:.3g}" if med is not None else ""
         cgcc = (r.get("codegen_s") or 0.0) + (r.get("compile_s") or 0.0)
         star = "*" if r.get("ours") else ""
-        rows.append((
-            str(r["N"]), r["method"] + star, _g(med), mm, _g(r.get("ratio_to_ours")),
-            _g(r.get("steps")), _g(r.get("rhs_evals")), _g(r.get("rhs_us")),
-            _g(r.get("symbolic_s")), _g(cgcc) if "codegen_s" in r else "",
-            _g((r.get("c_bytes") or 0) / 1000) if r.get("c_bytes") else "",
-            _g(r.get("peak_rss_mb")),
-            _status_short(r),
-        ))  # fmt: skip
+        rows.append(
+            (
+                str(r["N"]),
+                r["method"] + star,
+                _g(med),
+                mm,
+                _g(r.get("ratio_to_ours")),
+                _g(r.get("steps")),
+                _g(r.get("rhs_evals")),
+                _g(r.get("rhs_us")),
+                _g(r.get("symbolic_s")),
+                _g(cgcc) if "codegen_s" in r else "",
+                _g((r.get("c_bytes") or 0) / 1000) if r.get("c_bytes") else "",
+                _g(r.get("peak_rss_mb")),
+                _status_short(r),
+            )
+        )
     widths = [max(len(row[k]) for row in rows) for k in range(len(head))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
@@ -715,21 +860,39 @@ def markdown(records: list[dict[str, Any]]) -> str:
     records : list of dict
         Cell records after :func:`finish`.
     """
-    head = ["N", "method", "integration [s] median (min–max)", "× ours", "steps", "RHS evals",
-            "µs / RHS", "symbolic [s]", "codegen + gcc [s]", "C [kB]", "peak RSS [MB]", "status"]  # fmt: skip
+    head = [
+        "N",
+        "method",
+        "integration [s] median (min–max)",
+        "× ours",
+        "steps",
+        "RHS evals",
+        "µs / RHS",
+        "symbolic [s]",
+        "codegen + gcc [s]",
+        "C [kB]",
+        "peak RSS [MB]",
+        "status",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in records:
         med = r.get("int_median_s")
         t = f"{med:.3g} ({r['int_min_s']:.3g}–{r['int_max_s']:.3g})" if med is not None else ""
         cgcc = (r.get("codegen_s") or 0.0) + (r.get("compile_s") or 0.0)
         cells = [
-            str(r["N"]), r["method"] + (" *" if r.get("ours") else ""), t,
-            _g(r.get("ratio_to_ours")), _g(r.get("steps")), _g(r.get("rhs_evals")),
-            _g(r.get("rhs_us")), _g(r.get("symbolic_s")),
+            str(r["N"]),
+            r["method"] + (" *" if r.get("ours") else ""),
+            t,
+            _g(r.get("ratio_to_ours")),
+            _g(r.get("steps")),
+            _g(r.get("rhs_evals")),
+            _g(r.get("rhs_us")),
+            _g(r.get("symbolic_s")),
             _g(cgcc) if "codegen_s" in r else "",
-            _g(r["c_bytes"] / 1000) if r.get("c_bytes") else "", _g(r.get("peak_rss_mb")),
+            _g(r["c_bytes"] / 1000) if r.get("c_bytes") else "",
+            _g(r.get("peak_rss_mb")),
             _status_short(r).replace("|", "/"),
-        ]  # fmt: skip
+        ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -770,12 +933,19 @@ def plot(records: list[dict[str, Any]], path: Path) -> Path | None:
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for meth in METHODS:
         mine = [r for r in records if r["method"] == meth]
-        pts = [(r["N"], r["int_median_s"]) for r in mine
-               if r.get("status") == "ok" and r.get("int_median_s")]  # fmt: skip
+        pts = [
+            (r["N"], r["int_median_s"])
+            for r in mine
+            if r.get("status") == "ok" and r.get("int_median_s")
+        ]
         # stopped or failed cells that ran (not the "not run" ones), at their wall time
-        bad = [(r["N"], r["cell_wall_s"]) for r in mine
-               if r.get("status") != "ok" and r.get("cell_wall_s")
-               and not str(r.get("status", "")).startswith(("not run", "build only"))]  # fmt: skip
+        bad = [
+            (r["N"], r["cell_wall_s"])
+            for r in mine
+            if r.get("status") != "ok"
+            and r.get("cell_wall_s")
+            and not str(r.get("status", "")).startswith(("not run", "build only"))
+        ]
         if not pts and not bad:
             continue
         xy = list(zip(*sorted(pts), strict=True)) if pts else [[], []]
@@ -797,6 +967,38 @@ def plot(records: list[dict[str, Any]], path: Path) -> Path | None:
     return atomic_write_bytes(path, buf.getvalue())
 
 
+def _parser() -> argparse.ArgumentParser:
+    """The command line of :func:`main`."""
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.bench", description=__doc__.split("\n")[0]
+    )
+    ap.add_argument("--quick", action="store_true", help="N = 5 only, one run per method")
+    ap.add_argument("--sizes", default=None, help="comma-separated N (default 5,50,500,2000)")
+    ap.add_argument("--methods", default=None, help=f"comma-separated, from {','.join(METHODS)}")
+    ap.add_argument("--runs", type=int, default=None, help="runs per cell (default 5; quick 1)")
+    ap.add_argument(
+        "--time-limit", type=float, default=None, help="seconds per cell (default 120; quick 60)"
+    )
+    ap.add_argument(
+        "--ours-time-limit",
+        type=float,
+        default=None,
+        help="seconds per cell for ours (default 1500, at least 4x --time-limit: "
+        "ours completes N = 2,000 in about 700 s here)",
+    )
+    ap.add_argument("--horizon", type=float, default=20.0, help="simulated seconds (default 20)")
+    ap.add_argument("--out", default=None, help="output folder (default out/bench)")
+    ap.add_argument(
+        "--warm-cache",
+        action="store_true",
+        help="reuse compiled libraries from the build cache (default: a fresh cache "
+        "in <out>/build, so codegen and gcc times are measured, not cache hits)",
+    )
+    ap.add_argument("--worker", nargs=2, metavar=("N", "METHOD"), help=argparse.SUPPRESS)
+    ap.add_argument("--record", default=None, help=argparse.SUPPRESS)
+    return ap
+
+
 def main(argv: list[str]) -> int:
     """Command line of ``python -m benchmarks.bench`` (see the module docstring).
 
@@ -805,26 +1007,7 @@ def main(argv: list[str]) -> int:
     argv : list of str
         Arguments without the program name.
     """
-    ap = argparse.ArgumentParser(
-        prog="python -m benchmarks.bench", description=__doc__.split("\n")[0]
-    )
-    ap.add_argument("--quick", action="store_true", help="N = 5 only, one run per method")
-    ap.add_argument("--sizes", default=None, help="comma-separated N (default 5,50,500,2000)")
-    ap.add_argument("--methods", default=None, help=f"comma-separated, from {','.join(METHODS)}")
-    ap.add_argument("--runs", type=int, default=None, help="runs per cell (default 5; quick 1)")
-    ap.add_argument("--time-limit", type=float, default=None,
-                    help="seconds per cell (default 120; quick 60)")  # fmt: skip
-    ap.add_argument("--ours-time-limit", type=float, default=None,
-                    help="seconds per cell for ours (default 1500, at least 4x --time-limit: "
-                    "ours completes N = 2,000 in about 700 s here)")  # fmt: skip
-    ap.add_argument("--horizon", type=float, default=20.0, help="simulated seconds (default 20)")
-    ap.add_argument("--out", default=None, help="output folder (default out/bench)")
-    ap.add_argument("--warm-cache", action="store_true",
-                    help="reuse compiled libraries from generated/build (default: a fresh cache "
-                    "in <out>/build, so codegen and gcc times are measured, not cache hits)")  # fmt: skip
-    ap.add_argument("--worker", nargs=2, metavar=("N", "METHOD"), help=argparse.SUPPRESS)
-    ap.add_argument("--record", default=None, help=argparse.SUPPRESS)
-    a = ap.parse_args(argv)
+    a = _parser().parse_args(argv)
     runs = a.runs if a.runs is not None else (1 if a.quick else 5)
     limit = a.time_limit if a.time_limit is not None else (60.0 if a.quick else 120.0)
     if runs < 1 and not a.worker:
@@ -841,16 +1024,44 @@ def main(argv: list[str]) -> int:
         raise BenchError(
             f"--methods: {', '.join(bad)} unknown (expected some of {', '.join(METHODS)})"
         )
+    folder = _bench_folder(a.out, a.warm_cache)
+    print(
+        f"bench: N = {', '.join(map(str, sizes))}; {len(methods)} methods; {runs} run(s); "
+        f"limit {limit:g} s per cell; horizon {a.horizon:g} s; {os.cpu_count()} CPUs",
+        flush=True,
+    )
+    ours_limit = a.ours_time_limit if a.ours_time_limit is not None else max(1500.0, 4.0 * limit)
+    limits = (limit, ours_limit)
+    records = finish(_run_cells(sizes, methods, runs, limits, a.horizon, folder))
+    _report(records, folder)
+    return 0
+
+
+def _bench_folder(out: str | None, warm_cache: bool) -> Path:
+    """The output folder; unless ``warm_cache``, an emptied build cache in it for the cells."""
     from core.artifacts import OUT_ROOT
 
-    folder = Path(a.out) if a.out else OUT_ROOT / "bench"
+    folder = Path(out) if out else OUT_ROOT / "bench"
     folder.mkdir(parents=True, exist_ok=True)
-    if not a.warm_cache:  # the cells (subprocesses) inherit the empty cache
+    if not warm_cache:  # the cells (subprocesses) inherit the empty cache
         shutil.rmtree(folder / "build", ignore_errors=True)
         os.environ["HITL_BUILD_DIR"] = str((folder / "build").resolve())
-    print(f"bench: N = {', '.join(map(str, sizes))}; {len(methods)} methods; {runs} run(s); "
-          f"limit {limit:g} s per cell; horizon {a.horizon:g} s; {os.cpu_count()} CPUs", flush=True)  # fmt: skip
-    ours_limit = a.ours_time_limit if a.ours_time_limit is not None else max(1500.0, 4.0 * limit)
+    return folder
+
+
+def _run_cells(
+    sizes: tuple[int, ...],
+    methods: tuple[str, ...],
+    runs: int,
+    limits: tuple[float, float],
+    horizon: float,
+    folder: Path,
+) -> list[dict[str, Any]]:
+    """Every (N, method) cell in order; a method that hit the time limit at some N gets a
+    build-only cell (cheap builds) or a 'not run' record at larger N.
+
+    ``limits``: seconds per cell for the others and for ours.
+    """
     records = []
     stopped: dict[str, int] = {}  # method -> first N where it hit the time limit
     for N in sizes:
@@ -858,28 +1069,31 @@ def main(argv: list[str]) -> int:
         for meth in methods:
             why = f"stopped at the time limit at N = {stopped.get(meth)}"
             if meth in stopped and meth in CHEAP_BUILDS:  # still measure the build and RHS
-                r = run_cell(N, meth, 0, limit, a.horizon, folder)
+                r = run_cell(N, meth, 0, limits[0], horizon, folder)
                 if r.get("status") == "built":
                     r["status"] = f"build only: not integrated ({why})"
             elif meth in stopped:  # reported, not silently skipped
                 r = {"N": N, "method": meth, "status": f"not run: {why}"}
             else:
-                lim = ours_limit if meth == ours_name else limit
-                r = run_cell(N, meth, runs, lim, a.horizon, folder)
-                if "time limit" in str(r.get("status", "")):
+                lim = limits[1] if meth == ours_name else limits[0]
+                r = run_cell(N, meth, runs, lim, horizon, folder)
+                if r.get("status_code") == Status.TIME_LIMIT.name:
                     stopped[meth] = N
             records.append(r)
-            print(f"  N={N:<5d} {meth:<16s} {_g(r.get('int_median_s')):>8s} s  {_status_short(r)}",
-                  flush=True)  # fmt: skip
-    records = finish(records)
-    csv_path = write_csv(records, folder / "bench.csv")
-    png = plot(records, folder / "scaling.png")
+            median = _g(r.get("int_median_s"))
+            print(f"  N={N:<5d} {meth:<16s} {median:>8s} s  {_status_short(r)}", flush=True)
+    return records
+
+
+def _report(records: list[dict[str, Any]], folder: Path) -> None:
+    """bench.csv, bench.md and scaling.png in ``folder``; the table on stdout."""
     from core.artifacts import atomic_write_text
 
+    csv_path = write_csv(records, folder / "bench.csv")
+    png = plot(records, folder / "scaling.png")
     atomic_write_text(folder / "bench.md", markdown(records))
     print(table(records))
     print(f"wrote {csv_path}, {folder / 'bench.md'} and {png}")
-    return 0
 
 
 def _ints(text: str | None, default: tuple[int, ...], what: str) -> tuple[int, ...]:

@@ -166,12 +166,17 @@ def step_profile(built: Any, sc: Any, edges: Sequence[float], settings: Any = No
         since = float(a - before[-1]) if len(before) else math.nan
         out.append(
             Window(
-                float(a), float(b), int(st["steps"]), int(st["rhs_evals"]),
-                int(st["error_test_fails"]), int(st["newton_fails"]),
-                float(st.get("last_step", math.nan)), bool(np.any((changes > a) & (changes <= b))),
+                float(a),
+                float(b),
+                int(st["steps"]),
+                int(st["rhs_evals"]),
+                int(st["error_test_fails"]),
+                int(st["newton_fails"]),
+                float(st.get("last_step", math.nan)),
+                bool(np.any((changes > a) & (changes <= b))),
                 since,
             )
-        )  # fmt: skip
+        )
     return out
 
 
@@ -247,11 +252,17 @@ def knob_sensitivity(
         eeta, et = _tail_errors(built, tr) if tr.complete else (math.nan, math.nan)
         rows.append(
             dict(
-                key=key, value=value, steps=tr.stats["steps"], rhs_evals=tr.stats["rhs_evals"],
-                integration_s=wall, complete=tr.complete, t_reached=tr.t_reached,
-                tail_eeta=eeta, tail_et=et,
+                key=key,
+                value=value,
+                steps=tr.stats["steps"],
+                rhs_evals=tr.stats["rhs_evals"],
+                integration_s=wall,
+                complete=tr.complete,
+                t_reached=tr.t_reached,
+                tail_eeta=eeta,
+                tail_et=et,
             )
-        )  # fmt: skip
+        )
     return pd.DataFrame(rows)
 
 
@@ -320,7 +331,7 @@ def main(argv: list[str]) -> int:
     )
     ap.add_argument("--no-knobs", action="store_true", help="window profile only")
     ap.add_argument("--out", default=None, help="output folder (default out/steps/<name>)")
-    args = ap.parse_args(argv)  # fmt: skip
+    args = ap.parse_args(argv)
     vary = [parse_vary(v) for v in args.vary] if args.vary else list(DEFAULT_VARY)
 
     if args.bench_n is not None:

@@ -289,9 +289,14 @@ def build_from_closed_loop(
         "compile": lib.compile_seconds + (dag_lib.compile_seconds if dag_lib else 0.0),
     }
     return Built(
-        cl, lib, lib.function(name), lib.function(OUT_NAME), form, timings,
-        dag=(dag_lib, cascade) if dag_lib else None,
-    )  # fmt: skip
+        cl,
+        lib,
+        lib.function(name),
+        lib.function(OUT_NAME),
+        form,
+        timings,
+        dag=(dag_lib, plan.data) if dag_lib else None,
+    )
 
 
 # --------------------------------------------------------------------------- simulate

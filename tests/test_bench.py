@@ -387,3 +387,17 @@ def synthesize_gains(sc):
     from benchmarks.bench import bench_gains
 
     return bench_gains(sc)[0]
+
+
+def test_bench_methods_map_through_the_registry() -> None:
+    """Every benchmark method of ours names a registered integration method; the scipy
+    ones name none (consistency check of the table, not a measurement)."""
+    from benchmarks.bench import BENCH_METHODS, integration_method
+    from generated import solvers
+
+    for m in BENCH_METHODS.values():
+        if m.solver is None:
+            with pytest.raises(BenchError):
+                integration_method(m.name)
+        else:
+            assert integration_method(m.name) in solvers.names()

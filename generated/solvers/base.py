@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     from generated.api import Built
     from generated.codegen import CodegenSettings, Library, Toolchain
     from generated.integrate import IntegratorSettings, Trajectory
+    from generated.largescale import JacobianPlan as Plan
     from symbolic.closed_loop import ClosedLoop
     from synthesis.gains import Gains
 
@@ -207,6 +208,19 @@ class Solver(ABC):
         Trajectory
             Incomplete (``status`` not ``OK``), not raised, on an integrator failure.
         """
+
+    def linear_algebra(self, N: int, plan: Plan) -> str:
+        """How the method solves its Newton systems at N followers, for reports.
+
+        Parameters
+        ----------
+        N : int
+            Number of followers.
+        plan : Plan
+            The large-N plan (:func:`generated.largescale.choose_plan`) the CasADi
+            methods follow.
+        """
+        return f"{plan.jacobian}: {plan.strategy} Newton ({plan.reason})"
 
     def settings_used(self, settings: IntegratorSettings) -> dict[str, Any]:
         """The method-specific settings a run record lists (default: none).

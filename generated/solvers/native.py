@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from generated.api import Built
     from generated.codegen import CodegenSettings
     from generated.integrate import IntegratorSettings, Trajectory
+    from generated.largescale import JacobianPlan as Plan
     from symbolic.closed_loop import ClosedLoop
     from synthesis.gains import Gains
 
@@ -101,6 +102,20 @@ class Native(Solver):
             raise IntegrationError(
                 "method 'native' needs the native build: call build(..., method='native')"
             )
+
+    def linear_algebra(self, N: int, plan: Plan) -> str:
+        """The driver's Newton solves at N followers (the CasADi plan does not apply).
+
+        Parameters
+        ----------
+        N : int
+        plan : Plan
+        """
+        from generated import native
+
+        if N <= native.MAX_AGENTS:
+            return "native CVODE: generated J (reused by CVODE) and sparse LU without pivoting"
+        return "native CVODE, graph-ordered blocks: block forward substitution"
 
     def run(
         self,
