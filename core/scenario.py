@@ -49,11 +49,47 @@ from core.settings import (
 SIGN_MODES = ("exact", "sat", "tanh")
 GHAT_LAWS = ("paper", "sigma", "projection", "sigma+projection")
 DERIVATIVES = ("oracle", "filtered")
-METHODS = ("cvodes", "native", "idas", "fixed")
+# Integration methods a scenario file may name: the built-in ones, plus any that
+# generated.solvers.register declares (this layer cannot import the registry).
+BUILTIN_METHODS = ("cvodes", "native", "idas", "fixed")
+METHODS = list(BUILTIN_METHODS)
+FIXED_STEP_METHODS = {"fixed"}  # the methods that may integrate the exact sign function
 START_MODES = ("given", "formation")
 MAX_TABLE_ROWS = 1000  # rows of a piecewise g_i table
 MAX_TRACE_ROWS = 1_000_000  # rows of a CSV operator trace
 MAX_TRACE_BYTES = 64 * 2**20  # size of a CSV operator trace (read whole)
+
+
+def declare_method(name: str, *, fixed_step: bool) -> None:
+    """Let scenario files name an integration method (called by the solver registry).
+
+    Parameters
+    ----------
+    name : str
+        The method's ``integration.method``.
+    fixed_step : bool
+        Whether it steps with a fixed step, so that ``options.sign = "exact"`` is allowed.
+    """
+    if name not in METHODS:
+        METHODS.append(name)
+    if fixed_step:
+        FIXED_STEP_METHODS.add(name)
+    else:
+        FIXED_STEP_METHODS.discard(name)
+
+
+def withdraw_method(name: str) -> None:
+    """Undo :func:`declare_method` for a method that is not built in.
+
+    Parameters
+    ----------
+    name : str
+    """
+    if name in METHODS and name not in BUILTIN_METHODS:
+        METHODS.remove(name)
+        FIXED_STEP_METHODS.discard(name)
+
+
 MAX_SCENARIO_BYTES = 64 * 2**20  # size of a scenario file (read whole)
 MAX_HORIZON = 1e6  # s; far beyond any study here, and keeps time arithmetic finite
 #: peak memory per value of trajectory.csv while it is made (state table, outputs,
@@ -380,7 +416,7 @@ def _g_min_below_health(s: Scenario) -> Problem | None:
 
 
 def _exact_sign_needs_fixed_step(s: Scenario) -> Problem | None:
-    if s.options.sign == "exact" and s.integration.method != "fixed":
+    if s.options.sign == "exact" and s.integration.method not in FIXED_STEP_METHODS:
         return (
             "'exact' makes variable-step integrators chatter and fail",
             "sign = 'tanh' or 'sat', or integration.method = 'fixed'",

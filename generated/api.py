@@ -460,17 +460,6 @@ def _timed(f: Callable[..., Any], *args: Any) -> tuple[Any, float]:
     return f(*args), time.perf_counter() - t0
 
 
-def _check_sign(sc: Scenario, method: str) -> None:
-    """Refuse ``options.sign = "exact"`` with a variable-step method (it chatters and fails)."""
-    if sc.options.sign == "exact" and method != "fixed":
-        raise ScenarioError(
-            sc.path,
-            "options.sign",
-            "'exact' makes variable-step integrators chatter and fail",
-            "method 'fixed'",
-        )
-
-
 def _write_trajectory(folder: Path, df: pd.DataFrame, traj: Trajectory) -> tuple[Path, str]:
     """Write ``folder/trajectory.csv``; its path and the SHA-256 of its bytes."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -522,7 +511,7 @@ def run(
     requested = (codegen or CodegenSettings(jacobian="auto")).jacobian
     codegen = resolve_codegen(sc.N, codegen)
     method = method or sc.integration.method
-    _check_sign(sc, method)
+    with_method(sc, method)  # the scenario's rules hold for the method run (Scenario.validate)
     root = Path(out_root or OUT_ROOT)
     gains, ginfo = ensure_gains(sc, root)
     built = build(sc, gains, method, codegen)

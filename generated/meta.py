@@ -20,6 +20,7 @@ import numpy as np
 
 from core.errors import ToolkitError
 from core.scenario import Scenario
+from generated import solvers
 from generated.codegen import CodegenSettings, Library
 from generated.gains_cache import GainsInfo
 from generated.integrate import IntegratorSettings, Trajectory
@@ -244,7 +245,8 @@ class RunMeta:
         inputs, libraries, library, wall_seconds
             See the attributes.
         """
-        s, fixed = settings, settings.method == "fixed"
+        s = settings
+        used = solvers.get(s.method).settings_used(s)  # the method-specific settings
         st = trajectory.stats
         return cls(
             scenario=sc.name,
@@ -259,9 +261,9 @@ class RunMeta:
             rtol=s.rtol,
             atol=s.atol,
             max_steps=s.max_steps,
-            fixed_step=s.fixed_step if fixed else None,
-            fixed_rtol=s.fixed_rtol if fixed else None,
-            fixed_atol=s.fixed_atol if fixed else None,
+            fixed_step=used.get("fixed_step"),
+            fixed_rtol=used.get("fixed_rtol"),
+            fixed_atol=used.get("fixed_atol"),
             newton_scheme=s.newton_scheme,
             linear_solver=s.linear_solver,
             integrator_extra_options=dict(s.extra_options),

@@ -176,6 +176,26 @@ def test_a_method_registered_in_a_test_runs_through_the_api(tmp_path, toy_method
     assert np.max(np.abs(a - b) / scale) < TIGHT_BOUND
 
 
+def test_a_registered_method_may_be_named_in_a_scenario_file(tmp_path) -> None:
+    """register declares the name to the loader (with its fixed_step flag); unregister
+    withdraws it, and the file is refused again in one line."""
+    path = _small(tmp_path)
+    text = path.read_text()
+    assert 'method = "cvodes"' in text
+    path.write_text(text.replace('method = "cvodes"', 'method = "toy-scipy-radau"'))
+    solver = solvers.register(ScipyRadau())
+    try:
+        assert api.load(path).integration.method == solver.name
+        exact = tmp_path / "exact.toml"
+        exact.write_text(path.read_text().replace('sign = "tanh"', 'sign = "exact"'))
+        with pytest.raises(ScenarioError, match="options.sign"):
+            api.load(exact)  # a variable-step method may not integrate the exact sign
+    finally:
+        solvers.unregister(solver.name)
+    with pytest.raises(ScenarioError, match="integration.method"):
+        api.load(path)
+
+
 def test_failures_carry_a_status() -> None:
     """x' = x² from x(0) = 1 blows up at t = 1: CVODES and ROS2 stop with a status."""
     t, x = ca.SX.sym("t"), ca.SX.sym("x")

@@ -17,6 +17,7 @@ from __future__ import annotations
 import importlib
 
 from core.errors import IntegrationError
+from core.scenario import declare_method, withdraw_method
 from generated.solvers.base import FORMS, BuildPlan, Solver, Status, flag_status
 
 __all__ = [
@@ -72,6 +73,7 @@ def register(solver: Solver, *, replace: bool = False) -> Solver:
     if name in _REGISTRY and not replace and _REGISTRY[name] is not solver:
         raise IntegrationError(f"solver {name!r} is registered already (pass replace=True)")
     _REGISTRY[name] = solver
+    declare_method(name, fixed_step=solver.fixed_step)  # scenario files may name it
     return solver
 
 
@@ -83,6 +85,7 @@ def unregister(name: str) -> None:
     name : str
     """
     _REGISTRY.pop(name, None)
+    withdraw_method(name)
 
 
 def names() -> tuple[str, ...]:

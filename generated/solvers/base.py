@@ -123,11 +123,15 @@ class Solver(ABC):
         algebraic states z): the closed-loop form it integrates.
     summary : str
         One line for listings and errors.
+    fixed_step : bool
+        Whether it steps with a fixed step (only such a method may integrate the exact
+        sign function, ``options.sign = "exact"``).
     """
 
     name: ClassVar[str]
     form: ClassVar[str] = "ode"
     summary: ClassVar[str] = ""
+    fixed_step: ClassVar[bool] = False
 
     def prepare(self, sc: Scenario, gains: Gains) -> Any:
         """Checks and data needed before the closed loop is built (default: none).

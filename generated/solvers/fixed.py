@@ -19,6 +19,7 @@ class Fixed(CasadiSolver):
     name = "fixed"
     form = "ode"
     summary = "ROS2, fixed step with a loose safeguard"
+    fixed_step = True
 
     def stepper(self, f: ca.Function, settings: IntegratorSettings, nx: int, nz: int) -> Any:
         """A :class:`generated.integrate.Ros2Stepper`.
