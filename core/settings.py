@@ -57,7 +57,13 @@ class Check:
     expected: str
 
     def error(self, value: float) -> tuple[str, str]:
-        """``(problem, expected)`` for the offending ``value``."""
+        """``(problem, expected)`` for the offending ``value``.
+
+        Parameters
+        ----------
+        value : float
+            The value that failed the check.
+        """
         return self.problem.format(v=value), self.expected
 
 
@@ -120,6 +126,11 @@ class Setting:
         """The first problem of a held ``value``: ``(index, problem, expected)``, or None.
 
         ``index`` is ``""`` for a scalar, else the 0-based position (``"[2][1]"``).
+
+        Parameters
+        ----------
+        value : object
+            The setting's value as the scenario holds it.
         """
         if value is None and self.synth:
             return None
@@ -216,6 +227,12 @@ def default_of(cls: type, name: str) -> Any:
 
 
 def brief(v: Any) -> str:
-    """``repr`` of a user value, shortened so the message stays one readable line."""
+    """``repr`` of a user value, shortened so the message stays one readable line.
+
+    Parameters
+    ----------
+    v : object
+        The value a message quotes.
+    """
     r = repr(v)
     return r if len(r) <= 60 else r[:57] + "..."

@@ -210,6 +210,12 @@ def read_trajectory(data: bytes | str | Path) -> tuple[pd.DataFrame, str | None]
 
 
 def data_rows(text: str) -> int:
-    """Rows of a trajectory text: non-empty lines that are neither comments nor the header."""
+    """Rows of a trajectory text: non-empty lines that are neither comments nor the header.
+
+    Parameters
+    ----------
+    text : str
+        The contents of a ``trajectory.csv``.
+    """
     lines = [ln for ln in text.splitlines() if ln and not ln.startswith("#")]
     return max(len(lines) - 1, 0)

@@ -21,7 +21,7 @@ from types import ModuleType
 
 import pytest
 
-PACKAGES = ["symbolic", "synthesis", "verify", "generated"]
+PACKAGES = ["core", "synthesis", "symbolic", "generated", "verify", "benchmarks"]
 # modules neither imported nor checked
 EXCLUDED_MODULES: set[str] = set()
 
