@@ -11,14 +11,13 @@ import casadi as ca
 import numpy as np
 import pytest
 import scipy.linalg as sla
+from helpers import ROOT
 
 from benchmarks.bench import BenchError, bench_scenario, main, random_graph
 from core.errors import ToolkitError
 from generated.codegen import CodegenSettings, build_library
 from generated.integrate import IntegratorSettings, integrate
 from generated.largescale import choose_plan
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
 # ----------------------------------------------------------------------------- graphs

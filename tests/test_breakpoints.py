@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 import pytest
+from helpers import PAPER
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -32,8 +32,6 @@ from generated.integrate import (
     time_tolerance,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "scenarios" / "paper.toml"
 E = ca.SX(0, 1)
 EPS = float(np.finfo(float).eps)
 FAST = settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -9,18 +9,17 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.linalg as sla
+from helpers import ROOT
 
 from core.scenario import load_scenario
 from synthesis.api import synthesize
 from synthesis.certificate import Certificate, Check, certify
 from synthesis.gains import read_gains_file, save_gains
 
-ROOT = Path(__file__).resolve().parents[1]
 NAMES = (
     "shapes_finite symmetry assumption2_rank uio_Gamma_Phi assumption2_zeros gauge_H "
     "assumption1_M_matrix Z_pd lemma3_S_pd lemma3_w T_pd lmi15 Q_B0T Omega_pd lmi16 hurwitz "

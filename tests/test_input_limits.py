@@ -17,14 +17,13 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import PAPER, ROOT
 
 from core import scenario as S
 from core.errors import ScenarioError, UsageError, os_error_line, run_cli
 from generated import api
 from generated.__main__ import main as sim_main
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "scenarios" / "paper.toml"
 PAPER_CSV = ROOT / "scenarios" / "paper-csv.toml"
 
 

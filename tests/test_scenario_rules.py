@@ -13,14 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import PAPER
 
 from core.errors import ScenarioError
 from core.scenario import Integration, load_scenario
 from generated import api
 from generated.integrate import IntegratorSettings
-
-ROOT = Path(__file__).resolve().parents[1]
-PAPER = ROOT / "scenarios" / "paper.toml"
 
 
 @pytest.fixture(scope="module")

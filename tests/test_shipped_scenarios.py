@@ -16,12 +16,12 @@ import tomllib
 from pathlib import Path
 
 import pytest
+from helpers import ROOT
 
 from core.scenario import load_scenario
 from generated import api
 from generated.codegen import CodegenSettings
 
-ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted([*ROOT.glob("scenarios/*.toml"), *ROOT.glob("studies/*.toml")])
 SHORT = 0.5  # seconds simulated: past the start-up transient (t < 0.1 s)
 

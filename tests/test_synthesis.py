@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import cvxpy as cp
 import numpy as np
 import pytest
+from helpers import ROOT
 
 from core.errors import SynthesisError
 from core.graph import check_network
@@ -24,7 +24,6 @@ from synthesis.assumptions import (
 from synthesis.certificate import k1_bound
 from synthesis.lmi import min_lambda_bar1_for_Q, synth_T
 
-ROOT = Path(__file__).resolve().parents[1]
 A0 = np.array([[0.0, 1.0], [0.0, 0.0]])
 B0 = np.array([[0.0], [1.0]])
 C0 = np.array([[1.0, 1.0], [2.0, 2.0]])

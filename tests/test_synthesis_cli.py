@@ -9,11 +9,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import ROOT
 
 from core.errors import run_cli
 from synthesis.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
 KEYS = (
     "A0 B0 C0 Gamma Phi Theta Omega T Q lambda_bar1 delta1 delta2 L_bar H Z w "

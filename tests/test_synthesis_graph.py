@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.linalg as sla
+from helpers import ROOT
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -16,8 +16,6 @@ from core.graph import check_network, find_gauge
 from core.scenario import Graph, load_scenario
 from synthesis import certify, synthesize
 from synthesis.lemma3 import best_diagonal_z, lemma3, lemma3_z, w_of
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 @st.composite
