@@ -23,7 +23,7 @@ import math
 import os
 import stat
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple, TypeVar
@@ -35,15 +35,21 @@ from core.errors import ExpressionError, ScenarioError, UsageError
 from core.expressions import Expr, parse_expression
 from core.graph import unreachable_followers
 from core.settings import (
+    EITHER,
     NONNEG,
     POSITIVE,
+    REQUIRED,
     SYNTH,
     WHOLE,
     Check,
+    Derived,
     Setting,
     brief,
+    declare,
+    required_keys,
     setting,
     settings_of,
+    zeros,
 )
 
 SIGN_MODES = ("exact", "sat", "tanh")
@@ -453,22 +459,62 @@ def type_text(section: str, name: str) -> str:
     Parameters
     ----------
     section : str
-        A key of :data:`SECTIONS` (``"observer"``).
+        A key of :data:`SECTIONS` (``"observer"``) or of :data:`TABLES` (``"leader"``).
     name : str
         The setting (``"delta1_hat"``).
     """
+    if section in TABLES:
+        return TABLES[section][name].type_text()
     words = tuple(r.text for r in RULES if r.key == f"{section}.{name}" and r.text)
     return settings_of(SECTIONS[section])[name].type_text(words)
 
 
 # --------------------------------------------------------------------------- schema
-LEADER_KEYS = {"A0", "B0", "C0", "eta0", "u0", "u0_csv", "alpha"}
-LEADER_REQUIRED = {"A0", "B0", "C0", "alpha"}
-GRAPH_KEYS = GRAPH_REQUIRED = {"adjacency", "pinning"}
-FOLLOWER_KEYS = {"model", "params", "p0", "q0", "b0", "g", "f", "d"}
-FOLLOWER_REQUIRED = {"model", "p0", "b0"}
-TOP_KEYS = {"name", "description", "leader", "graph", "followers", *SECTIONS}
-TOP_REQUIRED = {"leader", "graph", "followers"}
+# The tables read key by key (their values set the sizes, or need expressions,
+# g tables or CSV traces): each key declared once, with its default, shape and checks.
+
+#: the top-level keys
+TOP: dict[str, Setting] = {
+    "name": declare(Derived("file name without `.toml`"), "string"),
+    "description": declare("", "string"),
+    "leader": declare(REQUIRED, "table"),
+    "graph": declare(REQUIRED, "table"),
+    "followers": declare(REQUIRED, "tables"),
+    **{section: declare(Derived("all defaults"), "table") for section in SECTIONS},
+}
+#: ``[leader]``, eq. (3); A0 sets m, B0 sets p, C0 sets n
+LEADER: dict[str, Setting] = {
+    "A0": declare(REQUIRED, "matrix", dims=("m", "m")),
+    "B0": declare(REQUIRED, "matrix", dims=("m", "p")),
+    "C0": declare(REQUIRED, "matrix", dims=("n", "m")),
+    "eta0": declare(zeros("m"), "vector", dims=("m", "")),
+    "u0": declare(EITHER, "expressions", dims=("p", "")),
+    "u0_csv": declare(EITHER, "string"),
+    "alpha": declare(REQUIRED, "number", POSITIVE),
+}
+#: ``[graph]``; adjacency sets N
+GRAPH: dict[str, Setting] = {
+    "adjacency": declare(REQUIRED, "matrix", dims=("N", "N")),
+    "pinning": declare(REQUIRED, "vector", NONNEG, dims=("N", "")),
+}
+#: one ``[[followers]]`` table, eq. (2)
+FOLLOWER: dict[str, Setting] = {
+    "model": declare(REQUIRED, "string"),
+    "params": declare(Derived("the model's defaults", lambda sizes: {}), "numbers_table"),
+    "p0": declare(REQUIRED, "vector", dims=("n", "")),
+    "q0": declare(zeros("n"), "vector", dims=("n", "")),
+    "b0": declare(REQUIRED, "vector", dims=("n", "")),
+    "g": declare(1.0, "health"),
+    "f": declare(0.0, "expression_or_list", dims=("n", "")),
+    "d": declare(Derived("sup |f_ir| on [0, horizon]"), "vector", NONNEG, dims=("n", "")),
+}
+#: the tables above by their name in docs/scenario-format.md
+TABLES: dict[str, dict[str, Setting]] = {
+    "top": TOP,
+    "leader": LEADER,
+    "graph": GRAPH,
+    "followers": FOLLOWER,
+}
 
 
 class Dims(NamedTuple):
@@ -694,7 +740,7 @@ def scenario_from_dict(data: dict[str, Any], *, path: str | Path, sha256: str) -
 
 def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     """Read every table of ``data`` in dependency order; :class:`Scenario` checks the rules."""
-    ctx.table(data, "", TOP_KEYS, TOP_REQUIRED)
+    ctx.table(data, "", set(TOP), required_keys(TOP))
     name, desc = _name(ctx, data, path), _description(ctx, data)
     # integration first: u0, g_i and f_i are checked over [0, horizon]
     integ = _section(ctx, Integration, data.get("integration", {}), "integration", None)
@@ -740,7 +786,7 @@ def _name(ctx: _Ctx, data: dict, path: Path) -> str:
 
 
 def _description(ctx: _Ctx, data: dict) -> str:
-    desc = data.get("description", "")
+    desc = data.get("description", TOP["description"].default)
     if not isinstance(desc, str):
         raise ctx.err("description", "is not a string", "a string")
     return desc
@@ -757,15 +803,20 @@ def _section(ctx: _Ctx, cls: type[_Section], raw: Any, key: str, dims: Dims | No
     """
     declared = settings_of(cls)
     table = ctx.table(raw, key, set(declared))
+    sizes = dims._asdict() if dims is not None else None
     values = {
-        name: _read(ctx, s, table.get(name, s.default), f"{key}.{name}", dims)
+        name: _read(ctx, s, table.get(name, s.default), f"{key}.{name}", sizes)
         for name, s in declared.items()
     }
     return cls(**values)
 
 
-def _read(ctx: _Ctx, s: Setting, v: Any, key: str, dims: Dims | None) -> Any:
-    """One TOML value read as setting ``s`` says (``"synthesize"`` -> None where allowed)."""
+def _read(ctx: _Ctx, s: Setting, v: Any, key: str, dims: Mapping[str, int] | None) -> Any:
+    """One TOML value read as setting ``s`` says (``"synthesize"`` -> None where allowed).
+
+    ``dims`` holds the sizes known so far by symbol (:class:`Dims` or a part of it);
+    a matrix or vector dimension not yet known is not checked.
+    """
     if s.synth and isinstance(v, str):
         if v == SYNTH:
             return None
@@ -779,13 +830,24 @@ def _read(ctx: _Ctx, s: Setting, v: Any, key: str, dims: Dims | None) -> Any:
         return ctx.choice(v, key, s.options)
     assert dims is not None, f"{key} needs the scenario's dimensions"
     if s.shape == "matrix":
-        return ctx.matrix(v, key, (getattr(dims, s.dims[0]), getattr(dims, s.dims[1])))
+        return ctx.matrix(v, key, (dims.get(s.dims[0]), dims.get(s.dims[1])))
+    if s.shape == "vector":
+        return ctx.vector(v, key, dims.get(s.dims[0]), s.checks)
     if s.shape == "per_follower":
-        return ctx.per_agent(v, key, dims.N, s.checks)
+        return ctx.per_agent(v, key, dims["N"], s.checks)
     if s.shape == "per_coordinate":
-        return ctx.per_agent_comp(v, key, dims.N, dims.n, s.checks)
-    k = dims.m if s.shape == "rows_m" else dims.n
-    return _rows(ctx, v, key, dims.N, k, s.checks)
+        return ctx.per_agent_comp(v, key, dims["N"], dims["n"], s.checks)
+    k = dims["m"] if s.shape == "rows_m" else dims["n"]
+    return _rows(ctx, v, key, dims["N"], k, s.checks)
+
+
+def _key(
+    ctx: _Ctx, table: Mapping[str, Setting], raw: dict, prefix: str, name: str, dims: Mapping
+) -> Any:
+    """Key ``name`` of a table read key by key: its value, or its declared default, read."""
+    s = table[name]
+    v = raw[name] if name in raw else s.default_for(dims)
+    return _read(ctx, s, v, f"{prefix}.{name}", dims)
 
 
 def _controller(ctx: _Ctx, raw: Any, dims: Dims) -> Controller:
@@ -804,24 +866,26 @@ def _controller(ctx: _Ctx, raw: Any, dims: Dims) -> Controller:
 # --------------------------------------------------------------------------- leader, graph
 def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) -> Leader:
     """The [leader] table, eq. (3); ‖u0‖ ≤ α is checked on [0, horizon]."""
-    L = ctx.table(raw, "leader", LEADER_KEYS, LEADER_REQUIRED)
-    A0 = ctx.matrix(L["A0"], "leader.A0", (None, None))
-    m = A0.shape[0]
+    L = ctx.table(raw, "leader", set(LEADER), required_keys(LEADER))
+    sizes: dict[str, int] = {}
+    A0 = _key(ctx, LEADER, L, "leader", "A0", sizes)
+    m = sizes["m"] = A0.shape[0]
     if A0.shape[1] != m:
         raise ctx.err(
             "leader.A0", f"has shape {A0.shape[0]}x{A0.shape[1]}", "a square matrix m x m"
         )
-    B0 = ctx.matrix(L["B0"], "leader.B0", (m, None))
-    C0 = ctx.matrix(L["C0"], "leader.C0", (None, m))
-    eta0 = ctx.vector(L.get("eta0", [0.0] * m), "leader.eta0", m)
-    alpha = ctx.number(L["alpha"], "leader.alpha", (POSITIVE,))
+    B0 = _key(ctx, LEADER, L, "leader", "B0", sizes)
+    C0 = _key(ctx, LEADER, L, "leader", "C0", sizes)
+    sizes.update(p=B0.shape[1], n=C0.shape[0])
+    eta0 = _key(ctx, LEADER, L, "leader", "eta0", sizes)
+    alpha = _key(ctx, LEADER, L, "leader", "alpha", sizes)
     if ("u0" in L) == ("u0_csv" in L):
         raise ctx.err(
             "leader.u0",
             "give exactly one of u0 and u0_csv",
             "u0 = [expressions of t] or u0_csv = 'file.csv'",
         )
-    p = B0.shape[1]
+    p = sizes["p"]
     if "u0" in L:
         u0, trace = _u0_expressions(ctx, L["u0"], p), None
         u_peak = _u0_peak(ctx, u0, tgrid)
@@ -861,8 +925,8 @@ def _u0_peak(ctx: _Ctx, u0: tuple[Expr, ...], tgrid: np.ndarray) -> float:
 
 def _graph(ctx: _Ctx, raw: Any) -> Graph:
     """The [graph] table; every follower must be reachable from the leader (Assumption 1)."""
-    G = ctx.table(raw, "graph", GRAPH_KEYS, GRAPH_REQUIRED)
-    A = ctx.matrix(G["adjacency"], "graph.adjacency", (None, None))
+    G = ctx.table(raw, "graph", set(GRAPH), required_keys(GRAPH))
+    A = _key(ctx, GRAPH, G, "graph", "adjacency", {})
     N = A.shape[0]
     if A.shape[1] != N:
         raise ctx.err(
@@ -870,7 +934,7 @@ def _graph(ctx: _Ctx, raw: Any) -> Graph:
         )
     if np.any(np.diag(A) != 0):
         raise ctx.err("graph.adjacency", "has a non-zero diagonal (self-loop)", "a_ii = 0")
-    pin = ctx.vector(G["pinning"], "graph.pinning", N, (NONNEG,))
+    pin = _key(ctx, GRAPH, G, "graph", "pinning", {"N": N})
     unreachable = unreachable_followers(A, pin)
     if unreachable:
         names = ", ".join(str(i + 1) for i in unreachable)
@@ -965,10 +1029,28 @@ def _check_output_size(ctx: _Ctx, integ: Integration, N: int, n: int, m: int) ->
 
 def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Follower:
     """One [[followers]] table (0-based ``i``; messages say ``followers[i+1]``)."""
+    key = f"followers[{i + 1}]"
+    ctx.table(fo, key, set(FOLLOWER), required_keys(FOLLOWER))
+    sizes = {"n": n}
+    model, params = _model(ctx, fo, key, n)
+    health = _health(ctx, fo.get("g", FOLLOWER["g"].default), f"{key}.g", tgrid)
+    f, d = _disturbance(ctx, fo, key, n, tgrid)
+    return Follower(
+        model=model,
+        params=params,
+        p0=_key(ctx, FOLLOWER, fo, key, "p0", sizes),
+        q0=_key(ctx, FOLLOWER, fo, key, "q0", sizes),
+        b0=_key(ctx, FOLLOWER, fo, key, "b0", sizes),
+        g=health,
+        f=f,
+        d=d,
+    )
+
+
+def _model(ctx: _Ctx, fo: dict, key: str, n: int) -> tuple[str, dict[str, float]]:
+    """A follower's ``model`` (a registered one with n coordinates) and its ``params``."""
     from core.models import REGISTRY
 
-    key = f"followers[{i + 1}]"
-    ctx.table(fo, key, FOLLOWER_KEYS, FOLLOWER_REQUIRED)
     model = fo["model"]
     if not isinstance(model, str) or model not in REGISTRY:
         raise ctx.err(
@@ -983,7 +1065,8 @@ def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Followe
             f"{model!r} has n = {spec.n} coordinates but leader.C0 has {n} rows",
             f"a model with n = {n}, or a C0 with {spec.n} rows",
         )
-    prm = ctx.table(fo.get("params", {}), f"{key}.params", set(spec.defaults))
+    given = fo["params"] if "params" in fo else FOLLOWER["params"].default_for({"n": n})
+    prm = ctx.table(given, f"{key}.params", set(spec.defaults))
     params = {
         k: ctx.number(
             prm.get(k, v),
@@ -992,8 +1075,14 @@ def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Followe
         )
         for k, v in spec.defaults.items()
     }
-    health = _health(ctx, fo.get("g", 1.0), f"{key}.g", tgrid)
-    f_raw = fo.get("f", 0.0)
+    return model, params
+
+
+def _disturbance(
+    ctx: _Ctx, fo: dict, key: str, n: int, tgrid: np.ndarray
+) -> tuple[tuple[Expr, ...], np.ndarray]:
+    """A follower's ``f`` (n expressions) and its bound ``d`` (given and checked, or sampled)."""
+    f_raw = fo.get("f", FOLLOWER["f"].default)
     if not isinstance(f_raw, list):
         f_raw = [f_raw] * n  # one expression for every component
     if len(f_raw) != n:
@@ -1011,27 +1100,17 @@ def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Followe
                 "is not finite somewhere on [0, horizon]",
                 "a bounded disturbance (Assumption 3)",
             )
-    if "d" in fo:
-        d = ctx.vector(fo["d"], f"{key}.d", n, (NONNEG,))
-        if np.any(worst > d * (1 + 1e-9)):
-            r = int(np.argmax(worst - d))
-            raise ctx.err(
-                f"{key}.d",
-                f"|f[{r}]| reaches {worst[r]:.4g} > d = {d[r]:.4g}",
-                "d_ir >= sup |f_ir(t)| (Assumption 3)",
-            )
-    else:
-        d = _freeze(worst)
-    return Follower(
-        model=model,
-        params=params,
-        p0=ctx.vector(fo["p0"], f"{key}.p0", n),
-        q0=ctx.vector(fo.get("q0", [0.0] * n), f"{key}.q0", n),
-        b0=ctx.vector(fo["b0"], f"{key}.b0", n),
-        g=health,
-        f=f,
-        d=d,
-    )
+    if "d" not in fo:  # the declared default: the sampled supremum
+        return f, _freeze(worst)
+    d = _key(ctx, FOLLOWER, fo, key, "d", {"n": n})
+    if np.any(worst > d * (1 + 1e-9)):
+        r = int(np.argmax(worst - d))
+        raise ctx.err(
+            f"{key}.d",
+            f"|f[{r}]| reaches {worst[r]:.4g} > d = {d[r]:.4g}",
+            "d_ir >= sup |f_ir(t)| (Assumption 3)",
+        )
+    return f, d
 
 
 def _rows(

@@ -13,7 +13,7 @@ documented type of a key have one owner.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,19 +21,65 @@ import numpy as np
 
 SYNTH = "synthesize"
 
-#: how a TOML value is read into the field (documented type words, without range)
+#: how a TOML value is read into the field (documented type words, without range);
+#: ``{0}`` and ``{1}`` stand for the symbolic dimensions ``dims`` of the setting
 SHAPES = {
     "number": "number",
     "integer": "whole number",
     "boolean": "boolean",
     "choice": "",  # rendered as the list of options
-    "matrix": "matrix",
+    "matrix": "matrix {0}×{1}",
+    "vector": "list of {0} numbers",
     "per_follower": "per follower",
     "per_coordinate": "per follower and coordinate",
     "rows_m": "number, list of m, or N lists of m",
     "rows_n": "number, list of n, or N lists of n",
+    # read by the loader's own parsers (names, expressions, health, paths, tables)
+    "string": "string",
+    "expressions": "list of {0} expressions of t",
+    "expression_or_list": "expression, or list of {0} expressions",
+    "health": "health (see *Actuator health*)",
+    "numbers_table": "table of numbers",
+    "table": "table",
+    "tables": "array of tables",
 }
 _SCALAR_SHAPES = ("number", "integer", "boolean", "choice")
+#: shapes whose range words follow the shape after a space ("number > 0"), not a comma
+_SPACED_SHAPES = ("number", "integer", "vector")
+
+
+@dataclass(frozen=True)
+class Derived:
+    """A default that is not one TOML value: it is made by the loader, or from the sizes.
+
+    Attributes
+    ----------
+    text : str
+        Its words in the default column of docs/scenario-format.md (``"zeros"``).
+    of : callable or None
+        The TOML value from the scenario's sizes (``{"m": 2, ...}``); None when the
+        loader computes it from other keys (e.g. ``d`` from ``f``, ``name`` from the path).
+    """
+
+    text: str
+    of: Callable[[Mapping[str, int]], Any] | None = None
+
+
+def zeros(dim: str) -> Derived:
+    """The default "zeros": a list of ``dim`` zeros (``dim`` is ``"m"``, ``"n"``, ...).
+
+    Parameters
+    ----------
+    dim : str
+        The symbolic size of the list.
+    """
+    return Derived("zeros", lambda sizes: [0.0] * sizes[dim])
+
+
+#: the default of a key a file must give
+REQUIRED = Derived("required")
+#: the default of a key that is one of a pair a file must give exactly one of
+EITHER = Derived("—")
 
 
 @dataclass(frozen=True)
@@ -114,13 +160,32 @@ class Setting:
         """
         if self.shape == "choice":
             return ", ".join(f'"{o}"' for o in self.options)
-        shape = SHAPES[self.shape]
-        if self.shape == "matrix":
-            shape += f" {self.dims[0]}×{self.dims[1]}"
+        shape = SHAPES[self.shape].format(*self.dims)
         words = [c.text for c in self.checks if c.text] + list(rule_words)
-        sep = " " if self.shape in ("number", "integer") else ", "
+        sep = " " if self.shape in _SPACED_SHAPES else ", "
         text = shape + (sep + ", ".join(words) if words else "")
         return text + f' or "{SYNTH}"' if self.synth else text
+
+    def default_for(self, sizes: Mapping[str, int]) -> Any:
+        """The TOML value an omitted key takes, given the sizes known so far.
+
+        Parameters
+        ----------
+        sizes : mapping
+            The scenario's sizes by symbol (``"N"``, ``"n"``, ``"m"``, ``"p"``).
+        """
+        if isinstance(self.default, Derived):
+            assert self.default.of is not None, "this default is computed by the loader"
+            return self.default.of(sizes)
+        return self.default
+
+    def default_text(self) -> str:
+        """The default column of docs/scenario-format.md for a :class:`Derived` default.
+
+        Plain defaults are documented as their TOML literal and compared as values.
+        """
+        assert isinstance(self.default, Derived)
+        return self.default.text
 
     def violation(self, value: Any) -> tuple[str, str, str] | None:
         """The first problem of a held ``value``: ``(index, problem, expected)``, or None.
@@ -200,6 +265,41 @@ def setting(
         value = float(default) if shape == "number" else default
         return dataclasses.field(default=value, metadata=meta)
     return dataclasses.field(metadata=meta)
+
+
+def declare(
+    default: Any,
+    shape: str,
+    *checks: Check,
+    dims: tuple[str, str] = ("", ""),
+) -> Setting:
+    """A :class:`Setting` of a table the loader reads key by key (``[leader]``, ...).
+
+    Parameters
+    ----------
+    default : object
+        The TOML value a file may omit, or a :class:`Derived` (:data:`REQUIRED`, ...).
+    shape : str
+        A key of :data:`SHAPES`.
+    *checks : Check
+        Range rules, in order.
+    dims : tuple of str
+        Symbolic sizes of a matrix, vector or list (``("m", "")``).
+    """
+    if shape not in SHAPES:
+        raise ValueError(f"unknown shape {shape!r}")
+    return Setting(default, shape, checks, dims=dims)
+
+
+def required_keys(table: Mapping[str, Setting]) -> set[str]:
+    """The keys of a declared table that a file must give.
+
+    Parameters
+    ----------
+    table : mapping
+        Key -> :class:`Setting`, e.g. :data:`core.scenario.LEADER`.
+    """
+    return {k for k, s in table.items() if s.default is REQUIRED}
 
 
 def settings_of(cls: type) -> dict[str, Setting]:
