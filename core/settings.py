@@ -179,14 +179,6 @@ class Setting:
             return self.default.of(sizes)
         return self.default
 
-    def default_text(self) -> str:
-        """The default column of docs/scenario-format.md for a :class:`Derived` default.
-
-        Plain defaults are documented as their TOML literal and compared as values.
-        """
-        assert isinstance(self.default, Derived)
-        return self.default.text
-
     def violation(self, value: Any) -> tuple[str, str, str] | None:
         """The first problem of a held ``value``: ``(index, problem, expected)``, or None.
 
