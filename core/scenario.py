@@ -37,6 +37,7 @@ from core.graph import unreachable_followers
 from core.settings import (
     EITHER,
     NONNEG,
+    OFF,
     POSITIVE,
     REQUIRED,
     SYNTH,
@@ -234,6 +235,8 @@ class Controller:
     ghat_ref: np.ndarray = setting(1.0, "per_follower", POSITIVE)  # N, ĝ0 of the σ-mod.
     # designer's worst health: projection onto [1, 1/g_min]
     g_min: float = setting(0.5, "number", POSITIVE, _G_MIN_RANGE)
+    # N, actuator limit |u_ir| <= u_max_i (outside the paper's theory); None = no limit
+    u_max: np.ndarray | None = setting(OFF, "per_follower", POSITIVE, off=True)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -812,15 +815,15 @@ def _section(ctx: _Ctx, cls: type[_Section], raw: Any, key: str, dims: Dims | No
 
 
 def _read(ctx: _Ctx, s: Setting, v: Any, key: str, dims: Mapping[str, int] | None) -> Any:
-    """One TOML value read as setting ``s`` says (``"synthesize"`` -> None where allowed).
+    """One TOML value read as setting ``s`` says (``"synthesize"``, ``"none"`` -> None where allowed).
 
     ``dims`` holds the sizes known so far by symbol (:class:`Dims` or a part of it);
     a matrix or vector dimension not yet known is not checked.
     """
-    if s.synth and isinstance(v, str):
-        if v == SYNTH:
+    if s.keyword and isinstance(v, str):
+        if v == s.keyword:
             return None
-        raise ctx.err(key, f"{brief(v)} is not a value", f"a value or {SYNTH!r}")
+        raise ctx.err(key, f"{brief(v)} is not a value", f"a value or {s.keyword!r}")
     if s.shape in ("number", "integer"):
         x = ctx.number(v, key, s.checks)
         return int(x) if s.shape == "integer" else x

@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 
 SYNTH = "synthesize"
+#: the string of an optional feature that is off (held as None)
+OFF = "none"
 
 #: how a TOML value is read into the field (documented type words, without range);
 #: ``{0}`` and ``{1}`` stand for the symbolic dimensions ``dims`` of the setting
@@ -141,6 +143,8 @@ class Setting:
         Symbolic shape of a ``matrix`` (``("p", "m")``).
     synth : bool
         The string ``"synthesize"`` is accepted and held as ``None``.
+    off : bool
+        The string ``"none"`` (the feature is off) is accepted and held as ``None``.
     """
 
     default: Any
@@ -149,6 +153,12 @@ class Setting:
     options: tuple[str, ...] = ()
     dims: tuple[str, str] = ("", "")
     synth: bool = False
+    off: bool = False
+
+    @property
+    def keyword(self) -> str | None:
+        """The string held as None (``"synthesize"`` or ``"none"``), if any."""
+        return SYNTH if self.synth else OFF if self.off else None
 
     def type_text(self, rule_words: tuple[str, ...] = ()) -> str:
         """The type column of docs/scenario-format.md for this setting.
@@ -164,7 +174,7 @@ class Setting:
         words = [c.text for c in self.checks if c.text] + list(rule_words)
         sep = " " if self.shape in _SPACED_SHAPES else ", "
         text = shape + (sep + ", ".join(words) if words else "")
-        return text + f' or "{SYNTH}"' if self.synth else text
+        return text + f' or "{self.keyword}"' if self.keyword else text
 
     def default_for(self, sizes: Mapping[str, int]) -> Any:
         """The TOML value an omitted key takes, given the sizes known so far.
@@ -189,7 +199,7 @@ class Setting:
         value : object
             The setting's value as the scenario holds it.
         """
-        if value is None and self.synth:
+        if value is None and self.keyword:
             return None
         if self.shape == "choice":
             if isinstance(value, str) and value in self.options:
@@ -230,11 +240,12 @@ def setting(
     options: tuple[str, ...] = (),
     dims: tuple[str, str] = ("", ""),
     synth: bool = False,
+    off: bool = False,
 ) -> Any:
     """A dataclass field declared with its :class:`Setting`.
 
     Scalar settings also get ``default`` as the field's default value (``"synthesize"``
-    becomes ``None``); per-follower settings have none (their value depends on N) and
+    and ``"none"`` become ``None``); per-follower settings have none (their value depends on N) and
     need ``kw_only`` sections.
 
     Parameters
@@ -245,13 +256,14 @@ def setting(
         A key of :data:`SHAPES`.
     *checks : Check
         Range rules, in order.
-    options, dims, synth
+    options, dims, synth, off
         See :class:`Setting`.
     """
     if shape not in SHAPES:
         raise ValueError(f"unknown shape {shape!r}")
-    meta = {"setting": Setting(default, shape, checks, options, dims, synth)}
-    if default == SYNTH and synth:
+    s = Setting(default, shape, checks, options, dims, synth, off)
+    meta = {"setting": s}
+    if s.keyword is not None and default == s.keyword:
         return dataclasses.field(default=None, metadata=meta)
     if shape in _SCALAR_SHAPES:
         value = float(default) if shape == "number" else default

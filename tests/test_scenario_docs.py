@@ -18,7 +18,7 @@ import pytest
 
 from core import scenario as S
 from core.models import REGISTRY
-from core.settings import SYNTH, Derived, settings_of
+from core.settings import OFF, SYNTH, Derived, settings_of
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "scenario-format.md"
@@ -142,7 +142,7 @@ def test_omitted_tables_take_the_documented_defaults(tmp_path):
         obj = getattr(sc, section)
         for key, _, default in tables[section]:
             doc_value, held = _toml(default), getattr(obj, key)
-            if doc_value == SYNTH:
+            if doc_value in (SYNTH, OFF):  # held as None
                 assert held is None, (section, key)
             elif isinstance(held, np.ndarray):
                 assert held.shape[0] == sc.N and np.all(held == doc_value), (section, key)
