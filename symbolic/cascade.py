@@ -40,6 +40,7 @@ from symbolic.closed_loop import (
     _param_matrix,
     agent_function,
     make_layout,
+    saturated,
 )
 from symbolic.derivatives import flow_jets
 from symbolic.leader import leader_function
@@ -162,7 +163,7 @@ def _block(sc: Scenario, og: ObserverGains, lay: StateLayout) -> ca.Function:
     m, n = sc.m, sc.n
     filtered = sc.options.derivatives == "filtered"
     C0 = ca.DM(np.atleast_2d(sc.leader.C0))
-    poff, npar = _param_layout(n)
+    poff, npar = _param_layout(n, saturated(sc))
     t = ca.SX.sym("t")
     xb = ca.SX.sym("xb", m + lay.agent_size)
     nb = ca.SX.sym("nb", 3 * n)

@@ -30,7 +30,7 @@ from core.errors import ScenarioError, SynthesisError
 from core.models import ELModel, build_model
 from core.scenario import Scenario
 from symbolic.adaptive import adaptive_function
-from symbolic.controller import controller_function
+from symbolic.controller import controller_function, saturate
 from symbolic.derivatives import filter_function, filter_sizes, flow_jets
 from symbolic.formation import formation_function
 from symbolic.leader import leader_function
@@ -202,7 +202,8 @@ def make_layout(m: int, n: int, N: int, filtered: bool) -> StateLayout:
     return StateLayout(slices=slices, nx=m + N * na, m=m, N=N, agent_offsets=off, agent_size=na)
 
 
-def _param_layout(n: int) -> tuple[dict[str, slice], int]:
+def _param_layout(n: int, saturated: bool = False) -> tuple[dict[str, slice], int]:
+    """Offsets of the per-agent numbers; ``u_max`` only with an actuator limit."""
     sizes = [
         ("obs", 2),  # (α1 + ᾱ1, φ_min): input of the observer Function
         ("Lambda", n),
@@ -214,12 +215,17 @@ def _param_layout(n: int) -> tuple[dict[str, slice], int]:
         ("b0", n),
         ("d", n),
     ]
-    return _offsets(sizes)
+    return _offsets(sizes + [("u_max", 1)] if saturated else sizes)
+
+
+def saturated(sc: Scenario) -> bool:
+    """Whether ``sc`` limits the applied torque (``controller.u_max`` given)."""
+    return sc.controller.u_max is not None
 
 
 def _param_matrix(sc: Scenario) -> np.ndarray:
     """Per-agent numbers as columns (constants of the mapped Function's inputs)."""
-    off, npar = _param_layout(sc.n)
+    off, npar = _param_layout(sc.n, saturated(sc))
     P = np.zeros((npar, sc.N))
     o, c = sc.observer, sc.controller
     for i, fo in enumerate(sc.followers):
@@ -232,6 +238,8 @@ def _param_matrix(sc: Scenario) -> np.ndarray:
         P[off["ghat_ref"], i] = c.ghat_ref[i]
         P[off["b0"], i] = fo.b0
         P[off["d"], i] = fo.d
+        if saturated(sc):
+            P[off["u_max"], i] = c.u_max[i]
     return P
 
 
@@ -315,7 +323,7 @@ class _AgentSymbols:
         """Symbols sized for ``sc``'s leader, coordinates and derivative option."""
         m, n = sc.m, sc.n
         off, na = _agent_offsets(m, n, sc.options.derivatives == "filtered")
-        poff, npar = _param_layout(n)
+        poff, npar = _param_layout(n, saturated(sc))
         s = ca.SX.sym("s", na)
         psi, dpsi, ddpsi = (ca.SX.sym(k, n) for k in ("psi", "dpsi", "ddpsi"))
         gf = ca.SX.sym("gf", 1 + n)
@@ -399,6 +407,8 @@ def _control(sc: Scenario, model: ELModel, sym: _AgentSymbols, r: dict[str, Any]
         P["Lambda"],
         P["k1"],
     )  # eqs. (28)-(29), (42)
+    if saturated(sc):
+        u = saturate(u, P["u_max"])  # the applied (and logged) torque; Ψ and (30) unchanged
     adap = adaptive_function(sc.n, opts.ghat_law, sc.controller.g_min)
     thd, ghd = adap(
         chi, Psi, S["thetahat"], S["ghat"], P["k2"], P["gamma"], P["sigma"], P["ghat_ref"]

@@ -1,5 +1,7 @@
 """Fault-tolerant controller: tracking error and sliding variable (28), control law (29), ablation (42).
 
+An optional actuator limit (:func:`saturate`) clips the torque the follower receives.
+
 The controller of follower i sees its own p_i, q_i, its observer's η_i, η̇_i,
 η̈_i, the formation offset b_i (and ḃ_i, b̈_i) and its adaptive states; it never
 sees the actuator health g_i or the bias f_i.
@@ -34,6 +36,24 @@ def sign_function(x: ca.SX, mode: str, width: float) -> ca.SX:
     if mode == "tanh":
         return ca.tanh(x / width)
     raise ValueError(f"unknown sign mode {mode!r}")
+
+
+def saturate(u: ca.SX, u_max: ca.SX) -> ca.SX:
+    """The applied torque sat(u) = min(max(u, −u_max), u_max), component-wise.
+
+    A hard clip: exactly u below the limit, exactly ±u_max beyond it. It is
+    Lipschitz (constant 1), so the closed loop keeps unique solutions; its
+    Jacobian jumps where a component meets the limit, which costs a variable-step
+    integrator a few rejected steps there (docs/fidelity.md, actuator saturation).
+
+    Parameters
+    ----------
+    u : casadi.SX
+        The torque of the control law (29) (or (42)).
+    u_max : casadi.SX
+        The limit u_max_i > 0 (a scalar, applied to every component).
+    """
+    return ca.fmin(ca.fmax(u, -u_max), u_max)
 
 
 def controller_function(

@@ -191,6 +191,8 @@ class Reference:
         self.Lam, self.k1 = np.asarray(c.Lambda), np.asarray(c.k1)
         self.k2, self.gam = np.asarray(c.k2), np.asarray(c.gamma)
         self.sig, self.gref = np.asarray(c.sigma), np.asarray(c.ghat_ref)
+        # actuator limit per follower (None = no limit)
+        self.u_max = None if c.u_max is None else np.asarray(c.u_max, dtype=float)
         self.b0 = np.array([f.b0 for f in sc.followers])
         self.opts = sc.options
         self.filtered = self.opts.derivatives == "filtered"
@@ -508,6 +510,9 @@ class Reference:
             - self.k1 * chi
         )
         u = Psi if self.opts.ablation else gh[:, None] * Psi  # eq. (42) / eq. (29)
+        if self.u_max is not None:  # the applied torque sat(u); Ψ and (30) unchanged
+            lim = self.u_max[:, None]
+            u = np.where(u > lim, lim, np.where(u < -lim, -lim, u))
         thd = np.abs(chi) - self.k2[:, None] * th  # eq. (30)
         return dict(et=et, chi=chi, Psi=Psi, u=u, thetahatdot=thd)
 
