@@ -37,8 +37,8 @@ report: $(STAMP)
 	$(PY) -m verify report $(SCENARIO)
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check core synthesis symbolic generated verify benchmarks tests
-	$(VENV)/bin/ruff format --check core synthesis symbolic generated verify benchmarks tests
+	$(VENV)/bin/ruff check core synthesis symbolic generated verify benchmarks sweep tests
+	$(VENV)/bin/ruff format --check core synthesis symbolic generated verify benchmarks sweep tests
 	$(VENV)/bin/lint-imports
 
 test: lint

@@ -15,7 +15,7 @@ import subprocess
 import pytest
 from helpers import ROOT
 
-PACKAGES = ("core", "synthesis", "symbolic", "generated", "verify", "benchmarks")
+PACKAGES = ("core", "synthesis", "symbolic", "generated", "verify", "benchmarks", "sweep")
 MAX_LINES = 80
 MARKER = "# fmt" + ": " + "skip"
 

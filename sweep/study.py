@@ -1,0 +1,507 @@
+"""Study files: a base scenario, distributions over its fields, random graphs and operator inputs.
+
+:func:`load_study` reads and completely validates a study file (docs/studies.md); every
+problem is one line naming the file, the key and the fix (:class:`StudyError`).
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import math
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from core.errors import ExpressionError, ScenarioError
+from core.expressions import parse_expression
+from core.scenario import load_scenario, scenario_from_dict
+from generated.overrides import _set_path
+from sweep.graphs import random_graph, resize_followers
+
+#: largest study file read (bytes)
+MAX_STUDY_BYTES = 1 << 20
+#: most samples a study may ask for
+MAX_COUNT = 1_000_000
+#: largest random graph (the adjacency is written densely into each sample's file)
+MAX_GRAPH_N = 500
+#: the distributions and the number of arguments each takes
+KINDS = {"uniform": 2, "normal": 2, "choice": None, "integers": 2}
+TOP_KEYS = {"name", "description", "base", "count", "seed", "params", "graph", "operator"}
+GRAPH_KEYS = {"N", "edge_probability", "weight"}
+OPERATOR_KEYS = {"u0", "params", "traces"}
+
+
+class StudyError(ScenarioError):
+    """A study file is malformed or asks for something impossible.
+
+    Same one-line form as a scenario error: ``file: key: problem (expected fix)``.
+
+    Parameters
+    ----------
+    file : str
+        Path of the study file.
+    key : str
+        Dotted key of the offending field, e.g. ``params."controller.k1".uniform``.
+    problem : str
+        What is wrong.
+    expected : str
+        What is expected instead (the fix).
+    """
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """One distribution over a scenario value.
+
+    Attributes
+    ----------
+    kind : str
+        ``uniform`` (lo, hi), ``normal`` (mean, std), ``choice`` (values) or
+        ``integers`` (lo, hi, both included).
+    args : tuple
+        The arguments of ``kind``.
+    size : int or None
+        None: one value; k: a list of k independent draws (e.g. a vector ``p0``).
+    truncate : tuple of float or None
+        ``normal`` only: draws restricted to [lo, hi].
+    """
+
+    kind: str
+    args: tuple
+    size: int | None = None
+    truncate: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class GraphFamily:
+    """Random graphs with a directed spanning tree rooted at the leader.
+
+    Attributes
+    ----------
+    n_range : tuple of int
+        N is drawn uniformly from [lo, hi] (both included).
+    edge_probability : float
+        Probability of each extra edge j -> i beyond the spanning tree, in [0, 1].
+    weight : float
+        Weight a_ij of every edge and of the pinning, > 0.
+    """
+
+    n_range: tuple[int, int]
+    edge_probability: float
+    weight: float = 1.0
+
+
+@dataclass(frozen=True)
+class OperatorFamily:
+    """The operator input u0: expressions with sampled parameters, or a recorded trace.
+
+    Attributes
+    ----------
+    u0 : tuple of str
+        One expression per input, naming the parameters (``"A*cos(w*t + phi)"``); empty
+        when ``traces`` is given.
+    params : dict
+        Parameter name -> :class:`Distribution` (one value each).
+    traces : tuple of str
+        Absolute paths of CSV traces, one chosen uniformly per sample.
+    """
+
+    u0: tuple[str, ...]
+    params: dict[str, Distribution]
+    traces: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Study:
+    """A validated study file.
+
+    Attributes
+    ----------
+    name : str
+        The study's name (default: the file's stem); samples are ``<name>-<id>``.
+    path : str
+        The study file.
+    description : str
+        Free text.
+    base : str
+        Absolute path of the base scenario.
+    base_data : dict
+        The base scenario's table (relative trace paths made absolute); not to be mutated.
+    count : int
+        Number of samples (ids 0 .. count - 1).
+    seed : int
+        The study's seed; sample k draws from a generator seeded by (seed, k).
+    params : dict
+        ``--set`` key -> :class:`Distribution`, in file order.
+    graph : GraphFamily or None
+        Random graphs replacing the base's [graph], or None to keep it.
+    operator : OperatorFamily or None
+        The operator input family, or None to keep the base's u0.
+    """
+
+    name: str
+    path: str
+    description: str
+    base: str
+    base_data: dict
+    count: int
+    seed: int
+    params: dict[str, Distribution]
+    graph: GraphFamily | None
+    operator: OperatorFamily | None
+
+
+# --------------------------------------------------------------------------- reading
+def load_study(path: str | Path) -> Study:
+    """Load and completely validate a study file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The study TOML file.
+
+    Returns
+    -------
+    Study
+        Frozen and validated: every distribution is possible, the graph family has
+        spanning trees, the base scenario loads and every ``--set`` key applies to it.
+
+    Raises
+    ------
+    StudyError
+        One line naming the file, the key, the problem and the fix.
+    """
+    path = Path(path)
+    data = _read_toml(path)
+    f = str(path)
+    _table(f, data, "", TOP_KEYS, {"base", "count", "seed"})
+    base, base_data = _base(f, path, data["base"])
+    study = Study(
+        name=_name(f, data, path),
+        path=f,
+        description=_string(f, data.get("description", ""), "description"),
+        base=base,
+        base_data=base_data,
+        count=_integer(f, data["count"], "count", 1, MAX_COUNT),
+        seed=_integer(f, data["seed"], "seed", 0, 2**63 - 1),
+        params=_params(f, data.get("params", {})),
+        graph=_graph(f, data["graph"]) if "graph" in data else None,
+        operator=_operator(f, path, data["operator"]) if "operator" in data else None,
+    )
+    _check_keys_apply(study)
+    return study
+
+
+def _read_toml(path: Path) -> dict:
+    f = str(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise StudyError(
+            f, "(file)", f"cannot be read: {exc.strerror}", "an existing TOML file"
+        ) from None
+    if len(raw) > MAX_STUDY_BYTES:
+        raise StudyError(f, "(file)", f"has {len(raw)} bytes", "a study file of at most 1 MiB")
+    try:
+        return tomllib.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError, ValueError, RecursionError) as exc:
+        raise StudyError(f, "(file)", f"malformed TOML: {exc}", "a valid TOML file") from None
+
+
+def _table(f: str, obj: Any, key: str, allowed: set[str], required: set[str] = frozenset()) -> dict:
+    """``obj`` as a table with only ``allowed`` keys and every ``required`` one."""
+    if not isinstance(obj, dict):
+        raise StudyError(f, key, f"is a {type(obj).__name__}", "a table")
+    for k in obj:
+        if k not in allowed:
+            raise StudyError(
+                f, _join(key, k), "unknown key", "one of " + ", ".join(sorted(allowed))
+            )
+    for k in sorted(required):
+        if k not in obj:
+            raise StudyError(f, _join(key, k), "missing", "a value")
+    return obj
+
+
+def _join(key: str, k: str) -> str:
+    """Dotted key ``key.k``; a sub-key that is itself dotted is quoted as in TOML."""
+    sub = k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else f'"{k}"'
+    return f"{key}.{sub}" if key else sub
+
+
+def _string(f: str, v: Any, key: str) -> str:
+    if not isinstance(v, str):
+        raise StudyError(f, key, f"{v!r} is not a string", "a string")
+    return v
+
+
+def _integer(f: str, v: Any, key: str, lo: int, hi: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise StudyError(f, key, f"{v!r} is not an integer", f"an integer in [{lo}, {hi}]")
+    if not lo <= v <= hi:
+        raise StudyError(f, key, f"{v} is out of range", f"an integer in [{lo}, {hi}]")
+    return v
+
+
+def _number(f: str, v: Any, key: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)):
+        raise StudyError(f, key, f"{v!r} is not a finite number", "a finite number")
+    return float(v)
+
+
+def _name(f: str, data: dict, path: Path) -> str:
+    name = _string(f, data.get("name", path.stem), "name")
+    if not re.fullmatch(r"[A-Za-z0-9_.-]{1,40}", name):
+        raise StudyError(f, "name", f"{name!r} is not a plain name", "[A-Za-z0-9_.-], 1-40 chars")
+    return name
+
+
+def _base(f: str, path: Path, v: Any) -> tuple[str, dict]:
+    """The base scenario: must load; its relative trace path is made absolute."""
+    rel = _string(f, v, "base")
+    base = (path.parent / rel).resolve()
+    if not base.is_file():
+        raise StudyError(
+            f, "base", f"{rel} does not exist", "a scenario file relative to the study"
+        )
+    try:
+        load_scenario(base)
+    except (ScenarioError, ExpressionError) as exc:
+        raise StudyError(f, "base", f"the scenario is refused: {exc}", "a valid scenario") from None
+    data = tomllib.loads(base.read_text(encoding="utf-8"))
+    leader = data.get("leader", {})
+    if "u0_csv" in leader:
+        leader["u0_csv"] = str((base.parent / leader["u0_csv"]).resolve())
+    return str(base), data
+
+
+# --------------------------------------------------------------------------- distributions
+def _params(f: str, raw: Any) -> dict[str, Distribution]:
+    table = _table(f, raw, "params", set(raw) if isinstance(raw, dict) else set())
+    out = {}
+    for key, spec in table.items():
+        where = _join("params", key)
+        if not re.fullmatch(r"[A-Za-z_]\w*(\[\d+\])?(\.[A-Za-z_]\w*(\[\d+\])?)*", key):
+            raise StudyError(f, where, "is not a dotted key", 'a --set key, e.g. "followers[2].p0"')
+        out[key] = distribution(f, spec, where)
+    return out
+
+
+def distribution(f: str, spec: Any, where: str) -> Distribution:
+    """Read one distribution table, e.g. ``{ uniform = [15.0, 25.0] }``.
+
+    Parameters
+    ----------
+    f : str
+        The study file (for messages).
+    spec : Any
+        The table from the file.
+    where : str
+        Its dotted key (for messages).
+
+    Returns
+    -------
+    Distribution
+
+    Raises
+    ------
+    StudyError
+        Unknown or missing kind, wrong arguments, or an impossible distribution
+        (lo > hi, std < 0, an empty choice, an empty truncation interval).
+    """
+    spec = _table(f, spec, where, {*KINDS, "size", "truncate"})
+    kinds = [k for k in spec if k in KINDS]
+    if len(kinds) != 1:
+        raise StudyError(
+            f, where, f"names {len(kinds)} distributions", "exactly one of " + ", ".join(KINDS)
+        )
+    kind = kinds[0]
+    key = _join(where, kind)
+    args = spec[kind]
+    if not isinstance(args, list):
+        raise StudyError(f, key, f"{args!r} is not a list", "a list of arguments")
+    size = spec.get("size")
+    if size is not None:
+        size = _integer(f, size, _join(where, "size"), 1, 10_000)
+    if kind == "choice":
+        if not args:
+            raise StudyError(f, key, "is empty", "at least one value to choose from")
+        return Distribution(kind, tuple(args), size)
+    if len(args) != 2:
+        raise StudyError(f, key, f"has {len(args)} arguments", f"2 arguments: {_ARGS[kind]}")
+    dist = _two_args(f, kind, key, args, size)
+    if "truncate" in spec:
+        return _truncated(f, dist, spec["truncate"], _join(where, "truncate"))
+    return dist
+
+
+_ARGS = {"uniform": "[lo, hi]", "normal": "[mean, std]", "integers": "[lo, hi]"}
+
+
+def _two_args(f: str, kind: str, key: str, args: list, size: int | None) -> Distribution:
+    if kind == "integers":
+        lo, hi = (_integer(f, a, key, -(2**62), 2**62) for a in args)
+    else:
+        lo, hi = (_number(f, a, key) for a in args)
+    if kind == "normal" and hi < 0:
+        raise StudyError(f, key, f"std = {hi:g} is negative", "std >= 0")
+    if kind != "normal" and lo > hi:
+        raise StudyError(f, key, f"lo = {lo:g} > hi = {hi:g}", "lo <= hi")
+    return Distribution(kind, (lo, hi), size)
+
+
+def _truncated(f: str, dist: Distribution, raw: Any, key: str) -> Distribution:
+    if dist.kind != "normal":
+        raise StudyError(f, key, f"applies to normal, not {dist.kind}", "truncate only on normal")
+    if not isinstance(raw, list) or len(raw) != 2:
+        raise StudyError(f, key, f"{raw!r} is not [lo, hi]", "a list [lo, hi]")
+    lo, hi = (_number(f, a, key) for a in raw)
+    if not lo < hi:
+        raise StudyError(f, key, f"lo = {lo:g} >= hi = {hi:g}", "lo < hi")
+    if dist.args[1] == 0:
+        raise StudyError(f, key, "std = 0 cannot be truncated", "std > 0, or no truncate")
+    return Distribution(dist.kind, dist.args, dist.size, (lo, hi))
+
+
+# --------------------------------------------------------------------------- graph, operator
+def _graph(f: str, raw: Any) -> GraphFamily:
+    g = _table(f, raw, "graph", GRAPH_KEYS, {"N", "edge_probability"})
+    N = g["N"]
+    if isinstance(N, list):
+        if len(N) != 2:
+            raise StudyError(f, "graph.N", f"{N!r} is not [lo, hi]", "an integer or [lo, hi]")
+        lo, hi = (_integer(f, n, "graph.N", 1, MAX_GRAPH_N) for n in N)
+    else:
+        lo = hi = _integer(f, N, "graph.N", 1, MAX_GRAPH_N)
+    if lo > hi:
+        raise StudyError(f, "graph.N", f"lo = {lo} > hi = {hi}", "lo <= hi")
+    p = _number(f, g["edge_probability"], "graph.edge_probability")
+    if not 0 <= p <= 1:
+        raise StudyError(f, "graph.edge_probability", f"{p:g} is outside [0, 1]", "a probability")
+    w = _number(f, g.get("weight", 1.0), "graph.weight")
+    if w <= 0:
+        raise StudyError(f, "graph.weight", f"{w:g} is not positive", "a weight > 0")
+    return GraphFamily((lo, hi), p, w)
+
+
+def _operator(f: str, path: Path, raw: Any) -> OperatorFamily:
+    op = _table(f, raw, "operator", OPERATOR_KEYS)
+    if ("u0" in op) == ("traces" in op):
+        raise StudyError(
+            f, "operator", "give exactly one of u0 and traces", "u0 = [...] or traces = [...]"
+        )
+    if "traces" in op:
+        return OperatorFamily((), {}, _traces(f, path, op["traces"], "params" in op))
+    u0 = op["u0"]
+    if not isinstance(u0, list) or not u0 or not all(isinstance(e, str) for e in u0):
+        raise StudyError(f, "operator.u0", f"{u0!r} is not a list of strings", "expressions of t")
+    params = {}
+    for name, spec in _table(
+        f, op.get("params", {}), "operator.params", set(op.get("params", {}))
+    ).items():
+        where = _join("operator.params", name)
+        if not re.fullmatch(r"[A-Za-z_]\w*", name) or name in ("t", "pi"):
+            raise StudyError(f, where, "is not a parameter name", "an identifier other than t, pi")
+        if not any(re.search(rf"\b{name}\b", e) for e in u0):
+            raise StudyError(f, where, "is not used in operator.u0", "a name the expressions use")
+        params[name] = distribution(f, spec, where)
+        if params[name].size is not None:
+            raise StudyError(f, _join(where, "size"), "is given", "one number per parameter")
+    for k, e in enumerate(u0):
+        try:  # every parameter replaced by 1: the family must parse
+            parse_expression(substitute(e, dict.fromkeys(params, 1.0)), where=f"operator.u0[{k}]")
+        except ExpressionError as exc:
+            raise StudyError(
+                f, f"operator.u0[{k}]", str(exc), "an expression of t and the params"
+            ) from None
+    return OperatorFamily(tuple(u0), params, ())
+
+
+def _traces(f: str, path: Path, raw: Any, has_params: bool) -> tuple[str, ...]:
+    if has_params:
+        raise StudyError(f, "operator.params", "is given with traces", "params only with u0")
+    if not isinstance(raw, list) or not raw or not all(isinstance(r, str) for r in raw):
+        raise StudyError(f, "operator.traces", f"{raw!r} is not a list of paths", "CSV paths")
+    out = []
+    for k, rel in enumerate(raw):
+        p = (path.parent / rel).resolve()
+        if not p.is_file():
+            raise StudyError(
+                f,
+                f"operator.traces[{k}]",
+                f"{rel} does not exist",
+                "a CSV file relative to the study",
+            )
+        out.append(str(p))
+    return tuple(out)
+
+
+def substitute(expression: str, values: dict[str, float]) -> str:
+    """Write parameter values into an operator expression (``A`` -> ``(1.5)``).
+
+    Parameters
+    ----------
+    expression : str
+        E.g. ``"A*cos(w*t + phi)"``.
+    values : dict
+        Parameter name -> number.
+
+    Returns
+    -------
+    str
+        The expression with each whole-word name replaced by its value in parentheses.
+    """
+    for name, v in values.items():
+        expression = re.sub(rf"\b{name}\b", f"({float(v)!r})", expression)
+    return expression
+
+
+# --------------------------------------------------------------------------- keys apply
+def representative(d: Distribution) -> Any:
+    """One value ``d`` can produce (lo, mean or the first choice); a list when sized.
+
+    Parameters
+    ----------
+    d : Distribution
+        The distribution.
+    """
+    v = d.args[0]
+    if d.truncate is not None:
+        v = min(max(v, d.truncate[0]), d.truncate[1])
+    return v if d.size is None else [v] * d.size
+
+
+def _check_keys_apply(study: Study) -> None:
+    """Every ``--set`` key applies to the base (resized to the smallest N) and names a field.
+
+    Other refusals of the loader depend on the drawn values and are reported per sample.
+    """
+    data = copy.deepcopy(study.base_data)
+    if study.graph is not None:
+        A, b = random_graph(
+            study.graph.n_range[0], 0.0, study.graph.weight, np.random.default_rng(0)
+        )
+        data["graph"] = {"adjacency": A.tolist(), "pinning": b.tolist()}
+        resize_followers(data, study.graph.n_range[0])
+    for key, d in study.params.items():
+        try:
+            _set_path(data, study.path, key, representative(d))
+        except ScenarioError as exc:
+            raise StudyError(study.path, _join("params", key), exc.problem, exc.expected) from None
+    try:
+        scenario_from_dict(data, path=study.path, sha256=hashlib.sha256(b"").hexdigest())
+    except ScenarioError as exc:
+        if exc.problem == "unknown key":
+            bare = re.sub(r"\[\d+\]", "", exc.key)
+            for key in study.params:
+                if re.sub(r"\[\d+\]", "", key) == bare:
+                    raise StudyError(
+                        study.path, _join("params", key), "names no scenario field", exc.expected
+                    ) from None
+    except ExpressionError:
+        pass
