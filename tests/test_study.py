@@ -1,0 +1,291 @@
+"""Study files and the sampler (sweep/): distributions, reproducibility, random graphs,
+one-line errors and written scenario files.
+
+Independent truths: the distributions' analytic moments and supports, a reachability
+test written here (not core.graph's), tomllib reading the written files, and the normal
+scenario loader reading them back.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import ROOT
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from core.errors import run_cli
+from core.scenario import load_scenario
+from sweep.__main__ import main
+from sweep.graphs import random_graph
+from sweep.sampler import draw, samples, write_scenario
+from sweep.study import Distribution, load_study
+
+EXAMPLE = ROOT / "studies" / "example.toml"
+PAPER = (ROOT / "scenarios" / "paper.toml").as_posix()
+TRACE = (ROOT / "scenarios" / "traces" / "operator.csv").as_posix()
+DRAWS = 40_000
+
+
+def _study(tmp_path: Path, body: str, head: str | None = None) -> Path:
+    """A study file on the paper scenario: ``head`` (default base/count/seed) + ``body``."""
+    if head is None:
+        head = f'base = "{PAPER}"\ncount = 4\nseed = 7\n'
+    p = tmp_path / "s.toml"
+    p.write_text(head + body)
+    return p
+
+
+# --------------------------------------------------------------------------- distributions
+def _draws(d: Distribution, n: int = DRAWS) -> np.ndarray:
+    rng = np.random.default_rng(123)
+    return np.array([draw(d, rng) for _ in range(n)])
+
+
+def test_uniform_bounds_and_moments():
+    x = _draws(Distribution("uniform", (2.0, 5.0)))
+    assert x.min() >= 2.0 and x.max() <= 5.0
+    sd_mean = 3 / math.sqrt(12) / math.sqrt(DRAWS)
+    assert abs(x.mean() - 3.5) < 5 * sd_mean
+    assert abs(x.var() - 9 / 12) < 0.02  # var of U(2, 5) = 3^2 / 12
+
+
+def test_normal_moments():
+    x = _draws(Distribution("normal", (-1.0, 2.0)))
+    assert abs(x.mean() + 1.0) < 5 * 2.0 / math.sqrt(DRAWS)
+    assert abs(x.std() - 2.0) < 0.05
+
+
+def test_truncated_normal_bounds_and_analytic_mean():
+    mu, s, lo, hi = 0.0, 1.0, -0.5, 2.0
+    x = _draws(Distribution("normal", (mu, s), truncate=(lo, hi)))
+    assert x.min() >= lo and x.max() <= hi
+
+    def pdf(z):
+        return math.exp(-z * z / 2) / math.sqrt(2 * math.pi)
+
+    def cdf(z):
+        return 0.5 * (1 + math.erf(z / math.sqrt(2)))
+
+    a, b = (lo - mu) / s, (hi - mu) / s
+    mean = mu + s * (pdf(a) - pdf(b)) / (cdf(b) - cdf(a))  # truncated-normal mean
+    assert abs(x.mean() - mean) < 5 * s / math.sqrt(DRAWS)
+
+
+def test_integers_are_inclusive_and_uniform():
+    x = _draws(Distribution("integers", (3, 6)))
+    assert set(x.tolist()) == {3, 4, 5, 6}
+    for k in range(3, 7):
+        assert abs((x == k).mean() - 0.25) < 5 * math.sqrt(0.25 * 0.75 / DRAWS)
+
+
+def test_choice_frequencies():
+    x = [
+        draw(Distribution("choice", ("a", "b", "c")), np.random.default_rng(k)) for k in range(6000)
+    ]
+    for v in "abc":
+        assert abs(x.count(v) / 6000 - 1 / 3) < 5 * math.sqrt(2 / 9 / 6000)
+
+
+def test_sized_draw_is_a_list_of_that_length():
+    v = draw(Distribution("uniform", (0.0, 1.0), size=3), np.random.default_rng(0))
+    assert isinstance(v, list) and len(v) == 3 and len(set(v)) == 3
+
+
+# --------------------------------------------------------------------------- reproducibility
+def test_same_seed_same_samples_and_subset_independent():
+    study = load_study(EXAMPLE)
+    full = [(s.id, s.seed, s.params) for s in samples(study)]
+    again = [(s.id, s.seed, s.params) for s in samples(load_study(EXAMPLE))]
+    assert full == again
+    subset = [(s.id, s.seed, s.params) for s in samples(study, ids=[3, 1])]
+    assert subset == [full[3], full[1]]
+    assert len({json.dumps(p) for _, _, p in full}) == len(full)  # samples differ
+
+
+def test_another_seed_gives_other_samples(tmp_path):
+    text = EXAMPLE.read_text().replace("seed = 2026", "seed = 2027")
+    text = text.replace("../scenarios/paper.toml", PAPER)
+    other = tmp_path / "other.toml"
+    other.write_text(text)
+    a = next(samples(load_study(EXAMPLE))).params
+    b = next(samples(load_study(other))).params
+    assert a != b
+
+
+def test_example_samples_respect_their_distributions():
+    for s in samples(load_study(EXAMPLE)):
+        assert s.reason is None and s.scenario is not None
+        assert 1.0 <= s.params["operator.A"] <= 2.0
+        assert np.all(s.scenario.controller.k1 == s.params["controller.k1"])
+        assert 15.0 <= s.params["controller.k1"] <= 25.0
+        for i, f in enumerate(s.scenario.followers):
+            assert np.array_equal(f.p0, s.params[f"followers[{i + 1}].p0"])
+            assert np.all((f.p0 >= 10.0) & (f.p0 <= 30.0))
+
+
+# --------------------------------------------------------------------------- random graphs
+def _reachable(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Followers reached from the leader: fixed point of reach |= (A @ reach > 0)."""
+    reach = b > 0
+    for _ in range(len(b)):
+        reach = reach | (A @ reach.astype(float) > 0)
+    return reach
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    N=st.integers(1, 25),
+    p=st.floats(0.0, 1.0),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_random_graph_has_a_spanning_tree_from_the_leader(N, p, seed):
+    A, b = random_graph(N, p, 1.0, np.random.default_rng(seed))
+    assert A.shape == (N, N) and b.shape == (N,)
+    assert np.all(np.diag(A) == 0) and np.all(A >= 0) and np.all(b >= 0)
+    assert _reachable(A, b).all()
+
+
+def test_study_graphs_have_the_requested_sizes(tmp_path):
+    path = _study(
+        tmp_path,
+        "[graph]\nN = [2, 7]\nedge_probability = 0.3\n",
+        head=f'base = "{PAPER}"\ncount = 30\nseed = 1\n',
+    )
+    sizes = set()
+    for s in samples(load_study(path)):
+        assert s.reason is None, s.reason
+        N = s.params["graph.N"]
+        sizes.add(N)
+        assert 2 <= N <= 7 and s.scenario.graph.N == N and len(s.scenario.followers) == N
+        assert _reachable(s.scenario.graph.adjacency, s.scenario.graph.pinning).all()
+    assert len(sizes) >= 4  # the range is explored
+
+
+# --------------------------------------------------------------------------- operator input
+def test_operator_traces_are_chosen_files(tmp_path):
+    path = _study(tmp_path, f'[operator]\ntraces = ["{TRACE}"]\n')
+    for s in samples(load_study(path)):
+        assert s.reason is None, s.reason
+        assert (
+            s.scenario_data["leader"]["u0_csv"] == TRACE and "u0" not in s.scenario_data["leader"]
+        )
+        assert s.scenario.leader.u0_trace is not None
+
+
+def test_sample_the_loader_refuses_carries_its_reason(tmp_path, capsys):
+    # amplitudes above leader.alpha = 2: every sample breaks ||u0|| <= alpha
+    path = _study(
+        tmp_path, '[operator]\nu0 = ["A*cos(t)"]\nparams = { A = { uniform = [3, 4] } }\n'
+    )
+    got = list(samples(load_study(path)))
+    assert all(s.scenario is None and "leader.alpha" in s.reason for s in got)
+    assert run_cli(main, ["samples", str(path)]) == 0
+    assert capsys.readouterr().out.count("refused") == 4
+
+
+# --------------------------------------------------------------------------- bad input
+BAD = [
+    ("colour = 1\n", "colour"),
+    ('[params]\n"controller.k1" = { uniform = [5, 1] }\n', "controller.k1"),
+    ('[params]\n"controller.k1" = { normal = [5, -1] }\n', "controller.k1"),
+    ('[params]\n"options.sign" = { choice = [] }\n', "options.sign"),
+    ('[params]\n"controller.k1" = { gamma = [1, 2] }\n', "gamma"),
+    ('[params]\n"controller.k1" = { normal = [1, 1], truncate = [2, 1] }\n', "truncate"),
+    ('[params]\n"controller.kk1" = { uniform = [1, 2] }\n', "controller.kk1"),
+    ('[params]\n"followers[9].p0" = { uniform = [1, 2], size = 2 }\n', "followers[9].p0"),
+    ("[graph]\nN = 0\nedge_probability = 0.1\n", "graph.N"),
+    ("[graph]\nN = [5, 3]\nedge_probability = 0.1\n", "graph.N"),
+    ("[graph]\nN = 4\nedge_probability = 1.5\n", "graph.edge_probability"),
+    ('[operator]\nu0 = ["A*cos(t)"]\nparams = { B = { uniform = [1, 2] } }\n', "operator.params.B"),
+    ('[operator]\nu0 = ["A*evil(t)"]\nparams = { A = { uniform = [1, 2] } }\n', "operator.u0[0]"),
+    ('[operator]\ntraces = ["missing.csv"]\n', "operator.traces[0]"),
+]
+BAD_HEAD = [
+    (f'base = "{PAPER}"\ncount = 0\nseed = 1\n', "count"),
+    (f'base = "{PAPER}"\ncount = -3\nseed = 1\n', "count"),
+    ("count = 3\nseed = 1\n", "base"),
+    ('base = "nowhere.toml"\ncount = 3\nseed = 1\n', "base"),
+    (f'base = "{PAPER}"\ncount = 3\n', "seed"),
+]
+
+
+def _one_line_error(path: Path, capsys) -> str:
+    assert run_cli(main, ["samples", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("error: "), err
+    return err
+
+
+@pytest.mark.parametrize(("body", "key"), BAD, ids=[k for _, k in BAD])
+def test_bad_study_body_is_one_line_naming_the_key(tmp_path, capsys, body, key):
+    assert key in _one_line_error(_study(tmp_path, body), capsys)
+
+
+@pytest.mark.parametrize(
+    ("head", "key"), BAD_HEAD, ids=[f"{k}-{i}" for i, (_, k) in enumerate(BAD_HEAD)]
+)
+def test_bad_study_head_is_one_line_naming_the_key(tmp_path, capsys, head, key):
+    assert f": {key}: " in _one_line_error(_study(tmp_path, "", head=head), capsys)
+
+
+def test_command_line_exit_status_two_and_one_stderr_line(tmp_path):
+    path = _study(tmp_path, '[params]\n"controller.k1" = { uniform = [5, 1] }\n')
+    proc = subprocess.run(
+        [sys.executable, "-m", "sweep", "samples", str(path)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.count("\n") == 1 and "controller.k1" in proc.stderr
+
+
+# --------------------------------------------------------------------------- written files
+def _same(a, b, path: str = "") -> None:
+    """Recursive equality of scenario values (dataclasses, arrays, tuples, scalars)."""
+    if dataclasses.is_dataclass(a):
+        assert type(a) is type(b), path
+        for f in dataclasses.fields(a):
+            _same(getattr(a, f.name), getattr(b, f.name), f"{path}.{f.name}")
+    elif isinstance(a, np.ndarray):
+        assert np.array_equal(a, b), path
+    elif isinstance(a, tuple | list):
+        assert len(a) == len(b), path
+        for k, (x, y) in enumerate(zip(a, b, strict=True)):
+            _same(x, y, f"{path}[{k}]")
+    elif isinstance(a, dict):
+        assert a.keys() == b.keys(), path
+        for k in a:
+            _same(a[k], b[k], f"{path}.{k}")
+    else:
+        assert a == b, path
+
+
+def test_written_scenarios_load_and_equal_the_sample(tmp_path, capsys):
+    study = load_study(EXAMPLE)
+    assert run_cli(main, ["samples", str(EXAMPLE), "--write-scenarios", str(tmp_path)]) == 0
+    capsys.readouterr()
+    for s in samples(study):
+        file = tmp_path / f"{s.scenario_data['name']}.toml"
+        assert tomllib.loads(file.read_text()) == s.scenario_data
+        loaded = load_scenario(file)
+        assert loaded.path == str(file)
+        _same(dataclasses.replace(loaded, path=s.scenario.path), s.scenario)
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_written_graph_study_round_trips(tmp_path):
+    path = _study(tmp_path, "[graph]\nN = [1, 6]\nedge_probability = 0.5\n")
+    for s in samples(load_study(path)):
+        file = write_scenario(s, tmp_path / "out")
+        _same(dataclasses.replace(load_scenario(file), path=s.scenario.path), s.scenario)
