@@ -13,7 +13,13 @@ from core.artifacts import atomic_write_text
 from core.scenario import Scenario
 from verify.bounds import VerifyConfig, theorem1_floor, theorem1_rates, theorem2_constants
 from verify.lyapunov import InequalityCheck, theorem2_guaranteed
-from verify.table import FIG13_LEVEL_FACTOR, STARTUP, failures, to_markdown
+from verify.table import (
+    FIG13_LEVEL_FACTOR,
+    SATURATION_NOTE,
+    STARTUP,
+    failures,
+    to_markdown,
+)
 
 
 @dataclass
@@ -291,6 +297,7 @@ def summary_section(v: Verification, strict: bool) -> list[str]:
         "(docs/fidelity.md, deviations); `info` rows are measurements.",
         "",
     ]
+    L += saturation_statement(tb)
     L += findings(v)
     if not fp.empty:
         L.append("The paper's claims that do not hold on these numbers:")
@@ -302,6 +309,27 @@ def summary_section(v: Verification, strict: bool) -> list[str]:
             )
         L.append("")
     return L
+
+
+def saturation_statement(table: pd.DataFrame) -> list[str]:
+    """One sentence when actuator saturation invalidated rows of the table (else nothing).
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table (rows marked by :func:`verify.table.mark_saturation`).
+    """
+    notes = table.loc[table["note"].str.startswith(SATURATION_NOTE), "note"]
+    if notes.empty:
+        return []
+    where = notes.iloc[0].split(";")[0].removeprefix(SATURATION_NOTE).strip()
+    return [
+        f"Actuator saturation (controller.u_max) was active on {where}: the {len(notes)} rows "
+        "derived from the unsaturated control law (29) (Theorem 2, eq. (38), Lemmas 1-2, "
+        "Definition 1) are shown as `info` with the note 'invalidated', neither passed nor "
+        "failed.",
+        "",
+    ]
 
 
 def theorem1_section(v: Verification) -> list[str]:

@@ -11,6 +11,10 @@ Columns: ``claim, agent, component, kind, bound, observed, ratio, holds, window,
 - ``paper``: the paper's own claim where it does not follow as printed
   (docs/fidelity.md, deviations); ``--strict`` makes these fail too;
 - ``info``: a measurement with no pass/fail (``holds`` is still shown).
+
+With an actuator limit (``controller.u_max``) that a run reaches, the rows derived
+from the unsaturated control law (29) become ``info`` with the note
+``invalidated: saturation active on [t_a, t_b] s`` (:func:`mark_saturation`).
 """
 
 from __future__ import annotations
@@ -55,6 +59,12 @@ FIG13_LEVEL_FACTOR = 3.0
 STARTUP = 1.0
 #: why the printed Theorem 2 rows are the paper's claims, not guarantees
 PAPER_NOTE = "Lemma 1 applied with no decay in ghat (docs/fidelity.md, D3)"
+#: claims whose derivation uses the unsaturated control law u_i = ĝ_i Ψ_i (29)
+SATURATION_CLAIMS = ("T2 ", "Lemma 1 ", "Lemma 2 ", "consistency: (38)", "Def. 1 ")
+#: a logged |u_ir| within this relative distance of u_max_i is at the limit
+SATURATION_RTOL = 1e-9
+#: the note's start on rows the saturation invalidates
+SATURATION_NOTE = "invalidated: saturation active on"
 
 
 @dataclass
@@ -234,7 +244,63 @@ def bounds_table(
     if ablation is not None:
         for i in range(dm.N):
             ablation_rows(R, df, ablation, i, dm.n, cfg)
-    return R.frame()
+    return mark_saturation(R.frame(), saturation_window(scenario, df))
+
+
+def saturation_window(scenario: Scenario, df: pd.DataFrame) -> tuple[float, float] | None:
+    """First and last output time at which some logged |u_ir| is at its limit u_max_i.
+
+    The logged ``u`` columns hold the applied, clipped torque, so the limit is met
+    exactly while a component saturates.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its ``controller.u_max`` (None: no limit, no window).
+    df : DataFrame
+        The trajectory.
+
+    Returns
+    -------
+    tuple of float or None
+        ``(t_a, t_b)``, or None when no component reaches its limit at an output time.
+    """
+    u_max = scenario.controller.u_max
+    if u_max is None:
+        return None
+    dm = S.dims(df)
+    hit = np.zeros(len(df), dtype=bool)
+    for i in range(dm.N):
+        u = np.abs(S.block(df, "u", i + 1, dm.n))
+        hit |= np.any(u >= u_max[i] * (1.0 - SATURATION_RTOL), axis=1)
+    if not hit.any():
+        return None
+    t = df["t"].to_numpy(float)[hit]
+    return float(t[0]), float(t[-1])
+
+
+def mark_saturation(table: pd.DataFrame, window: tuple[float, float] | None) -> pd.DataFrame:
+    """The rows of :data:`SATURATION_CLAIMS` as ``info``, noted, when saturation was active.
+
+    Theorem 2, eq. (38), Lemmas 1–2 and Definition 1 assume the follower receives
+    g_i ĝ_i Ψ_i; once the torque is clipped that no longer holds, so these rows are
+    neither passes nor failures. Without a window the table is returned unchanged.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+    window : tuple of float or None
+        :func:`saturation_window` of the run.
+    """
+    if window is None:
+        return table
+    out = table.copy()
+    sel = out["claim"].str.startswith(SATURATION_CLAIMS)
+    note = f"{SATURATION_NOTE} {_win(*window)}"
+    out.loc[sel, "kind"] = "info"
+    out.loc[sel, "note"] = [f"{note}; {n}" if n else note for n in out.loc[sel, "note"]]
+    return out
 
 
 def _check_dims(scenario: Scenario, dm: S.Dims) -> None:
