@@ -1,5 +1,6 @@
-"""Every shipped scenario runs: ``scenarios/*.toml`` (and ``studies/*.toml``), globbed at
-collection, so a file added later is covered too.
+"""Every shipped scenario runs: ``scenarios/*.toml``, globbed at collection, so a file
+added later is covered too; every shipped study (``studies/*.toml``) loads and its first
+sample runs.
 
 Each is simulated over a short horizon with its own method and must reach it; the
 command line is run as a subprocess for paper-csv.toml (exit status 0). The scenario
@@ -21,8 +22,11 @@ from helpers import ROOT
 from core.scenario import load_scenario
 from generated import api
 from generated.codegen import CodegenSettings
+from sweep.sampler import samples, write_scenario
+from sweep.study import load_study
 
-SHIPPED = sorted([*ROOT.glob("scenarios/*.toml"), *ROOT.glob("studies/*.toml")])
+SHIPPED = sorted(ROOT.glob("scenarios/*.toml"))
+STUDIES = sorted(ROOT.glob("studies/*.toml"))
 SHORT = 0.5  # seconds simulated: past the start-up transient (t < 0.1 s)
 
 
@@ -42,10 +46,24 @@ def _horizon(path: Path) -> float:
 def test_scenarios_are_found():
     names = {p.name for p in SHIPPED}
     assert {"paper.toml", "paper-csv.toml", "paper-synth.toml"} <= names
+    assert "example.toml" in {p.name for p in STUDIES}
 
 
 @pytest.mark.parametrize("path", SHIPPED, ids=lambda p: f"{p.parent.name}/{p.name}")
 def test_shipped_scenario_reaches_a_short_horizon(path, roots):
+    _reaches_a_short_horizon(path, roots)
+
+
+@pytest.mark.parametrize("path", STUDIES, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_shipped_study_first_sample_reaches_a_short_horizon(path, roots, tmp_path):
+    """A study is not a scenario: it loads, and its first sample (written as a scenario
+    file, the way ``python -m sweep samples --write-scenarios`` does) runs."""
+    first = next(samples(load_study(path), ids=[0]))
+    assert first.reason is None, first.reason
+    _reaches_a_short_horizon(write_scenario(first, tmp_path), roots)
+
+
+def _reaches_a_short_horizon(path: Path, roots) -> None:
     out, build = roots
     horizon = _horizon(path)
     cg = CodegenSettings(optimization="-O0", jacobian="auto", build_root=str(build))
