@@ -33,6 +33,15 @@ from scipy.optimize import minimize_scalar
 
 from core.errors import ExpressionError, ScenarioError, UsageError
 from core.expressions import Expr, parse_expression
+from core.faults import (
+    FAULT,
+    FAULT_TYPES,
+    MAX_SWITCHES,
+    Fault,
+    faulted_bias,
+    faulted_health,
+    pulse_count,
+)
 from core.graph import unreachable_followers
 from core.settings import (
     EITHER,
@@ -63,6 +72,7 @@ METHODS = list(BUILTIN_METHODS)
 FIXED_STEP_METHODS = {"fixed"}  # the methods that may integrate the exact sign function
 START_MODES = ("given", "formation")
 MAX_TABLE_ROWS = 1000  # rows of a piecewise g_i table
+MAX_FAULTS = 100  # [[followers.faults]] tables of one follower
 MAX_TRACE_ROWS = 1_000_000  # rows of a CSV operator trace
 MAX_TRACE_BYTES = 64 * 2**20  # size of a CSV operator trace (read whole)
 
@@ -199,6 +209,7 @@ class Follower:
     g: Health
     f: tuple[Expr, ...]  # n expressions of t, the bias/disturbance f_i(t)
     d: np.ndarray  # n, bound |f_ir| ≤ d_ir (given or sampled over the horizon)
+    faults: tuple[Fault, ...] = ()  # [[followers.faults]], already composed into g and f
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -351,7 +362,9 @@ class Scenario:
 
     def breakpoints(self) -> tuple[float, ...]:
         """Known discontinuities in time inside (0, horizon): faults, steps in inputs."""
+        H = self.integration.horizon
         times: set[float] = set()
+        exact = {t for fo in self.followers for fa in fo.faults for t in fa.times(H)}
         for fo in self.followers:
             times.update(fo.g.breakpoints)
             for e in fo.f:
@@ -359,8 +372,14 @@ class Scenario:
         if self.leader.u0 is not None:
             for e in self.leader.u0:
                 times.update(e.breakpoints())
-        H = self.integration.horizon
+        # a root found numerically in f may differ from a fault's onset by rounding: keep the onset
+        times = {t for t in times if not any(_near(t, x) for x in exact)} | exact
         return tuple(sorted(t for t in times if 0.0 < t < H))
+
+
+def _near(a: float, b: float) -> bool:
+    """``a`` and ``b`` are the same time up to rounding (a few ulps), but not equal."""
+    return a != b and abs(a - b) <= 1e-12 * max(1.0, abs(b))
 
 
 # --------------------------------------------------------------------------- rules
@@ -510,6 +529,7 @@ FOLLOWER: dict[str, Setting] = {
     "g": declare(1.0, "health"),
     "f": declare(0.0, "expression_or_list", dims=("n", "")),
     "d": declare(Derived("sup |f_ir| on [0, horizon]"), "vector", NONNEG, dims=("n", "")),
+    "faults": declare(Derived("none"), "tables"),
 }
 #: the tables above by their name in docs/scenario-format.md
 TABLES: dict[str, dict[str, Setting]] = {
@@ -1036,8 +1056,10 @@ def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Followe
     ctx.table(fo, key, set(FOLLOWER), required_keys(FOLLOWER))
     sizes = {"n": n}
     model, params = _model(ctx, fo, key, n)
+    faults = _faults(ctx, fo.get("faults", []), key, n, float(tgrid[-1]))
     health = _health(ctx, fo.get("g", FOLLOWER["g"].default), f"{key}.g", tgrid)
-    f, d = _disturbance(ctx, fo, key, n, tgrid)
+    health = _faulted(ctx, health, faults, key, tgrid)
+    f, d = _disturbance(ctx, fo, key, n, tgrid, faults)
     return Follower(
         model=model,
         params=params,
@@ -1047,6 +1069,7 @@ def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Followe
         g=health,
         f=f,
         d=d,
+        faults=faults,
     )
 
 
@@ -1082,9 +1105,12 @@ def _model(ctx: _Ctx, fo: dict, key: str, n: int) -> tuple[str, dict[str, float]
 
 
 def _disturbance(
-    ctx: _Ctx, fo: dict, key: str, n: int, tgrid: np.ndarray
+    ctx: _Ctx, fo: dict, key: str, n: int, tgrid: np.ndarray, faults: tuple[Fault, ...] = ()
 ) -> tuple[tuple[Expr, ...], np.ndarray]:
-    """A follower's ``f`` (n expressions) and its bound ``d`` (given and checked, or sampled)."""
+    """A follower's ``f`` (n expressions, plus its bias ``faults``) and its bound ``d``.
+
+    ``d`` is given and checked, or sampled.
+    """
     f_raw = fo.get("f", FOLLOWER["f"].default)
     if not isinstance(f_raw, list):
         f_raw = [f_raw] * n  # one expression for every component
@@ -1095,6 +1121,7 @@ def _disturbance(
             f"one expression of t, or a list of {n} (one per coordinate)",
         )
     f = tuple(ctx.expr(e, f"{key}.f[{r}]") for r, e in enumerate(f_raw))
+    f = faulted_bias(f, faults)
     worst = np.array([_sup(lambda t, e=e: np.abs(_sample(e, t)), _times(e, tgrid)) for e in f])
     for r, w in enumerate(worst):
         if not math.isfinite(w):
@@ -1233,6 +1260,70 @@ def _health(ctx: _Ctx, v: Any, key: str, tgrid: np.ndarray) -> Health:
                 "0 < g_i <= 1 (1 = healthy)",
             )
         breaks = expr.breakpoints()
+    return Health(expr=expr, breakpoints=breaks, minimum=float(lo))
+
+
+def _faults(ctx: _Ctx, raw: Any, key: str, n: int, horizon: float) -> tuple[Fault, ...]:
+    """A follower's ``[[followers.faults]]`` tables (docs/scenario-format.md, 'Faults')."""
+    if not isinstance(raw, list) or not all(isinstance(x, dict) for x in raw):
+        raise ctx.err(
+            f"{key}.faults",
+            "is not an array of tables",
+            '[[followers.faults]] tables, each with a type such as "abrupt"',
+        )
+    if len(raw) > MAX_FAULTS:
+        raise ctx.err(f"{key}.faults", f"has {len(raw)} faults", f"at most {MAX_FAULTS}")
+    return tuple(_fault(ctx, fa, f"{key}.faults[{k + 1}]", n, horizon) for k, fa in enumerate(raw))
+
+
+def _fault(ctx: _Ctx, raw: dict, key: str, n: int, horizon: float) -> Fault:
+    """One fault table: its type, then exactly the keys of that type, each checked."""
+    kind = raw.get("type")
+    if not isinstance(kind, str) or kind not in FAULT_TYPES:
+        problem = "missing" if "type" not in raw else f"{brief(kind)} is not a fault type"
+        raise ctx.err(f"{key}.type", problem, "one of " + ", ".join(map(repr, FAULT_TYPES)))
+    names = FAULT_TYPES[kind]
+    for k in raw:
+        if k not in names:
+            expected = f"the keys of a {kind!r} fault: " + ", ".join(names)
+            raise ctx.err(f"{key}.{k}", f"unknown key for a {kind!r} fault", expected)
+    ctx.table(raw, key, set(names), set(names))
+    values = {k: _read(ctx, FAULT[k], raw[k], f"{key}.{k}", {"n": n}) for k in names[1:]}
+    if values["onset"] > horizon:
+        raise ctx.err(
+            f"{key}.onset",
+            f"{values['onset']:g} is beyond the horizon {horizon:g} s",
+            "a time in [0, integration.horizon]",
+        )
+    if kind == "intermittent":
+        count = pulse_count(values["onset"], values["period"], horizon)
+        if 2 * count > MAX_SWITCHES:
+            raise ctx.err(
+                f"{key}.period",
+                f"{values['period']:g} s gives {2 * count} on/off switches before the horizon",
+                f"at most {MAX_SWITCHES}: a longer period or a later onset",
+            )
+    if "amplitude" in values:
+        values["amplitude"] = tuple(float(a) for a in values["amplitude"])
+    return Fault(type=kind, **values)
+
+
+def _faulted(
+    ctx: _Ctx, base: Health, faults: tuple[Fault, ...], key: str, tgrid: np.ndarray
+) -> Health:
+    """The health ``base`` times the factors of the loss-of-effectiveness ``faults``."""
+    H = float(tgrid[-1])
+    health = [fa for fa in faults if not fa.is_bias]
+    if not health:
+        return base
+    expr = faulted_health(base.expr, faults, H)
+    times = {t for fa in health for t in fa.times(H) if 0.0 < t < H}
+    breaks = tuple(sorted(set(base.breakpoints) | times))
+    extra = [x for b in breaks for x in (b, b - 1e-9, b + 1e-9)]
+    ts = np.unique(np.concatenate([_times(expr, tgrid), np.array(extra, dtype=float)]))
+    lo = -_sup(lambda t: -_sample(expr, t), ts[(ts >= 0.0) & (ts <= H)])
+    if not (math.isfinite(lo) and lo > 0.0):  # cannot happen with severities < 1
+        raise ctx.err(f"{key}.faults", f"actuator health reaches {lo:.4g}", "severities below 1")
     return Health(expr=expr, breakpoints=breaks, minimum=float(lo))
 
 
