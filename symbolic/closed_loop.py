@@ -219,7 +219,13 @@ def _param_layout(n: int, saturated: bool = False) -> tuple[dict[str, slice], in
 
 
 def saturated(sc: Scenario) -> bool:
-    """Whether ``sc`` limits the applied torque (``controller.u_max`` given)."""
+    """Whether ``sc`` limits the applied torque (``controller.u_max`` given).
+
+    Parameters
+    ----------
+    sc : Scenario
+        The scenario.
+    """
     return sc.controller.u_max is not None
 
 
