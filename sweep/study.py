@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from core.errors import ExpressionError, ScenarioError
-from core.expressions import parse_expression
+from core.expressions import CONSTANTS, FUNCTIONS, parse_expression
 from core.scenario import load_scenario, scenario_from_dict
 from generated.overrides import _set_path
 from sweep.graphs import random_graph, resize_followers
@@ -34,6 +34,8 @@ KINDS = {"uniform": 2, "normal": 2, "choice": None, "integers": 2}
 TOP_KEYS = {"name", "description", "base", "count", "seed", "params", "graph", "operator"}
 GRAPH_KEYS = {"N", "edge_probability", "weight"}
 OPERATOR_KEYS = {"u0", "params", "traces"}
+#: names an operator parameter may not take: the parser's own
+RESERVED = {"t", *CONSTANTS, *FUNCTIONS}
 
 
 class StudyError(ScenarioError):
@@ -405,8 +407,10 @@ def _operator(f: str, path: Path, raw: Any) -> OperatorFamily:
         f, op.get("params", {}), "operator.params", set(op.get("params", {}))
     ).items():
         where = _join("operator.params", name)
-        if not re.fullmatch(r"[A-Za-z_]\w*", name) or name in ("t", "pi"):
-            raise StudyError(f, where, "is not a parameter name", "an identifier other than t, pi")
+        if not re.fullmatch(r"[A-Za-z_]\w*", name) or name in RESERVED:
+            raise StudyError(
+                f, where, "is not a parameter name", "an identifier other than t, pi and functions"
+            )
         if not any(re.search(rf"\b{name}\b", e) for e in u0):
             raise StudyError(f, where, "is not used in operator.u0", "a name the expressions use")
         params[name] = distribution(f, spec, where)

@@ -181,6 +181,20 @@ def test_operator_traces_are_chosen_files(tmp_path):
         assert s.scenario.leader.u0_trace is not None
 
 
+def test_operator_family_evaluates_to_the_drawn_parameters(tmp_path):
+    body = (
+        '[operator]\nu0 = ["A*cos(w*t + phi)"]\n'
+        "params = { A = { uniform = [-2, 2] }, w = { uniform = [0.5, 1.5] },"
+        " phi = { uniform = [0, 6.3] } }\n"
+    )
+    t = np.linspace(0.0, 20.0, 101)
+    for s in samples(load_study(_study(tmp_path, body))):
+        assert s.reason is None, s.reason
+        A, w, phi = (s.params[f"operator.{k}"] for k in ("A", "w", "phi"))
+        u0 = s.scenario.leader.u0[0].numpy(t)
+        np.testing.assert_allclose(u0, A * np.cos(w * t + phi), rtol=0, atol=1e-12)
+
+
 def test_sample_the_loader_refuses_carries_its_reason(tmp_path, capsys):
     # amplitudes above leader.alpha = 2: every sample breaks ||u0|| <= alpha
     path = _study(
@@ -208,6 +222,10 @@ BAD = [
     ('[operator]\nu0 = ["A*cos(t)"]\nparams = { B = { uniform = [1, 2] } }\n', "operator.params.B"),
     ('[operator]\nu0 = ["A*evil(t)"]\nparams = { A = { uniform = [1, 2] } }\n', "operator.u0[0]"),
     ('[operator]\ntraces = ["missing.csv"]\n', "operator.traces[0]"),
+    (
+        '[operator]\nu0 = ["cos*t"]\nparams = { cos = { uniform = [1, 2] } }\n',
+        "operator.params.cos",
+    ),
 ]
 BAD_HEAD = [
     (f'base = "{PAPER}"\ncount = 0\nseed = 1\n', "count"),
