@@ -11,8 +11,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from core.errors import ScenarioError
+from core.faults import node_text
 from core.models import REGISTRY, ELModel, build_model
-from core.scenario import Scenario
+from core.scenario import Follower, Scenario
 
 
 def _num(x: float) -> str:
@@ -173,15 +174,40 @@ def _model_lines(s: Scenario, models: dict[tuple[str, tuple], ELModel]) -> list[
 def _follower_lines(s: Scenario) -> list[str]:
     lines = ["followers"]
     for i, fo in enumerate(s.followers):
-        g = fo.g.expr.text if not fo.g.expr.is_constant() else _num(fo.g.minimum)
-        if fo.g.breakpoints:
-            g += f"  [faults at t = {', '.join(_num(b) for b in fo.g.breakpoints)}]"
         lines += [
             f"  {i + 1}: {fo.model}, p(0) = {_vec(fo.p0)}, q(0) = {_vec(fo.q0)}, b0 = {_vec(fo.b0)}",
-            f"     g(t) = {g} (min {_num(fo.g.minimum)})",
-            f"     f(t) = [{', '.join(e.text for e in fo.f)}], |f_r| <= d = {_vec(fo.d)}",
+            f"     g(t) = {_health_text(fo)} (min {_num(fo.g.minimum)})",
+            f"     f(t) = [{', '.join(_bias_texts(fo))}], |f_r| <= d = {_vec(fo.d)}",
         ]
+        lines += [f"     fault {k + 1}: {fa.describe()}" for k, fa in enumerate(fo.faults)]
     return lines
+
+
+def _health_text(fo: Follower) -> str:
+    """g_i as written (the file's g, times the faults listed below), with its switching times."""
+    e = fo.g.expr
+    if any(not fa.is_bias for fa in fo.faults):  # e = g_file * product of fault factors
+        g = f"{_text(e.node[2])} x the faults below"
+    else:
+        g = e.text if not e.is_constant() else _num(fo.g.minimum)
+    if fo.g.breakpoints:
+        times = [_num(b) for b in fo.g.breakpoints]
+        shown = ", ".join(times[:8]) + (f", ... ({len(times)} in all)" if len(times) > 8 else "")
+        g += f"  [faults at t = {shown}]"
+    return g
+
+
+def _bias_texts(fo: Follower) -> list[str]:
+    """f_ir as written in the file, plus the bias faults listed below."""
+    if not any(fa.is_bias for fa in fo.faults):
+        return [e.text for e in fo.f]
+    return [f"{_text(e.node[2])} + biases below" for e in fo.f]
+
+
+def _text(node: tuple) -> str:
+    """A node's text without the outer parentheses the fault composition adds."""
+    text = node_text(node)
+    return text[1:-1] if text.startswith("(") and text.endswith(")") else text
 
 
 def _gain_lines(s: Scenario) -> list[str]:
