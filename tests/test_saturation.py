@@ -185,3 +185,40 @@ def test_paper_trajectory_is_unchanged(tmp_path):
     subprocess.run([*cmd, "--no-progress"], cwd=ROOT, check=True, capture_output=True, timeout=600)
     data = (tmp_path / "paper" / "trajectory.csv").read_bytes()
     assert hashlib.sha256(data).hexdigest() == PAPER_SHA
+
+
+def test_none_and_per_follower_values_load(tmp_path):
+    path = tmp_path / "limits.toml"
+    path.write_text(_paper_text_with('u_max = "none"'))
+    assert load_scenario(path).controller.u_max is None
+    path.write_text(_paper_text_with("u_max = [10.0, 20.0, 30.0, 40.0, 50.0]"))
+    assert np.array_equal(load_scenario(path).controller.u_max, [10.0, 20.0, 30.0, 40.0, 50.0])
+    path.write_text(_paper_text_with("u_max = 7"))
+    assert np.array_equal(load_scenario(path).controller.u_max, np.full(5, 7.0))
+
+
+def test_cascade_blocks_apply_the_same_limit():
+    """The graph-order blocks (native above N = 20) clip like the whole closed loop."""
+    from symbolic.cascade import build_cascade
+
+    sc = load_scenario(PAPER)
+    g = hand_gains(sc)
+    sat = _limited(sc, np.full(sc.N, 50.0))
+    cl, cas = build_closed_loop(sat, g), build_cascade(sat, g)
+    lay = cas.layout
+    m, na, n = lay.m, lay.agent_size, cas.n
+    x = np.asarray(cl.x0).ravel()
+    t = 0.0
+    xd, u = _signals(cl, t, x)
+    assert np.isclose(np.abs(u), 50.0, rtol=1e-12).any()  # the limit is active here
+    fv = np.array(cas.faults(t)).ravel()
+    jets: dict[int, np.ndarray] = {}
+    for i in cas.order:
+        nb = np.zeros(3 * n)
+        for k in range(cas.upstream_ptr[i], cas.upstream_ptr[i + 1]):
+            nb += cas.upstream_weight[k] * jets[cas.upstream_idx[k]]
+        xb = np.concatenate([x[:m], x[m + i * na : m + (i + 1) * na]])
+        out = cas.block(t, xb, nb, cas.coupling[i], cas.params[:, i], fv[cas.fault_index[i]])
+        jets[i] = np.array(out[1]).ravel()
+        want = np.concatenate([xd[:m], xd[m + i * na : m + (i + 1) * na]])
+        np.testing.assert_allclose(np.array(out[0]).ravel(), want, rtol=1e-12, atol=1e-12)
