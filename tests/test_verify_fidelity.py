@@ -48,3 +48,10 @@ def test_scan_reads_every_range_in_a_comment(tmp_path):
     emap = equation_map(tmp_path)
     assert sorted(emap) == [18, 19, 20, 33, 34, 35, 41]
     assert emap[34] == ["verify.m:f"]
+
+
+def test_raw_scan_in_the_doc_is_current():
+    """The doc's raw-scan table is what `python -m verify.fidelity` prints for today's code."""
+    from verify.fidelity import markdown
+
+    assert markdown(ROOT).strip() in DOC, "regenerate it: python -m verify.fidelity"
