@@ -1,4 +1,5 @@
-"""``python -m sweep samples STUDY [--write-scenarios DIR]``: list a study's samples.
+"""``python -m sweep samples STUDY [--write-scenarios DIR]``: list a study's samples;
+``python -m sweep run STUDY [--ids ...]``: run them (docs/studies.md, "Running a study").
 
 One line per sample: id, seed, ``ok`` or ``refused``, the drawn values as JSON (and the
 loader's reason for a refused sample). ``--write-scenarios DIR`` also writes each valid
@@ -7,10 +8,11 @@ sample's scenario file, so ``make sim SCENARIO=DIR/<name>.toml`` runs it.
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 
-from core.errors import CliParser, run_cli
+from core.errors import CliParser, UsageError, run_cli
 from sweep.sampler import samples, write_scenario
 from sweep.study import load_study
 
@@ -28,7 +30,14 @@ def main(argv: list[str]) -> int:
     sp = sub.add_parser("samples", help="list a study's samples")
     sp.add_argument("study", help="the study TOML file")
     sp.add_argument("--write-scenarios", metavar="DIR", help="write each valid sample's TOML")
+    rp = sub.add_parser("run", help="simulate and verify a study's samples (resumable)")
+    rp.add_argument("study", help="the study TOML file")
+    rp.add_argument("--ids", type=int, nargs="+", help="only these sample ids (default all)")
+    rp.add_argument("--out", default=None, help="output root (default out/ or $HITL_OUT)")
+    rp.add_argument("--batch", type=int, default=10, help="rows per atomic commit (default 10)")
     args = ap.parse_args(argv)
+    if args.cmd == "run":
+        return _run(args, argv)
     study = load_study(args.study)
     refused = 0
     for s in samples(study):
@@ -41,6 +50,22 @@ def main(argv: list[str]) -> int:
             line += f"\t{write_scenario(s, args.write_scenarios)}"
         print(line)
     print(f"{study.count} samples, {refused} refused by the loader", file=sys.stderr)
+    return 0
+
+
+def _run(args: argparse.Namespace, argv: list[str]) -> int:
+    """``run``: execute the study, then print where the results and report are."""
+    from core.artifacts import OUT_ROOT
+    from sweep.run import run_study
+
+    if args.ids is not None and any(k < 0 for k in args.ids):
+        raise UsageError("--ids: sample ids are integers >= 0")
+    command = " ".join(["python -m sweep", *argv])
+    path = run_study(
+        args.study, out_root=args.out or OUT_ROOT, batch=args.batch, ids=args.ids, command=command
+    )
+    print(f"results: {path}")
+    print(f"report: {path.parent / 'report.md'}")
     return 0
 
 

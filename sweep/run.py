@@ -1,0 +1,497 @@
+"""Run a study's samples on Dask and stream one result row per sample to Parquet.
+
+Each task draws one sample, writes its scenario file, simulates it
+(:func:`generated.api.run`), verifies it (the bound-vs-actual table of
+:func:`verify.pipeline.verify_run`, no figures) and returns one flat row. Rows are
+committed to ``out/<study>/results.parquet`` in batches by an atomic replace of the
+whole table, so an interrupted study resumes with only the missing sample ids.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import math
+import os
+import re
+import sys
+import time
+import traceback
+import uuid
+from collections.abc import Iterable
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from core.errors import UsageError
+from sweep.sampler import Sample, make_sample, write_scenario
+from sweep.study import Study, load_study
+
+RESULTS = "results.parquet"
+#: columns every row has, in this order (then ``param:<key>`` and ``t2_entry:<i>``)
+BASE_COLUMNS = [
+    "id",
+    "seed",
+    "name",
+    "status",
+    "steps",
+    "wall_s",
+    "library_sha256",
+    "tail_max_et",
+    "formation_tail_max",
+    "observer_tail_max",
+    "t2_entry_source",
+    "peak_u_max",
+    "guaranteed_held",
+    "consistency_held",
+    "n_guaranteed",
+    "n_consistency",
+    "finished_utc",
+]
+
+
+@dataclass(frozen=True)
+class StudyPaths:
+    """Where a study's outputs go: ``<out_root>/<study name>/``.
+
+    Attributes
+    ----------
+    folder : Path
+        The study's folder.
+    """
+
+    folder: Path
+
+    @property
+    def samples(self) -> Path:
+        """Folder of the written sample scenarios."""
+        return self.folder / "samples"
+
+    @property
+    def runs(self) -> Path:
+        """Output root of the simulations (``runs/<sample name>/``)."""
+        return self.folder / "runs"
+
+    @property
+    def results(self) -> Path:
+        """The results table."""
+        return self.folder / RESULTS
+
+
+# --------------------------------------------------------------------------- one sample
+@lru_cache(maxsize=4)
+def _study(path: str) -> Study:
+    """The study, loaded once per worker process."""
+    return load_study(path)
+
+
+def run_sample(study_path: str, sample_id: int, folder: str) -> dict[str, Any]:
+    """Draw, write, simulate and verify one sample; never raises for a sample's own fault.
+
+    Parameters
+    ----------
+    study_path : str
+        The study file.
+    sample_id : int
+        0-based id.
+    folder : str
+        The study's output folder (:class:`StudyPaths`).
+
+    Returns
+    -------
+    dict
+        One flat row (:data:`BASE_COLUMNS`, ``param:<key>``, ``t2_entry:<i>``); ``status``
+        is ``ok``, ``refused: <loader's reason>`` or ``failed: <one-line error>``.
+    """
+    t0 = time.perf_counter()
+    paths = StudyPaths(Path(folder))
+    sample = make_sample(_study(study_path), sample_id)
+    row: dict[str, Any] = {"id": sample.id, "seed": str(sample.seed), **param_columns(sample)}
+    row["name"] = sample.scenario_data.get("name", "")
+    if sample.scenario is None:
+        row["status"] = f"refused: {sample.reason}"
+    else:
+        try:
+            row.update(_simulate_and_verify(sample, paths))
+            row["status"] = "ok"
+        except Exception as exc:  # noqa: BLE001 - any failure of one sample is recorded
+            row["status"] = f"failed: {_one_line(exc)}"
+    row["wall_s"] = time.perf_counter() - t0
+    row["finished_utc"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+    return row
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split()) or "".join(traceback.format_exception_only(exc)).strip()
+    return f"{type(exc).__name__}: {text}"[:500]
+
+
+def param_columns(sample: Sample) -> dict[str, Any]:
+    """The drawn values as ``param:<key>`` columns; a list becomes ``param:<key>[k]`` (1-based).
+
+    Parameters
+    ----------
+    sample : Sample
+        A drawn sample.
+    """
+    out: dict[str, Any] = {}
+    for key, v in sample.params.items():
+        if isinstance(v, list):
+            out.update({f"param:{key}[{k + 1}]": _scalar(x) for k, x in enumerate(v)})
+        else:
+            out[f"param:{key}"] = _scalar(v)
+    return out
+
+
+def _scalar(v: Any) -> Any:
+    """A Parquet-friendly value: numbers and strings stay, anything else becomes JSON."""
+    if isinstance(v, bool | int | float | str):
+        return v
+    return json.dumps(v)
+
+
+def _simulate_and_verify(sample: Sample, paths: StudyPaths) -> dict[str, Any]:
+    """Write the scenario file, run it and summarize its bounds table."""
+    from generated import api
+    from verify import pipeline as P
+
+    scenario_file = write_scenario(sample, paths.samples)
+    res = api.run(scenario_file, out_root=paths.runs, progress=False)
+    run = P.Run(sample.scenario, res.frame, res.trajectory.x, res.meta, res.csv_path.parent)
+    v = P.verify_run(run, out_root=paths.runs)
+    meta = res.meta
+    return {
+        "steps": meta.get("steps"),
+        "library_sha256": library_sha(meta),
+        **summarize_table(v.table),
+        "tail_max_et": tail_max_et(res.frame, v.config.tail_fraction),
+    }
+
+
+def library_sha(meta: dict[str, Any]) -> str:
+    """SHA-256 of the compiled library the run executed (from meta.json).
+
+    Parameters
+    ----------
+    meta : dict
+        The run's meta.json content.
+    """
+    libs = meta.get("libraries") or {}
+    main = (meta.get("library") or {}).get("path")
+    if main in libs:
+        return libs[main]
+    return ",".join(sorted(libs.values()))
+
+
+def tail_max_et(frame: pd.DataFrame, tail_fraction: float) -> float:
+    """max_i sup over the tail window of the Euclidean norm |e_ti| (columns ``et<i>_<r>``).
+
+    Parameters
+    ----------
+    frame : DataFrame
+        The trajectory.
+    tail_fraction : float
+        The asymptotic window: the last fraction of the horizon.
+    """
+    from verify import signals as S
+
+    t = frame["t"].to_numpy(float)
+    tail = S.tail_mask(t, tail_fraction)
+    best = -math.inf
+    for i in range(1, S.dims(frame).N + 1):
+        cols = [c for c in frame.columns if re.fullmatch(rf"et{i}_\d+", c)]
+        e = np.linalg.norm(frame.loc[tail, cols].to_numpy(float), axis=1)
+        best = max(best, float(e.max()))
+    return best
+
+
+_TC = re.compile(r"comparison-lemma time ([0-9.eE+-]+|inf) s")
+
+
+def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
+    """The row's numbers from a bounds table (:func:`verify.table.bounds_table`).
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+
+    Returns
+    -------
+    dict
+        Formation and observer tails, peak |u_i|, Theorem 2 entry times and the verdicts.
+    """
+    guaranteed = table[table["kind"] == "guaranteed"]
+    consistency = table[table["kind"] == "consistency"]
+    out: dict[str, Any] = {
+        "formation_tail_max": _max_observed(table, "Formation |p_i"),
+        "observer_tail_max": _max_observed(table, "T1 |ebar_eta_i| -> 0 (tail sup)"),
+        "peak_u_max": _max_observed(table, "peak |u_i|", exact=True),
+        "guaranteed_held": bool(guaranteed["holds"].all()),
+        "consistency_held": bool(consistency["holds"].all()),
+        "n_guaranteed": len(guaranteed),
+        "n_consistency": len(consistency),
+    }
+    out.update(theorem2_entry(table))
+    return out
+
+
+def _max_observed(table: pd.DataFrame, claim: str, exact: bool = False) -> float:
+    hit = table["claim"] == claim if exact else table["claim"].str.startswith(claim)
+    vals = table.loc[hit, "observed"].astype(float)
+    return float(vals.max()) if len(vals) else math.nan
+
+
+def theorem2_entry(table: pd.DataFrame) -> dict[str, Any]:
+    """Each follower's Theorem 2 entry time: the comparison-lemma time t_c of the provable
+    variant's rows when the table has them, else Lemma 1's observed reaching time.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+
+    Returns
+    -------
+    dict
+        ``t2_entry:<i>`` per follower and ``t2_entry_source`` (``comparison lemma``,
+        ``Lemma 1 observed`` or both, comma-separated, or empty when neither row exists).
+    """
+    out: dict[str, Any] = {}
+    sources: set[str] = set()
+    prov = table[table["claim"].str.startswith("T2 |chi_si| <= chi_bar_si, provable")]
+    lem = table[table["claim"].str.startswith("Lemma 1 reaching time t_f")]
+    for agent in sorted({*prov["agent"], *lem["agent"]}, key=str):
+        m = [_TC.search(str(n)) for n in prov.loc[prov["agent"] == agent, "note"]]
+        if m and m[0]:
+            out[f"t2_entry:{agent}"] = float(m[0].group(1))
+            sources.add("comparison lemma")
+        else:
+            obs = lem.loc[lem["agent"] == agent, "observed"].astype(float)
+            out[f"t2_entry:{agent}"] = float(obs.iloc[0]) if len(obs) else math.nan
+            sources.add("Lemma 1 observed")
+    out["t2_entry_source"] = ",".join(sorted(sources))
+    return out
+
+
+# --------------------------------------------------------------------------- results table
+def read_results(path: Path) -> pd.DataFrame:
+    """The committed rows (an empty table when the file does not exist).
+
+    Parameters
+    ----------
+    path : Path
+        ``results.parquet``.
+    """
+    if not path.is_file():
+        return pd.DataFrame(columns=BASE_COLUMNS)
+    return pd.read_parquet(path)
+
+
+def commit_rows(
+    path: Path, old: pd.DataFrame, rows: list[dict], info: dict[str, str]
+) -> pd.DataFrame:
+    """Write ``old`` plus ``rows`` as the whole table: a temporary file, then ``os.replace``.
+
+    Parameters
+    ----------
+    path : Path
+        ``results.parquet``.
+    old : DataFrame
+        The rows already committed.
+    rows : list of dict
+        New rows.
+    info : dict
+        Key-value metadata stored in the Parquet schema (date, command).
+
+    Returns
+    -------
+    DataFrame
+        The table written, sorted by id, one row per id (the first kept).
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    new = pd.DataFrame(rows)
+    frames = [f for f in (old, new) if len(f)]
+    table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=BASE_COLUMNS)
+    table = table.drop_duplicates("id", keep="first").sort_values("id", ignore_index=True)
+    table = _column_order(_uniform_types(table))
+    arrow = pa.Table.from_pandas(table, preserve_index=False)
+    meta = {**(arrow.schema.metadata or {}), **{k.encode(): v.encode() for k, v in info.items()}}
+    tmp = path.with_name(path.name + ".tmp")
+    pq.write_table(arrow.replace_schema_metadata(meta), tmp)
+    os.replace(tmp, path)
+    return table
+
+
+def _uniform_types(table: pd.DataFrame) -> pd.DataFrame:
+    """Object columns mixing types (e.g. a ``choice`` of numbers and strings) become text."""
+    for c in table.columns:
+        if table[c].dtype == object:
+            kinds = {type(x) for x in table[c] if x is not None and x == x}
+            if len(kinds) > 1:
+                table[c] = [None if x is None or x != x else str(x) for x in table[c]]
+    return table
+
+
+def _column_order(table: pd.DataFrame) -> pd.DataFrame:
+    for c in BASE_COLUMNS:
+        if c not in table.columns:
+            table[c] = None
+    rest = sorted(c for c in table.columns if c not in BASE_COLUMNS)
+    return table[BASE_COLUMNS + rest]
+
+
+# --------------------------------------------------------------------------- the study
+def _client(scheduler: str | None) -> Any:
+    """A client of ``scheduler`` (or ``$DASK_SCHEDULER``), else of a new local cluster
+    with one single-threaded worker process per core."""
+    from distributed import Client, LocalCluster
+
+    address = scheduler or os.environ.get("DASK_SCHEDULER")
+    if address:
+        return Client(address)
+    cluster = LocalCluster(
+        n_workers=os.cpu_count() or 1, threads_per_worker=1, processes=True, dashboard_address=None
+    )
+    return Client(cluster)
+
+
+def _close(client: Any, own_cluster: bool) -> None:
+    cluster = client.cluster if own_cluster else None
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+def run_study(
+    study_path: str | Path,
+    out_root: str | Path = "out",
+    scheduler: str | None = None,
+    batch: int = 10,
+    ids: Iterable[int] | None = None,
+    command: str | None = None,
+) -> Path:
+    """Run the study's samples not yet in ``results.parquet``; return the results path.
+
+    Parameters
+    ----------
+    study_path : str or Path
+        The study file.
+    out_root : str or Path
+        Results go to ``<out_root>/<study name>/``.
+    scheduler : str, optional
+        A Dask scheduler address (``tcp://host:port``); default ``$DASK_SCHEDULER``, else a
+        local cluster of one single-threaded worker process per core.
+    batch : int
+        Rows are committed (atomically) every ``batch`` finished samples, and at the end.
+    ids : iterable of int, optional
+        Which samples (default all); those already in the results are skipped.
+    command : str, optional
+        The command recorded with the results (default ``sys.argv``).
+
+    Returns
+    -------
+    Path
+        ``results.parquet``.
+    """
+    study = load_study(study_path)
+    paths = StudyPaths(Path(out_root) / study.name)
+    paths.folder.mkdir(parents=True, exist_ok=True)
+    done = read_results(paths.results)
+    wanted = list(range(study.count)) if ids is None else sorted(set(ids))
+    for k in wanted:
+        if not 0 <= k < study.count:
+            raise UsageError(
+                f"--ids: sample id {k} outside 0..{study.count - 1}: give ids of the study"
+            )
+    have = set(int(x) for x in done["id"])
+    todo = [k for k in wanted if k not in have]
+    info = {
+        "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        "command": command or " ".join(["python -m sweep", *sys.argv[1:]]),
+        "study": str(Path(study_path)),
+    }
+    if todo or not paths.results.is_file():
+        _execute(str(Path(study_path).resolve()), todo, paths, done, batch, info, scheduler)
+    from sweep.report import write_report
+
+    write_report(paths.results, info["command"], info["date"])
+    return paths.results
+
+
+def _execute(
+    study_path: str,
+    todo: list[int],
+    paths: StudyPaths,
+    done: pd.DataFrame,
+    batch: int,
+    info: dict[str, str],
+    scheduler: str | None,
+) -> None:
+    """Submit ``todo`` (a bounded window in flight) and commit rows as they finish."""
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    own = not (scheduler or os.environ.get("DASK_SCHEDULER"))
+    client = _client(scheduler) if todo else None
+    pending: list[dict] = []
+    failures = 0
+    try:
+        with tqdm(total=len(todo), desc="samples", unit="sample", file=sys.stderr) as bar:
+            for row in _results(client, as_completed, study_path, todo, paths):
+                pending.append(row)
+                failures += row["status"] != "ok"
+                bar.update(1)
+                bar.set_postfix(not_ok=failures)
+                if len(pending) >= max(1, batch):
+                    done = commit_rows(paths.results, done, pending, info)
+                    pending = []
+    finally:
+        commit_rows(paths.results, done, pending, info)
+        if client is not None:
+            _close(client, own)
+
+
+def _results(client: Any, as_completed: Any, study_path: str, todo: list[int], paths: StudyPaths):
+    """Yield rows as tasks finish, keeping about two tasks per worker thread in flight.
+
+    A task that dies with its worker (e.g. a crash inside the compiled library) yields a
+    ``failed`` row for its sample; the study goes on.
+    """
+    if not todo:
+        return
+    window = max(2, 2 * sum(client.nthreads().values()))
+    queue = iter(todo)
+    folder = str(paths.folder.resolve())
+    tag = uuid.uuid4().hex[:8]
+    ids: dict[str, int] = {}
+
+    def submit(k: int) -> Any:
+        fut = client.submit(run_sample, study_path, k, folder, key=f"sample-{k}-{tag}", pure=False)
+        ids[fut.key] = k
+        return fut
+
+    stream = as_completed([submit(k) for _, k in zip(range(window), queue, strict=False)])
+    for fut in stream:
+        yield _row_of(fut, ids[fut.key])
+        nxt = next(queue, None)
+        if nxt is not None:
+            stream.add(submit(nxt))
+
+
+def _row_of(fut: Any, sample_id: int) -> dict[str, Any]:
+    """The task's row, or a ``failed`` row when the task itself raised."""
+    try:
+        return fut.result()
+    except Exception as exc:  # noqa: BLE001 - the worker died or the task was lost
+        return {
+            "id": sample_id,
+            "status": f"failed: {_one_line(exc)}",
+            "finished_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        }
