@@ -6,10 +6,11 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 SCENARIO ?= scenarios/paper.toml
+SWEEP ?= studies/example.toml
 STRICT ?= 0
 export STRICT
 
-.PHONY: all demo synth sim verify report test lint bench clean clean-cache distclean
+.PHONY: all demo synth sim sweep verify report test lint bench clean clean-cache distclean
 
 all: demo
 
@@ -29,6 +30,9 @@ synth: $(STAMP)
 
 sim: $(STAMP)
 	$(PY) -m generated sim $(SCENARIO)
+
+sweep: $(STAMP)
+	$(PY) -m sweep run $(SWEEP)
 
 verify: $(STAMP)
 	$(PY) -m verify check $(SCENARIO)
