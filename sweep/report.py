@@ -129,23 +129,24 @@ def failing_lines(table: pd.DataFrame, samples_dir: str) -> list[str]:
     return lines
 
 
-def write_report(results: Path, command: str, date: str) -> Path:
+def write_report(results: Path) -> Path:
     """Write ``report.md`` and ``figures/`` next to ``results``.
 
     Parameters
     ----------
     results : Path
-        ``out/<study>/results.parquet``.
-    command : str
-        The command that produced the results.
-    date : str
-        When (ISO 8601, UTC).
+        ``out/<study>/results.parquet``; its schema metadata gives the date and the
+        command of the last run that wrote rows.
 
     Returns
     -------
     Path
         The report.
     """
+    import pyarrow.parquet as pq
+
+    info = {k.decode(): v.decode() for k, v in (pq.read_schema(results).metadata or {}).items()}
+    command, date = info.get("command", "?"), info.get("date", "?")
     table = pd.read_parquet(results)
     folder = results.parent
     figs = folder / "figures"

@@ -402,14 +402,14 @@ def run_study(
     """
     study = load_study(study_path)
     paths = StudyPaths(Path(out_root) / study.name)
-    paths.folder.mkdir(parents=True, exist_ok=True)
-    done = read_results(paths.results)
     wanted = list(range(study.count)) if ids is None else sorted(set(ids))
     for k in wanted:
         if not 0 <= k < study.count:
             raise UsageError(
                 f"--ids: sample id {k} outside 0..{study.count - 1}: give ids of the study"
             )
+    paths.folder.mkdir(parents=True, exist_ok=True)
+    done = read_results(paths.results)
     have = set(int(x) for x in done["id"])
     todo = [k for k in wanted if k not in have]
     info = {
@@ -421,7 +421,7 @@ def run_study(
         _execute(str(Path(study_path).resolve()), todo, paths, done, batch, info, scheduler)
     from sweep.report import write_report
 
-    write_report(paths.results, info["command"], info["date"])
+    write_report(paths.results)
     return paths.results
 
 

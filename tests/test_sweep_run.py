@@ -125,3 +125,16 @@ def test_explicit_scheduler_gives_the_same_rows(setup):
     default = setup["full"][setup["full"]["id"].isin([1, 3])].reset_index(drop=True)
     cols = [c for c in default.columns if c not in TIMING]
     pd.testing.assert_frame_equal(res[cols], default[cols], check_exact=True)
+
+
+def test_cli_bad_id_is_one_line_and_writes_nothing(setup, capsys):
+    from core.errors import run_cli
+    from sweep.__main__ import main
+
+    root = setup["root"]
+    status = run_cli(
+        main, ["run", str(root / "study.toml"), "--out", str(root / "bad"), "--ids", "9"]
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1 and "--ids" in err[0] and "0..3" in err[0]
+    assert not (root / "bad").exists()
