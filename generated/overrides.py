@@ -118,7 +118,7 @@ def _check_value(file: str, key: str, value: Any) -> None:
             raise ScenarioError(file, _brief_text(key), *_too_long_int())
 
 
-def _set_path(data: dict, file: str, key: str, value: Any) -> None:
+def set_path(data: dict, file: str, key: str, value: Any) -> None:
     """Set a dotted key (``options.ablation``, ``followers[2].g``; 1-based) in the raw TOML."""
     parts = key.split(".")
     node: Any = data
@@ -207,7 +207,7 @@ def load(
     raw = Path(path).read_bytes()
     data = tomllib.loads(raw.decode("utf-8"))
     for k, v in overrides.items():
-        _set_path(data, str(path), k, v)
+        set_path(data, str(path), k, v)
     sha = hashlib.sha256((sc.sha256 + "\n" + _canonical(overrides)).encode()).hexdigest()
     # the loader's own validation, on the modified table
     out = scenario_from_dict(data, path=path, sha256=sha)

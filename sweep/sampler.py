@@ -22,7 +22,7 @@ from scipy.stats import truncnorm
 
 from core.errors import ExpressionError, ScenarioError
 from core.scenario import Scenario, scenario_from_dict
-from generated.overrides import _set_path
+from generated.overrides import set_path
 from sweep.graphs import random_graph, resize_followers
 from sweep.study import Distribution, Study, substitute
 
@@ -138,7 +138,7 @@ def make_sample(study: Study, sample_id: int) -> Sample:
         _draw_operator(study, data, params, rng)
         for key, d in study.params.items():
             params[key] = draw(d, rng)
-            _set_path(data, f"{study.path}#{sample_id}", key, params[key])
+            set_path(data, f"{study.path}#{sample_id}", key, params[key])
         sc = scenario_from_dict(
             data, path=f"{study.path}#{sample_id}", sha256=_sha(scenario_toml(data))
         )

@@ -20,7 +20,7 @@ import numpy as np
 from core.errors import ExpressionError, ScenarioError
 from core.expressions import CONSTANTS, FUNCTIONS, parse_expression
 from core.scenario import load_scenario, scenario_from_dict
-from generated.overrides import _set_path
+from generated.overrides import set_path
 from sweep.graphs import random_graph, resize_followers
 
 #: largest study file read (bytes)
@@ -494,7 +494,7 @@ def _check_keys_apply(study: Study) -> None:
         resize_followers(data, study.graph.n_range[0])
     for key, d in study.params.items():
         try:
-            _set_path(data, study.path, key, representative(d))
+            set_path(data, study.path, key, representative(d))
         except ScenarioError as exc:
             raise StudyError(study.path, _join("params", key), exc.problem, exc.expected) from None
     try:

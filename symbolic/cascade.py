@@ -33,13 +33,13 @@ from core.errors import ScenarioError
 from core.scenario import Scenario
 from symbolic.closed_loop import (
     StateLayout,
-    _fault_function,
-    _groups,
-    _observer_gains,
-    _param_layout,
-    _param_matrix,
     agent_function,
+    fault_function,
     make_layout,
+    model_groups,
+    observer_gains,
+    param_layout,
+    param_matrix,
     saturated,
 )
 from symbolic.derivatives import flow_jets
@@ -147,7 +147,7 @@ def topological_order(adjacency: np.ndarray, where: str = "scenario") -> np.ndar
 
 def _one_model(sc: Scenario) -> int:
     """The follower whose model serves all: one generated block needs one model."""
-    groups = _groups(sc)
+    groups = model_groups(sc)
     if len(groups) > 1:
         raise ScenarioError(
             sc.path,
@@ -163,7 +163,7 @@ def _block(sc: Scenario, og: ObserverGains, lay: StateLayout) -> ca.Function:
     m, n = sc.m, sc.n
     filtered = sc.options.derivatives == "filtered"
     C0 = ca.DM(np.atleast_2d(sc.leader.C0))
-    poff, npar = _param_layout(n, saturated(sc))
+    poff, npar = param_layout(n, saturated(sc))
     t = ca.SX.sym("t")
     xb = ca.SX.sym("xb", m + lay.agent_size)
     nb = ca.SX.sym("nb", 3 * n)
@@ -245,14 +245,14 @@ def build_cascade(scenario: Scenario, gains: Gains) -> Cascade:
     order = topological_order(sc.graph.adjacency, sc.path)
     lay = make_layout(sc.m, n, N, sc.options.derivatives == "filtered")
     gm = graph_matrices(sc.graph, gains)  # h and L + B = H L̄ H from the gains
-    block = _block(sc, _observer_gains(sc, gains), lay)
-    faults, fidx = _fault_function(sc)
+    block = _block(sc, observer_gains(sc, gains), lay)
+    faults, fidx = fault_function(sc)
     ptr, idx, wts = _upstream(gm.L_B)
     return Cascade(
         block=block,
         faults=faults,
         fault_index=np.asarray(fidx, dtype=np.int32).reshape(N, 1 + n),
-        params=_param_matrix(sc),
+        params=param_matrix(sc),
         coupling=np.column_stack([np.diag(gm.L_B), gm.a0h]).astype(float),
         order=order,
         upstream_ptr=ptr,

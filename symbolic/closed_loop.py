@@ -202,7 +202,7 @@ def make_layout(m: int, n: int, N: int, filtered: bool) -> StateLayout:
     return StateLayout(slices=slices, nx=m + N * na, m=m, N=N, agent_offsets=off, agent_size=na)
 
 
-def _param_layout(n: int, saturated: bool = False) -> tuple[dict[str, slice], int]:
+def param_layout(n: int, saturated: bool = False) -> tuple[dict[str, slice], int]:
     """Offsets of the per-agent numbers; ``u_max`` only with an actuator limit."""
     sizes = [
         ("obs", 2),  # (α1 + ᾱ1, φ_min): input of the observer Function
@@ -229,9 +229,9 @@ def saturated(sc: Scenario) -> bool:
     return sc.controller.u_max is not None
 
 
-def _param_matrix(sc: Scenario) -> np.ndarray:
+def param_matrix(sc: Scenario) -> np.ndarray:
     """Per-agent numbers as columns (constants of the mapped Function's inputs)."""
-    off, npar = _param_layout(sc.n, saturated(sc))
+    off, npar = param_layout(sc.n, saturated(sc))
     P = np.zeros((npar, sc.N))
     o, c = sc.observer, sc.controller
     for i, fo in enumerate(sc.followers):
@@ -249,7 +249,7 @@ def _param_matrix(sc: Scenario) -> np.ndarray:
     return P
 
 
-def _fault_function(sc: Scenario) -> tuple[ca.Function, list[int]]:
+def fault_function(sc: Scenario) -> tuple[ca.Function, list[int]]:
     """Distinct fault expressions g_i(t), f_ir(t) evaluated once; index list to (1+n)×N.
 
     Followers sharing an expression share its evaluation, so with identical
@@ -268,7 +268,7 @@ def _fault_function(sc: Scenario) -> tuple[ca.Function, list[int]]:
     return ca.Function("faults", [t], [ca.vertcat(*vals)], ["t"], ["values"]), idx
 
 
-def _observer_gains(sc: Scenario, gains: Gains) -> ObserverGains:
+def observer_gains(sc: Scenario, gains: Gains) -> ObserverGains:
     """Eq. (9)'s gains and the UIO, read from ``gains`` (checked against the leader)."""
     L = sc.leader
     for name, a, b in (("A0", gains.A0, L.A0), ("B0", gains.B0, L.B0), ("C0", gains.C0, L.C0)):
@@ -329,7 +329,7 @@ class _AgentSymbols:
         """Symbols sized for ``sc``'s leader, coordinates and derivative option."""
         m, n = sc.m, sc.n
         off, na = _agent_offsets(m, n, sc.options.derivatives == "filtered")
-        poff, npar = _param_layout(n, saturated(sc))
+        poff, npar = param_layout(n, saturated(sc))
         s = ca.SX.sym("s", na)
         psi, dpsi, ddpsi = (ca.SX.sym(k, n) for k in ("psi", "dpsi", "ddpsi"))
         gf = ca.SX.sym("gf", 1 + n)
@@ -478,7 +478,7 @@ def agent_function(sc: Scenario, og: ObserverGains, model_index: int) -> ca.Func
 
 
 # ----------------------------------------------------------------------------- assembly
-def _groups(sc: Scenario) -> list[list[int]]:
+def model_groups(sc: Scenario) -> list[list[int]]:
     """Agents grouped by (model, parameters): one per-agent Function per group."""
     keys: dict[tuple, list[int]] = {}
     for i, fo in enumerate(sc.followers):
@@ -526,10 +526,10 @@ def _network(
     filtered = sc.options.derivatives == "filtered"
     lay = make_layout(m, n, N, filtered)
     gm: GraphMatrices = graph_matrices(sc.graph, gains)
-    og = _observer_gains(sc, gains)
-    P = ca.DM(_param_matrix(sc))
-    poff, _ = _param_layout(n)
-    ffun, fidx = _fault_function(sc)
+    og = observer_gains(sc, gains)
+    P = ca.DM(param_matrix(sc))
+    poff, _ = param_layout(n)
+    ffun, fidx = fault_function(sc)
     GF = ca.reshape(ffun(t)[fidx], 1 + n, N)
     lead = leader_function(sc.leader)
     eta0dot, eta0ddot, y0, y0dot, y0ddot, u0, u0dot = lead(t, x[:m])
@@ -550,7 +550,7 @@ def _network(
         SOdd = apply_agents(D1, N, [SO, psi, Pobs, SOd, dpsi], assembly)[0]
         ddpsi = coupling(sc.leader.C0, SOdd[m : 2 * m, :], y0ddot, gm)
     A = ca.reshape(a, n, N)
-    groups = _groups(sc)
+    groups = model_groups(sc)
     outs: list[Any] | None = None
     args = [X, psi, dpsi, ddpsi, GF, A, P]
     funs = {}
