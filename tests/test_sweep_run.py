@@ -138,3 +138,16 @@ def test_cli_bad_id_is_one_line_and_writes_nothing(setup, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and len(err) == 1 and "--ids" in err[0] and "0..3" in err[0]
     assert not (root / "bad").exists()
+
+
+def test_integrator_failure_is_recorded_and_the_study_goes_on(setup):
+    root = setup["root"]
+    # a step budget far below the ~17000 steps these runs take: CVODES gives up
+    text = STUDY.replace('name = "tiny"', 'name = "starved"').replace("count = 4", "count = 2")
+    text += '"integration.max_steps" = { choice = [10] }\n'
+    (root / "starved.toml").write_text(text)
+    res = pd.read_parquet(run_study(root / "starved.toml", out_root=root / "out"))
+    assert sorted(res["id"]) == [0, 1]
+    assert res["status"].str.startswith("failed: IntegrationError").all(), res["status"].tolist()
+    report = (root / "out/starved/report.md").read_text()
+    assert "| failed | 2 |" in report and "- id 1: failed: IntegrationError" in report
