@@ -355,7 +355,13 @@ def _client(scheduler: str | None) -> Any:
 
     address = scheduler or os.environ.get("DASK_SCHEDULER")
     if address:
-        return Client(address)
+        try:
+            return Client(address)
+        except OSError as exc:  # refused or timed out: name the address and the fix
+            raise UsageError(
+                f"Dask scheduler {address}: cannot connect ({' '.join(str(exc).split())[:200]}); "
+                "start `dask scheduler` and `dask worker` there, or unset DASK_SCHEDULER"
+            ) from exc
     cluster = LocalCluster(
         n_workers=os.cpu_count() or 1, threads_per_worker=1, processes=True, dashboard_address=None
     )

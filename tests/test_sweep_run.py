@@ -151,3 +151,15 @@ def test_integrator_failure_is_recorded_and_the_study_goes_on(setup):
     assert res["status"].str.startswith("failed: IntegrationError").all(), res["status"].tolist()
     report = (root / "out/starved/report.md").read_text()
     assert "| failed | 2 |" in report and "- id 1: failed: IntegrationError" in report
+
+
+def test_unreachable_scheduler_is_one_error_naming_it(setup):
+    import dask
+
+    from core.errors import UsageError
+
+    root = setup["root"]
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        with pytest.raises(UsageError, match=r"tcp://127\.0\.0\.1:1: cannot connect"):
+            run_study(root / "study.toml", out_root=root / "nowhere", scheduler="tcp://127.0.0.1:1")
+    assert not (root / "nowhere/tiny/results.parquet").exists()
