@@ -119,7 +119,19 @@ def _check_value(file: str, key: str, value: Any) -> None:
 
 
 def set_path(data: dict, file: str, key: str, value: Any) -> None:
-    """Set a dotted key (``options.ablation``, ``followers[2].g``; 1-based) in the raw TOML."""
+    """Set a dotted key (``options.ablation``, ``followers[2].g``; 1-based) in the raw TOML.
+
+    Parameters
+    ----------
+    data : dict
+        The scenario file's parsed TOML, changed in place.
+    file : str
+        The file's path, for error messages.
+    key : str
+        The dotted key, as ``--set`` takes it.
+    value : object
+        The new value.
+    """
     parts = key.split(".")
     node: Any = data
     for k, part in enumerate(parts):

@@ -203,7 +203,15 @@ def make_layout(m: int, n: int, N: int, filtered: bool) -> StateLayout:
 
 
 def param_layout(n: int, saturated: bool = False) -> tuple[dict[str, slice], int]:
-    """Offsets of the per-agent numbers; ``u_max`` only with an actuator limit."""
+    """Offsets of the per-agent numbers; ``u_max`` only with an actuator limit.
+
+    Parameters
+    ----------
+    n : int
+        Coordinates per follower.
+    saturated : bool
+        Whether the scenario has an actuator limit (``controller.u_max``).
+    """
     sizes = [
         ("obs", 2),  # (α1 + ᾱ1, φ_min): input of the observer Function
         ("Lambda", n),
@@ -230,7 +238,12 @@ def saturated(sc: Scenario) -> bool:
 
 
 def param_matrix(sc: Scenario) -> np.ndarray:
-    """Per-agent numbers as columns (constants of the mapped Function's inputs)."""
+    """Per-agent numbers as columns (constants of the mapped Function's inputs).
+
+    Parameters
+    ----------
+    sc : Scenario
+    """
     off, npar = param_layout(sc.n, saturated(sc))
     P = np.zeros((npar, sc.N))
     o, c = sc.observer, sc.controller
@@ -254,6 +267,10 @@ def fault_function(sc: Scenario) -> tuple[ca.Function, list[int]]:
 
     Followers sharing an expression share its evaluation, so with identical
     faults the graph size does not grow with N.
+
+    Parameters
+    ----------
+    sc : Scenario
     """
     t = ca.SX.sym("t")
     texts: dict[str, int] = {}
@@ -269,7 +286,13 @@ def fault_function(sc: Scenario) -> tuple[ca.Function, list[int]]:
 
 
 def observer_gains(sc: Scenario, gains: Gains) -> ObserverGains:
-    """Eq. (9)'s gains and the UIO, read from ``gains`` (checked against the leader)."""
+    """Eq. (9)'s gains and the UIO, read from ``gains`` (checked against the leader).
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+    """
     L = sc.leader
     for name, a, b in (("A0", gains.A0, L.A0), ("B0", gains.B0, L.B0), ("C0", gains.C0, L.C0)):
         a = np.atleast_2d(np.asarray(a, dtype=float))
@@ -479,7 +502,12 @@ def agent_function(sc: Scenario, og: ObserverGains, model_index: int) -> ca.Func
 
 # ----------------------------------------------------------------------------- assembly
 def model_groups(sc: Scenario) -> list[list[int]]:
-    """Agents grouped by (model, parameters): one per-agent Function per group."""
+    """Agents grouped by (model, parameters): one per-agent Function per group.
+
+    Parameters
+    ----------
+    sc : Scenario
+    """
     keys: dict[tuple, list[int]] = {}
     for i, fo in enumerate(sc.followers):
         keys.setdefault((fo.model, tuple(sorted(fo.params.items()))), []).append(i)
