@@ -168,6 +168,7 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths) -> dict[str, Any]:
         "steps": meta.get("steps"),
         "library_sha256": library_sha(meta),
         **summarize_table(v.table),
+        **theorem2_entry(v.table, sample.scenario, res.frame, v.config),
         "tail_max_et": tail_max_et(res.frame, v.config.tail_fraction),
     }
 
@@ -209,9 +210,6 @@ def tail_max_et(frame: pd.DataFrame, tail_fraction: float) -> float:
     return best
 
 
-_TC = re.compile(r"comparison-lemma time ([0-9.eE+-]+|inf) s")
-
-
 def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
     """The row's numbers from a bounds table (:func:`verify.table.bounds_table`).
 
@@ -236,7 +234,6 @@ def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
         "n_guaranteed": len(guaranteed),
         "n_consistency": len(consistency),
     }
-    out.update(theorem2_entry(table))
     return out
 
 
@@ -246,33 +243,42 @@ def _max_observed(table: pd.DataFrame, claim: str, exact: bool = False) -> float
     return float(vals.max()) if len(vals) else math.nan
 
 
-def theorem2_entry(table: pd.DataFrame) -> dict[str, Any]:
-    """Each follower's Theorem 2 entry time: the comparison-lemma time t_c of the provable
-    variant's rows when the table has them, else Lemma 1's observed reaching time.
+def theorem2_entry(
+    table: pd.DataFrame, scenario: Any, frame: pd.DataFrame, config: Any
+) -> dict[str, Any]:
+    """Each follower's Theorem 2 entry time: the comparison-lemma time t_c after which the
+    provable variant's bound holds (:func:`verify.bounds.provable_entry_time`, the time
+    the report's provable rows start from), else Lemma 1's observed reaching time.
 
     Parameters
     ----------
     table : DataFrame
-        The bound-vs-actual table.
+        The bound-vs-actual table (for Lemma 1's observed reaching time).
+    scenario : Scenario
+    frame : DataFrame
+        The trajectory.
+    config : VerifyConfig
+        The verification's settings.
 
     Returns
     -------
     dict
-        ``t2_entry:<i>`` per follower and ``t2_entry_source`` (``comparison lemma``,
-        ``Lemma 1 observed`` or both, comma-separated, or empty when neither row exists).
+        ``t2_entry:<i>`` per follower (1-based) and ``t2_entry_source`` (``comparison lemma``,
+        ``Lemma 1 observed`` or both, comma-separated).
     """
+    from verify.bounds import provable_entry_time, theorem2_constants
+
     out: dict[str, Any] = {}
     sources: set[str] = set()
-    prov = table[table["claim"].str.startswith("T2 |chi_si| <= chi_bar_si, provable")]
     lem = table[table["claim"].str.startswith("Lemma 1 reaching time t_f")]
-    for agent in sorted({*prov["agent"], *lem["agent"]}, key=str):
-        m = [_TC.search(str(n)) for n in prov.loc[prov["agent"] == agent, "note"]]
-        if m and m[0]:
-            out[f"t2_entry:{agent}"] = float(m[0].group(1))
+    for i in range(scenario.N):
+        c = theorem2_constants(scenario, i, config)
+        if c.provable:
+            out[f"t2_entry:{i + 1}"] = provable_entry_time(c, frame, i, config.lemma1_delta)
             sources.add("comparison lemma")
         else:
-            obs = lem.loc[lem["agent"] == agent, "observed"].astype(float)
-            out[f"t2_entry:{agent}"] = float(obs.iloc[0]) if len(obs) else math.nan
+            obs = lem.loc[lem["agent"] == i + 1, "observed"].astype(float)
+            out[f"t2_entry:{i + 1}"] = float(obs.iloc[0]) if len(obs) else math.nan
             sources.add("Lemma 1 observed")
     out["t2_entry_source"] = ",".join(sorted(sources))
     return out

@@ -24,6 +24,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 from core.errors import ToolkitError
 from core.models import build_model
@@ -225,6 +226,28 @@ def comparison_reaching_time(Omega: float, chi_v: float, V0: float, delta: float
         return math.inf
     x = Omega * (1.0 - delta) * V0 / (chi_v * delta)
     return 0.0 if x <= 1.0 else math.log(x) / Omega
+
+
+def provable_entry_time(c: Theorem2Constants, df: pd.DataFrame, agent: int, delta: float) -> float:
+    """The comparison-lemma time t_c after which follower ``agent``'s provable bound holds.
+
+    From V2(0) in the trajectory (NaN without a ``V2_<i>`` column) and the provable
+    variant's constants: the start of every window that uses that bound.
+
+    Parameters
+    ----------
+    c : Theorem2Constants
+        Of follower ``agent`` (:func:`theorem2_constants`).
+    df : DataFrame
+        The trajectory.
+    agent : int
+        0-based follower.
+    delta : float
+        Lemma 1's δ (``VerifyConfig.lemma1_delta``).
+    """
+    col = f"V2_{agent + 1}"
+    V2_0 = float(df[col].iloc[0]) if col in df.columns else math.nan
+    return comparison_reaching_time(c.Omega_var, c.chi_v_var, V2_0, delta)
 
 
 def lemma2_bounds(gamma_bar: float, theta: float, order: int) -> np.ndarray:

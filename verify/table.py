@@ -31,9 +31,9 @@ from verify import signals as S
 from verify.bounds import (
     Theorem2Constants,
     VerifyConfig,
-    comparison_reaching_time,
     lemma1_bound,
     lemma1_reaching_time,
+    provable_entry_time,
     theorem2_constants,
 )
 from verify.lyapunov import InequalityCheck, theorem2_guaranteed
@@ -527,8 +527,8 @@ def _theorem2_agent_rows(
         )
     has_v2 = S.has(df, f"V2_{i + 1}")
     if c.provable:
-        V2_0 = float(df[f"V2_{i + 1}"].iloc[0]) if has_v2 else math.nan
-        _provable_rows(R, c, span.t, span.tail_start, chin, et, V2_0, i, guaranteed, cfg)
+        tc = provable_entry_time(c, df, i, cfg.lemma1_delta)
+        _provable_rows(R, c, span.t, span.tail_start, chin, et, tc, i, guaranteed, cfg)
     if has_v2:
         _lemma1_row(R, c, span, df[f"V2_{i + 1}"].to_numpy(float), i, cfg)
 
@@ -585,7 +585,7 @@ def _provable_rows(
     tail_start: float,
     chin: np.ndarray,
     et: np.ndarray,
-    V2_0: float,
+    tc: float,
     i: int,
     guaranteed: bool,
     cfg: VerifyConfig,
@@ -597,7 +597,6 @@ def _provable_rows(
     |e_r| ≤ max(χ̄/λ_r, |e_r(t_s)|) (the interval [−χ̄/λ_r, χ̄/λ_r] attracts and is
     invariant); the printed χ̄/λ_r is only asymptotic.
     """
-    tc = comparison_reaching_time(c.Omega_var, c.chi_v_var, V2_0, cfg.lemma1_delta)
     start = max(tail_start, tc)
     win = t >= start
     if not win.any():
@@ -894,8 +893,7 @@ def _definition1_derived(
     cfg: VerifyConfig,
 ) -> None:
     """‖p_i − h_i y0 − b_i‖ ≤ ‖e_ti‖ + ‖C0 ē_ηi‖, each bounded by its theorem, pointwise."""
-    V2_0 = float(df[f"V2_{i + 1}"].iloc[0]) if S.has(df, f"V2_{i + 1}") else math.nan
-    tc = comparison_reaching_time(c.Omega_var, c.chi_v_var, V2_0, cfg.lemma1_delta)
+    tc = provable_entry_time(c, df, i, cfg.lemma1_delta)
     win = t >= max(float(t[k0]), tc)
     if not win.any():
         return
