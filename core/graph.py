@@ -8,7 +8,9 @@ the gauge H = diag(±1) is found here.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -264,4 +266,206 @@ def m_matrix_violation(L_bar: np.ndarray | sp.spmatrix) -> str | None:
         return "it is singular"
     if z.min() <= 0:
         return f"(L̄ᵀ)⁻¹1 has a non-positive entry {z.min():g}"
+    return None
+
+
+# --------------------------------------------------------------------------- switching topology
+# Outside the paper's theorems (docs/fidelity.md, 'Switching topology'): the graph is piecewise
+# constant in time; every topology a run reaches must satisfy Assumption 1 with the base gauge.
+
+
+@dataclass(frozen=True)
+class Switch:
+    """One ``[[graph.switches]]`` event: from ``time`` on, a_{follower, neighbour} = ``weight``.
+
+    Attributes
+    ----------
+    time : float
+        Switching time, 0 < time < horizon.
+    follower : int
+        0-based follower whose incoming link changes.
+    neighbour : int or None
+        0-based follower it hears, or None for the leader (its pinning gain a_i0).
+    weight : float
+        The link's new weight: 0 removes it, any other value sets (adds) it.
+    """
+
+    time: float
+    follower: int
+    neighbour: int | None
+    weight: float
+
+    @property
+    def link(self) -> str:
+        """The weight it sets, 1-based as in files: ``a_31`` or ``a_30`` (the leader)."""
+        j = 0 if self.neighbour is None else self.neighbour + 1
+        return f"a_{self.follower + 1},{j}"
+
+
+class Topology(NamedTuple):
+    """The graph that holds on ``[t_start, next t_start)``."""
+
+    t_start: float
+    adjacency: np.ndarray  # N×N, a_ij
+    pinning: np.ndarray  # N, a_i0
+
+
+class SwitchedGraph(Protocol):
+    """What :func:`weights_at` needs of a graph (``core.scenario.Graph`` has it)."""
+
+    adjacency: np.ndarray
+    pinning: np.ndarray
+
+    def topologies(self) -> tuple[Topology, ...]: ...
+
+
+def switch_times(switches: tuple[Switch, ...]) -> tuple[float, ...]:
+    """The distinct switching times, increasing.
+
+    Parameters
+    ----------
+    switches : tuple of Switch
+    """
+    return tuple(sorted({s.time for s in switches}))
+
+
+def iter_topologies(
+    adjacency: np.ndarray, pinning: np.ndarray, switches: tuple[Switch, ...]
+) -> Iterator[Topology]:
+    """The piecewise-constant graph, one topology at a time (base graph first, t_start = 0).
+
+    Events at the same time are applied together; each topology is a fresh copy.
+
+    Parameters
+    ----------
+    adjacency : ndarray
+        N×N base adjacency.
+    pinning : ndarray
+        N base pinning gains.
+    switches : tuple of Switch
+        In any order.
+    """
+    A = np.array(adjacency, dtype=float)
+    b = np.array(pinning, dtype=float)
+    yield Topology(0.0, _frozen(A), _frozen(b))
+    for t in switch_times(switches):
+        for s in switches:
+            if s.time != t:
+                continue
+            if s.neighbour is None:
+                b[s.follower] = s.weight
+            else:
+                A[s.follower, s.neighbour] = s.weight
+        yield Topology(t, _frozen(A), _frozen(b))
+
+
+def topologies(
+    adjacency: np.ndarray, pinning: np.ndarray, switches: tuple[Switch, ...]
+) -> tuple[Topology, ...]:
+    """All topologies of :func:`iter_topologies` as a tuple.
+
+    Parameters
+    ----------
+    adjacency, pinning : ndarray
+        The base graph.
+    switches : tuple of Switch
+    """
+    return tuple(iter_topologies(adjacency, pinning, switches))
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = a.copy()
+    a.setflags(write=False)
+    return a
+
+
+def topology_index(tops: tuple[Topology, ...], t: float) -> int:
+    """Index of the topology that holds at time ``t`` (right-continuous: a switch acts at its time).
+
+    Parameters
+    ----------
+    tops : tuple of Topology
+        From :func:`topologies`.
+    t : float
+    """
+    starts = np.array([tp.t_start for tp in tops])
+    return max(int(np.searchsorted(starts, t, side="right")) - 1, 0)
+
+
+def base_gauge(adjacency: np.ndarray | sp.spmatrix, pinning: np.ndarray) -> np.ndarray:
+    """The gauge h of the base graph: all +1 when cooperative, else :func:`find_gauge`.
+
+    Parameters
+    ----------
+    adjacency, pinning : ndarray
+        The base graph.
+    """
+    A = sp.csr_matrix(adjacency, dtype=float)
+    if not (A.data < 0).any():
+        return np.ones(A.shape[0])
+    return find_gauge(A, pinning)
+
+
+def weights_at(graph: SwitchedGraph, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(L + B, a0 ∘ h)`` of the topology that holds at ``t``, dense (a numpy reference).
+
+    ψ = C0 E (L + B)ᵀ − y0 (a0 ∘ h)ᵀ with E = [η_1 … η_N] (eq. (6) summed over
+    neighbours); h is the base graph's gauge, which every topology keeps (checked on load).
+    For many calls, evaluate it once per topology at ``top.t_start``.
+
+    Parameters
+    ----------
+    graph : SwitchedGraph
+        A scenario's graph.
+    t : float
+        Time.
+
+    Returns
+    -------
+    L_B, a0h : ndarray
+        N×N ``L + B`` (``L = D − A``, ``D = diag(Σ_j |a_ij|)``) and N ``a_i0 h_i``.
+    """
+    tops = graph.topologies()
+    top = tops[topology_index(tops, t)]
+    h = base_gauge(graph.adjacency, graph.pinning)
+    return pinned_laplacian(top.adjacency, top.pinning).toarray(), top.pinning * h
+
+
+def topology_violation(
+    adjacency: np.ndarray | sp.spmatrix, pinning: np.ndarray, h: np.ndarray | None
+) -> str | None:
+    """What a switched topology breaks, or None: Assumption 1, or the gauge ``h``.
+
+    Parameters
+    ----------
+    adjacency, pinning : ndarray
+        The topology.
+    h : ndarray or None
+        The base graph's gauge, which the certified gains assume (None: not checked).
+
+    Returns
+    -------
+    str or None
+        One clause (``"follower(s) 3 cannot be reached from the leader (Assumption 1)"``).
+    """
+    if np.any(np.asarray(pinning) < 0):
+        i = int(np.flatnonzero(np.asarray(pinning) < 0)[0])
+        return f"pinning a_{i + 1},0 = {pinning[i]:g} is negative"
+    bad = unreachable_followers(adjacency, pinning)
+    if bad:
+        names = ", ".join(str(i + 1) for i in bad)
+        return f"follower(s) {names} cannot be reached from the leader (Assumption 1)"
+    if h is None:
+        return None
+    try:
+        hk = base_gauge(adjacency, pinning)
+    except SynthesisError as exc:
+        return str(exc).split(": ", 1)[-1]
+    flipped = np.flatnonzero(hk != np.asarray(h))
+    if flipped.size:
+        i = int(flipped[0])
+        return (
+            f"the signed graph's gauge changes (h_{i + 1} = {h[i]:+g} becomes {hk[i]:+g}), "
+            "which the certified gains assume (Remark 2)"
+        )
     return None

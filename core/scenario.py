@@ -31,18 +31,31 @@ from typing import Any, NamedTuple, TypeVar
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from core.errors import ExpressionError, ScenarioError, UsageError
+from core.errors import ExpressionError, ScenarioError, ToolkitError, UsageError
 from core.expressions import Expr, parse_expression
 from core.faults import (
     FAULT,
     FAULT_TYPES,
+    MAX_SLOTS,
     MAX_SWITCHES,
     Fault,
     faulted_bias,
+    SLOT_COUNT,
+    fault_times,
     faulted_health,
     pulse_count,
+    slotted_bias,
+    slotted_health,
 )
-from core.graph import unreachable_followers
+from core.graph import (
+    Switch,
+    Topology,
+    base_gauge,
+    iter_topologies,
+    switch_times,
+    topology_violation,
+    unreachable_followers,
+)
 from core.settings import (
     EITHER,
     NONNEG,
@@ -73,6 +86,7 @@ FIXED_STEP_METHODS = {"fixed"}  # the methods that may integrate the exact sign 
 START_MODES = ("given", "formation")
 MAX_TABLE_ROWS = 1000  # rows of a piecewise g_i table
 MAX_FAULTS = 100  # [[followers.faults]] tables of one follower
+MAX_GRAPH_SWITCHES = 1000  # [[graph.switches]] tables (each topology is an N×N copy)
 MAX_TRACE_ROWS = 1_000_000  # rows of a CSV operator trace
 MAX_TRACE_BYTES = 64 * 2**20  # size of a CSV operator trace (read whole)
 
@@ -178,10 +192,19 @@ class Graph:
 
     adjacency: np.ndarray  # N×N
     pinning: np.ndarray  # N
+    switches: tuple[Switch, ...] = ()  # [[graph.switches]], in file order
 
     @property
     def N(self) -> int:
         return self.adjacency.shape[0]
+
+    def topologies(self) -> tuple[Topology, ...]:
+        """The piecewise-constant graph: ``(t_start, adjacency, pinning)``, base graph first.
+
+        ``t_start`` = 0 for the base graph, then one entry per distinct switching time
+        (all switches at that time applied together); each holds until the next.
+        """
+        return tuple(iter_topologies(self.adjacency, self.pinning, self.switches))
 
     @property
     def signed(self) -> bool:
@@ -264,6 +287,8 @@ class Options:
     filter_bandwidth: float = setting(50.0, "number", POSITIVE)  # rad/s, filtered derivatives
     # ‖η̇_i‖ below which the formation angle τ_i is faded out
     tau_threshold: float = setting(1e-3, "number", POSITIVE)
+    # g_i, f_i in one generic form with this many fault slots (None: each fault type its own)
+    fault_slots: int | None = setting(OFF, "integer", NONNEG, WHOLE, SLOT_COUNT, off=True)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -361,10 +386,11 @@ class Scenario:
         return self.leader.p
 
     def breakpoints(self) -> tuple[float, ...]:
-        """Known discontinuities in time inside (0, horizon): faults, steps in inputs."""
+        """Known discontinuities in time inside (0, horizon): faults, steps in inputs, graph switches."""
         H = self.integration.horizon
         times: set[float] = set()
-        exact = {t for fo in self.followers for fa in fo.faults for t in fa.times(H)}
+        slots = self.options.fault_slots
+        exact = {t for fo in self.followers for t in fault_times(fo.faults, H, slots)}
         for fo in self.followers:
             times.update(fo.g.breakpoints)
             for e in fo.f:
@@ -372,6 +398,7 @@ class Scenario:
         if self.leader.u0 is not None:
             for e in self.leader.u0:
                 times.update(e.breakpoints())
+        exact |= set(switch_times(self.graph.switches))  # the graph switches exactly then
         # a root found numerically in f may differ from a fault's onset by rounding: keep the onset
         times = {t for t in times if not any(_near(t, x) for x in exact)} | exact
         return tuple(sorted(t for t in times if 0.0 < t < H))
@@ -462,6 +489,20 @@ def _step_within_horizon(key: str) -> Callable[[Scenario], Problem | None]:
     return broken
 
 
+def _switches_fit(s: Scenario) -> Problem | None:
+    """A scenario made by ``replace`` keeps its graph switches inside the horizon and the graph."""
+    H, N = s.integration.horizon, s.N
+    for k, sw in enumerate(s.graph.switches):
+        agents = [sw.follower] + ([] if sw.neighbour is None else [sw.neighbour])
+        if not 0.0 < sw.time < H or max(agents) >= N:
+            return (
+                f"switch {k + 1} (t = {sw.time:g} s, {sw.link}) is outside (0, {H:g}) s "
+                f"or the {N} followers",
+                "switch times inside (0, horizon) and agents of the graph",
+            )
+    return None
+
+
 #: every rule between settings, in the order they are checked
 RULES: tuple[Rule, ...] = (
     Rule("integration.output_step", "≤ horizon", _step_within_horizon("output_step")),
@@ -472,6 +513,7 @@ RULES: tuple[Rule, ...] = (
     Rule("controller.sigma", "", _sigma_for_sigma_laws),
     Rule("controller.g_min", "", _g_min_below_health),
     Rule("options.sign", "", _exact_sign_needs_fixed_step),
+    Rule("graph.switches", "", _switches_fit),
 )
 
 
@@ -518,6 +560,7 @@ LEADER: dict[str, Setting] = {
 GRAPH: dict[str, Setting] = {
     "adjacency": declare(REQUIRED, "matrix", dims=("N", "N")),
     "pinning": declare(REQUIRED, "vector", NONNEG, dims=("N", "")),
+    "switches": declare(Derived("none"), "tables"),
 }
 #: one ``[[followers]]`` table, eq. (2)
 FOLLOWER: dict[str, Setting] = {
@@ -769,10 +812,11 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     integ = _section(ctx, Integration, data.get("integration", {}), "integration", None)
     tgrid = np.linspace(0.0, integ.horizon, 4001)
     leader = _leader(ctx, data["leader"], path, integ.horizon, tgrid)
-    graph = _graph(ctx, data["graph"])
+    graph = _graph(ctx, data["graph"], integ.horizon)
     dims = Dims(N=graph.N, n=leader.n, m=leader.m, p=leader.p)
     _check_output_size(ctx, integ, dims.N, dims.n, dims.m)
-    followers = _followers(ctx, data["followers"], dims.n, dims.N, tgrid)
+    options = _section(ctx, Options, data.get("options", {}), "options", dims)
+    followers = _followers(ctx, data["followers"], dims.n, dims.N, tgrid, options.fault_slots)
     return Scenario(
         name=name,
         path=str(path),
@@ -783,7 +827,7 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
         followers=followers,
         observer=_section(ctx, Observer, data.get("observer", {}), "observer", dims),
         controller=_controller(ctx, data.get("controller", {}), dims),
-        options=_section(ctx, Options, data.get("options", {}), "options", dims),
+        options=options,
         initial=_section(ctx, Initial, data.get("initial", {}), "initial", dims),
         integration=integ,
     )
@@ -946,7 +990,7 @@ def _u0_peak(ctx: _Ctx, u0: tuple[Expr, ...], tgrid: np.ndarray) -> float:
     return u_peak
 
 
-def _graph(ctx: _Ctx, raw: Any) -> Graph:
+def _graph(ctx: _Ctx, raw: Any, horizon: float) -> Graph:
     """The [graph] table; every follower must be reachable from the leader (Assumption 1)."""
     G = ctx.table(raw, "graph", set(GRAPH), required_keys(GRAPH))
     A = _key(ctx, GRAPH, G, "graph", "adjacency", {})
@@ -967,11 +1011,89 @@ def _graph(ctx: _Ctx, raw: Any) -> Graph:
             "a directed spanning tree rooted at the leader: add a pinning a_i0 > 0 "
             "or an edge a_ij != 0 from a reachable agent",
         )
-    return Graph(adjacency=A, pinning=pin)
+    switches = _switches(ctx, G.get("switches", []), A, pin, horizon)
+    return Graph(adjacency=A, pinning=pin, switches=switches)
 
 
-def _followers(ctx: _Ctx, F: Any, n: int, N: int, tgrid: np.ndarray) -> tuple[Follower, ...]:
-    """The [[followers]] tables, one per row of the adjacency matrix."""
+def _switches(
+    ctx: _Ctx, raw: Any, A: np.ndarray, pin: np.ndarray, horizon: float
+) -> tuple[Switch, ...]:
+    """``[[graph.switches]]``: each event checked, then every topology it makes (Assumption 1)."""
+    if not isinstance(raw, list) or not all(isinstance(x, dict) for x in raw):
+        raise ctx.err(
+            "graph.switches",
+            "is not an array of tables",
+            "[[graph.switches]] tables with time, follower, neighbour, weight",
+        )
+    if len(raw) > MAX_GRAPH_SWITCHES:
+        raise ctx.err("graph.switches", f"has {len(raw)} switches", f"at most {MAX_GRAPH_SWITCHES}")
+    try:
+        h = base_gauge(A, pin)
+    except ToolkitError:  # an unbalanced base graph: synthesis names its cycle
+        h = None
+    out: list[Switch] = []
+    for k, sw in enumerate(raw):
+        s = _switch(ctx, sw, f"graph.switches[{k + 1}]", A.shape[0], horizon, h)
+        for j, o in enumerate(out):
+            if (o.time, o.follower, o.neighbour) == (s.time, s.follower, s.neighbour):
+                raise ctx.err(
+                    f"graph.switches[{k + 1}]",
+                    f"sets {s.link} at t = {s.time:g} s again (graph.switches[{j + 1}] does)",
+                    "one switch per link and time",
+                )
+        out.append(s)
+    switches = tuple(out)
+    for top in list(iter_topologies(A, pin, switches))[1:]:
+        why = topology_violation(top.adjacency, top.pinning, h)
+        if why is not None:
+            k = next(k for k, s in enumerate(switches) if s.time == top.t_start)
+            raise ctx.err(
+                f"graph.switches[{k + 1}].weight",
+                f"from t = {top.t_start:g} s {why}",
+                "every topology keeps a directed spanning tree rooted at the leader "
+                "(restore a link or add one from a reachable agent at the same time)",
+            )
+    return switches
+
+
+def _switch(ctx: _Ctx, raw: dict, key: str, N: int, horizon: float, h: np.ndarray | None) -> Switch:
+    """One switch table: time in (0, horizon), 1-based indices, a finite weight of a valid sign."""
+    names = ("time", "follower", "neighbour", "weight")
+    ctx.table(raw, key, set(names), set(names))
+    t = ctx.number(raw["time"], f"{key}.time")
+    if not 0.0 < t < horizon:
+        raise ctx.err(
+            f"{key}.time", f"{t:g} is outside (0, {horizon:g})", "0 < time < integration.horizon"
+        )
+    i = _index(ctx, raw["follower"], f"{key}.follower", 1, N, "a follower 1..N")
+    j = _index(ctx, raw["neighbour"], f"{key}.neighbour", 0, N, "0 (the leader) or a follower 1..N")
+    if j == i:
+        raise ctx.err(f"{key}.neighbour", f"{j} is the follower itself", "a different agent")
+    w = ctx.number(raw["weight"], f"{key}.weight")
+    if j == 0 and w < 0:
+        raise ctx.err(f"{key}.weight", f"pinning gain {w:g} is negative", "a_i0 >= 0")
+    if j > 0 and w != 0 and h is not None and np.sign(w) != h[i - 1] * h[j - 1]:
+        raise ctx.err(
+            f"{key}.weight",
+            f"{w:g} has the sign opposite to h_{i} h_{j} = {h[i - 1] * h[j - 1]:+g} of the "
+            "graph's gauge (it would change the gauge the gains are certified for)",
+            f"a weight of sign {h[i - 1] * h[j - 1]:+g}, or 0 to remove the link",
+        )
+    return Switch(time=t, follower=i - 1, neighbour=None if j == 0 else j - 1, weight=w)
+
+
+def _index(ctx: _Ctx, v: Any, key: str, lo: int, hi: int, expected: str) -> int:
+    """A whole number in [lo, hi] (1-based agents, 0 for the leader)."""
+    x = ctx.number(v, key)
+    if x != int(x) or not lo <= x <= hi:
+        raise ctx.err(key, f"{brief(v)} is not an agent", expected)
+    return int(x)
+
+
+def _followers(
+    ctx: _Ctx, F: Any, n: int, N: int, tgrid: np.ndarray, slots: int | None = None
+) -> tuple[Follower, ...]:
+    """The [[followers]] tables, one per row of the adjacency matrix (``slots``: fault_slots)."""
     if not isinstance(F, list) or not all(isinstance(x, dict) for x in F):
         raise ctx.err(
             "followers", "is not an array of tables", "[[followers]] tables, one per follower"
@@ -982,7 +1104,7 @@ def _followers(ctx: _Ctx, F: Any, n: int, N: int, tgrid: np.ndarray) -> tuple[Fo
             f"has {len(F)} followers but graph.adjacency is {N}x{N}",
             "one [[followers]] table per row of the adjacency matrix",
         )
-    return tuple(_follower(ctx, fo, i, n, tgrid) for i, fo in enumerate(F))
+    return tuple(_follower(ctx, fo, i, n, tgrid, slots) for i, fo in enumerate(F))
 
 
 def output_columns(N: int, n: int, m: int) -> int:
@@ -1050,16 +1172,24 @@ def _check_output_size(ctx: _Ctx, integ: Integration, N: int, n: int, m: int) ->
         )
 
 
-def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Follower:
+def _follower(
+    ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray, slots: int | None = None
+) -> Follower:
     """One [[followers]] table (0-based ``i``; messages say ``followers[i+1]``)."""
     key = f"followers[{i + 1}]"
     ctx.table(fo, key, set(FOLLOWER), required_keys(FOLLOWER))
     sizes = {"n": n}
     model, params = _model(ctx, fo, key, n)
     faults = _faults(ctx, fo.get("faults", []), key, n, float(tgrid[-1]))
+    if slots is not None and len(faults) > slots:
+        raise ctx.err(
+            f"{key}.faults",
+            f"has {len(faults)} faults but options.fault_slots = {slots}",
+            f"at most {slots} faults per follower, or options.fault_slots >= {len(faults)}",
+        )
     health = _health(ctx, fo.get("g", FOLLOWER["g"].default), f"{key}.g", tgrid)
-    health = _faulted(ctx, health, faults, key, tgrid)
-    f, d = _disturbance(ctx, fo, key, n, tgrid, faults)
+    health = _faulted(ctx, health, faults, key, tgrid, slots)
+    f, d = _disturbance(ctx, fo, key, n, tgrid, faults, slots)
     return Follower(
         model=model,
         params=params,
@@ -1105,7 +1235,13 @@ def _model(ctx: _Ctx, fo: dict, key: str, n: int) -> tuple[str, dict[str, float]
 
 
 def _disturbance(
-    ctx: _Ctx, fo: dict, key: str, n: int, tgrid: np.ndarray, faults: tuple[Fault, ...] = ()
+    ctx: _Ctx,
+    fo: dict,
+    key: str,
+    n: int,
+    tgrid: np.ndarray,
+    faults: tuple[Fault, ...] = (),
+    slots: int | None = None,
 ) -> tuple[tuple[Expr, ...], np.ndarray]:
     """A follower's ``f`` (n expressions, plus its bias ``faults``) and its bound ``d``.
 
@@ -1121,7 +1257,7 @@ def _disturbance(
             f"one expression of t, or a list of {n} (one per coordinate)",
         )
     f = tuple(ctx.expr(e, f"{key}.f[{r}]") for r, e in enumerate(f_raw))
-    f = faulted_bias(f, faults)
+    f = faulted_bias(f, faults) if slots is None else slotted_bias(f, faults, slots)
     worst = np.array([_sup(lambda t, e=e: np.abs(_sample(e, t)), _times(e, tgrid)) for e in f])
     for r, w in enumerate(worst):
         if not math.isfinite(w):
@@ -1309,15 +1445,28 @@ def _fault(ctx: _Ctx, raw: dict, key: str, n: int, horizon: float) -> Fault:
 
 
 def _faulted(
-    ctx: _Ctx, base: Health, faults: tuple[Fault, ...], key: str, tgrid: np.ndarray
+    ctx: _Ctx,
+    base: Health,
+    faults: tuple[Fault, ...],
+    key: str,
+    tgrid: np.ndarray,
+    slots: int | None = None,
 ) -> Health:
-    """The health ``base`` times the factors of the loss-of-effectiveness ``faults``."""
+    """The health ``base`` times the factors of the loss-of-effectiveness ``faults``.
+
+    With ``slots`` (options.fault_slots) in the generic form, even without faults.
+    """
     H = float(tgrid[-1])
-    health = [fa for fa in faults if not fa.is_bias]
-    if not health:
+    health = tuple(fa for fa in faults if not fa.is_bias)
+    if slots is not None:
+        expr = slotted_health(base.expr, faults, slots)
+        if not health:  # every factor is exactly 1: the values of base
+            return Health(expr=expr, breakpoints=base.breakpoints, minimum=base.minimum)
+    elif not health:
         return base
-    expr = faulted_health(base.expr, faults, H)
-    times = {t for fa in health for t in fa.times(H) if 0.0 < t < H}
+    else:
+        expr = faulted_health(base.expr, faults, H)
+    times = {t for t in fault_times(health, H, slots) if 0.0 < t < H}
     breaks = tuple(sorted(set(base.breakpoints) | times))
     extra = [x for b in breaks for x in (b, b - 1e-9, b + 1e-9)]
     ts = np.unique(np.concatenate([_times(expr, tgrid), np.array(extra, dtype=float)]))

@@ -31,6 +31,7 @@ from synthesis.lmi import (
     synth_Omega_Theta,
     synth_T,
 )
+from synthesis.switching import check_topologies, switched_w_min
 
 MIN_REL_MARGIN = 1e-3  # strict inequalities (λ1 > λ̄1/w, k1 > bound) keep at least this margin
 
@@ -185,7 +186,9 @@ def synthesize(scenario: Scenario, *, strict: bool = False) -> Gains:
     Gamma, Phi = uio_matrices(B0, C0)  # eq. (7)
     t15 = _lmi15(obs, A0, B0)
     orr = _lmi16(obs, Phi, A0, C0, margin)
-    lambda1, lambda2, notes2 = _theorem1_gains(obs, lead.alpha, l3.used.w, margin)
+    # a synthesised λ1 serves every topology of a switching graph: the smallest w
+    w_all = min(l3.used.w, switched_w_min(scenario, net.h))
+    lambda1, lambda2, notes2 = _theorem1_gains(obs, lead.alpha, w_all, margin)
     info = _info(scenario, lc, net, l3, t15, orr, margin, [*t15.notes, *notes2])
     N = net.L_bar.shape[0]
     base = Gains(
@@ -214,4 +217,14 @@ def synthesize(scenario: Scenario, *, strict: bool = False) -> Gains:
         certificate={},
         info=info,
     )
-    return _certified(_with_k1(base, margin), scenario.name, strict)
+    g = _certified(_with_k1(base, margin), scenario.name, strict)
+    return _with_topologies(g, scenario)
+
+
+def _with_topologies(g: Gains, scenario: Scenario) -> Gains:
+    """``g`` with each switched topology's Lemma 3 w in ``info``; one that fails raises."""
+    if not scenario.graph.switches:
+        return g
+    checks = check_topologies(scenario, g.h, g.lambda1, g.lambda_bar1)
+    tops = [{"t_start": c.t_start, "w": c.w} for c in checks]
+    return replace(g, info={**g.info, "switched_topologies": tops})

@@ -355,11 +355,16 @@ def recertified(g: Gains, source: str, scenario: Scenario | None = None) -> Gain
         the scenario's (else the file's ``info["given"]``).
     """
     from synthesis.certificate import certify
+    from synthesis.switching import check_topologies
 
     if scenario is not None:
         why = scenario_mismatch(g, scenario)
         if why is not None:
             raise SynthesisError(f"{source}: {why} (scenario {scenario.name}) {_fix(source)}")
+        try:  # every topology of a switching graph, with these gains
+            check_topologies(scenario, g.h, g.lambda1, g.lambda_bar1)
+        except SynthesisError as exc:
+            raise SynthesisError(f"{source}: {exc}") from None
         given = given_by(scenario)
     else:
         raw = g.info.get("given", [])
