@@ -36,6 +36,7 @@ FUNCTIONS: dict[str, tuple[int, ...]] = {
     "max": (2,),
     "step": (1,),  # Heaviside: 1 for x >= 0, else 0
     "sat": (1,),  # clip to [-1, 1]
+    "mod": (2,),  # floating remainder with the sign of x (C fmod)
 }
 CONSTANTS = {"pi": math.pi}
 _BINOPS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
@@ -54,15 +55,38 @@ class Expr:
     text: str
     node: tuple
 
-    def casadi(self, t: Any) -> Any:
+    def casadi(self, t: Any, lits: Any = None) -> Any:
         """Evaluate with CasADi operations on a symbol or number ``t``.
 
         Parameters
         ----------
         t : casadi.SX or float
             Time.
+        lits : casadi.SX or MX vector, optional
+            Values for the literals, in the order of :meth:`literals`: the expression
+            then depends on them instead of on its own numbers (runtime parameters).
         """
-        return _eval(self.node, t, _CASADI)
+        if lits is None:
+            return _eval(self.node, t, _CASADI)
+        if lits.numel() != len(self.literals()):
+            raise ExpressionError(
+                f"{self.text!r}: {lits.numel()} literal values for {len(self.literals())} literals"
+            )
+        return _eval(self.node, t, _CASADI, iter([lits[k] for k in range(lits.numel())]))
+
+    def literals(self) -> tuple[float, ...]:
+        """The numbers of the expression in walk order, except literal exponents of ``**``.
+
+        These are the expression's runtime parameters; what remains (:meth:`template`)
+        is its structure. Exponents stay structure so ``t**2`` keeps CasADi's integer power.
+        """
+        out: list[float] = []
+        _collect_literals(self.node, out)
+        return tuple(out)
+
+    def template(self) -> str:
+        """The expression's structure: its tree with every literal written ``#``."""
+        return _template(self.node)
 
     def numpy(self, t: Any) -> Any:
         """Evaluate with numpy on a float or array ``t`` (overflow gives inf/nan, no warning).
@@ -283,6 +307,7 @@ _CASADI = _Backend(
     max=ca.fmax,
     step=lambda x: ca.if_else(x >= 0, 1.0, 0.0),
     sat=lambda x: ca.fmin(ca.fmax(x, -1.0), 1.0),
+    mod=ca.fmod,
 )
 _NUMPY = _Backend(
     sin=np.sin,
@@ -298,19 +323,57 @@ _NUMPY = _Backend(
     max=np.maximum,
     step=lambda x: np.where(np.asarray(x) >= 0, 1.0, 0.0),
     sat=lambda x: np.clip(x, -1.0, 1.0),
+    mod=np.fmod,
 )
 
 
-def _eval(node: tuple, t: Any, be: _Backend) -> Any:
+def _is_exponent_literal(node: tuple) -> bool:
+    return node[0] == "bin" and node[1] == "**" and node[3][0] == "num"
+
+
+def _collect_literals(node: tuple, out: list[float]) -> None:
     kind = node[0]
     if kind == "num":
+        out.append(node[1])
+    elif kind == "neg":
+        _collect_literals(node[1], out)
+    elif kind == "bin":
+        _collect_literals(node[2], out)
+        if not _is_exponent_literal(node):
+            _collect_literals(node[3], out)
+    elif kind == "call":
+        for a in node[2]:
+            _collect_literals(a, out)
+
+
+def _template(node: tuple) -> str:
+    kind = node[0]
+    if kind == "num":
+        return "#"
+    if kind == "t":
+        return "t"
+    if kind == "neg":
+        return f"(-{_template(node[1])})"
+    if kind == "bin":
+        right = repr(node[3][1]) if _is_exponent_literal(node) else _template(node[3])
+        return f"({_template(node[2])}{node[1]}{right})"
+    return f"{node[1]}({','.join(_template(a) for a in node[2])})"
+
+
+def _eval(node: tuple, t: Any, be: _Backend, lits: Any = None) -> Any:
+    """Evaluate ``node``; ``lits`` (an iterator) supplies the literals in walk order."""
+    kind = node[0]
+    if kind == "num":
+        if lits is not None:
+            return next(lits)
         return node[1] + 0 * t if be is _NUMPY else node[1]
     if kind == "t":
         return t
     if kind == "neg":
-        return -_eval(node[1], t, be)
+        return -_eval(node[1], t, be, lits)
     if kind == "bin":
-        a, b = _eval(node[2], t, be), _eval(node[3], t, be)
+        a = _eval(node[2], t, be, lits)
+        b = node[3][1] if _is_exponent_literal(node) else _eval(node[3], t, be, lits)
         op = node[1]
         if op == "+":
             return a + b
@@ -321,7 +384,7 @@ def _eval(node: tuple, t: Any, be: _Backend) -> Any:
         if op == "/":
             return a / b
         return a**b
-    args = [_eval(a, t, be) for a in node[2]]
+    args = [_eval(a, t, be, lits) for a in node[2]]
     return getattr(be, node[1])(*args)
 
 

@@ -38,14 +38,13 @@ from symbolic.closed_loop import (
     make_layout,
     model_groups,
     observer_gains,
-    param_layout,
-    param_matrix,
     saturated,
 )
 from symbolic.derivatives import flow_jets
 from symbolic.leader import leader_function
 from symbolic.network import graph_matrices
 from symbolic.observer import ObserverGains, observer_function
+from symbolic.parameters import param_layout, param_matrix
 from synthesis.gains import Gains
 
 

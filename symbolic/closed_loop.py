@@ -36,6 +36,14 @@ from symbolic.formation import formation_function
 from symbolic.leader import leader_function
 from symbolic.network import ASSEMBLIES, GraphMatrices, apply_agents, coupling, graph_matrices
 from symbolic.observer import ObserverGains, observer_function
+from symbolic.parameters import (
+    ParamLayout,
+    graph_weights,
+    layout_of,
+    param_layout,
+    param_values,
+    structure_key,
+)
 from symbolic.uio import uio_of
 from synthesis.gains import Gains
 
@@ -159,6 +167,36 @@ class ClosedLoop:
     breakpoints: tuple[float, ...]
     assembly: str = "map"
     blocks: dict[str, ca.Function] = field(default_factory=dict, repr=False)
+    parametric: Parametric | None = field(default=None, repr=False)
+    p0: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Parametric:
+    """The closed loop's Functions with the parameter vector p as an input.
+
+    What the generated code is made of: equal :attr:`structure_key`, equal code.
+
+    Attributes
+    ----------
+    layout : ParamLayout
+        Named slices of p (:mod:`symbolic.parameters`).
+    ode : casadi.Function
+        ``(t, x, p) -> xdot``.
+    ode_dyn, dae_dyn : casadi.Function
+        Integrator forms ``(t, x, z, p, u)`` (see :class:`ClosedLoop`), p not empty.
+    outputs : casadi.Function
+        ``(t, x, p) -> named outputs``.
+    structure_key : str
+        :func:`symbolic.parameters.structure_key` of the scenario it was built from.
+    """
+
+    layout: ParamLayout
+    ode: ca.Function
+    ode_dyn: ca.Function
+    dae_dyn: ca.Function
+    outputs: ca.Function
+    structure_key: str
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -202,30 +240,6 @@ def make_layout(m: int, n: int, N: int, filtered: bool) -> StateLayout:
     return StateLayout(slices=slices, nx=m + N * na, m=m, N=N, agent_offsets=off, agent_size=na)
 
 
-def param_layout(n: int, saturated: bool = False) -> tuple[dict[str, slice], int]:
-    """Offsets of the per-agent numbers; ``u_max`` only with an actuator limit.
-
-    Parameters
-    ----------
-    n : int
-        Coordinates per follower.
-    saturated : bool
-        Whether the scenario has an actuator limit (``controller.u_max``).
-    """
-    sizes = [
-        ("obs", 2),  # (α1 + ᾱ1, φ_min): input of the observer Function
-        ("Lambda", n),
-        ("k1", n),
-        ("k2", 1),
-        ("gamma", 1),
-        ("sigma", 1),
-        ("ghat_ref", 1),
-        ("b0", n),
-        ("d", n),
-    ]
-    return _offsets(sizes + [("u_max", 1)] if saturated else sizes)
-
-
 def saturated(sc: Scenario) -> bool:
     """Whether ``sc`` limits the applied torque (``controller.u_max`` given).
 
@@ -235,31 +249,6 @@ def saturated(sc: Scenario) -> bool:
         The scenario.
     """
     return sc.controller.u_max is not None
-
-
-def param_matrix(sc: Scenario) -> np.ndarray:
-    """Per-agent numbers as columns (constants of the mapped Function's inputs).
-
-    Parameters
-    ----------
-    sc : Scenario
-    """
-    off, npar = param_layout(sc.n, saturated(sc))
-    P = np.zeros((npar, sc.N))
-    o, c = sc.observer, sc.controller
-    for i, fo in enumerate(sc.followers):
-        P[off["obs"], i] = (o.alpha1[i] + o.alpha1_bar[i], o.phi_min)
-        P[off["Lambda"], i] = c.Lambda[i]
-        P[off["k1"], i] = c.k1[i]
-        P[off["k2"], i] = c.k2[i]
-        P[off["gamma"], i] = c.gamma[i]
-        P[off["sigma"], i] = c.sigma[i]
-        P[off["ghat_ref"], i] = c.ghat_ref[i]
-        P[off["b0"], i] = fo.b0
-        P[off["d"], i] = fo.d
-        if saturated(sc):
-            P[off["u_max"], i] = c.u_max[i]
-    return P
 
 
 def fault_function(sc: Scenario) -> tuple[ca.Function, list[int]]:
@@ -283,6 +272,52 @@ def fault_function(sc: Scenario) -> tuple[ca.Function, list[int]]:
                 vals.append(ca.SX(e.casadi(t)))
             idx.append(texts[e.text])
     return ca.Function("faults", [t], [ca.vertcat(*vals)], ["t"], ["values"]), idx
+
+
+def fault_values(sc: Scenario, lay: ParamLayout) -> ca.Function:
+    """``(t, p) -> (1+n)×N``: g_i(t) and f_i(t) of every follower, literals read from p.
+
+    Parameters
+    ----------
+    sc : Scenario
+    lay : ParamLayout
+        The layout of p (:func:`symbolic.parameters.layout_of`).
+    """
+    t = ca.SX.sym("t")
+    p = ca.SX.sym("p", lay.size)
+    cols = []
+    for i, fo in enumerate(sc.followers):
+        g = fo.g.expr.casadi(t, lay.get(p, f"expr:followers[{i}].g"))
+        f = [e.casadi(t, lay.get(p, f"expr:followers[{i}].f[{r}]")) for r, e in enumerate(fo.f)]
+        cols.append(ca.vertcat(g, *f))
+    return ca.Function("faults", [t, p], [ca.horzcat(*cols)], ["t", "p"], ["GF"])
+
+
+def graph_coupling(sc: Scenario, gains: Gains, lay: ParamLayout, p: Any) -> tuple[Any, Any]:
+    """``L_Bᵀ`` and ``(a0 ∘ h)ᵀ`` as sparse matrices whose nonzeros are read from p.
+
+    The pattern is the scenario graph's (structure); the weights are parameters, so a
+    link's weight can change without new code.
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+        Supplies the gauge h.
+    lay : ParamLayout
+    p : casadi.SX or casadi.MX
+        The parameter vector.
+    """
+    h = np.diag(np.atleast_2d(gains.H)).astype(float)
+    LBt, a0h = graph_weights(sc, h)
+    w = lay.get(p, "graph")
+    out, k = [], 0
+    for a in (LBt, a0h):
+        cols, rows = np.nonzero(a.T)
+        sp = ca.Sparsity.triplet(a.shape[0], a.shape[1], rows.tolist(), cols.tolist())
+        out.append(type(p)(sp, w[k : k + sp.nnz()]))
+        k += sp.nnz()
+    return out[0], out[1]
 
 
 def observer_gains(sc: Scenario, gains: Gains) -> ObserverGains:
@@ -544,28 +579,33 @@ def _network(
     t: Any,
     x: Any,
     a: Any,
+    pv: Any,
     keep: Sequence[str] | None = None,
 ) -> dict[str, Any]:
-    """Symbolic evaluation of the whole network at (t, x) (and accelerations a).
+    """Symbolic evaluation of the whole network at (t, x, p) (and accelerations a).
 
-    ``keep`` names the per-agent outputs needed (all when None, see :func:`_slim`).
+    ``pv`` is the parameter vector (:mod:`symbolic.parameters`); ``keep`` names the
+    per-agent outputs needed (all when None, see :func:`_slim`).
     """
     m, n, N = sc.m, sc.n, sc.N
     filtered = sc.options.derivatives == "filtered"
     lay = make_layout(m, n, N, filtered)
+    play = layout_of(sc)
     gm: GraphMatrices = graph_matrices(sc.graph, gains)
     og = observer_gains(sc, gains)
-    P = ca.DM(param_matrix(sc))
-    poff, _ = param_layout(n)
-    ffun, fidx = fault_function(sc)
-    GF = ca.reshape(ffun(t)[fidx], 1 + n, N)
-    lead = leader_function(sc.leader)
-    eta0dot, eta0ddot, y0, y0dot, y0ddot, u0, u0dot = lead(t, x[:m])
+    poff, npar = param_layout(n, saturated(sc))
+    P = ca.reshape(play.get(pv, "agents"), npar, N)
+    GF = fault_values(sc, play)(t, pv)
+    W = graph_coupling(sc, gains, play, pv)
+    lead = leader_function(sc.leader, parametric=True)
+    u0_lits = [play.get(pv, k) for k in play.slices if k.startswith("expr:leader.u0")]
+    lits = ca.vertcat(*u0_lits) if u0_lits else type(pv)(0, 1)
+    eta0dot, eta0ddot, y0, y0dot, y0ddot, u0, u0dot = lead(t, x[:m], lits)
     eta0 = x[:m]
     X = ca.reshape(x[m:], lay.agent_size, N)
     E = X[lay.agent_offsets["eta"], :]
     SO = X[: 2 * m + 1, :]  # (μ, η, φ) of every agent
-    psi = coupling(sc.leader.C0, E, y0, gm)  # eq. (6): ψ_i from neighbours' estimates and y0
+    psi = coupling(sc.leader.C0, E, y0, gm, W)  # eq. (6): ψ_i from neighbours' estimates and y0
     if filtered:
         dpsi = ddpsi = ca.DM.zeros(n, N)
     else:
@@ -574,9 +614,9 @@ def _network(
         D1, _ = flow_jets(obs)
         Pobs = P[poff["obs"], :]
         SOd = apply_agents(obs, N, [SO, psi, Pobs], assembly)[0]
-        dpsi = coupling(sc.leader.C0, SOd[m : 2 * m, :], y0dot, gm)
+        dpsi = coupling(sc.leader.C0, SOd[m : 2 * m, :], y0dot, gm, W)
         SOdd = apply_agents(D1, N, [SO, psi, Pobs, SOd, dpsi], assembly)[0]
-        ddpsi = coupling(sc.leader.C0, SOdd[m : 2 * m, :], y0ddot, gm)
+        ddpsi = coupling(sc.leader.C0, SOdd[m : 2 * m, :], y0ddot, gm, W)
     A = ca.reshape(a, n, N)
     groups = model_groups(sc)
     outs: list[Any] | None = None
@@ -611,6 +651,9 @@ def _network(
         E=E,
         GF=GF,
         gm=gm,
+        W=W,
+        P=P,
+        poff=poff,
         lay=lay,
         funs=funs,
         lead=lead,
@@ -651,41 +694,108 @@ def build_closed_loop(scenario: Scenario, gains: Gains, *, assembly: str = "map"
     filtered = sc.options.derivatives == "filtered"
     lay = make_layout(m, n, N, filtered)
     Sym = ca.MX if assembly == "map" else ca.SX
+    play = layout_of(sc)
     t, x, a = Sym.sym("t"), Sym.sym("x", lay.nx), Sym.sym("z", n * N)
-    net = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N), keep=("sdot",))
+    pv = Sym.sym("p", play.size)
+    net = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N), pv, keep=("sdot",))
     xdot = ca.vertcat(net["eta0dot"], ca.vec(net["sdot"]))  # eq. (3) and every agent
-    net_dae = _network(sc, gains, assembly, t, x, a, keep=("sdot_dae", "res"))
+    net_dae = _network(sc, gains, assembly, t, x, a, pv, keep=("sdot_dae", "res"))
     xdot_dae = ca.vertcat(net_dae["eta0dot"], ca.vec(net_dae["sdot_dae"]))
     alg = ca.vec(net_dae["res"])
     e0 = Sym(0, 1)
-    ode = ca.Function("ode", [t, x], [xdot], ["t", "x"], ["xdot"])
-    ode_dyn = ca.Function(
-        "ode_dyn", [t, x, e0, e0, e0], [xdot, e0, e0, e0], ca.dyn_in(), ca.dyn_out()
+    ode_p = ca.Function("ode", [t, x, pv], [xdot], ["t", "x", "p"], ["xdot"])
+    ode_dyn_p = ca.Function(
+        "ode_dyn", [t, x, e0, pv, e0], [xdot, e0, e0, e0], ca.dyn_in(), ca.dyn_out()
     )
-    dae_dyn = ca.Function(
-        "dae_dyn", [t, x, a, e0, e0], [xdot_dae, alg, e0, e0], ca.dyn_in(), ca.dyn_out()
+    dae_dyn_p = ca.Function(
+        "dae_dyn", [t, x, a, pv, e0], [xdot_dae, alg, e0, e0], ca.dyn_in(), ca.dyn_out()
     )
-    net_out = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N))  # every signal
-    outputs = _outputs_function(sc, gains, net_out, t, x, a)
-    x0 = initial_state(sc, lay, outputs)
-    qdd0 = np.array(outputs(0.0, x0)[outputs.name_out().index("qdot")]).reshape(-1)  # agent-major
+    net_out = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N), pv)  # every signal
+    outputs_p = _outputs_function(sc, gains, net_out, t, x, pv)
     blocks = dict(net["funs"])
     blocks["leader"] = net["lead"]
+    parametric = Parametric(play, ode_p, ode_dyn_p, dae_dyn_p, outputs_p, structure_key(sc, gains))
+    return bind(parametric, sc, gains, lay, assembly, blocks)
+
+
+def _bound(f: ca.Function, p: np.ndarray, name: str) -> ca.Function:
+    """``f`` with its input ``p`` fixed to the numbers ``p`` (the input kept, empty, in dyn form)."""
+    ins = [ca.MX.sym(k, f.sparsity_in(k)) for k in f.name_in()]
+    k = f.name_in().index("p")
+    args = list(ins)
+    args[k] = ca.DM(p)
+    if f.name_in() == ca.dyn_in():
+        ins[k] = ca.MX(0, 1)  # integrator form keeps its five inputs, p empty
+    else:
+        del ins[k]
+    names = [n for n in f.name_in() if n != "p" or f.name_in() == ca.dyn_in()]
+    return ca.Function(name, ins, f.call(args), names, f.name_out())
+
+
+def bind(
+    par: Parametric,
+    sc: Scenario,
+    gains: Gains,
+    lay: StateLayout | None = None,
+    assembly: str = "map",
+    blocks: dict[str, ca.Function] | None = None,
+) -> ClosedLoop:
+    """The closed loop of ``sc``: the parametric Functions with ``sc``'s numbers.
+
+    ``sc`` must have the structure ``par`` was built for (equal
+    :func:`symbolic.parameters.structure_key`); only p, x(0) and the breakpoints
+    are computed, nothing symbolic is rebuilt.
+
+    Parameters
+    ----------
+    par : Parametric
+        The parametric Functions.
+    sc : Scenario
+    gains : Gains
+    lay : StateLayout, optional
+        Default :func:`make_layout` of ``sc``.
+    assembly : str
+        Recorded on the result.
+    blocks : dict, optional
+        Recorded on the result.
+
+    Raises
+    ------
+    ScenarioError
+        If ``sc`` has another structure.
+    """
+    key = structure_key(sc, gains)
+    if key != par.structure_key:
+        raise ScenarioError(
+            sc.path,
+            "structure",
+            "differs from the compiled closed loop's (graph, models, options, expression forms)",
+            "build a closed loop for this scenario",
+        )
+    lay = lay or make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered")
+    p0 = param_values(sc, gains)
+    outputs = _bound(par.outputs, p0, "outputs")
+    x0 = initial_state(sc, lay, outputs)
+    qdd0 = np.array(outputs(0.0, x0)[outputs.name_out().index("qdot")]).reshape(-1)  # agent-major
     return ClosedLoop(
         layout=lay,
-        ode=ode,
-        ode_dyn=ode_dyn,
-        dae_dyn=dae_dyn,
+        ode=_bound(par.ode, p0, "ode"),
+        ode_dyn=_bound(par.ode_dyn, p0, "ode_dyn"),
+        dae_dyn=_bound(par.dae_dyn, p0, "dae_dyn"),
         outputs=outputs,
         x0=x0,
         z0=qdd0,
         breakpoints=sc.breakpoints(),
         assembly=assembly,
-        blocks=blocks,
+        blocks=blocks or {},
+        parametric=par,
+        p0=p0,
     )
 
 
-def _outputs_function(sc: Scenario, gains: Gains, net: dict, t: Any, x: Any, a: Any) -> ca.Function:
+def _outputs_function(
+    sc: Scenario, gains: Gains, net: dict, t: Any, x: Any, pv: Any
+) -> ca.Function:
     """Named outputs of (t, x); per-agent quantities as N×k matrices (row i = agent i)."""
     gm: GraphMatrices = net["gm"]
     lay: StateLayout = net["lay"]
@@ -693,14 +803,14 @@ def _outputs_function(sc: Scenario, gains: Gains, net: dict, t: Any, x: Any, a: 
     ehat = net["ehat"]
     h = ca.DM(gm.h.reshape(1, -1))
     ebar = E - ca.mtimes(eta0, h)  # ē_ηi = η_i − h_i η0
-    e_eta = coupling(None, E, eta0, gm)  # true neighbourhood error, eq. (6)
+    e_eta = coupling(None, E, eta0, gm, net["W"])  # true neighbourhood error, eq. (6)
     etilde = ehat - e_eta  # UIO error, eq. (8)
     Tinv = ca.DM(np.linalg.inv(np.atleast_2d(gains.T)))
     Om = ca.DM(np.atleast_2d(gains.Omega))
     z = ca.DM(np.diag(np.atleast_2d(gains.Z)).reshape(-1, 1))
     phi = X[lay.agent_offsets["phi"], :]
     eps = ca.mtimes(ehat, ca.DM(ca.Sparsity.diag(gm.N), gm.h.tolist()))  # ε_η = (H ⊗ I) ê_η
-    abar = ca.DM((sc.observer.alpha1_bar).reshape(-1, 1))
+    abar = net["P"][net["poff"]["abar"], :].T  # ᾱ1i, a runtime parameter
     lbar = ca.DM(gm.l_bar.reshape(-1, 1))
     lam2 = float(gains.lambda2)
     V1 = (
@@ -729,7 +839,7 @@ def _outputs_function(sc: Scenario, gains: Gains, net: dict, t: Any, x: Any, a: 
         "u0": net["u0"].T,
         "track": (X[lay.agent_offsets["p"], :] - ca.repmat(net["y0"], 1, sc.N) - net["b"]).T,
     }
-    return ca.Function("outputs", [t, x], list(items.values()), ["t", "x"], list(items))
+    return ca.Function("outputs", [t, x, pv], list(items.values()), ["t", "x", "p"], list(items))
 
 
 def initial_state(sc: Scenario, lay: StateLayout, outputs: ca.Function) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 from core.scenario import Leader
 
 
-def operator_input(leader: Leader, t: ca.SX) -> ca.SX:
+def operator_input(leader: Leader, t: ca.SX, lits: ca.SX | None = None) -> ca.SX:
     """The operator's command u0(t) as a CasADi expression of ``t`` (p×1).
 
     From the scenario's expressions, or from its CSV trace through a linear
@@ -21,11 +21,21 @@ def operator_input(leader: Leader, t: ca.SX) -> ca.SX:
         The scenario's leader (u0 expressions or CSV trace).
     t : casadi.SX
         Time symbol.
+    lits : casadi.SX, optional
+        The expressions' literals, concatenated in input order (runtime parameters);
+        default: the scenario's numbers, written into the expression.
     """
     if leader.u0 is not None:
-        return ca.vertcat(
-            *[ca.SX(e.casadi(t)) if e.is_constant() else e.casadi(t) for e in leader.u0]
-        )
+        if lits is None:
+            return ca.vertcat(
+                *[ca.SX(e.casadi(t)) if e.is_constant() else e.casadi(t) for e in leader.u0]
+            )
+        out, k = [], 0
+        for e in leader.u0:
+            nl = len(e.literals())
+            out.append(ca.SX(e.casadi(t, lits[k : k + nl])) if nl else ca.SX(e.casadi(t)))
+            k += nl
+        return ca.vertcat(*out)
     tr = np.asarray(leader.u0_trace)
     tc = ca.fmin(ca.fmax(t, float(tr[0, 0])), float(tr[-1, 0]))
     # one interpolant per input: linear in t, the trace's own knots
@@ -37,8 +47,8 @@ def operator_input(leader: Leader, t: ca.SX) -> ca.SX:
     )
 
 
-def leader_function(leader: Leader) -> ca.Function:
-    """The leader as a Function of ``(t, eta0)``.
+def leader_function(leader: Leader, parametric: bool = False) -> ca.Function:
+    """The leader as a Function of ``(t, eta0)``, or ``(t, eta0, c)`` when ``parametric``.
 
     Outputs ``eta0dot`` (eq. (3)), ``eta0ddot`` (= A0 η̇0 + B0 u̇0, needed by the
     oracle derivatives), ``y0``, ``y0dot``, ``y0ddot``, ``u0`` and ``u0dot``
@@ -48,18 +58,24 @@ def leader_function(leader: Leader) -> ca.Function:
     ----------
     leader : Leader
         The scenario's leader (A0, B0, C0 and u0).
+    parametric : bool
+        Take the literals of the u0 expressions as a third input ``c`` (runtime
+        parameters, :mod:`symbolic.parameters`) instead of writing them into the code.
     """
     A0, B0, C0 = (ca.DM(leader.A0), ca.DM(leader.B0), ca.DM(leader.C0))
     t = ca.SX.sym("t")
     eta0 = ca.SX.sym("eta0", leader.m)
-    u0 = operator_input(leader, t)
+    nc = sum(len(e.literals()) for e in leader.u0) if leader.u0 is not None else 0
+    c = ca.SX.sym("c", nc)
+    u0 = operator_input(leader, t, c if parametric else None)
     u0dot = ca.jtimes(u0, t, ca.SX(1.0))
     eta0dot = A0 @ eta0 + B0 @ u0  # eq. (3)
     eta0ddot = A0 @ eta0dot + B0 @ u0dot
+    ins, names = ([t, eta0, c], ["t", "eta0", "c"]) if parametric else ([t, eta0], ["t", "eta0"])
     return ca.Function(
         "leader",
-        [t, eta0],
+        ins,
         [eta0dot, eta0ddot, C0 @ eta0, C0 @ eta0dot, C0 @ eta0ddot, u0, u0dot],
-        ["t", "eta0"],
+        names,
         ["eta0dot", "eta0ddot", "y0", "y0dot", "y0ddot", "u0", "u0dot"],
     )

@@ -111,7 +111,13 @@ def graph_matrices(graph: Graph, gains: Gains) -> GraphMatrices:
     return GraphMatrices(A=A, a0=a0, h=h, L_B=L_B, l_bar=np.diag(L_B).copy())
 
 
-def coupling(C0: np.ndarray | None, X: Any, leader: Any, gm: GraphMatrices) -> Any:
+def coupling(
+    C0: np.ndarray | None,
+    X: Any,
+    leader: Any,
+    gm: GraphMatrices,
+    weights: tuple[Any, Any] | None = None,
+) -> Any:
     """``C0 X L_Bᵀ − leader (a0 ∘ h)ᵀ``: neighbourhood sums for all agents at once.
 
     With ``X = E`` (columns η_i) and ``leader = y0`` this is ψ (the measured
@@ -128,9 +134,13 @@ def coupling(C0: np.ndarray | None, X: Any, leader: Any, gm: GraphMatrices) -> A
         The leader's column, y0 (with ``C0``) or η0 (without).
     gm : GraphMatrices
         Graph matrices (L_B and a0 ∘ h).
+    weights : (L_Bᵀ, (a0 ∘ h)ᵀ), optional
+        The same matrices with symbolic nonzeros (runtime parameters); default the
+        constants of ``gm``.
     """
     CX = X if C0 is None else ca.mtimes(ca.DM(C0), X)
-    return ca.mtimes(CX, gm.LBt_sparse()) - ca.mtimes(leader, gm.a0h_sparse())
+    LBt, a0h = weights if weights is not None else (gm.LBt_sparse(), gm.a0h_sparse())
+    return ca.mtimes(CX, LBt) - ca.mtimes(leader, a0h)
 
 
 def apply_agents(fun: ca.Function, N: int, args: Sequence[Any], assembly: str) -> list[Any]:

@@ -291,11 +291,12 @@ def test_graph_size_independent_of_N():
     for N in (5, 500):
         scN = replicate(sc, N)
         cl = build_closed_loop(scN, hand_gains(scN))
+        par = cl.parametric  # the Functions the code is generated from
         sizes[N] = (
-            cl.ode.n_instructions(),
-            cl.ode.n_nodes(),
-            cl.dae_dyn.n_instructions(),
-            cl.outputs.n_instructions(),
+            par.ode.n_instructions(),
+            par.ode.n_nodes(),
+            par.dae_dyn.n_instructions(),
+            par.outputs.n_instructions(),
         )
         assert cl.layout.nx == 2 + N * 12
     assert sizes[5] == sizes[500]
@@ -307,7 +308,8 @@ def test_flat_graph_grows_with_N(tmp_path):
         A = np.diag(np.ones(N - 1), -1)
         pin = np.eye(1, N).ravel()
         sc = write_scenario(tmp_path, A, pin, name=f"flat{N}")
-        counts.append(build_closed_loop(sc, hand_gains(sc), assembly="flat").ode.n_instructions())
+        cl = build_closed_loop(sc, hand_gains(sc), assembly="flat")
+        counts.append(cl.parametric.ode.n_instructions())
     assert counts[1] > 1.5 * counts[0]
 
 

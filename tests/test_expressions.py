@@ -150,7 +150,29 @@ def test_function_list_is_the_documented_list():
         "max",
         "step",
         "sat",
+        "mod",
     }
+
+
+def test_mod_is_the_c_remainder():
+    e = parse_expression("mod(t, 0.75)", where=WHERE)
+    for t in (0.0, 0.5, 0.75, 2.0, 7.3):
+        assert e.numpy(t) == pytest.approx(math.fmod(t, 0.75), abs=1e-15)
+        assert float(e.casadi(t)) == pytest.approx(math.fmod(t, 0.75), abs=1e-15)
+
+
+def test_literals_are_parameters_and_the_template_is_the_structure():
+    a = parse_expression("4*sin(2*t) + 1 - t**2", where=WHERE)
+    b = parse_expression("3*sin(5*t) + 0.5 - t**2", where=WHERE)
+    assert a.literals() == (4.0, 2.0, 1.0)  # the exponent stays structure
+    assert a.template() == b.template()
+    assert a.template() != parse_expression("4*sin(2*t) + 1 - t**3", where=WHERE).template()
+    lits = ca.SX.sym("c", 3)
+    t = ca.SX.sym("t")
+    f = ca.Function("f", [t, lits], [a.casadi(t, lits)])
+    for tt in (0.0, 0.3, 2.5):
+        # a's template with b's numbers is b, evaluated independently with numpy
+        assert float(f(tt, b.literals())) == pytest.approx(float(b.numpy(tt)), rel=1e-15)
 
 
 @settings(max_examples=150, deadline=None)

@@ -1,0 +1,279 @@
+"""The closed loop's runtime parameters: numbers that are inputs, not constants, of the code.
+
+Every number a study or the operator console may vary enters the compiled closed loop
+through one flat vector ``p`` instead of being written into the generated C:
+
+* ``agents``: the per-agent numbers (:func:`param_layout`), column i = follower i:
+  the observer's decay α1 + ᾱ1 and floor φ_min, the controller's λ_ir, k1ir, k2i, γ_i,
+  σ_i, ĝ_i0, the formation offset b_i0, the bias bound d_i, the actuator limit and ᾱ1i;
+* ``expr:<where>``: the literals of each expression of t (the operator's u0, the health
+  g_i(t) with its faults, the bias f_i(t)): ``2*cos(t)`` is the template ``#*cos(t)``
+  with the parameter 2 (:meth:`core.expressions.Expr.literals`);
+* ``graph``: the nonzero weights of ``L + B`` and ``a0 ∘ h`` (the coupling of eq. (6)).
+
+What is left is the *structure*: the graph's pattern, the follower models, the
+options, the expressions' templates, the leader matrices and the certified gains.
+:func:`structure_key` hashes exactly that, so two scenarios with equal keys are the
+same code with different ``p`` (tests/test_parameters.py checks it against the
+serialized CasADi Functions). Initial states never enter the code: x(0) is computed
+from the scenario at run time.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from core.expressions import Expr
+from core.graph import pinned_laplacian
+from core.scenario import Scenario
+from synthesis.gains import Gains
+
+#: observer settings that are runtime parameters (in ``agents``) or only initial values
+_OBSERVER_PARAMS = ("alpha1", "alpha1_bar", "phi_min", "phi0")
+#: controller settings that are runtime parameters (``u_max``: only its presence is structure)
+_CONTROLLER_PARAMS = ("Lambda", "k1", "k2", "gamma", "sigma", "ghat_ref", "u_max")
+
+
+@dataclass(frozen=True)
+class ParamLayout:
+    """Named slices of the flat parameter vector ``p``.
+
+    Attributes
+    ----------
+    slices : dict
+        Name -> slice of p (``"agents"``, ``"graph"``, ``"expr:<where>"``).
+    size : int
+        Length of p.
+    """
+
+    slices: dict[str, slice]
+    size: int
+
+    def get(self, p: Any, name: str) -> Any:
+        """The part of ``p`` named ``name`` (numpy array or CasADi vector).
+
+        Parameters
+        ----------
+        p : ndarray or casadi.SX or casadi.MX
+            A parameter vector of this layout.
+        name : str
+            A name of :attr:`slices`.
+        """
+        return p[self.slices[name]]
+
+
+def param_layout(n: int, saturated: bool = False) -> tuple[dict[str, slice], int]:
+    """Offsets of the per-agent numbers (rows of the ``agents`` block).
+
+    Parameters
+    ----------
+    n : int
+        Coordinates per follower.
+    saturated : bool
+        Whether the scenario has an actuator limit (``controller.u_max``).
+    """
+    sizes = [
+        ("obs", 2),  # (α1 + ᾱ1, φ_min): input of the observer Function
+        ("Lambda", n),
+        ("k1", n),
+        ("k2", 1),
+        ("gamma", 1),
+        ("sigma", 1),
+        ("ghat_ref", 1),
+        ("b0", n),
+        ("d", n),
+        ("abar", 1),  # ᾱ1i: weights φ_i in V1, eq. (17)
+    ]
+    if saturated:
+        sizes.append(("u_max", 1))
+    off, k = {}, 0
+    for name, s in sizes:
+        off[name] = slice(k, k + s)
+        k += s
+    return off, k
+
+
+def param_matrix(sc: Scenario) -> np.ndarray:
+    """Per-agent numbers as columns (the ``agents`` block of p, npar × N).
+
+    Parameters
+    ----------
+    sc : Scenario
+    """
+    sat = sc.controller.u_max is not None
+    off, npar = param_layout(sc.n, sat)
+    P = np.zeros((npar, sc.N))
+    o, c = sc.observer, sc.controller
+    for i, fo in enumerate(sc.followers):
+        P[off["obs"], i] = (o.alpha1[i] + o.alpha1_bar[i], o.phi_min)
+        P[off["Lambda"], i] = c.Lambda[i]
+        P[off["k1"], i] = c.k1[i]
+        P[off["k2"], i] = c.k2[i]
+        P[off["gamma"], i] = c.gamma[i]
+        P[off["sigma"], i] = c.sigma[i]
+        P[off["ghat_ref"], i] = c.ghat_ref[i]
+        P[off["b0"], i] = fo.b0
+        P[off["d"], i] = fo.d
+        P[off["abar"], i] = o.alpha1_bar[i]
+        if sat:
+            P[off["u_max"], i] = c.u_max[i]
+    return P
+
+
+def expressions(sc: Scenario) -> dict[str, Expr]:
+    """Every expression of t the closed loop evaluates, by its parameter name.
+
+    Parameters
+    ----------
+    sc : Scenario
+    """
+    out: dict[str, Expr] = {}
+    if sc.leader.u0 is not None:
+        out.update({f"expr:leader.u0[{k}]": e for k, e in enumerate(sc.leader.u0)})
+    for i, fo in enumerate(sc.followers):
+        out[f"expr:followers[{i}].g"] = fo.g.expr
+        out.update({f"expr:followers[{i}].f[{r}]": e for r, e in enumerate(fo.f)})
+    return out
+
+
+def graph_weights(sc: Scenario, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``L_Bᵀ`` and ``(a0 ∘ h)ᵀ`` of the scenario's graph (dense; the code keeps their patterns).
+
+    Parameters
+    ----------
+    sc : Scenario
+    h : ndarray
+        The gauge signs (from the certified gains).
+    """
+    A = np.asarray(sc.graph.adjacency, dtype=float)
+    a0 = np.asarray(sc.graph.pinning, dtype=float)
+    return pinned_laplacian(A, a0).toarray().T, (a0 * h).reshape(1, -1)
+
+
+def nonzeros(a: np.ndarray) -> np.ndarray:
+    """The nonzeros of ``a`` in CasADi's column-major order.
+
+    Parameters
+    ----------
+    a : ndarray
+        A dense matrix.
+    """
+    cols, rows = np.nonzero(a.T)
+    return a[rows, cols]
+
+
+def layout_of(sc: Scenario) -> ParamLayout:
+    """The parameter layout of ``sc`` (sizes only: equal for equal structures).
+
+    Parameters
+    ----------
+    sc : Scenario
+    """
+    _, npar = param_layout(sc.n, sc.controller.u_max is not None)
+    A = np.asarray(sc.graph.adjacency, dtype=float)
+    a0 = np.asarray(sc.graph.pinning, dtype=float)
+    n_graph = int(np.count_nonzero(pinned_laplacian(A, a0).toarray()) + np.count_nonzero(a0))
+    sizes = [("agents", npar * sc.N), ("graph", n_graph)]
+    sizes += [(k, len(e.literals())) for k, e in expressions(sc).items()]
+    slices, k = {}, 0
+    for name, s in sizes:
+        slices[name] = slice(k, k + s)
+        k += s
+    return ParamLayout(slices, k)
+
+
+def param_values(sc: Scenario, gains: Gains) -> np.ndarray:
+    """The parameter vector p of ``sc`` (layout :func:`layout_of`).
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+        Supplies the gauge h of signed graphs.
+    """
+    lay = layout_of(sc)
+    p = np.zeros(lay.size)
+    p[lay.slices["agents"]] = param_matrix(sc).ravel(order="F")  # agent-major
+    h = np.diag(np.atleast_2d(gains.H)).astype(float)
+    LBt, a0h = graph_weights(sc, h)
+    p[lay.slices["graph"]] = np.concatenate([nonzeros(LBt), nonzeros(a0h)])
+    for name, e in expressions(sc).items():
+        p[lay.slices[name]] = e.literals()
+    return p
+
+
+# ----------------------------------------------------------------------------- structure
+def _plain(v: Any) -> Any:
+    """A JSON-able form of a setting's value (arrays as nested lists)."""
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, tuple | list):
+        return [_plain(x) for x in v]
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in sorted(v.items())}
+    return v
+
+
+def _section(obj: Any, skip: tuple[str, ...]) -> dict[str, Any]:
+    return {f.name: _plain(getattr(obj, f.name)) for f in fields(obj) if f.name not in skip}
+
+
+def structure(sc: Scenario, gains: Gains) -> dict[str, Any]:
+    """Everything of ``sc`` and ``gains`` that is written into the generated code.
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+    """
+    L = sc.leader
+    A = np.asarray(sc.graph.adjacency, dtype=float)
+    trace = None if L.u0_trace is None else hashlib.sha256(L.u0_trace.tobytes()).hexdigest()
+    return {
+        "leader": {
+            "A0": _plain(L.A0),
+            "B0": _plain(L.B0),
+            "C0": _plain(L.C0),
+            "u0": None if L.u0 is None else [e.template() for e in L.u0],
+            "u0_trace": trace,
+        },
+        "graph": {
+            "adjacency": np.sign(A).astype(int).tolist(),
+            "pinning": np.sign(sc.graph.pinning).astype(int).tolist(),
+        },
+        "followers": [
+            {
+                "model": fo.model,
+                "params": _plain(fo.params),
+                "g": fo.g.expr.template(),
+                "f": [e.template() for e in fo.f],
+            }
+            for fo in sc.followers
+        ],
+        "observer": _section(sc.observer, _OBSERVER_PARAMS),
+        "controller": {
+            **_section(sc.controller, _CONTROLLER_PARAMS),
+            "saturated": sc.controller.u_max is not None,
+        },
+        "options": _section(sc.options, ()),
+        "gains": _section(gains, ("certificate", "info")),
+    }
+
+
+def structure_key(sc: Scenario, gains: Gains) -> str:
+    """SHA-256 of :func:`structure`: equal keys, equal generated code.
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+    """
+    text = json.dumps(structure(sc, gains), sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
