@@ -1,5 +1,6 @@
 """``python -m sweep samples STUDY [--write-scenarios DIR]``: list a study's samples;
 ``python -m sweep run STUDY [--ids ...]``: run them (docs/studies.md, "Running a study").
+``samples STUDY --ids 17 --write-scenarios DIR`` writes one sample's scenario file (to rerun it).
 
 One line per sample: id, seed, ``ok`` or ``refused``, the drawn values as JSON (and the
 loader's reason for a refused sample). ``--write-scenarios DIR`` also writes each valid
@@ -30,6 +31,7 @@ def main(argv: list[str]) -> int:
     sp = sub.add_parser("samples", help="list a study's samples")
     sp.add_argument("study", help="the study TOML file")
     sp.add_argument("--write-scenarios", metavar="DIR", help="write each valid sample's TOML")
+    sp.add_argument("--ids", type=int, nargs="+", help="only these sample ids (default all)")
     rp = sub.add_parser("run", help="simulate and verify a study's samples (resumable)")
     rp.add_argument("study", help="the study TOML file")
     rp.add_argument("--ids", type=int, nargs="+", help="only these sample ids (default all)")
@@ -39,8 +41,9 @@ def main(argv: list[str]) -> int:
     if args.cmd == "run":
         return _run(args, argv)
     study = load_study(args.study)
+    _check_ids(args.ids, study.count)
     refused = 0
-    for s in samples(study):
+    for s in samples(study, args.ids):
         status = "ok" if s.scenario is not None else "refused"
         line = f"{s.id}\t{s.seed}\t{status}\t{json.dumps(s.params)}"
         if s.reason:
@@ -49,8 +52,16 @@ def main(argv: list[str]) -> int:
         elif args.write_scenarios:
             line += f"\t{write_scenario(s, args.write_scenarios)}"
         print(line)
-    print(f"{study.count} samples, {refused} refused by the loader", file=sys.stderr)
+    n = study.count if args.ids is None else len(args.ids)
+    print(f"{n} samples, {refused} refused by the loader", file=sys.stderr)
     return 0
+
+
+def _check_ids(ids: list[int] | None, count: int) -> None:
+    """``--ids`` must name samples of the study (0 .. count - 1)."""
+    for k in ids or ():
+        if not 0 <= k < count:
+            raise UsageError(f"--ids: sample id {k} outside 0..{count - 1}: give ids of the study")
 
 
 def _run(args: argparse.Namespace, argv: list[str]) -> int:

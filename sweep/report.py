@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -46,13 +47,160 @@ def entry_times(table: pd.DataFrame) -> np.ndarray:
     return vals[np.isfinite(vals)]
 
 
-def _histogram(values: np.ndarray, xlabel: str, path: Path) -> Path | None:
-    """A histogram written to ``path`` (None when there is nothing finite to draw)."""
+#: colour of each fault type in the scatter plots
+TYPE_COLOURS = {"abrupt": "C0", "ramp": "C1", "intermittent": "C2", "bias": "C3"}
+
+
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def _num(table: pd.DataFrame, col: str) -> np.ndarray:
+    """Column ``col`` as floats (NaN where missing or not a number; all NaN if absent)."""
+    if col not in table.columns:
+        return np.full(len(table), np.nan)
+    return pd.to_numeric(table[col], errors="coerce").to_numpy(float)
+
+
+def fault_points(table: pd.DataFrame) -> pd.DataFrame:
+    """One row per drawn fault of each ``ok`` sample (``param:faults[k].*`` columns).
+
+    Parameters
+    ----------
+    table : DataFrame
+        The results.
+
+    Returns
+    -------
+    DataFrame
+        Columns ``id``, ``fault`` (k), ``type``, ``follower``, ``onset``, ``severity`` (NaN
+        for a bias), ``bias`` (the amplitude's Euclidean norm; NaN for a loss of
+        effectiveness) and the sample's ``tail_max_et``.
+    """
+    ok = table[table["status"] == "ok"]
+    ks = sorted({int(m.group(1)) for c in table.columns if (m := re.fullmatch(_FAULT_TYPE, c))})
+    parts = []
+    for k in ks:
+        pre = f"param:faults[{k}]."
+        amp = [c for c in ok.columns if c.startswith(pre + "amplitude[")]
+        bias = np.sqrt(sum(_num(ok, c) ** 2 for c in amp)) if amp else np.full(len(ok), np.nan)
+        part = pd.DataFrame(
+            {
+                "id": ok["id"].to_numpy(),
+                "fault": k,
+                "type": ok[pre + "type"].to_numpy(),
+                "follower": _num(ok, pre + "follower"),
+                "onset": _num(ok, pre + "onset"),
+                "severity": _num(ok, pre + "severity"),
+                "bias": bias,
+                "tail_max_et": _num(ok, "tail_max_et"),
+            }
+        )
+        parts.append(part[part["type"].notna()])
+    cols = ["id", "fault", "type", "follower", "onset", "severity", "bias", "tail_max_et"]
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=cols)
+
+
+_FAULT_TYPE = r"param:faults\[(\d+)\]\.type"
+
+
+def _scatter(ax, points: pd.DataFrame, x: str, xlabel: str) -> None:
+    """Tail error against column ``x``, one colour per fault type; log scale when positive."""
+    for kind, grp in points.groupby("type", sort=True):
+        ok = np.isfinite(grp[x].to_numpy(float)) & np.isfinite(grp["tail_max_et"].to_numpy(float))
+        if ok.any():
+            ax.scatter(
+                grp[x][ok], grp["tail_max_et"][ok], s=12, c=TYPE_COLOURS.get(kind), label=kind
+            )
+    y = points["tail_max_et"].to_numpy(float)
+    if len(y) and np.all(y[np.isfinite(y)] > 0):
+        ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("tail max |e_ti|")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+
+
+def fault_figures(points: pd.DataFrame, figs: Path) -> list[Path]:
+    """``error_vs_severity.png`` (loss of effectiveness: severity; bias: |amplitude|) and
+    ``error_vs_onset.png``, coloured by fault type; none when no fault was drawn.
+
+    Parameters
+    ----------
+    points : DataFrame
+        From :func:`fault_points`.
+    figs : Path
+        The figures folder.
+    """
+    if not len(points):
+        return []
+    plt = _pyplot()
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.4), sharey=True)
+    _scatter(
+        a1, points[points["type"] != "bias"], "severity", "fault severity (loss of effectiveness)"
+    )
+    _scatter(a2, points[points["type"] == "bias"], "bias", "bias fault |amplitude|")
+    out = [_save(fig, figs / "error_vs_severity.png")]
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    _scatter(ax, points, "onset", "fault onset [s]")
+    out.append(_save(fig, figs / "error_vs_onset.png"))
+    return out
+
+
+def graph_figure(table: pd.DataFrame, figs: Path) -> Path | None:
+    """``error_vs_N.png``: tail error against the number of followers, coloured by the
+    number of links lost (``param:graph.loss[k].*``); None without random graphs.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The results.
+    figs : Path
+        The figures folder.
+    """
+    ok = table[table["status"] == "ok"]
+    N, err = _num(ok, "param:graph.N"), _num(ok, "tail_max_et")
+    good = np.isfinite(N) & np.isfinite(err)
+    if not good.any():
+        return None
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    pts = ax.scatter(N[good], err[good], s=14, c=links_lost(ok)[good], cmap="viridis")
+    fig.colorbar(pts, ax=ax, label="links lost")
+    if np.all(err[good] > 0):
+        ax.set_yscale("log")
+    ax.set_xlabel("followers N")
+    ax.set_ylabel("tail max |e_ti|")
+    return _save(fig, figs / "error_vs_N.png")
+
+
+def links_lost(table: pd.DataFrame) -> np.ndarray:
+    """Number of links each row's sample loses (its ``param:graph.loss[k].time`` columns).
+
+    Parameters
+    ----------
+    table : DataFrame
+        The results.
+    """
+    cols = [c for c in table.columns if re.fullmatch(r"param:graph\.loss\[\d+\]\.time", c)]
+    return sum((np.isfinite(_num(table, c)) for c in cols), np.zeros(len(table))).astype(float)
+
+
+def _save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    _pyplot().close(fig)
+    return path
+
+
+def _histogram(values: np.ndarray, xlabel: str, path: Path) -> Path | None:
+    """A histogram written to ``path`` (None when there is nothing finite to draw)."""
+    plt = _pyplot()
     values = values[np.isfinite(values)]
     if not len(values):
         return None
@@ -60,10 +208,7 @@ def _histogram(values: np.ndarray, xlabel: str, path: Path) -> Path | None:
     ax.hist(values, bins=min(30, max(5, len(values) // 2)))
     ax.set_xlabel(xlabel)
     ax.set_ylabel("samples")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def summary_lines(table: pd.DataFrame) -> list[str]:
@@ -103,15 +248,58 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
     return lines
 
 
-def failing_lines(table: pd.DataFrame, samples_dir: str) -> list[str]:
-    """Samples where a guaranteed check fails, and failed/refused samples, with rerun commands.
+def fault_type_lines(points: pd.DataFrame) -> list[str]:
+    """Per fault type: how many faults of the ``ok`` samples, and their samples' median tail error.
+
+    Parameters
+    ----------
+    points : DataFrame
+        From :func:`fault_points`.
+    """
+    if not len(points):
+        return []
+    lines = ["| fault type | faults | median tail max \\|e_ti\\| |", "|---|---|---|"]
+    for kind, grp in points.groupby("type", sort=True):
+        err = grp["tail_max_et"].to_numpy(float)
+        err = err[np.isfinite(err)]
+        med = f"{np.median(err):.4g}" if len(err) else "-"
+        lines.append(f"| {kind} | {len(grp)} | {med} |")
+    return lines
+
+
+def rerun_command(study: str, sample_id: int, name: str, folder: Path) -> str:
+    """The command that writes one sample's scenario file and simulates it.
+
+    Parameters
+    ----------
+    study : str
+        The study file, as the run named it.
+    sample_id : int
+        The sample's id.
+    name : str
+        The sample's scenario name.
+    folder : Path
+        The study's output folder; the file goes to its ``samples/``.
+    """
+    samples = folder / "samples"
+    return (
+        f"python -m sweep samples {study} --ids {sample_id} --write-scenarios {samples} && "
+        f"make sim SCENARIO={samples}/{name}.toml"
+    )
+
+
+def failing_lines(table: pd.DataFrame, study: str, folder: Path) -> list[str]:
+    """Samples where a guaranteed check fails (which, and the rerun command), and the
+    failed/refused samples with their reasons.
 
     Parameters
     ----------
     table : DataFrame
         The results.
-    samples_dir : str
-        The folder of the sample scenario files, as written in the commands.
+    study : str
+        The study file (for the rerun commands).
+    folder : Path
+        The study's output folder.
     """
     ok = table[table["status"] == "ok"]
     bad = ok[~ok["guaranteed_held"].astype(bool)]
@@ -119,7 +307,8 @@ def failing_lines(table: pd.DataFrame, samples_dir: str) -> list[str]:
     if not len(bad):
         lines.append("None.")
     for r in bad.itertuples(index=False):
-        lines.append(f"- id {r.id}: `make sim SCENARIO={samples_dir}/{r.name}.toml`")
+        which = getattr(r, "guaranteed_failed", "") or "?"
+        lines.append(f"- id {r.id} ({which}): `{rerun_command(study, r.id, r.name, folder)}`")
     lines += ["", "## Samples not run to the end", ""]
     other = table[table["status"] != "ok"]
     if not len(other):
@@ -135,8 +324,8 @@ def write_report(results: Path) -> Path:
     Parameters
     ----------
     results : Path
-        ``out/<study>/results.parquet``; its schema metadata gives the date and the
-        command of the last run that wrote rows.
+        ``out/<study>/results.parquet``; its schema metadata gives the date, the
+        command and the study file of the last run that wrote rows.
 
     Returns
     -------
@@ -151,10 +340,7 @@ def write_report(results: Path) -> Path:
     folder = results.parent
     figs = folder / "figures"
     figs.mkdir(exist_ok=True)
-    ok = table[table["status"] == "ok"]
-    tail = pd.to_numeric(ok["tail_max_et"], errors="coerce").to_numpy(float)
-    h1 = _histogram(tail, "tail max |e_ti|", figs / "tail_error.png")
-    h2 = _histogram(entry_times(table), "Theorem 2 entry time [s]", figs / "theorem2_entry.png")
+    points = fault_points(table)
     lines = [
         f"# Study {folder.name}",
         "",
@@ -165,10 +351,28 @@ def write_report(results: Path) -> Path:
         "Theorem 2 entry time: the comparison-lemma time of the provable variant when the "
         "table has it, else Lemma 1's observed reaching time (column `t2_entry_source`).",
         "",
+        *fault_type_lines(points),
+        "",
         "## Figures",
         "",
+        *_figure_lines(table, points, figs),
+        "",
+        *failing_lines(table, info.get("study", "STUDY"), folder),
     ]
+    return atomic_write_text(folder / "report.md", "\n".join(lines) + "\n")
+
+
+def _figure_lines(table: pd.DataFrame, points: pd.DataFrame, figs: Path) -> list[str]:
+    """Draw every figure the results allow; one Markdown line each."""
+    ok = table[table["status"] == "ok"]
+    h1 = _histogram(_num(ok, "tail_max_et"), "tail max |e_ti|", figs / "tail_error.png")
+    h2 = _histogram(entry_times(table), "Theorem 2 entry time [s]", figs / "theorem2_entry.png")
+    lines = []
     for h, what in ((h1, "tail error"), (h2, "Theorem 2 entry time")):
         lines.append(f"![{what}](figures/{h.name})" if h else f"No finite {what} to draw.")
-    lines += ["", *failing_lines(table, str(folder / "samples"))]
-    return atomic_write_text(folder / "report.md", "\n".join(lines) + "\n")
+    for path in fault_figures(points, figs):
+        lines.append(f"![{path.stem.replace('_', ' ')}](figures/{path.name})")
+    g = graph_figure(table, figs)
+    if g is not None:
+        lines.append(f"![tail error against N](figures/{g.name})")
+    return lines

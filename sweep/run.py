@@ -40,13 +40,14 @@ BASE_COLUMNS = [
     "status",
     "steps",
     "wall_s",
-    "library_sha256",
+    "library",
     "tail_max_et",
     "formation_tail_max",
     "observer_tail_max",
     "t2_entry_source",
     "peak_u_max",
     "guaranteed_held",
+    "guaranteed_failed",
     "consistency_held",
     "n_guaranteed",
     "n_consistency",
@@ -166,23 +167,31 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths) -> dict[str, Any]:
     meta = res.meta
     return {
         "steps": meta.get("steps"),
-        "library_sha256": library_sha(meta),
+        "library": library_key(meta),
         **summarize_table(v.table),
         **theorem2_entry(v.table, sample.scenario, res.frame, v.config),
         "tail_max_et": tail_max_et(res.frame, v.config.tail_fraction),
     }
 
 
-def library_sha(meta: dict[str, Any]) -> str:
-    """SHA-256 of the compiled library the run executed (from meta.json).
+def library_key(meta: dict[str, Any]) -> str:
+    """The key of the compiled library the run executed (meta.json ``library``): its
+    content key when meta.json gives one, else the SHA-256 of the library file.
+
+    Samples with equal keys ran the same compiled code (docs/studies.md).
 
     Parameters
     ----------
     meta : dict
         The run's meta.json content.
     """
+    lib = meta.get("library")
+    if isinstance(lib, str):
+        return lib
+    if isinstance(lib, dict) and isinstance(lib.get("key"), str):
+        return lib["key"]
     libs = meta.get("libraries") or {}
-    main = (meta.get("library") or {}).get("path")
+    main = (lib or {}).get("path")
     if main in libs:
         return libs[main]
     return ",".join(sorted(libs.values()))
@@ -230,11 +239,23 @@ def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
         "observer_tail_max": _max_observed(table, "T1 |ebar_eta_i| -> 0 (tail sup)"),
         "peak_u_max": _max_observed(table, "peak |u_i|", exact=True),
         "guaranteed_held": bool(guaranteed["holds"].all()),
+        "guaranteed_failed": "; ".join(
+            _label(r) for r in guaranteed[~guaranteed["holds"].astype(bool)].itertuples()
+        ),
         "consistency_held": bool(consistency["holds"].all()),
         "n_guaranteed": len(guaranteed),
         "n_consistency": len(consistency),
     }
     return out
+
+
+def _label(row: Any) -> str:
+    """A table row's claim, with its follower when it has one."""
+    agent = getattr(row, "agent", None)
+    try:
+        return f"{row.claim} (follower {int(agent)})"
+    except (TypeError, ValueError):
+        return str(row.claim)
 
 
 def _max_observed(table: pd.DataFrame, claim: str, exact: bool = False) -> float:

@@ -21,10 +21,11 @@ import numpy as np
 from scipy.stats import truncnorm
 
 from core.errors import ExpressionError, ScenarioError
+from core.faults import FAULT_TYPES
 from core.scenario import Scenario, scenario_from_dict
 from generated.overrides import set_path
 from sweep.graphs import random_graph, resize_followers
-from sweep.study import Distribution, Study, substitute
+from sweep.study import Distribution, FaultFamily, LinkLosses, Study, substitute
 
 
 @dataclass(frozen=True)
@@ -135,7 +136,10 @@ def make_sample(study: Study, sample_id: int) -> Sample:
     params: dict[str, Any] = {}
     try:
         _draw_graph(study, data, params, rng)
+        for key, v in study.fixed.items():
+            set_path(data, f"{study.path}#{sample_id}", key, copy.deepcopy(v))
         _draw_operator(study, data, params, rng)
+        _draw_faults(study.faults, data, params, rng)
         for key, d in study.params.items():
             params[key] = draw(d, rng)
             set_path(data, f"{study.path}#{sample_id}", key, params[key])
@@ -174,6 +178,56 @@ def _draw_graph(study: Study, data: dict, params: dict, rng: np.random.Generator
     data["graph"] = {"adjacency": A.tolist(), "pinning": b.tolist()}
     resize_followers(data, N)
     params["graph.N"] = N
+    params["graph.edges"] = int(np.count_nonzero(A) + np.count_nonzero(b))
+    if g.losses is not None:
+        _draw_losses(g.losses, data, params, rng)
+
+
+def _draw_losses(losses: LinkLosses, data: dict, params: dict, rng: np.random.Generator) -> None:
+    """Lose distinct links of the drawn graph ([[graph.switches]] with weight 0), each
+    perhaps restored to its weight ``recovery`` seconds later (dropped past the horizon)."""
+    A = np.asarray(data["graph"]["adjacency"], float)
+    b = np.asarray(data["graph"]["pinning"], float)
+    links = [(int(i), int(j) + 1, A[i, j]) for i, j in zip(*np.nonzero(A), strict=True)]
+    if losses.pinning:
+        links += [(int(i), 0, b[i]) for i in np.flatnonzero(b)]
+    n = int(rng.integers(losses.count[0], losses.count[1], endpoint=True))
+    chosen = rng.choice(len(links), size=min(n, len(links)), replace=False)
+    horizon = data.get("integration", {}).get("horizon", math.inf)
+    switches = []
+    for k, c in enumerate(chosen, 1):
+        i, j, w = links[c]
+        t = draw(losses.time, rng)
+        params.update({f"graph.loss[{k}].follower": i + 1, f"graph.loss[{k}].neighbour": j})
+        params[f"graph.loss[{k}].time"] = t
+        switches.append({"time": t, "follower": i + 1, "neighbour": j, "weight": 0.0})
+        if losses.recovery is not None:
+            back = t + draw(losses.recovery, rng)
+            params[f"graph.loss[{k}].recovery"] = back
+            if back < horizon:
+                switches.append({"time": back, "follower": i + 1, "neighbour": j, "weight": w})
+    if switches:
+        data["graph"]["switches"] = sorted(switches, key=lambda s: s["time"])
+
+
+def _draw_faults(
+    fam: FaultFamily | None, data: dict, params: dict, rng: np.random.Generator
+) -> None:
+    """Add the drawn faults to the followers' ``faults`` lists (after the base's own):
+    per fault the follower, the type, then the type's keys in the order it lists them."""
+    if fam is None:
+        return
+    n = int(rng.integers(fam.count[0], fam.count[1], endpoint=True))
+    pool = fam.followers or tuple(range(1, len(data["followers"]) + 1))
+    params["faults.count"] = n
+    for k in range(1, n + 1):
+        who = pool[int(rng.integers(len(pool)))]
+        kind = fam.types[int(rng.integers(len(fam.types)))]
+        fault = {"type": kind, **{key: draw(fam.keys[key], rng) for key in FAULT_TYPES[kind][1:]}}
+        follower = data["followers"][who - 1]
+        follower["faults"] = [*follower.get("faults", []), fault]
+        params.update({f"faults[{k}].follower": who, f"faults[{k}].type": kind})
+        params.update({f"faults[{k}].{key}": v for key, v in fault.items() if key != "type"})
 
 
 def _draw_operator(study: Study, data: dict, params: dict, rng: np.random.Generator) -> None:

@@ -11,7 +11,7 @@ import hashlib
 import math
 import re
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +19,7 @@ import numpy as np
 
 from core.errors import ExpressionError, ScenarioError
 from core.expressions import CONSTANTS, FUNCTIONS, parse_expression
+from core.faults import FAULT_TYPES
 from core.scenario import load_scenario, scenario_from_dict
 from generated.overrides import set_path
 from sweep.graphs import random_graph, resize_followers
@@ -31,9 +32,28 @@ MAX_COUNT = 1_000_000
 MAX_GRAPH_N = 500
 #: the distributions and the number of arguments each takes
 KINDS = {"uniform": 2, "normal": 2, "choice": None, "integers": 2}
-TOP_KEYS = {"name", "description", "base", "count", "seed", "params", "graph", "operator"}
-GRAPH_KEYS = {"N", "edge_probability", "weight"}
+TOP_KEYS = {
+    "name",
+    "description",
+    "base",
+    "count",
+    "seed",
+    "set",
+    "params",
+    "graph",
+    "operator",
+    "faults",
+}
+GRAPH_KEYS = {"N", "edge_probability", "weight", "losses"}
+LOSS_KEYS = {"count", "time", "recovery", "pinning"}
+#: the keys of [faults]: which, how many, and a distribution per fault key
+FAULT_KEYS = {"count", "followers", "types", "onset", "severity", "duration", "period", "duty"}
+FAULT_KEYS |= {"amplitude"}
+#: most faults or link losses drawn per sample
+MAX_DRAWN = 100
 OPERATOR_KEYS = {"u0", "params", "traces"}
+#: a ``--set`` key: dotted names, each with an optional 1-based [index]
+KEY_PATTERN = r"[A-Za-z_]\w*(\[\d+\])?(\.[A-Za-z_]\w*(\[\d+\])?)*"
 #: names an operator parameter may not take: the parser's own
 RESERVED = {"t", *CONSTANTS, *FUNCTIONS}
 
@@ -80,6 +100,28 @@ class Distribution:
 
 
 @dataclass(frozen=True)
+class LinkLosses:
+    """Links of the drawn graph lost (weight 0) during the run, and perhaps restored.
+
+    Attributes
+    ----------
+    count : tuple of int
+        How many links each sample loses, drawn uniformly from [lo, hi].
+    time : Distribution
+        When each lost link goes (seconds).
+    recovery : Distribution or None
+        How long after its loss each link comes back with its weight; None: lost for good.
+    pinning : bool
+        Whether a leader link a_i0 may be drawn.
+    """
+
+    count: tuple[int, int]
+    time: Distribution
+    recovery: Distribution | None
+    pinning: bool = True
+
+
+@dataclass(frozen=True)
 class GraphFamily:
     """Random graphs with a directed spanning tree rooted at the leader.
 
@@ -91,11 +133,39 @@ class GraphFamily:
         Probability of each extra edge j -> i beyond the spanning tree, in [0, 1].
     weight : float
         Weight a_ij of every edge and of the pinning, > 0.
+    losses : LinkLosses or None
+        Link losses (``[[graph.switches]]``) drawn on each sampled graph.
     """
 
     n_range: tuple[int, int]
     edge_probability: float
     weight: float = 1.0
+    losses: LinkLosses | None = None
+
+
+@dataclass(frozen=True)
+class FaultFamily:
+    """Faults of a random type on a random follower (``[[followers.faults]]`` tables).
+
+    Attributes
+    ----------
+    count : tuple of int
+        How many faults each sample gets, drawn uniformly from [lo, hi].
+    followers : tuple of int or None
+        The 1-based followers a fault may hit (each equally likely); None: every follower
+        of the sample.
+    types : tuple of str
+        The fault types drawn from (each equally likely): ``abrupt``, ``ramp``,
+        ``intermittent``, ``bias``.
+    keys : dict
+        Fault key (``onset``, ``severity``, ``duration``, ``period``, ``duty``,
+        ``amplitude``) -> :class:`Distribution`; a fault draws the keys its type takes.
+    """
+
+    count: tuple[int, int]
+    followers: tuple[int, ...] | None
+    types: tuple[str, ...]
+    keys: dict[str, Distribution]
 
 
 @dataclass(frozen=True)
@@ -138,12 +208,16 @@ class Study:
         Number of samples (ids 0 .. count - 1).
     seed : int
         The study's seed; sample k draws from a generator seeded by (seed, k).
+    fixed : dict
+        ``--set`` key -> value given to every sample (``[set]``), before any draw.
     params : dict
         ``--set`` key -> :class:`Distribution`, in file order.
     graph : GraphFamily or None
         Random graphs replacing the base's [graph], or None to keep it.
     operator : OperatorFamily or None
         The operator input family, or None to keep the base's u0.
+    faults : FaultFamily or None
+        Random faults added to the followers, or None.
     """
 
     name: str
@@ -156,6 +230,8 @@ class Study:
     params: dict[str, Distribution]
     graph: GraphFamily | None
     operator: OperatorFamily | None
+    fixed: dict[str, Any] = field(default_factory=dict)
+    faults: FaultFamily | None = None
 
 
 # --------------------------------------------------------------------------- reading
@@ -194,6 +270,8 @@ def load_study(path: str | Path) -> Study:
         params=_params(f, data.get("params", {})),
         graph=_graph(f, data["graph"]) if "graph" in data else None,
         operator=_operator(f, path, data["operator"]) if "operator" in data else None,
+        fixed=_fixed(f, data.get("set", {})),
+        faults=_faults(f, data["faults"]) if "faults" in data else None,
     )
     _check_keys_apply(study)
     return study
@@ -288,7 +366,7 @@ def _params(f: str, raw: Any) -> dict[str, Distribution]:
     out = {}
     for key, spec in table.items():
         where = _join("params", key)
-        if not re.fullmatch(r"[A-Za-z_]\w*(\[\d+\])?(\.[A-Za-z_]\w*(\[\d+\])?)*", key):
+        if not re.fullmatch(KEY_PATTERN, key):
             raise StudyError(f, where, "is not a dotted key", 'a --set key, e.g. "followers[2].p0"')
         out[key] = distribution(f, spec, where)
     return out
@@ -388,7 +466,87 @@ def _graph(f: str, raw: Any) -> GraphFamily:
     w = _number(f, g.get("weight", 1.0), "graph.weight")
     if w <= 0:
         raise StudyError(f, "graph.weight", f"{w:g} is not positive", "a weight > 0")
-    return GraphFamily((lo, hi), p, w)
+    losses = _losses(f, g["losses"]) if "losses" in g else None
+    return GraphFamily((lo, hi), p, w, losses)
+
+
+def _count_range(f: str, v: Any, key: str) -> tuple[int, int]:
+    """``count``: an integer or ``[lo, hi]`` in [0, MAX_DRAWN]."""
+    if isinstance(v, list):
+        if len(v) != 2:
+            raise StudyError(f, key, f"{v!r} is not [lo, hi]", "an integer or [lo, hi]")
+        lo, hi = (_integer(f, n, key, 0, MAX_DRAWN) for n in v)
+    else:
+        lo = hi = _integer(f, v, key, 0, MAX_DRAWN)
+    if lo > hi:
+        raise StudyError(f, key, f"lo = {lo} > hi = {hi}", "lo <= hi")
+    return lo, hi
+
+
+def _scalar_distribution(f: str, raw: Any, key: str) -> Distribution:
+    """A distribution of one number (no ``size``)."""
+    d = distribution(f, raw, key)
+    if d.size is not None:
+        raise StudyError(f, _join(key, "size"), "is given", "one number per draw (no size)")
+    return d
+
+
+def _losses(f: str, raw: Any) -> LinkLosses:
+    t = _table(f, raw, "graph.losses", LOSS_KEYS, {"time"})
+    pinning = t.get("pinning", True)
+    if not isinstance(pinning, bool):
+        raise StudyError(f, "graph.losses.pinning", f"{pinning!r} is not a boolean", "true/false")
+    rec = t.get("recovery")
+    return LinkLosses(
+        count=_count_range(f, t.get("count", 1), "graph.losses.count"),
+        time=_scalar_distribution(f, t["time"], "graph.losses.time"),
+        recovery=None if rec is None else _scalar_distribution(f, rec, "graph.losses.recovery"),
+        pinning=pinning,
+    )
+
+
+# --------------------------------------------------------------------------- set, faults
+def _fixed(f: str, raw: Any) -> dict[str, Any]:
+    """``[set]``: dotted ``--set`` key -> the value every sample gets."""
+    table = _table(f, raw, "set", set(raw) if isinstance(raw, dict) else set())
+    for key in table:
+        if not re.fullmatch(KEY_PATTERN, key):
+            raise StudyError(
+                f, _join("set", key), "is not a dotted key", 'a --set key, e.g. "options.sign"'
+            )
+    return dict(table)
+
+
+def _faults(f: str, raw: Any) -> FaultFamily:
+    t = _table(f, raw, "faults", FAULT_KEYS, {"onset"})
+    followers = None
+    if "followers" in t:
+        v = t["followers"]
+        if not isinstance(v, list) or not v:
+            raise StudyError(f, "faults.followers", f"{v!r} is not a list", "1-based followers")
+        followers = tuple(_integer(f, x, "faults.followers", 1, MAX_GRAPH_N) for x in v)
+    types = t.get("types", list(FAULT_TYPES))
+    if not isinstance(types, list) or not types or not all(x in FAULT_TYPES for x in types):
+        raise StudyError(
+            f, "faults.types", f"{types!r} is not a list of fault types", ", ".join(FAULT_TYPES)
+        )
+    keys = {}
+    for k in sorted(FAULT_KEYS - {"count", "followers", "types"}):
+        if k in t:
+            where = _join("faults", k)
+            keys[k] = (distribution if k == "amplitude" else _scalar_distribution)(f, t[k], where)
+    used = {k for ty in types for k in FAULT_TYPES[ty]}
+    for k in keys:
+        if k not in used:
+            raise StudyError(f, _join("faults", k), f"no type of {types} takes it", "remove it")
+    for ty in types:
+        for k in FAULT_TYPES[ty]:
+            if k != "type" and k not in keys:
+                raise StudyError(
+                    f, _join("faults", k), f"missing (a {ty} fault takes it)", "a distribution"
+                )
+    count = _count_range(f, t.get("count", 1), "faults.count")
+    return FaultFamily(count, followers, tuple(dict.fromkeys(types)), keys)
 
 
 def _operator(f: str, path: Path, raw: Any) -> OperatorFamily:
@@ -481,7 +639,8 @@ def representative(d: Distribution) -> Any:
 
 
 def _check_keys_apply(study: Study) -> None:
-    """Every ``--set`` key applies to the base (resized to the smallest N) and names a field.
+    """Every ``[set]`` and ``[params]`` key applies to the base (resized to the smallest N)
+    and names a field; every fault type of ``[faults]`` is accepted with representative values.
 
     Other refusals of the loader depend on the drawn values and are reported per sample.
     """
@@ -492,20 +651,70 @@ def _check_keys_apply(study: Study) -> None:
         )
         data["graph"] = {"adjacency": A.tolist(), "pinning": b.tolist()}
         resize_followers(data, study.graph.n_range[0])
-    for key, d in study.params.items():
+    _apply(study, data, "set", study.fixed)
+    fixed = copy.deepcopy(data)
+    _apply(study, data, "params", {k: representative(d) for k, d in study.params.items()})
+    _check_unknown(study, data)
+    if study.faults is not None:
+        _check_faults(study, fixed)
+
+
+def _apply(study: Study, data: dict, table: str, values: dict[str, Any]) -> None:
+    """``set_path`` of each value; a key that does not apply is refused naming ``table``."""
+    for key, v in values.items():
         try:
-            set_path(data, study.path, key, representative(d))
+            set_path(data, study.path, key, v)
         except ScenarioError as exc:
-            raise StudyError(study.path, _join("params", key), exc.problem, exc.expected) from None
+            raise StudyError(study.path, _join(table, key), exc.problem, exc.expected) from None
+
+
+def _validate(study: Study, data: dict) -> None:
+    scenario_from_dict(data, path=study.path, sha256=hashlib.sha256(b"").hexdigest())
+
+
+def _check_unknown(study: Study, data: dict) -> None:
+    """A key of ``[set]`` or ``[params]`` the scenario loader does not know is refused."""
     try:
-        scenario_from_dict(data, path=study.path, sha256=hashlib.sha256(b"").hexdigest())
+        _validate(study, data)
     except ScenarioError as exc:
         if exc.problem == "unknown key":
             bare = re.sub(r"\[\d+\]", "", exc.key)
-            for key in study.params:
-                if re.sub(r"\[\d+\]", "", key) == bare:
-                    raise StudyError(
-                        study.path, _join("params", key), "names no scenario field", exc.expected
-                    ) from None
+            for table, keys in (("set", study.fixed), ("params", study.params)):
+                for key in keys:
+                    if re.sub(r"\[\d+\]", "", key) == bare:
+                        raise StudyError(
+                            study.path, _join(table, key), "names no scenario field", exc.expected
+                        ) from None
     except ExpressionError:
         pass
+
+
+def _check_faults(study: Study, data: dict) -> None:
+    """Each fault type, with representative values, on the first follower it may hit."""
+    fam = study.faults
+    N = len(data["followers"])
+    if fam.followers is not None and max(fam.followers) > N:
+        raise StudyError(
+            study.path,
+            "faults.followers",
+            f"follower {max(fam.followers)} > N = {N} (the smallest graph)",
+            f"followers in 1..{N}",
+        )
+    i = (fam.followers or (1,))[0] - 1
+    for ty in fam.types:
+        trial = copy.deepcopy(data)
+        fault = {"type": ty, **{k: representative(fam.keys[k]) for k in FAULT_TYPES[ty][1:]}}
+        trial["followers"][i]["faults"] = [*trial["followers"][i].get("faults", []), fault]
+        try:
+            _validate(study, trial)
+        except ScenarioError as exc:
+            m = re.search(r"faults\[\d+\]\.(\w+)$", exc.key)
+            if m and m.group(1) in FAULT_KEYS:
+                raise StudyError(
+                    study.path,
+                    _join("faults", m.group(1)),
+                    f"a {ty} fault: {exc.problem}",
+                    exc.expected,
+                ) from None
+        except ExpressionError:
+            pass

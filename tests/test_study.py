@@ -307,3 +307,177 @@ def test_written_graph_study_round_trips(tmp_path):
     for s in samples(load_study(path)):
         file = write_scenario(s, tmp_path / "out")
         _same(dataclasses.replace(load_scenario(file), path=s.scenario.path), s.scenario)
+
+
+# --------------------------------------------------------------------------- [set], [faults]
+#: severities up to 0.2: two faults on one follower keep 0.95 * 0.8^2 >= controller.g_min
+FAULTS = """
+[faults]
+count = [1, 2]
+types = ["abrupt", "ramp", "intermittent", "bias"]
+followers = [2, 4]
+onset = { uniform = [1.0, 15.0] }
+severity = { uniform = [0.05, 0.2] }
+duration = { uniform = [0.5, 4.0] }
+period = { uniform = [0.5, 3.0] }
+duty = { uniform = [0.2, 0.8] }
+amplitude = { uniform = [-1.0, 1.0], size = 2 }
+"""
+#: each type's own keys and the closed interval its drawn values must lie in
+RANGES = {
+    "onset": (1.0, 15.0),
+    "severity": (0.05, 0.2),
+    "duration": (0.5, 4.0),
+    "period": (0.5, 3.0),
+    "duty": (0.2, 0.8),
+}
+OWN_KEYS = {
+    "abrupt": {"onset", "severity"},
+    "ramp": {"onset", "severity", "duration"},
+    "intermittent": {"onset", "severity", "period", "duty"},
+    "bias": {"onset", "amplitude"},
+}
+
+
+def test_fault_family_draws_faults_of_the_listed_types_on_the_listed_followers(tmp_path):
+    head = f'base = "{PAPER}"\ncount = 120\nseed = 3\n'
+    types, counts = [], set()
+    for s in samples(load_study(_study(tmp_path, FAULTS, head=head))):
+        assert s.reason is None, s.reason
+        n = s.params["faults.count"]
+        counts.add(n)
+        loaded = [f.faults for f in s.scenario.followers]  # what the scenario loader read
+        assert sum(len(x) for x in loaded) == n and not loaded[0] and not loaded[2]
+        seen = {1: 0, 3: 0}
+        for k in range(1, n + 1):
+            who, kind = s.params[f"faults[{k}].follower"], s.params[f"faults[{k}].type"]
+            assert who in (2, 4)
+            fault = loaded[who - 1][seen[who - 1]]
+            seen[who - 1] += 1
+            drawn = {
+                key[len(f"faults[{k}].") :] for key in s.params if key.startswith(f"faults[{k}].")
+            }
+            assert drawn - {"follower", "type"} == OWN_KEYS[kind] and fault.type == kind
+            for key in OWN_KEYS[kind] - {"amplitude"}:
+                lo, hi = RANGES[key]
+                assert lo <= s.params[f"faults[{k}].{key}"] <= hi
+                assert getattr(fault, key) == s.params[f"faults[{k}].{key}"]
+            if kind == "bias":
+                amp = s.params[f"faults[{k}].amplitude"]
+                assert len(amp) == 2 and all(-1 <= a <= 1 for a in amp)
+                assert tuple(fault.amplitude) == tuple(amp)
+            types.append(kind)
+    assert counts == {1, 2}
+    for kind in OWN_KEYS:  # four equally likely types: binomial frequencies
+        p, n = 0.25, len(types)
+        assert abs(types.count(kind) / n - p) < 5 * math.sqrt(p * (1 - p) / n)
+
+
+def test_drawn_abrupt_fault_sets_the_health_closed_form(tmp_path):
+    body = FAULTS.replace('["abrupt", "ramp", "intermittent", "bias"]', '["abrupt"]')
+    body = body.replace("count = [1, 2]", "count = 1")
+    body = "\n".join(
+        line
+        for line in body.splitlines()
+        if not line.startswith(("duration", "period", "duty", "amplitude"))
+    )
+    for s in samples(load_study(_study(tmp_path, body))):
+        who, t0 = s.params["faults[1].follower"], s.params["faults[1].onset"]
+        sev = s.params["faults[1].severity"]
+        g = s.scenario.followers[who - 1].g.expr.numpy(np.array([t0 - 1e-9, t0, 19.0]))
+        # h(t) = 1 before the onset, 1 - s from it on, times the base health 0.95
+        np.testing.assert_allclose(g, [0.95, 0.95 * (1 - sev), 0.95 * (1 - sev)], rtol=1e-14)
+
+
+def test_set_values_reach_every_sample(tmp_path):
+    body = '[set]\n"controller.k2" = 2.5\n"followers[3].g" = 0.9\n'
+    for s in samples(load_study(_study(tmp_path, body))):
+        assert s.reason is None
+        assert np.all(s.scenario.controller.k2 == 2.5)
+        assert s.scenario_data["followers"][2]["g"] == 0.9
+        assert "controller.k2" not in s.params  # fixed, not drawn
+
+
+BAD_FAULTS = [
+    (FAULTS.replace('"bias"]', '"stuck"]'), "faults.types"),
+    (FAULTS.replace("severity = { uniform = [0.05, 0.2] }\n", ""), "faults.severity"),
+    (FAULTS.replace("size = 2", "size = 3"), "faults.amplitude"),
+    (FAULTS.replace("followers = [2, 4]", "followers = [2, 9]"), "faults.followers"),
+    (FAULTS.replace('"intermittent", ', ""), "faults.duty"),  # no listed type takes duty
+    (
+        FAULTS.replace(
+            "onset = { uniform = [1.0, 15.0] }", "onset = { uniform = [1.0, 15.0], size = 2 }"
+        ),
+        "faults.onset.size",
+    ),
+    (FAULTS.replace("count = [1, 2]", "count = -1"), "faults.count"),
+    (
+        FAULTS.replace("onset = { uniform = [1.0, 15.0] }", "onset = { uniform = [25.0, 30.0] }"),
+        "faults.onset",
+    ),
+    ('[set]\n"controller.kk2" = 1.0\n', 'set."controller.kk2"'),
+    ('[set]\n"followers[9].g" = 0.9\n', 'set."followers[9].g"'),
+]
+
+
+@pytest.mark.parametrize(
+    ("body", "key"), BAD_FAULTS, ids=[f"{k}-{i}" for i, (_, k) in enumerate(BAD_FAULTS)]
+)
+def test_bad_faults_or_set_is_one_line_naming_the_key(tmp_path, capsys, body, key):
+    assert f": {key}" in _one_line_error(_study(tmp_path, body), capsys)
+
+
+# --------------------------------------------------------------------------- link losses
+LOSSES = """
+[graph]
+N = [4, 8]
+edge_probability = 0.3
+
+[graph.losses]
+count = [1, 3]
+time = { uniform = [2.0, 12.0] }
+recovery = { uniform = [1.0, 10.0] }
+"""
+
+
+def _topologies(A: np.ndarray, b: np.ndarray, switches: list[dict]):
+    """Each graph in force, from the written switches (applied together at equal times)."""
+    A, b = A.copy(), b.copy()
+    yield A.copy(), b.copy()
+    for t in sorted({s["time"] for s in switches}):
+        for s in (s for s in switches if s["time"] == t):
+            if s["neighbour"] == 0:
+                b[s["follower"] - 1] = s["weight"]
+            else:
+                A[s["follower"] - 1, s["neighbour"] - 1] = s["weight"]
+        yield A.copy(), b.copy()
+
+
+def test_link_losses_are_links_of_the_graph_restored_with_their_weight(tmp_path):
+    head = f'base = "{PAPER}"\ncount = 60\nseed = 11\n'
+    refused = accepted = 0
+    for s in samples(load_study(_study(tmp_path, LOSSES, head=head))):
+        g = s.scenario_data["graph"]
+        A, b = np.array(g["adjacency"]), np.array(g["pinning"])
+        sw = g.get("switches", [])
+        assert [x["time"] for x in sw] == sorted(x["time"] for x in sw)
+        k = 1
+        while f"graph.loss[{k}].time" in s.params:
+            i, j = s.params[f"graph.loss[{k}].follower"], s.params[f"graph.loss[{k}].neighbour"]
+            t, back = s.params[f"graph.loss[{k}].time"], s.params[f"graph.loss[{k}].recovery"]
+            w = b[i - 1] if j == 0 else A[i - 1, j - 1]
+            assert w > 0 and 2.0 <= t <= 12.0 and 1.0 <= back - t <= 10.0  # an existing link
+            mine = [x for x in sw if (x["follower"], x["neighbour"]) == (i, j)]
+            want = [(t, 0.0)] + ([(back, w)] if back < 20.0 else [])  # horizon 20 s
+            assert [(x["time"], x["weight"]) for x in mine] == want
+            k += 1
+        assert 1 <= k - 1 <= 3
+        # the loader refuses exactly the samples where some topology cuts a follower off
+        cut = not all(_reachable(At, bt).all() for At, bt in _topologies(A, b, sw))
+        assert (s.scenario is None) == cut, s.reason
+        if cut:
+            assert "graph.switches" in s.reason
+            refused += 1
+        else:
+            accepted += 1
+    assert refused and accepted  # both kinds occur with these settings

@@ -50,7 +50,7 @@ def test_one_ok_row_per_sample_with_the_drawn_values(setup):
     assert sorted(full["id"]) == [0, 1, 2, 3]
     assert (full["status"] == "ok").all(), full["status"].tolist()
     # p0 is a runtime value: one library for the whole study
-    assert full["library_sha256"].nunique() == 1 and len(full["library_sha256"].iloc[0]) == 64
+    assert full["library"].nunique() == 1 and len(full["library"].iloc[0]) == 64
     study = load_study(setup["root"] / "study.toml")
     for s in samples(study):
         row = full[full["id"] == s.id].iloc[0]
