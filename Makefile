@@ -10,14 +10,15 @@ SWEEP ?= studies/example.toml
 STRICT ?= 0
 export STRICT
 
-.PHONY: all demo synth sim sweep verify report test lint bench clean clean-cache distclean
+.PHONY: all demo synth sim sweep console chromium verify report test lint bench clean clean-cache distclean
 
 all: demo
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,native]"
+	$(PY) -m pip install --quiet -e ".[dev,native,console]"
+	$(MAKE) chromium
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -34,6 +35,18 @@ sim: $(STAMP)
 sweep: $(STAMP)
 	$(PY) -m sweep run $(SWEEP)
 
+# the live operator console on http://127.0.0.1:$(PORT)/ (docs/console.md)
+PORT ?= 8765
+console: $(STAMP)
+	$(PY) -m console serve $(SCENARIO) --port $(PORT)
+
+# the browser the console's test drives (Debian's chromium, through Playwright); where it
+# cannot be installed (no apt, not root) the test is skipped and says why
+chromium:
+	@if [ ! -x /usr/bin/chromium ] && command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+		apt-get install -y -q chromium >/dev/null || (apt-get update -q >/dev/null && apt-get install -y -q chromium >/dev/null) \
+		|| echo "chromium could not be installed: the console's browser test will be skipped"; fi
+
 verify: $(STAMP)
 	$(PY) -m verify check $(SCENARIO)
 
@@ -41,11 +54,11 @@ report: $(STAMP)
 	$(PY) -m verify report $(SCENARIO)
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check core synthesis symbolic generated verify benchmarks sweep tests
-	$(VENV)/bin/ruff format --check core synthesis symbolic generated verify benchmarks sweep tests
+	$(VENV)/bin/ruff check core synthesis symbolic generated verify benchmarks sweep console tests
+	$(VENV)/bin/ruff format --check core synthesis symbolic generated verify benchmarks sweep console tests
 	$(VENV)/bin/lint-imports
 
-test: lint
+test: lint chromium
 	$(PY) -m pytest
 
 bench: $(STAMP)

@@ -1,0 +1,187 @@
+"""One console run: wall-clock pacing, the operator's commands, the log and the record.
+
+The server calls :meth:`Session.tick` at its frame rate and :meth:`Session.handle`
+for every validated message, both from one asyncio thread, so a command always
+falls between two integrator calls. Pacing: the simulated time owed grows by
+``scale`` × the wall time since the last tick (at most :data:`MAX_LAG` seconds of
+wall time per tick, so a stall is not made up in a burst) and is paid in whole
+quanta; the states at every quantum are logged from t = 0.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from console.engine import LoopBase
+from console.protocol import Command, MessageError
+
+#: most wall-clock seconds one tick pays for (a longer stall slows the run down instead)
+MAX_LAG = 0.25
+#: most quanta one integrator call may take (keeps a tick short at a large time scale)
+MAX_QUANTA = 2000
+#: logged rows kept from t = 0 (at the default quantum 0.01 s: 2 h 46 min of simulated time)
+MAX_LOG_ROWS = 1_000_000
+#: window of the simulated/real ratio shown on the page (s)
+RATIO_WINDOW = 1.0
+
+
+@dataclass
+class Pace:
+    """The clock's state, as the page shows it.
+
+    Attributes
+    ----------
+    scale : float
+        Simulated seconds per wall-clock second asked for.
+    paused : bool
+    ratio : float
+        Simulated seconds advanced per wall-clock second over the last
+        :data:`RATIO_WINDOW` (equal to ``scale`` when the loop keeps up).
+    load : float
+        Fraction of wall time spent integrating over the same window.
+    """
+
+    scale: float = 1.0
+    paused: bool = False
+    ratio: float = 0.0
+    load: float = 0.0
+    window: deque = field(default_factory=deque)  # (wall, simulated advanced, busy)
+
+
+class Session:
+    """A live loop, its pacing and its log.
+
+    Parameters
+    ----------
+    loop : LoopBase
+        The engine (:class:`console.engine.LiveLoop`, or a stand-in with the same base).
+    recorder : callable, optional
+        ``recorder(session) -> dict`` writes the record so far and returns what the page
+        is told (paths); without one, ``save`` is refused.
+    clock : callable
+        Wall clock in seconds (``time.perf_counter``; tests may pass their own).
+    """
+
+    def __init__(self, loop: LoopBase, recorder: Any = None, clock: Any = time.perf_counter):
+        self.loop, self.recorder, self.clock = loop, recorder, clock
+        self.pace = Pace()
+        self.owed = 0.0
+        self.last_wall = clock()
+        self._start_log()
+
+    def _start_log(self) -> None:
+        self.log_t: list[float] = [self.loop.t]
+        self.log_x: list[np.ndarray] = [self.loop.x.copy()]
+        self.log_full = False
+
+    # ---------------------------------------------------------------- commands
+    def handle(self, cmd: Command) -> dict[str, Any] | None:
+        """Apply one validated command; a reply for the page, or None.
+
+        Raises
+        ------
+        MessageError
+            For a command that cannot apply now (a change after a failure, a save
+            without a recorder).
+        """
+        loop = self.loop
+        if cmd.kind == "pause":
+            self.pace.paused = True
+        elif cmd.kind == "resume":
+            self.pace.paused = False
+            self.last_wall = self.clock()
+        elif cmd.kind == "scale":
+            self.pace.scale = cmd.values[0]
+        elif cmd.kind == "reset":
+            loop.reset()
+            self.owed = 0.0
+            self._start_log()
+        elif cmd.kind == "save":
+            if self.recorder is None:
+                raise MessageError("save: this console has no record folder (start it with --out)")
+            return {"type": "saved", **self.recorder(self)}
+        elif loop.failure:
+            raise MessageError(f"{cmd.kind}: the integrator stopped ({loop.failure}); send reset")
+        elif cmd.kind == "u0":
+            loop.set_u0(cmd.values)
+        elif cmd.kind == "health":
+            loop.set_health(cmd.follower, cmd.values[0])
+        elif cmd.kind == "bias":
+            loop.set_bias(cmd.follower, cmd.values)
+        elif cmd.kind == "link":
+            loop.set_link(cmd.follower, cmd.neighbour, cmd.cut)
+        elif cmd.kind == "clear":
+            loop.clear(cmd.follower)
+        return None
+
+    # ---------------------------------------------------------------- time
+    def tick(self) -> dict[str, Any]:
+        """Advance by the simulated time the wall clock owes; the frame for the pages."""
+        now = self.clock()
+        wall = min(max(now - self.last_wall, 0.0), MAX_LAG)
+        self.last_wall = now
+        advanced, busy = 0.0, 0.0
+        if not self.pace.paused and not self.loop.failure:
+            self.owed += wall * self.pace.scale
+            h = self.loop.quantum
+            quanta = min(int(math.floor(self.owed / h + 1e-9)), MAX_QUANTA)
+            if quanta >= 1:
+                t_before = self.loop.t
+                w0 = self.clock()
+                adv = self.loop.advance(quanta)
+                busy = self.clock() - w0
+                advanced = self.loop.t - t_before
+                self.owed = 0.0 if adv.failure else max(self.owed - quanta * h, 0.0)
+                self._log(adv.t, adv.x)
+        self._measure(now, wall, advanced, busy)
+        return self.frame()
+
+    def _log(self, t: np.ndarray, x: np.ndarray) -> None:
+        room = MAX_LOG_ROWS - len(self.log_t)
+        if room < len(t):
+            self.log_full = True
+        self.log_t.extend(float(v) for v in t[:room])
+        self.log_x.extend(np.array(r) for r in x[:room])
+
+    def _measure(self, now: float, wall: float, advanced: float, busy: float) -> None:
+        w = self.pace.window
+        w.append((now, wall, advanced, busy))
+        while w and now - w[0][0] > RATIO_WINDOW:
+            w.popleft()
+        total = sum(e[1] for e in w)
+        self.pace.ratio = sum(e[2] for e in w) / total if total > 0 else 0.0
+        self.pace.load = sum(e[3] for e in w) / total if total > 0 else 0.0
+
+    # ---------------------------------------------------------------- view
+    def frame(self) -> dict[str, Any]:
+        """The state message every page receives."""
+        loop = self.loop
+        st = loop.settings
+        return {
+            "type": "state",
+            "t": loop.t,
+            **loop.signals(loop.x),
+            "u0": st.u0.tolist(),
+            "health": st.health.tolist(),
+            "bias": st.bias.tolist(),
+            "cut": [[i + 1, j + 1] for (i, j), w in sorted(st.weights.items()) if w == 0.0],
+            "paused": self.pace.paused,
+            "scale": self.pace.scale,
+            "ratio": self.pace.ratio,
+            "load": self.pace.load,
+            "steps": loop.steps,
+            "failure": loop.failure,
+            "changes": len(loop.changes),
+            "log_full": self.log_full,
+        }
+
+    def log_array(self) -> tuple[np.ndarray, np.ndarray]:
+        """The logged times and states from t = 0."""
+        return np.array(self.log_t), np.array(self.log_x)
+

@@ -1,0 +1,213 @@
+// The console page: draws the frames the server streams, sends the operator's commands.
+// No build step: plain JS and canvas. Followers are 1-based in messages and on screen.
+"use strict";
+
+const COLORS = ["#1e88e5", "#e53935", "#43a047", "#fb8c00", "#8e24aa", "#00897b", "#6d4c41", "#3949ab"];
+const TRAIL_S = 5, PLOT_S = 10;
+let info = null, last = null, ws = null;
+let trails = [], hist = [];
+let keys = { left: false, right: false, up: false, down: false };
+let sentU0 = null;
+
+const $ = (id) => document.getElementById(id);
+const color = (i) => COLORS[i % COLORS.length];
+
+function send(msg) { if (ws && ws.readyState === 1) ws.send(JSON.stringify(msg)); }
+
+function connect() {
+  ws = new WebSocket(`ws://${location.host}/ws`);
+  ws.onopen = () => send({ type: "drive" });
+  ws.onmessage = (ev) => {
+    const msg = JSON.parse(ev.data);
+    if (msg.type === "state") onState(msg);
+    else if (msg.type === "hello") onHello(msg);
+    else if (msg.type === "error") logError(msg.message);
+    else if (msg.type === "saved") $("saved").textContent = "saved: " + msg.scenario + " (" + msg.rows + " rows)";
+  };
+  ws.onclose = () => { $("role").textContent = "disconnected"; };
+}
+
+function logError(text) {
+  const div = $("errors");
+  div.textContent = (text + "\n" + div.textContent).slice(0, 2000);
+}
+
+function onHello(msg) {
+  info = msg;
+  $("title").textContent = msg.title || "console";
+  trails = Array.from({ length: msg.N }, () => []);
+  buildTable();
+}
+
+function buildTable() {
+  const tbl = $("followers");
+  let html = "<tr><th>follower</th><th>health g</th><th>ĝ</th><th>|u|</th><th>bias</th><th>links</th><th>faults</th></tr>";
+  for (let i = 0; i < info.N; i++) {
+    const links = info.edges.filter((e) => e[0] === i + 1).map((e) =>
+      `<button data-link="${i + 1},${e[1]}">${e[1] === 0 ? "leader" : e[1]}</button>`).join("");
+    html += `<tr><td style="color:${color(i)}">${i + 1}</td>` +
+      `<td><span class="bar" id="gbar${i}"></span> <span id="g${i}"></span></td>` +
+      `<td id="ghat${i}"></td><td id="un${i}"></td><td id="b${i}"></td><td>${links}</td>` +
+      `<td><button data-health="${i + 1}">g×0.6</button><button data-bias="${i + 1}">bias</button>` +
+      `<button data-clear="${i + 1}">clear</button></td></tr>`;
+  }
+  tbl.innerHTML = html;
+  tbl.querySelectorAll("button[data-health]").forEach((b) => b.onclick = () => {
+    const i = +b.dataset.health;
+    const g = Math.max(info.g_min, (last ? last.health[i - 1] : 1) * 0.6);
+    send({ type: "health", follower: i, value: g });
+  });
+  tbl.querySelectorAll("button[data-bias]").forEach((b) => b.onclick = () => {
+    const v = Math.min(info.bias_max, 5);
+    send({ type: "bias", follower: +b.dataset.bias, value: Array(info.n).fill(v) });
+  });
+  tbl.querySelectorAll("button[data-clear]").forEach((b) => b.onclick = () =>
+    send({ type: "clear", follower: +b.dataset.clear }));
+  tbl.querySelectorAll("button[data-link]").forEach((b) => b.onclick = () => {
+    const [i, j] = b.dataset.link.split(",").map(Number);
+    const isCut = last && last.cut.some((c) => c[0] === i && c[1] === j);
+    send({ type: "link", follower: i, neighbour: j, cut: !isCut });
+  });
+}
+
+function onState(s) {
+  if (last && s.t < last.t) { trails = trails.map(() => []); hist = []; }
+  last = s;
+  if (!info) return;
+  for (let i = 0; i < info.N; i++) {
+    if (s.p && s.p[i]) trails[i].push([s.t, s.p[i][0], s.p[i][1]]);
+    while (trails[i].length && trails[i][0][0] < s.t - TRAIL_S) trails[i].shift();
+  }
+  hist.push([s.t, s.et, s.est]);
+  while (hist.length && hist[0][0] < s.t - PLOT_S) hist.shift();
+  $("t").textContent = s.t.toFixed(2);
+  $("ratio").textContent = s.ratio.toFixed(2);
+  $("scale").textContent = s.scale;
+  $("health").textContent = s.failure ? "FAILED" : (s.paused ? "paused" : "ok");
+  $("steps").textContent = s.steps;
+  $("load").textContent = (100 * s.load).toFixed(0) + " %";
+  $("u0").textContent = s.u0.map((v) => v.toFixed(2)).join(", ");
+  $("role").textContent = `${s.role} (${s.pages} page${s.pages > 1 ? "s" : ""})`;
+  $("banner").style.display = s.failure ? "block" : "none";
+  $("why").textContent = s.failure;
+  $("pause").textContent = s.paused ? "resume" : "pause";
+  for (let i = 0; i < info.N; i++) {
+    $("g" + i).textContent = s.health[i].toFixed(2);
+    $("gbar" + i).style.width = (60 * s.health[i]) + "px";
+    $("gbar" + i).style.background = s.health[i] < info.nominal_health[i] ? "#e53935" : "#43a047";
+    $("ghat" + i).textContent = s.ghat ? fmt(s.ghat[i]) : "";
+    $("un" + i).textContent = s.unorm ? fmt(s.unorm[i]) : "";
+    $("b" + i).textContent = s.bias[i].map((v) => v.toFixed(1)).join(", ");
+  }
+  document.querySelectorAll("button[data-link]").forEach((b) => {
+    const [i, j] = b.dataset.link.split(",").map(Number);
+    b.style.textDecoration = s.cut.some((c) => c[0] === i && c[1] === j) ? "line-through" : "none";
+  });
+  drawWorld(s);
+  drawPlot($("plot_et"), 1);
+  drawPlot($("plot_est"), 2);
+}
+
+function fmt(v) { return v === null ? "—" : (Math.abs(v) >= 1000 ? v.toExponential(1) : v.toFixed(2)); }
+
+function drawWorld(s) {
+  const cv = $("world"), g = cv.getContext("2d");
+  g.clearRect(0, 0, cv.width, cv.height);
+  if (!s.y0 || s.y0.length < 2) return;
+  const [cx, cy] = s.y0;
+  let half = 8;
+  for (const pt of [...(s.p || []), ...(s.slots || [])]) {
+    if (pt[0] === null || pt[1] === null) continue;
+    half = Math.max(half, 1.15 * Math.abs(pt[0] - cx), 1.15 * Math.abs(pt[1] - cy));
+  }
+  const k = Math.min(cv.width, cv.height) / (2 * half);
+  const X = (x) => cv.width / 2 + k * (x - cx), Y = (y) => cv.height / 2 - k * (y - cy);
+  g.strokeStyle = "#eee";
+  for (let v = Math.ceil((cx - half) / 5) * 5; v < cx + half * cv.width / cv.height; v += 5) {
+    g.beginPath(); g.moveTo(X(v), 0); g.lineTo(X(v), cv.height); g.stroke();
+  }
+  for (let v = Math.ceil((cy - half) / 5) * 5; v < cy + half; v += 5) {
+    g.beginPath(); g.moveTo(0, Y(v)); g.lineTo(cv.width, Y(v)); g.stroke();
+  }
+  for (let i = 0; i < info.N; i++) {
+    g.strokeStyle = color(i); g.globalAlpha = 0.5; g.beginPath();
+    trails[i].forEach((q, n) => n ? g.lineTo(X(q[1]), Y(q[2])) : g.moveTo(X(q[1]), Y(q[2])));
+    g.stroke(); g.globalAlpha = 1;
+    const sl = s.slots[i], p = s.p[i];
+    g.strokeRect(X(sl[0]) - 6, Y(sl[1]) - 6, 12, 12);
+    g.fillStyle = color(i); g.beginPath(); g.arc(X(p[0]), Y(p[1]), 6, 0, 2 * Math.PI); g.fill();
+    g.fillStyle = "#000"; g.fillText(String(i + 1), X(p[0]) + 8, Y(p[1]) - 8);
+  }
+  g.fillStyle = "#000"; g.beginPath(); g.arc(X(cx), Y(cy), 8, 0, 2 * Math.PI); g.fill();
+  g.fillText("leader y0", X(cx) + 10, Y(cy) + 14);
+  g.fillText("● follower p_i   □ slot y0 + R(τ0) b_i0", 8, cv.height - 8);
+}
+
+function drawPlot(cv, col) {
+  const g = cv.getContext("2d");
+  g.clearRect(0, 0, cv.width, cv.height);
+  if (!hist.length || !hist[hist.length - 1][col]) return;
+  const t1 = hist[hist.length - 1][0], t0 = t1 - PLOT_S;
+  let top = 1e-9;
+  for (const h of hist) for (const v of h[col]) if (v !== null) top = Math.max(top, v);
+  const X = (t) => 30 + (cv.width - 35) * (t - t0) / PLOT_S, Y = (v) => cv.height - 12 - (cv.height - 20) * v / top;
+  g.fillStyle = "#555"; g.fillText(top.toPrecision(2), 2, 10); g.fillText("0", 2, cv.height - 12);
+  for (let i = 0; i < info.N; i++) {
+    g.strokeStyle = color(i); g.beginPath();
+    hist.forEach((h, n) => { const v = h[col][i] ?? 0; n ? g.lineTo(X(h[0]), Y(v)) : g.moveTo(X(h[0]), Y(v)); });
+    g.stroke();
+  }
+}
+
+// ---- operator input: keyboard and the Gamepad API
+function commandFromKeys() {
+  const u = Array(info.p).fill(0), a = info.u_max;
+  u[0] = a * ((keys.right || keys.up && info.p === 1 ? 1 : 0) - (keys.left || keys.down && info.p === 1 ? 1 : 0));
+  if (info.p > 1) u[1] = a * ((keys.up ? 1 : 0) - (keys.down ? 1 : 0));
+  return u;
+}
+
+function pushU0(u) {
+  const key = JSON.stringify(u);
+  if (key !== sentU0) { sentU0 = key; send({ type: "u0", value: u }); }
+}
+
+const KEYMAP = { ArrowLeft: "left", ArrowRight: "right", ArrowUp: "up", ArrowDown: "down" };
+window.addEventListener("keydown", (e) => {
+  if (!info) return;
+  if (KEYMAP[e.key]) { keys[KEYMAP[e.key]] = true; pushU0(commandFromKeys()); e.preventDefault(); }
+  else if (e.key === " ") { send({ type: last && last.paused ? "resume" : "pause" }); e.preventDefault(); }
+  else if (e.key === "r") send({ type: "reset" });
+  else if (e.key === "+" || e.key === "=") scaleBy(2);
+  else if (e.key === "-") scaleBy(0.5);
+});
+window.addEventListener("keyup", (e) => {
+  if (info && KEYMAP[e.key]) { keys[KEYMAP[e.key]] = false; pushU0(commandFromKeys()); }
+});
+
+function scaleBy(f) {
+  const s = Math.min(20, Math.max(0.05, (last ? last.scale : 1) * f));
+  send({ type: "scale", value: s });
+}
+
+function pollGamepad() {
+  const pads = navigator.getGamepads ? navigator.getGamepads() : [];
+  const pad = Array.from(pads).find((p) => p);
+  if (pad && info) {
+    $("pads").textContent = "gamepad: " + pad.id;
+    const dead = (v) => (Math.abs(v) < 0.1 ? 0 : v);
+    const u = Array(info.p).fill(0);
+    u[0] = +(info.u_max * dead(pad.axes[0] || 0)).toFixed(3);
+    if (info.p > 1) u[1] = +(-info.u_max * dead(pad.axes[1] || 0)).toFixed(3);
+    if (!Object.values(keys).some((k) => k)) pushU0(u);
+  }
+  requestAnimationFrame(pollGamepad);
+}
+
+$("pause").onclick = () => send({ type: last && last.paused ? "resume" : "pause" });
+$("reset").onclick = $("reset2").onclick = () => send({ type: "reset" });
+$("slower").onclick = () => scaleBy(0.5);
+$("faster").onclick = () => scaleBy(2);
+$("save").onclick = () => send({ type: "save" });
+connect();
+requestAnimationFrame(pollGamepad);

@@ -1,0 +1,123 @@
+"""A stand-in loop for the console's server tests, and a server run in a thread.
+
+``FakeLoop`` has the console's bookkeeping (:class:`console.engine.LoopBase`) but
+integrates a small numpy model instead of the compiled closed loop: a double-integrator
+leader η̇0 = (η0_2, u0), y0 = (η0_1, 0), and followers ṗ_i = k g_i (y0 + b_i0 − p_i) +
+bias_i (the neighbours' links scale k). Its solution for a held u0 is known in closed
+form, which the tests use as truth.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from contextlib import contextmanager
+
+import numpy as np
+import uvicorn
+
+from console.engine import Advance, LoopBase, Settings, desired_formation
+from console.protocol import Limits
+from console.server import Hub, create_app
+from console.session import Session
+
+B0 = np.array([[4.0, 0.0], [0.0, 4.0], [-4.0, 0.0]])
+GAIN = 3.0
+
+
+class FakeLoop(LoopBase):
+    """Three followers following a double-integrator leader; optional failure time."""
+
+    def __init__(self, fail_at: float | None = None, quantum: float = 0.01) -> None:
+        N = len(B0)
+        limits = Limits(
+            N=N,
+            n=2,
+            p=1,
+            u_max=2.0,
+            g_min=0.5,
+            bias_max=10.0,
+            edges=frozenset({(1, 0), (2, 1), (3, 1), (3, 2)}),
+        )
+        nominal = Settings(
+            u0=np.zeros(1),
+            health=np.ones(N),
+            bias=np.zeros((N, 2)),
+            weights={(0, -1): 1.0, (1, 0): 1.0, (2, 0): 1.0, (2, 1): 1.0},
+        )
+        x0 = np.concatenate([[0.0, 0.0], (B0 + 1.0).ravel()])
+        self.fail_at = fail_at
+        super().__init__(limits, quantum, nominal, x0)
+
+    def rhs(self, x: np.ndarray) -> np.ndarray:
+        st = self.settings
+        y0 = np.array([x[0], 0.0])
+        P = x[2:].reshape(-1, 2)
+        dP = GAIN * st.health[:, None] * (y0 + B0 - P) + st.bias
+        return np.concatenate([[x[1], st.u0[0]], dP.ravel()])
+
+    def integrate(self, x0: np.ndarray, t_out: np.ndarray) -> Advance:
+        xs, x, steps = [x0.copy()], x0.copy(), 0
+        for a, b in zip(t_out[:-1], t_out[1:], strict=True):
+            if self.fail_at is not None and b > self.fail_at:
+                return Advance(t_out[: len(xs)], np.array(xs), f"fake failure at t = {a:g}", steps)
+            hs = (b - a) / 4
+            for _ in range(4):  # RK4
+                k1 = self.rhs(x)
+                k2 = self.rhs(x + hs / 2 * k1)
+                k3 = self.rhs(x + hs / 2 * k2)
+                k4 = self.rhs(x + hs * k3)
+                x = x + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+                steps += 1
+            xs.append(x.copy())
+        return Advance(t_out, np.array(xs), "", steps)
+
+    def signals(self, x: np.ndarray) -> dict:
+        y0 = np.array([x[0], 0.0])
+        P = x[2:].reshape(-1, 2)
+        slots = desired_formation(y0, np.array([x[1], 0.0]), B0)
+        return {
+            "y0": y0.tolist(),
+            "p": P.tolist(),
+            "slots": slots.tolist(),
+            "et": np.linalg.norm(P - y0 - B0, axis=1).tolist(),
+            "est": [0.0] * len(B0),
+            "ghat": [1.0] * len(B0),
+            "unorm": np.linalg.norm(GAIN * (y0 + B0 - P), axis=1).tolist(),
+        }
+
+
+def free_port() -> int:
+    """A free TCP port on 127.0.0.1 (bound and released)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextmanager
+def running(hub: Hub, host: str = "127.0.0.1"):
+    """Serve ``hub`` on a free loopback port in a thread; yields the port; always stops."""
+    port = free_port()
+    cfg = uvicorn.Config(
+        create_app(hub), host=host, port=port, log_level="warning", ws="websockets-sansio"
+    )
+    server = uvicorn.Server(cfg)
+    th = threading.Thread(target=server.run, daemon=True)
+    th.start()
+    try:
+        t0 = time.monotonic()
+        while not server.started:
+            if time.monotonic() - t0 > 10 or not th.is_alive():
+                raise RuntimeError("console server did not start")
+            time.sleep(0.02)
+        yield port
+    finally:
+        server.should_exit = True
+        th.join(timeout=10)
+
+
+def fake_hub(fail_at: float | None = None, fps: float = 30.0) -> Hub:
+    """A hub around a :class:`FakeLoop`."""
+    loop = FakeLoop(fail_at)
+    return Hub(Session(loop), loop.limits, fps=fps, title="fake")

@@ -1,0 +1,339 @@
+"""The operator console: message validation, pacing under bad input, roles, the page.
+
+The server tests run the real server (Starlette under uvicorn, on a free loopback
+port, stopped at the end of each test) around :class:`console_fake.FakeLoop`, whose
+leader and followers have closed-form solutions for a held command. The browser test
+drives the page with Debian's chromium through Playwright. The compiled closed loop
+and the replay of a recorded run are in ``tests/test_console_replay.py``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from console_fake import FakeLoop, fake_hub, running
+from websockets.sync.client import connect
+
+from console.engine import Change, desired_formation
+from console.protocol import Command, MessageError, parse_message
+from console.record import replay_table, u0_rows
+from console.server import create_app, is_loopback
+
+CHROMIUM = Path("/usr/bin/chromium")
+LIMITS = FakeLoop().limits
+
+
+# --------------------------------------------------------------------------- validation
+@pytest.mark.parametrize(
+    ("raw", "field"),
+    [
+        ("{bad", "not JSON"),
+        ("[1, 2]", "not a JSON object"),
+        ('{"value": [1]}', "type"),
+        ('{"type": "launch"}', "type"),
+        ('{"type": "u0", "value": 1.0}', "value"),
+        ('{"type": "u0", "value": ["1"]}', "value[0]"),
+        ('{"type": "u0", "value": [true]}', "value[0]"),
+        ('{"type": "u0", "value": [NaN]}', "NaN is not a number"),
+        ('{"type": "u0", "value": [Infinity]}', "Infinity is not a number"),
+        ('{"type": "u0", "value": [1e999]}', "value[0]"),
+        ('{"type": "u0", "value": [2.5]}', "out of range"),
+        ('{"type": "u0", "value": [1, 1]}', "list of 1 numbers"),
+        ('{"type": "health", "follower": 4, "value": 0.8}', "follower"),
+        ('{"type": "health", "follower": 0, "value": 0.8}', "follower"),
+        ('{"type": "health", "follower": 1.0, "value": 0.8}', "follower"),
+        ('{"type": "health", "follower": 1, "value": 0.4}', "out of range"),
+        ('{"type": "health", "follower": 1, "value": 1.01}', "out of range"),
+        ('{"type": "bias", "follower": 2, "value": [1]}', "list of 2 numbers"),
+        ('{"type": "bias", "follower": 2, "value": [1, 11]}', "out of range"),
+        ('{"type": "link", "follower": 1, "neighbour": 2, "cut": true}', "not heard"),
+        ('{"type": "link", "follower": 3, "neighbour": 2, "cut": 1}', "cut"),
+        ('{"type": "scale", "value": 0}', "out of range"),
+        ('{"type": "scale", "value": 100}', "out of range"),
+        ('{"type": "clear"}', "follower"),
+        ("x" * 5000, "bytes"),
+    ],
+)
+def test_bad_messages_are_refused_naming_the_field(raw: str, field: str) -> None:
+    """Each malformed message is one MessageError line naming what is wrong."""
+    with pytest.raises(MessageError) as exc:
+        parse_message(raw, LIMITS)
+    text = str(exc.value)
+    assert field in text and "\n" not in text
+
+
+def test_good_messages_parse_to_zero_based_commands() -> None:
+    """Followers and neighbours are 1-based in messages, 0-based (leader -1) in commands."""
+    assert parse_message('{"type": "u0", "value": [-2]}', LIMITS) == Command("u0", values=(-2.0,))
+    assert parse_message(
+        '{"type": "link", "follower": 1, "neighbour": 0, "cut": true}', LIMITS
+    ) == (Command("link", follower=0, neighbour=-1, cut=True))
+    cmd = parse_message('{"type": "bias", "follower": 3, "value": [0.5, -1]}', LIMITS)
+    assert cmd == Command("bias", follower=2, values=(0.5, -1.0))
+    assert parse_message('{"type": "pause"}', LIMITS).kind == "pause"
+
+
+def test_loopback_addresses() -> None:
+    """IPv4 and IPv6 loopback are local; private and public addresses are not."""
+    assert is_loopback("127.0.0.1") and is_loopback("::1") and is_loopback("127.5.6.7")
+    assert not is_loopback("10.0.0.5") and not is_loopback("192.168.1.2")
+    assert not is_loopback(None) and not is_loopback("example.org")
+
+
+def _asgi(app, kind: str, client: str, headers: dict | None = None) -> list[dict]:
+    """Call the ASGI app once (an HTTP GET of / or a WebSocket to /ws); what it sent."""
+    hdrs = [(k.encode(), v.encode()) for k, v in {"host": "127.0.0.1:1", **(headers or {})}.items()]
+    scope = {
+        "type": kind,
+        "path": "/" if kind == "http" else "/ws",
+        "raw_path": b"/",
+        "query_string": b"",
+        "headers": hdrs,
+        "client": (client, 5000),
+        "server": ("127.0.0.1", 1),
+        "scheme": "http" if kind == "http" else "ws",
+        "method": "GET",
+        "http_version": "1.1",
+        "root_path": "",
+        "asgi": {"version": "3.0"},
+    }
+    first = (
+        {"type": "http.request", "body": b""} if kind == "http" else {"type": "websocket.connect"}
+    )
+    inbox = [first, {"type": "http.disconnect" if kind == "http" else "websocket.disconnect"}]
+    sent: list[dict] = []
+
+    async def receive():
+        return inbox.pop(0) if inbox else {"type": "websocket.disconnect", "code": 1000}
+
+    async def send(msg):
+        sent.append(msg)
+
+    asyncio.run(app(scope, receive, send))
+    return sent
+
+
+def test_non_loopback_peers_are_refused_unless_allowed() -> None:
+    """A page or socket from a non-loopback address gets 403 / a closed socket (1008) unless
+    the server allows remote peers; a socket from another site's page (Origin) is closed."""
+    app = create_app(fake_hub())
+    assert _asgi(app, "http", "10.1.2.3")[0]["status"] == 403
+    assert _asgi(app, "http", "127.0.0.1")[0]["status"] == 200
+    assert _asgi(app, "websocket", "10.1.2.3")[0] == {
+        "type": "websocket.close",
+        "code": 1008,
+        "reason": "",
+    }
+    evil = _asgi(app, "websocket", "127.0.0.1", {"origin": "http://evil.example"})
+    assert evil[0]["type"] == "websocket.close" and evil[0]["code"] == 1008
+    hub = fake_hub()
+    hub.allow_remote = True
+    assert _asgi(create_app(hub), "http", "10.1.2.3")[0]["status"] == 200
+    assert _asgi(create_app(hub), "websocket", "10.1.2.3")[0]["type"] == "websocket.accept"
+
+
+# --------------------------------------------------------------------------- record
+def test_u0_trace_rows_hold_each_command_from_its_change() -> None:
+    """Trace rows: the start value, one row per change (last one at a time wins), the end."""
+    ch = [
+        Change(0.0, "u0", values=(1.0,)),
+        Change(0.5, "health", 1, values=(0.7,)),
+        Change(1.25, "u0", values=(-2.0,)),
+        Change(3.0, "u0", values=(0.5,)),
+    ]
+    assert u0_rows(ch, [0.0], 2.0) == [[0.0, 1.0], [1.25, -2.0], [2.0, -2.0]]
+
+
+def test_replay_table_writes_health_tables_and_bias_steps() -> None:
+    """Health changes become a g table; bias changes become bias faults of the difference."""
+    table = {"name": "x", "leader": {"u0": ["0"]}, "followers": [{"g": 1.0}, {"g": 0.9}]}
+    ch = [
+        Change(0.5, "health", 1, values=(0.7,)),
+        Change(1.0, "bias", 0, values=(1.0, 2.0)),
+        Change(2.0, "bias", 0, values=(0.0, 0.5)),
+    ]
+    data = replay_table(table, ch, [1.0, 0.9], 3.0, 0.01)
+    assert data["leader"] == {"u0_csv": "u0.csv", "u0_hold": True}
+    assert data["followers"][0]["g"] == 1.0
+    assert data["followers"][1]["g"] == [[0.0, 0.9], [0.5, 0.7]]
+    faults = data["followers"][0]["faults"]
+    assert [f["onset"] for f in faults] == [1.0, 2.0]
+    # the biases add: their sum after each onset is the value the operator set
+    assert np.allclose(np.cumsum([f["amplitude"] for f in faults], axis=0), [[1, 2], [0, 0.5]])
+    assert data["integration"] == {"horizon": 3.0, "output_step": 0.01}
+    assert table["leader"] == {"u0": ["0"]}  # the console's own table is untouched
+
+
+def test_desired_formation_rotates_by_the_leader_heading() -> None:
+    """Slots are y0 + R(τ0) b_i0: heading 90° turns (4, 0) into (0, 4); no heading: b_i0."""
+    y0 = np.array([1.0, 2.0])
+    slots = desired_formation(y0, np.array([0.0, 3.0]), np.array([[4.0, 0.0]]))
+    assert np.allclose(slots, [[1.0, 6.0]])
+    assert np.allclose(desired_formation(y0, np.zeros(2), np.array([[4.0, 0.0]])), [[5.0, 2.0]])
+
+
+# --------------------------------------------------------------------------- server
+def _states(ws, seconds: float) -> tuple[list[dict], list[dict]]:
+    """Frames and other messages received for ``seconds``."""
+    frames, other = [], []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        m = json.loads(ws.recv(timeout=2))
+        (frames if m["type"] == "state" else other).append(m)
+    return frames, other
+
+
+def _drive(ws) -> None:
+    ws.send(json.dumps({"type": "drive"}))
+
+
+def test_bad_messages_get_errors_and_the_loop_keeps_its_pace() -> None:
+    """Malformed JSON, wrong types, NaN, an unknown follower and a flood of 1,000 messages.
+
+    Every one is answered with an error, and over the flood the simulated clock still
+    advances at the time scale (ratio of simulated to wall time >= 0.9) with frames at
+    >= 20 Hz; afterwards a good command still acts.
+    """
+    hub = fake_hub()
+    with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
+        _drive(ws)
+        _states(ws, 0.3)
+        bad = [
+            "{not json",
+            '{"type": "u0", "value": "fast"}',
+            '{"type": "u0", "value": [NaN]}',
+            '{"type": "health", "follower": 9, "value": 0.9}',
+        ]
+        flood = [bad[k % len(bad)] for k in range(1000)]
+        t_sim0, w0 = hub.session.loop.t, time.monotonic()
+        for raw in flood:
+            ws.send(raw)
+        errors, frames = [], []
+        while len(errors) < len(flood):
+            m = json.loads(ws.recv(timeout=5))
+            (errors if m["type"] == "error" else frames).append(m)
+        more, _ = _states(ws, 1.0)
+        frames += more
+        wall = time.monotonic() - w0
+        sim = hub.session.loop.t - t_sim0
+        assert all("expected" in e["message"] for e in errors)
+        assert sim / wall >= 0.9, f"simulated {sim:.2f} s in {wall:.2f} s of wall time"
+        assert len(frames) / wall >= 20
+        assert not hub.session.loop.failure and hub.session.loop.changes == []
+        ws.send(json.dumps({"type": "u0", "value": [2.0]}))
+        frames, other = _states(ws, 0.5)
+        assert not other and frames[-1]["u0"] == [2.0]
+
+
+def test_watchers_and_closing_pages() -> None:
+    """One page drives, a second watches (its commands refused); closing the driver stops
+    nothing, and the watcher may then drive."""
+    hub = fake_hub()
+    with running(hub) as port:
+        url = f"ws://127.0.0.1:{port}/ws"
+        with connect(url) as a, connect(url) as b:
+            _drive(a)
+            _states(a, 0.2)
+            _drive(b)
+            b.send(json.dumps({"type": "u0", "value": [1.0]}))
+            frames, other = _states(b, 0.3)
+            assert [m["type"] for m in other if m["type"] != "hello"] == ["error", "error"]
+            assert frames[-1]["role"] == "watcher" and frames[-1]["pages"] == 2
+            a.close()
+            t1 = hub.session.loop.t
+            frames, _ = _states(b, 0.5)
+            assert hub.session.loop.t > t1 + 0.3  # the loop ran on
+            _drive(b)
+            b.send(json.dumps({"type": "u0", "value": [1.0]}))
+            frames, other = _states(b, 0.3)
+            assert [m["type"] for m in other] == ["role"] and frames[-1]["u0"] == [1.0]
+
+
+def test_integrator_failure_is_shown_and_reset_recovers() -> None:
+    """When the integrator gives up, frames carry the reason, changes are refused with it,
+    the loop keeps serving, and reset starts again from t = 0."""
+    hub = fake_hub(fail_at=0.3)
+    with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
+        _drive(ws)
+        frames, _ = _states(ws, 0.8)
+        assert "fake failure" in frames[-1]["failure"] and frames[-1]["t"] <= 0.3
+        ws.send(json.dumps({"type": "u0", "value": [1.0]}))
+        _, other = _states(ws, 0.2)
+        assert "send reset" in other[-1]["message"]
+        hub.session.loop.fail_at = None
+        ws.send(json.dumps({"type": "reset"}))
+        frames, _ = _states(ws, 0.4)
+        assert frames[-1]["failure"] == "" and 0.2 < frames[-1]["t"] < 0.8
+
+
+def test_pause_scale_and_held_command_against_closed_form() -> None:
+    """A held u0 = a from t_a moves the leader as η0_1 = a (t − t_a)² / 2; pause freezes the
+    clock; scale 4 runs four simulated seconds per wall second."""
+    hub = fake_hub()
+    with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
+        _drive(ws)
+        ws.send(json.dumps({"type": "pause"}))
+        _states(ws, 0.2)
+        t_a = hub.session.loop.t
+        ws.send(json.dumps({"type": "u0", "value": [2.0]}))
+        ws.send(json.dumps({"type": "scale", "value": 4.0}))
+        ws.send(json.dumps({"type": "resume"}))
+        frames, _ = _states(ws, 1.5)
+        f = frames[-1]
+        assert f["y0"][0] == pytest.approx((f["t"] - t_a) ** 2, rel=1e-9)  # a/2 = 1
+        assert f["ratio"] == pytest.approx(4.0, rel=0.1)
+        ws.send(json.dumps({"type": "pause"}))
+        frames, _ = _states(ws, 0.5)
+        assert frames[-1]["t"] == frames[len(frames) // 2]["t"] and frames[-1]["paused"]
+
+
+# --------------------------------------------------------------------------- the page
+def _browser():
+    """Headless Debian chromium through Playwright, or a skip saying what is missing."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    if not CHROMIUM.exists():
+        pytest.skip(
+            f"{CHROMIUM} is missing and could not be installed (make chromium needs apt-get as root)"
+        )
+    return sync_api
+
+
+def test_page_drives_the_leader_and_followers_follow(tmp_path: Path) -> None:
+    """In headless chromium: holding → makes the leader move right; the followers follow
+    (each ends nearer its slot than the leader's displacement); a fault button acts;
+    a screenshot is saved."""
+    sync_api = _browser()
+    hub = fake_hub()
+    with running(hub) as port, sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
+        try:
+            page = browser.new_page(viewport={"width": 1200, "height": 720})
+            page.goto(f"http://127.0.0.1:{port}/")
+            page.wait_for_function(
+                "document.getElementById('role').textContent.startsWith('driver')"
+            )
+            x_start = hub.session.loop.x.copy()
+            page.keyboard.down("ArrowRight")
+            time.sleep(1.5)
+            page.keyboard.up("ArrowRight")
+            page.click("button[data-health='2']")
+            time.sleep(0.5)
+            page.screenshot(path=str(tmp_path / "console.png"))
+            loop = hub.session.loop
+            moved = loop.x[0] - x_start[0]
+            assert loop.changes[0].kind == "u0" and loop.changes[0].values == (2.0,)
+            assert loop.changes[1].kind == "u0" and loop.changes[1].values == (0.0,)
+            assert moved > 1.0  # at least u0 t²/2 = 1 for the 1 s the key was surely held
+            # followers follow: each moved the same way by most of the leader's displacement
+            dP = (loop.x[2:] - x_start[2:]).reshape(-1, 2)
+            assert np.all(dP[:, 0] > 0.5 * moved) and np.all(np.abs(dP[:, 1]) < 0.1 * moved)
+            assert loop.settings.health[1] == pytest.approx(0.6)
+            assert page.text_content("#t") not in ("", "0")
+            assert (tmp_path / "console.png").stat().st_size > 10_000
+        finally:
+            browser.close()
