@@ -17,6 +17,7 @@ from verify.table import (
     FIG13_LEVEL_FACTOR,
     SATURATION_NOTE,
     STARTUP,
+    SWITCHING_NOTE,
     failures,
     to_markdown,
 )
@@ -298,6 +299,7 @@ def summary_section(v: Verification, strict: bool) -> list[str]:
         "",
     ]
     L += saturation_statement(tb)
+    L += switching_statement(v.scenario, tb)
     L += findings(v)
     if not fp.empty:
         L.append("The paper's claims that do not hold on these numbers:")
@@ -328,6 +330,38 @@ def saturation_statement(table: pd.DataFrame) -> list[str]:
         "derived from the unsaturated control law (29) (Theorem 2, eq. (38), Lemmas 1-2, "
         "Definition 1) are shown as `info` with the note 'invalidated', neither passed nor "
         "failed.",
+        "",
+    ]
+
+
+def switching_statement(sc: Scenario, table: pd.DataFrame) -> list[str]:
+    """Which topology held when, and which rows it invalidated (nothing without switches).
+
+    Parameters
+    ----------
+    sc : Scenario
+        Its ``graph.switches``.
+    table : DataFrame
+        The bound-vs-actual table (rows marked by :func:`verify.table.mark_switching`).
+    """
+    if not sc.graph.switches:
+        return []
+    tops = sc.graph.topologies()
+    ends = [f"{tp.t_start:g}" for tp in tops[1:]] + [f"{sc.integration.horizon:g}"]
+    held = [f"the base graph on [0, {ends[0]}) s"]
+    for k, tp in enumerate(tops[1:]):
+        links = ", ".join(
+            f"{s.link} = {s.weight:g}" for s in sc.graph.switches if s.time == tp.t_start
+        )
+        held.append(f"from {tp.t_start:g} s to {ends[k + 1]} s {links}")
+    n = int(table["note"].str.startswith(SWITCHING_NOTE).sum())
+    return [
+        "The graph switches (`[[graph.switches]]`, outside the paper's theorems): "
+        + "; ".join(held)
+        + f". The {n} rows built on V1 of the base graph (Theorem 1's dV1/dt and decay rate, "
+        "the derived Definition 1 bound) and Lemma 1's reaching time from V2(0) are shown as "
+        "`info` with the note 'invalidated by switching topology'; Theorem 2's provable rows "
+        f"restart their comparison lemma after the last switch ({tops[-1].t_start:g} s).",
         "",
     ]
 

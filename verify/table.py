@@ -15,6 +15,10 @@ Columns: ``claim, agent, component, kind, bound, observed, ratio, holds, window,
 With an actuator limit (``controller.u_max``) that a run reaches, the rows derived
 from the unsaturated control law (29) become ``info`` with the note
 ``invalidated: saturation active on [t_a, t_b] s`` (:func:`mark_saturation`).
+On a switching graph (``[[graph.switches]]``) the rows built on V1 of the base graph
+become ``info`` with the note ``invalidated by switching topology`` and Theorem 2's
+comparison lemma restarts after the last switch (:func:`mark_switching`,
+docs/verification.md, 'Switching topology').
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from core.graph import switch_times
 from core.scenario import Scenario
 from synthesis.gains import Gains
 from verify import signals as S
@@ -65,6 +70,15 @@ SATURATION_CLAIMS = ("T2 ", "Lemma 1 ", "Lemma 2 ", "consistency: (38)", "Def. 1
 SATURATION_RTOL = 1e-9
 #: the note's start on rows the saturation invalidates
 SATURATION_NOTE = "invalidated: saturation active on"
+#: claims built on V1 (17) of the base graph (its Z, l̄_ii) or on V2 integrated from t = 0
+SWITCHING_CLAIMS = (
+    "T1 dV1/dt",
+    "T1 |ebar_eta_i| decay rate",
+    "Def. 1 |p_i - h_i y0 - b_i| <= derived bound",
+    "Lemma 1 reaching time",
+)
+#: the note's start on rows a switching graph invalidates
+SWITCHING_NOTE = "invalidated by switching topology"
 
 
 @dataclass
@@ -244,7 +258,69 @@ def bounds_table(
     if ablation is not None:
         for i in range(dm.N):
             ablation_rows(R, df, ablation, i, dm.n, cfg)
-    return mark_saturation(R.frame(), saturation_window(scenario, df))
+    table = mark_saturation(R.frame(), saturation_window(scenario, df))
+    return mark_switching(table, scenario)
+
+
+def mark_switching(table: pd.DataFrame, scenario: Scenario) -> pd.DataFrame:
+    """The rows of :data:`SWITCHING_CLAIMS` as ``info``, noted, when the graph switches.
+
+    V1 (17) is built on the base graph's Lemma 3 Z and l̄_ii; after the first switch its
+    derivative no longer obeys Theorem 1's inequality, so its rows, the decay rate taken
+    from the base graph's w, the Definition 1 bound that integrates V1, and Lemma 1's
+    reaching time from V2(0) (V2 may jump at a switch) are neither passes nor failures.
+    Without switches the table is returned unchanged.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+    scenario : Scenario
+        Its ``graph.switches``.
+    """
+    times = switch_times(scenario.graph.switches)
+    if not times:
+        return table
+    out = table.copy()
+    sel = out["claim"].str.startswith(SWITCHING_CLAIMS)
+    note = f"{SWITCHING_NOTE} (first switch at t = {times[0]:g} s)"
+    out.loc[sel, "kind"] = "info"
+    out.loc[sel, "note"] = [f"{note}; {n}" if n else note for n in out.loc[sel, "note"]]
+    return out
+
+
+def theorem2_start(
+    scenario: Scenario, c: Theorem2Constants, df: pd.DataFrame, agent: int, delta: float
+) -> float:
+    """Comparison-lemma time t_c of Theorem 2's provable rows, restarted after the last switch.
+
+    Without switches this is :func:`verify.bounds.provable_entry_time` (from V2(0)). On a
+    switching graph V2 may jump at a switch (b_i and the observer's derivatives follow ψ_i),
+    but V̇2 <= -Ω V2 + χv holds between switches (no graph term), so the lemma restarts
+    at the first output time t_s after the last switch: t_c = t_s + its time from V2(t_s).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its ``graph.switches``.
+    c : Theorem2Constants
+        Of follower ``agent``.
+    df : DataFrame
+        The trajectory.
+    agent : int
+        0-based follower.
+    delta : float
+        Lemma 1's δ.
+    """
+    times = switch_times(scenario.graph.switches)
+    if not times:
+        return provable_entry_time(c, df, agent, delta)
+    t = df["t"].to_numpy(float)
+    after = np.flatnonzero(t > times[-1])
+    if not after.size:
+        return math.inf
+    k = int(after[0])
+    return float(t[k]) + provable_entry_time(c, df.iloc[k:], agent, delta)
 
 
 def saturation_window(scenario: Scenario, df: pd.DataFrame) -> tuple[float, float] | None:
@@ -527,7 +603,7 @@ def _theorem2_agent_rows(
         )
     has_v2 = S.has(df, f"V2_{i + 1}")
     if c.provable:
-        tc = provable_entry_time(c, df, i, cfg.lemma1_delta)
+        tc = theorem2_start(scenario, c, df, i, cfg.lemma1_delta)
         _provable_rows(R, c, span.t, span.tail_start, chin, et, tc, i, guaranteed, cfg)
     if has_v2:
         _lemma1_row(R, c, span, df[f"V2_{i + 1}"].to_numpy(float), i, cfg)
