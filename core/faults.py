@@ -10,12 +10,20 @@ built as :class:`~core.expressions.Expr` node trees (never text to be evaluated)
 so the closed loop (CasADi), the reference (numpy) and the breakpoint search all
 see the same function. Every fault is right-continuous: at a switching time it
 already takes its new value (``step(0) = 1``).
+
+By default each fault type has its own tree (:meth:`Fault.factor`). With
+``options.fault_slots = K`` every follower's g_i and f_i are instead built from K
+*slots* of one generic form (:class:`Slot`, :func:`slot_activation`), whatever the
+faults: the trees then differ only in their numbers, so scenarios that differ in the
+faults' types, followers, onsets or severities share one compiled closed loop.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from core.expressions import Expr
 from core.settings import NONNEG, POSITIVE, REQUIRED, Check, Derived, Setting, declare
@@ -51,6 +59,13 @@ FAULT_TYPES: dict[str, tuple[str, ...]] = {
     "bias": ("type", "onset", "amplitude"),
 }
 MAX_SWITCHES = 1000  # on/off switches of one intermittent fault before the horizon
+MAX_SLOTS = 100  # options.fault_slots: as many as the faults one follower may have
+SLOT_COUNT = Check(
+    f"≤ {MAX_SLOTS}",
+    lambda x: x <= MAX_SLOTS,
+    "{v:g} slots are more than a follower may have faults",
+    f"0 <= fault_slots <= {MAX_SLOTS}",
+)
 
 
 @dataclass(frozen=True)
@@ -199,6 +214,215 @@ def faulted_bias(base: tuple[Expr, ...], faults: tuple[Fault, ...]) -> tuple[Exp
         steps = [("bin", "*", ("num", fa.amplitude[r]), _step_at(fa.onset)) for fa in biases]
         out.append(_expr(("bin", "+", e.node, balanced("+", steps))))
     return tuple(out)
+
+
+# --------------------------------------------------------------------------- generic slots
+@dataclass(frozen=True)
+class Slot:
+    """The numbers of one slot of the generic fault form (``options.fault_slots``).
+
+    Every fault type is one choice of these numbers; an unused slot is :meth:`empty`
+    (no loss, no bias), so it leaves g_i and f_i unchanged.
+
+    Attributes
+    ----------
+    onset : float
+        Time the slot starts acting.
+    severity : float
+        Fraction of effectiveness lost while it acts (0 for a bias).
+    duration : float
+        Length of the ramp to full activity; 0 = abrupt.
+    period, duty : float
+        On/off period and the fraction of it on; ``period = 0`` = not intermittent.
+    amplitude : tuple of float
+        Bias added to f_i while it acts; ``()`` = no bias (zeros).
+    """
+
+    onset: float = 0.0
+    severity: float = 0.0
+    duration: float = 0.0
+    period: float = 0.0
+    duty: float = 0.0
+    amplitude: tuple[float, ...] = ()
+
+    @classmethod
+    def of(cls, fault: Fault) -> Slot:
+        """The slot numbers that reproduce ``fault``.
+
+        Parameters
+        ----------
+        fault : Fault
+            Any fault type.
+        """
+        if fault.is_bias:
+            return cls(onset=fault.onset, amplitude=fault.amplitude)
+        return cls(
+            onset=fault.onset,
+            severity=fault.severity,
+            duration=fault.duration if fault.type == "ramp" else 0.0,
+            period=fault.period if fault.type == "intermittent" else 0.0,
+            duty=fault.duty if fault.type == "intermittent" else 0.0,
+        )
+
+    def bias(self, r: int) -> float:
+        """Component ``r`` of the bias amplitude (0 when the slot has no bias).
+
+        Parameters
+        ----------
+        r : int
+            0-based coordinate.
+        """
+        return self.amplitude[r] if self.amplitude else 0.0
+
+
+def slots_of(faults: tuple[Fault, ...], count: int) -> tuple[Slot, ...]:
+    """``faults`` in file order in ``count`` slots, the rest padded with empty slots.
+
+    Parameters
+    ----------
+    faults : tuple of Fault
+        One follower's faults (the loader refuses more than ``count``).
+    count : int
+        ``options.fault_slots``.
+    """
+    if len(faults) > count:
+        raise ValueError(f"{len(faults)} faults do not fit in {count} slots")
+    return tuple(Slot.of(fa) for fa in faults) + (Slot(),) * (count - len(faults))
+
+
+def slot_activation(slot: Slot) -> tuple:
+    """The node of act(t) in [0, 1]: how much of the slot acts at time t.
+
+    act(t) = step(x) · min(1, x₊/(|D| + z_D) + z_D) · (1 − step(mod(x₊, |P| + z_P) − (c P + z_P)))
+
+    with x = t − onset, x₊ = max(x, 0), D the duration, P the period, c the duty and
+    z_D = step(−|D|), z_P = step(−|P|) (1 when D = 0, resp. P = 0, else 0). So act is 0
+    before the onset and right-continuous: already 1 at the onset when D = 0, linear
+    over [onset, onset + D] otherwise; with P > 0 it is on while mod(x, P) < c P
+    (C fmod). Whatever the numbers, no denominator or modulus is 0 (|D| + z_D > 0,
+    |P| + z_P > 0) and no ±inf meets a 0 (x₊ ≥ 0, ``max``/``min`` bound a quotient
+    that overflows), so neither backend produces a NaN (CasADi's if_else evaluates
+    both branches). x₊ in the modulus keeps the gate constant before the onset, so
+    the breakpoint scan of :meth:`Expr.breakpoints` finds no time where nothing happens.
+
+    Parameters
+    ----------
+    slot : Slot
+    """
+    x = ("bin", "-", ("t",), ("num", slot.onset))
+    x_pos = ("call", "max", (x, ("num", 0.0)))
+    dur = ("call", "abs", (("num", slot.duration),))
+    dur_zero = ("call", "step", (("neg", dur),))
+    rise = ("bin", "+", ("bin", "/", x_pos, ("bin", "+", dur, dur_zero)), dur_zero)
+    ramp = ("bin", "*", ("call", "step", (x,)), ("call", "min", (("num", 1.0), rise)))
+    per = ("call", "abs", (("num", slot.period),))
+    per_zero = ("call", "step", (("neg", per),))
+    phase = ("call", "mod", (x_pos, ("bin", "+", per, per_zero)))
+    on_len = ("bin", "+", ("bin", "*", ("num", slot.duty), ("num", slot.period)), per_zero)
+    gate = ("bin", "-", ("num", 1.0), ("call", "step", (("bin", "-", phase, on_len),)))
+    return ("bin", "*", ramp, gate)
+
+
+def slotted_health(base: Expr, faults: tuple[Fault, ...], count: int) -> Expr:
+    """g(t) = g_base(t) · Π_k (1 − severity_k act_k(t)) over ``count`` slots.
+
+    Parameters
+    ----------
+    base : Expr
+        The follower's own ``g``.
+    faults : tuple of Fault
+        The follower's faults (bias faults fill a slot with severity 0).
+    count : int
+        ``options.fault_slots``; 0 leaves ``base`` as it is.
+    """
+    slots = slots_of(faults, count)
+    if not slots:
+        return base
+    factors = [
+        ("bin", "-", ("num", 1.0), ("bin", "*", ("num", sl.severity), slot_activation(sl)))
+        for sl in slots
+    ]
+    return _expr(("bin", "*", base.node, balanced("*", factors)))
+
+
+def slotted_bias(base: tuple[Expr, ...], faults: tuple[Fault, ...], count: int) -> tuple[Expr, ...]:
+    """f_r(t) = f_base,r(t) + Σ_k amplitude_k,r act_k(t) over ``count`` slots.
+
+    Parameters
+    ----------
+    base : tuple of Expr
+        The follower's own ``f``, one per component.
+    faults : tuple of Fault
+        The follower's faults (loss-of-effectiveness faults fill a slot with amplitude 0).
+    count : int
+        ``options.fault_slots``; 0 leaves ``base`` as it is.
+    """
+    slots = slots_of(faults, count)
+    if not slots:
+        return base
+    acts = [slot_activation(sl) for sl in slots]
+    out = []
+    for r, e in enumerate(base):
+        terms = [
+            ("bin", "*", ("num", sl.bias(r)), act) for sl, act in zip(slots, acts, strict=True)
+        ]
+        out.append(_expr(("bin", "+", e.node, balanced("+", terms))))
+    return tuple(out)
+
+
+#: how far (in units of the last place) the generic form's switch may lie from the
+#: nominal time onset + k period (+ duty period): rounding of t − onset, a few units
+SWITCH_ULPS = 64
+
+
+def fault_times(
+    faults: tuple[Fault, ...], horizon: float, slots: int | None = None
+) -> tuple[float, ...]:
+    """The times where ``faults`` switch or kink, as the built g_i and f_i do.
+
+    Without slots these are :meth:`Fault.times`. With slots, an intermittent fault
+    switches where mod(t − onset, period) crosses 0 and duty·period; rounding of
+    t − onset puts that a few units in the last place away from the nominal
+    onset + k period (+ duty period), so each nominal time is replaced by the float
+    at which the generic form really switches (found by evaluating it on the floats
+    around the nominal time). The integrator then restarts exactly where the
+    right-continuous fault takes its new value.
+
+    Parameters
+    ----------
+    faults : tuple of Fault
+        One follower's faults.
+    horizon : float
+        End of the run.
+    slots : int or None
+        ``options.fault_slots``.
+    """
+    out: list[float] = []
+    for fa in faults:
+        if slots is None or fa.type != "intermittent":
+            out.extend(fa.times(horizon))
+        else:
+            out.extend(_generic_switches(fa, horizon))
+    return tuple(out)
+
+
+def _generic_switches(fault: Fault, horizon: float) -> tuple[float, ...]:
+    """The on/off floats of an intermittent fault in the generic form (see :func:`fault_times`)."""
+    nominal = np.array(fault.times(horizon), dtype=float)
+    if nominal.size == 0:
+        return ()
+    new = np.tile([1.0, 0.0], nominal.size // 2)  # on, off, on, off, ...
+    offsets = np.arange(-SWITCH_ULPS, SWITCH_ULPS + 1, dtype=np.int64)
+    bits = np.maximum(nominal.view(np.int64)[:, None] + offsets, 0)  # floats >= 0 are ordered
+    grid = bits.view(np.float64)
+    act = Expr("act", slot_activation(Slot.of(fault))).numpy(grid)
+    is_new = np.broadcast_to(act, grid.shape) == new[:, None]
+    flips = is_new[:, 1:] & ~is_new[:, :-1]  # flips[i, j]: the switch is at grid[i, j + 1]
+    out = nominal.copy()
+    for i in np.flatnonzero(flips.any(axis=1)):
+        j = np.flatnonzero(flips[i]) + 1
+        out[i] = grid[i, j[np.argmin(np.abs(j - SWITCH_ULPS))]]
+    return tuple(float(x) for x in out)
 
 
 def balanced(op: str, terms: list[tuple]) -> tuple:

@@ -37,10 +37,14 @@ from core.faults import (
     FAULT,
     FAULT_TYPES,
     MAX_SWITCHES,
+    SLOT_COUNT,
     Fault,
+    fault_times,
     faulted_bias,
     faulted_health,
     pulse_count,
+    slotted_bias,
+    slotted_health,
 )
 from core.graph import (
     Switch,
@@ -282,6 +286,8 @@ class Options:
     filter_bandwidth: float = setting(50.0, "number", POSITIVE)  # rad/s, filtered derivatives
     # ‖η̇_i‖ below which the formation angle τ_i is faded out
     tau_threshold: float = setting(1e-3, "number", POSITIVE)
+    # g_i, f_i in one generic form with this many fault slots (None: each fault type its own)
+    fault_slots: int | None = setting(OFF, "integer", NONNEG, WHOLE, SLOT_COUNT, off=True)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -382,7 +388,8 @@ class Scenario:
         """Known discontinuities in time inside (0, horizon): faults, steps in inputs, graph switches."""
         H = self.integration.horizon
         times: set[float] = set()
-        exact = {t for fo in self.followers for fa in fo.faults for t in fa.times(H)}
+        slots = self.options.fault_slots
+        exact = {t for fo in self.followers for t in fault_times(fo.faults, H, slots)}
         for fo in self.followers:
             times.update(fo.g.breakpoints)
             for e in fo.f:
@@ -807,7 +814,8 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     graph = _graph(ctx, data["graph"], integ.horizon)
     dims = Dims(N=graph.N, n=leader.n, m=leader.m, p=leader.p)
     _check_output_size(ctx, integ, dims.N, dims.n, dims.m)
-    followers = _followers(ctx, data["followers"], dims.n, dims.N, tgrid)
+    options = _section(ctx, Options, data.get("options", {}), "options", dims)
+    followers = _followers(ctx, data["followers"], dims.n, dims.N, tgrid, options.fault_slots)
     return Scenario(
         name=name,
         path=str(path),
@@ -818,7 +826,7 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
         followers=followers,
         observer=_section(ctx, Observer, data.get("observer", {}), "observer", dims),
         controller=_controller(ctx, data.get("controller", {}), dims),
-        options=_section(ctx, Options, data.get("options", {}), "options", dims),
+        options=options,
         initial=_section(ctx, Initial, data.get("initial", {}), "initial", dims),
         integration=integ,
     )
@@ -1081,8 +1089,10 @@ def _index(ctx: _Ctx, v: Any, key: str, lo: int, hi: int, expected: str) -> int:
     return int(x)
 
 
-def _followers(ctx: _Ctx, F: Any, n: int, N: int, tgrid: np.ndarray) -> tuple[Follower, ...]:
-    """The [[followers]] tables, one per row of the adjacency matrix."""
+def _followers(
+    ctx: _Ctx, F: Any, n: int, N: int, tgrid: np.ndarray, slots: int | None = None
+) -> tuple[Follower, ...]:
+    """The [[followers]] tables, one per row of the adjacency matrix (``slots``: fault_slots)."""
     if not isinstance(F, list) or not all(isinstance(x, dict) for x in F):
         raise ctx.err(
             "followers", "is not an array of tables", "[[followers]] tables, one per follower"
@@ -1093,7 +1103,7 @@ def _followers(ctx: _Ctx, F: Any, n: int, N: int, tgrid: np.ndarray) -> tuple[Fo
             f"has {len(F)} followers but graph.adjacency is {N}x{N}",
             "one [[followers]] table per row of the adjacency matrix",
         )
-    return tuple(_follower(ctx, fo, i, n, tgrid) for i, fo in enumerate(F))
+    return tuple(_follower(ctx, fo, i, n, tgrid, slots) for i, fo in enumerate(F))
 
 
 def output_columns(N: int, n: int, m: int) -> int:
@@ -1161,16 +1171,24 @@ def _check_output_size(ctx: _Ctx, integ: Integration, N: int, n: int, m: int) ->
         )
 
 
-def _follower(ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray) -> Follower:
+def _follower(
+    ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray, slots: int | None = None
+) -> Follower:
     """One [[followers]] table (0-based ``i``; messages say ``followers[i+1]``)."""
     key = f"followers[{i + 1}]"
     ctx.table(fo, key, set(FOLLOWER), required_keys(FOLLOWER))
     sizes = {"n": n}
     model, params = _model(ctx, fo, key, n)
     faults = _faults(ctx, fo.get("faults", []), key, n, float(tgrid[-1]))
+    if slots is not None and len(faults) > slots:
+        raise ctx.err(
+            f"{key}.faults",
+            f"has {len(faults)} faults but options.fault_slots = {slots}",
+            f"at most {slots} faults per follower, or options.fault_slots >= {len(faults)}",
+        )
     health = _health(ctx, fo.get("g", FOLLOWER["g"].default), f"{key}.g", tgrid)
-    health = _faulted(ctx, health, faults, key, tgrid)
-    f, d = _disturbance(ctx, fo, key, n, tgrid, faults)
+    health = _faulted(ctx, health, faults, key, tgrid, slots)
+    f, d = _disturbance(ctx, fo, key, n, tgrid, faults, slots)
     return Follower(
         model=model,
         params=params,
@@ -1216,7 +1234,13 @@ def _model(ctx: _Ctx, fo: dict, key: str, n: int) -> tuple[str, dict[str, float]
 
 
 def _disturbance(
-    ctx: _Ctx, fo: dict, key: str, n: int, tgrid: np.ndarray, faults: tuple[Fault, ...] = ()
+    ctx: _Ctx,
+    fo: dict,
+    key: str,
+    n: int,
+    tgrid: np.ndarray,
+    faults: tuple[Fault, ...] = (),
+    slots: int | None = None,
 ) -> tuple[tuple[Expr, ...], np.ndarray]:
     """A follower's ``f`` (n expressions, plus its bias ``faults``) and its bound ``d``.
 
@@ -1232,7 +1256,7 @@ def _disturbance(
             f"one expression of t, or a list of {n} (one per coordinate)",
         )
     f = tuple(ctx.expr(e, f"{key}.f[{r}]") for r, e in enumerate(f_raw))
-    f = faulted_bias(f, faults)
+    f = faulted_bias(f, faults) if slots is None else slotted_bias(f, faults, slots)
     worst = np.array([_sup(lambda t, e=e: np.abs(_sample(e, t)), _times(e, tgrid)) for e in f])
     for r, w in enumerate(worst):
         if not math.isfinite(w):
@@ -1420,15 +1444,28 @@ def _fault(ctx: _Ctx, raw: dict, key: str, n: int, horizon: float) -> Fault:
 
 
 def _faulted(
-    ctx: _Ctx, base: Health, faults: tuple[Fault, ...], key: str, tgrid: np.ndarray
+    ctx: _Ctx,
+    base: Health,
+    faults: tuple[Fault, ...],
+    key: str,
+    tgrid: np.ndarray,
+    slots: int | None = None,
 ) -> Health:
-    """The health ``base`` times the factors of the loss-of-effectiveness ``faults``."""
+    """The health ``base`` times the factors of the loss-of-effectiveness ``faults``.
+
+    With ``slots`` (options.fault_slots) in the generic form, even without faults.
+    """
     H = float(tgrid[-1])
-    health = [fa for fa in faults if not fa.is_bias]
-    if not health:
+    health = tuple(fa for fa in faults if not fa.is_bias)
+    if slots is not None:
+        expr = slotted_health(base.expr, faults, slots)
+        if not health:  # every factor is exactly 1: the values of base
+            return Health(expr=expr, breakpoints=base.breakpoints, minimum=base.minimum)
+    elif not health:
         return base
-    expr = faulted_health(base.expr, faults, H)
-    times = {t for fa in health for t in fa.times(H) if 0.0 < t < H}
+    else:
+        expr = faulted_health(base.expr, faults, H)
+    times = {t for t in fault_times(health, H, slots) if 0.0 < t < H}
     breaks = tuple(sorted(set(base.breakpoints) | times))
     extra = [x for b in breaks for x in (b, b - 1e-9, b + 1e-9)]
     ts = np.unique(np.concatenate([_times(expr, tgrid), np.array(extra, dtype=float)]))
