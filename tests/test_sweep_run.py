@@ -163,3 +163,90 @@ def test_unreachable_scheduler_is_one_error_naming_it(setup):
         with pytest.raises(UsageError, match=r"tcp://127\.0\.0\.1:1: cannot connect"):
             run_study(root / "study.toml", out_root=root / "nowhere", scheduler="tcp://127.0.0.1:1")
     assert not (root / "nowhere/tiny/results.parquet").exists()
+
+
+def test_killed_run_resumes_with_only_the_missing_samples(setup):
+    """SIGKILL `python -m sweep run` after some rows are committed, rerun: the committed rows
+    stay as they were (timing included), the others run once, none is lost or duplicated,
+    and every row equals the uninterrupted run of the same draws."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from helpers import ROOT
+
+    root = setup["root"]
+    # same seed and keys as "tiny": ids 0..3 draw what the uninterrupted run drew
+    (root / "killed.toml").write_text(
+        STUDY.replace('name = "tiny"', 'name = "killed"').replace("count = 4", "count = 10")
+    )
+    results = root / "out/killed/results.parquet"
+    cmd = [sys.executable, "-m", "sweep", "run", str(root / "killed.toml")]
+    cmd += ["--out", str(root / "out"), "--batch", "1"]
+    proc = subprocess.Popen(
+        cmd, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
+    try:
+        deadline = time.monotonic() + 600
+        while time.monotonic() < deadline and proc.poll() is None:
+            if results.is_file() and len(pd.read_parquet(results)) >= 2:
+                break
+            time.sleep(0.2)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the runner and its Dask workers, at once
+        proc.wait()
+    before = pd.read_parquet(results)
+    assert 2 <= len(before) < 10, "the run must be killed part-way"
+    assert before["id"].is_unique
+    after = pd.read_parquet(run_study(root / "killed.toml", out_root=root / "out"))
+    assert sorted(after["id"]) == list(range(10)) and after["id"].is_unique
+    kept = after[after["id"].isin(before["id"])].reset_index(drop=True)
+    pd.testing.assert_frame_equal(kept[before.columns], before.reset_index(drop=True))
+    # the samples finished after the kill ran in the rerun: their finish time is later
+    rerun = after[~after["id"].isin(before["id"])]
+    assert (rerun["finished_utc"] >= before["finished_utc"].max()).all()
+    truth = {s.id: s for s in samples(load_study(root / "killed.toml"))}
+    for row in after.itertuples(index=False):
+        assert row.seed == str(truth[row.id].seed)
+    # identical draws and results to the uninterrupted "tiny" run (names differ)
+    full = setup["full"].set_index("id")
+    same = [c for c in full.columns if c not in [*TIMING, "name"]]
+    got = after.set_index("id").loc[full.index, same]
+    pd.testing.assert_frame_equal(got, full[same], check_exact=True)
+
+
+def _report_table(text: str) -> dict[str, str]:
+    """The summary table of report.md: quantity -> value."""
+    rows = {}
+    for line in text.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split(" | ")]
+        if line.startswith("| ") and len(cells) == 2:
+            rows[cells[0].replace("\\|", "|")] = cells[1]
+    return rows
+
+
+def test_report_numbers_and_figures_follow_from_the_results(setup):
+    import numpy as np
+
+    folder = setup["root"] / "out/tiny"
+    res = pd.read_parquet(folder / "results.parquet")
+    rows = _report_table((folder / "report.md").read_text())
+    ok = res[res["status"] == "ok"]
+    assert rows["samples"] == str(len(res)) and rows["ok"] == str(len(ok))
+    # medians recomputed here from the Parquet file, printed to 4 significant digits
+    for col, label in [
+        ("tail_max_et", "median tail max |e_ti| (max over followers)"),
+        ("peak_u_max", "median peak |u_i| (max over followers)"),
+        ("steps", "median integrator steps"),
+    ]:
+        assert float(rows[label]) == pytest.approx(np.median(ok[col].astype(float)), rel=5e-4)
+    t2 = ok[[c for c in ok.columns if c.startswith("t2_entry:")]].to_numpy(float).ravel()
+    t2 = t2[np.isfinite(t2)]
+    assert float(rows["median Theorem 2 entry time [s]"]) == pytest.approx(np.median(t2), rel=5e-4)
+    held = int(ok["guaranteed_held"].sum())
+    assert rows["ok samples whose guaranteed rows all hold"] == f"{held} of {len(ok)}"
+    for fig in ("tail_error.png", "theorem2_entry.png"):
+        data = (folder / "figures" / fig).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 1000
