@@ -76,6 +76,7 @@ __all__ = [
     "breakpoints",
     "build",
     "build_from_closed_loop",
+    "fix_parameters",
     "code_sha256",
     "column_names",
     "csv_text",
@@ -150,16 +151,23 @@ def resolve_codegen(N: int, settings: CodegenSettings | None = None) -> CodegenS
 
 @dataclass(frozen=True)
 class Built:
-    """A closed loop compiled for one method.
+    """A closed loop compiled for one method, bound to one scenario's numbers.
+
+    The library takes the closed loop's runtime parameters p as an input
+    (:mod:`symbolic.parameters`); :attr:`dyn` and :attr:`outputs` are the library's
+    Functions with :attr:`p` filled in, :meth:`bind` gives the same library bound to
+    another scenario of the same structure.
 
     Attributes
     ----------
     closed_loop : symbolic.closed_loop.ClosedLoop
+        Bound to the scenario (``x0``, ``p0``, breakpoints).
     library : Library
     dyn : casadi.Function
-        The compiled integrator-form right-hand side (ODE, or DAE for ``idas``).
+        The compiled integrator-form right-hand side (ODE, or DAE for ``idas``) with p
+        fixed (its p input is empty).
     outputs : casadi.Function
-        The compiled ``(t, x) -> named outputs``.
+        The compiled ``(t, x) -> named outputs`` with p fixed.
     form : str
         ``"ode"`` or ``"dae"``.
     timings : dict
@@ -168,6 +176,10 @@ class Built:
         Method ``native`` above :data:`generated.native.MAX_AGENTS` followers: the
         graph-ordered library (:mod:`generated.dag`) and the per-follower blocks it was
         built from; None otherwise.
+    p : ndarray
+        The runtime parameters the library is called with.
+    dyn_p, outputs_p : casadi.Function or None
+        The library's Functions with p as an input.
     """
 
     closed_loop: Any
@@ -177,6 +189,67 @@ class Built:
     form: str
     timings: dict[str, float] = field(default_factory=dict)
     dag: tuple[Library, Any] | None = None
+    p: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    dyn_p: ca.Function | None = None
+    outputs_p: ca.Function | None = None
+
+    def bind(self, sc: Scenario, gains: Gains) -> Built:
+        """The same library bound to ``sc`` (same structure): new p, x(0) and breakpoints.
+
+        Parameters
+        ----------
+        sc : Scenario
+        gains : Gains
+
+        Raises
+        ------
+        ScenarioError
+            If ``sc``'s structure differs from the library's.
+        """
+        from symbolic.closed_loop import bind
+
+        cl = self.closed_loop
+        if self.dag is not None or cl.parametric is None:
+            raise ScenarioError(sc.path, "structure", "this build cannot be re-bound", "rebuild")
+        cl = bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks)
+        lib = dataclasses.replace(
+            self.library, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0
+        )
+        return dataclasses.replace(
+            self,
+            closed_loop=cl,
+            library=lib,
+            p=cl.p0,
+            dyn=fix_parameters(self.dyn_p, cl.p0),
+            outputs=fix_parameters(self.outputs_p, cl.p0),
+            timings=dict.fromkeys(self.timings, 0.0),
+        )
+
+
+def fix_parameters(f: ca.Function, p: np.ndarray) -> ca.Function:
+    """``f`` with its input ``p`` filled in (kept, empty, in integrator form; else removed).
+
+    Parameters
+    ----------
+    f : casadi.Function
+        A Function with an input named ``p``.
+    p : ndarray
+        Its value.
+    """
+    names = list(f.name_in())
+    k = names.index("p")
+    ins = [ca.MX.sym(n, f.sparsity_in(i)) for i, n in enumerate(names)]
+    args = list(ins)
+    args[k] = ca.DM(np.asarray(p, dtype=float).reshape(-1, 1))
+    if names == list(ca.dyn_in()):
+        ins[k] = ca.MX.sym("p", 0, 1)
+    else:
+        del ins[k], names[k]
+    return ca.Function(f.name(), ins, f.call(args), names, list(f.name_out()))
+
+
+#: compiled builds of this process by (structure key, method, codegen settings)
+_BUILDS: dict[tuple, Built] = {}
 
 
 def build(
@@ -187,6 +260,10 @@ def build(
     closed_loop: Any = None,
 ) -> Built:
     """Symbolic closed loop -> C -> shared library (cached) -> loaded Functions.
+
+    A scenario whose structure (:func:`symbolic.parameters.structure_key`) was built
+    before in this process reuses that build with its own numbers (:meth:`Built.bind`):
+    nothing symbolic, no code generation, no compiler.
 
     Parameters
     ----------
@@ -201,19 +278,27 @@ def build(
     closed_loop : ClosedLoop, optional
         A prebuilt closed loop (skips ``build_closed_loop``).
     """
+    from symbolic.parameters import structure_key
+
     settings = resolve_codegen(sc.N, settings)
     method = method or sc.integration.method
     t0 = time.perf_counter()
     # first: what the method cannot do (e.g. order a cyclic graph) fails before the closed
     # loop is built
     cascade = solvers.get(method).prepare(sc, gains)
+    key = (structure_key(sc, gains), method, settings) if cascade is None else None
+    if closed_loop is None and key in _BUILDS:
+        return _BUILDS[key].bind(sc, gains)
     if closed_loop is None:
         from symbolic.closed_loop import build_closed_loop
 
         closed_loop = build_closed_loop(sc, gains)
-    return build_from_closed_loop(
+    built = build_from_closed_loop(
         closed_loop, method, settings, t_symbolic_start=t0, cascade=cascade
     )
+    if key is not None and closed_loop.parametric is not None:
+        _BUILDS[key] = built
+    return built
 
 
 def native_cascade(sc: Scenario, gains: Gains) -> Any:
@@ -270,10 +355,13 @@ def build_from_closed_loop(
     settings = resolve_codegen(cl.layout.N, settings)
     t0 = time.perf_counter() if t_symbolic_start is None else t_symbolic_start
     form = solver.form
-    src, name = (cl.dae_dyn, DAE_NAME) if form == "dae" else (cl.ode_dyn, ODE_NAME)
+    par = cl.parametric
+    p = np.zeros(0) if par is None else np.asarray(cl.p0, dtype=float)
+    src_dyn, src_out = (cl, cl) if par is None else (par, par)
+    src, name = (src_dyn.dae_dyn, DAE_NAME) if form == "dae" else (src_dyn.ode_dyn, ODE_NAME)
     check_dyn_signature(src, f"closed loop {form}_dyn")
     dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
-    outs = renamed(cl.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
+    outs = renamed(src_out.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
     plan = solver.build(dyn, cl, settings, cascade)
     dag_lib = plan.companion
     t_sym = time.perf_counter() - t0
@@ -288,14 +376,19 @@ def build_from_closed_loop(
         "codegen": lib.codegen_seconds + (dag_lib.codegen_seconds if dag_lib else 0.0),
         "compile": lib.compile_seconds + (dag_lib.compile_seconds if dag_lib else 0.0),
     }
+    dyn_p, outputs_p = lib.function(name), lib.function(OUT_NAME)
+    bound = par is not None
     return Built(
         cl,
         lib,
-        lib.function(name),
-        lib.function(OUT_NAME),
+        fix_parameters(dyn_p, p) if bound else dyn_p,
+        fix_parameters(outputs_p, p) if bound else outputs_p,
         form,
         timings,
         dag=(dag_lib, plan.data) if dag_lib else None,
+        p=p,
+        dyn_p=dyn_p if bound else None,
+        outputs_p=outputs_p if bound else None,
     )
 
 

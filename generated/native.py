@@ -84,6 +84,8 @@ class Options(ctypes.Structure):
         ("t_out", _DP),
         ("nb", ctypes.c_int),
         ("breaks", _DP),
+        ("np", ctypes.c_int),
+        ("p", _DP),
     ]
 
 
@@ -199,8 +201,9 @@ def native_functions(
     Parameters
     ----------
     ode_dyn : casadi.Function
-        Integrator form ``(t, x, z, p, u) -> (ode, alg, quad, zero)`` with empty z, p, u
-        (``ClosedLoop.ode_dyn``); expanded to SX.
+        Integrator form ``(t, x, z, p, u) -> (ode, alg, quad, zero)`` with empty z and u
+        (``ClosedLoop.parametric.ode_dyn``); expanded to SX. Its parameters p become the
+        third input of ``nat_rhs`` and ``nat_jac``, given to :func:`run` at run time.
     cse : bool
         Common-subexpression elimination in the generated code.
 
@@ -212,9 +215,9 @@ def native_functions(
     Raises
     ------
     BuildError
-        If ``ode_dyn`` has algebraic states, parameters or controls, or cannot be expanded.
+        If ``ode_dyn`` has algebraic states or controls, or cannot be expanded.
     """
-    for i, what in ((2, "algebraic states z"), (3, "parameters p"), (4, "controls u")):
+    for i, what in ((2, "algebraic states z"), (4, "controls u")):
         if ode_dyn.nnz_in(i):
             raise BuildError(f"native integrator: {ode_dyn.name()} has {what} (needs an ODE)")
     try:
@@ -227,14 +230,15 @@ def native_functions(
     nx = int(f.size1_in(1))
     t = ca.SX.sym("t")
     x = ca.SX.sym("x", nx)
+    p = ca.SX.sym("p", f.nnz_in(3))  # runtime parameters, passed by the driver on every call
     empty = ca.SX(0, 1)
-    xdot = f(t, x, empty, empty, empty)[0]
+    xdot = f(t, x, empty, p, empty)[0]
     J = ca.jacobian(xdot, x)
     pattern = J.sparsity() + ca.Sparsity.diag(nx)
     jac = ca.project(J, pattern)  # structural zeros on the diagonal
     opts = {"cse": True} if cse else {}
-    rhs_f = ca.Function(RHS_NAME, [t, x], [xdot], ["t", "x"], ["xdot"], opts)
-    jac_f = ca.Function(JAC_NAME, [t, x], [jac], ["t", "x"], ["J"], opts)
+    rhs_f = ca.Function(RHS_NAME, [t, x, p], [xdot], ["t", "x", "p"], ["xdot"], opts)
+    jac_f = ca.Function(JAC_NAME, [t, x, p], [jac], ["t", "x", "p"], ["J"], opts)
     lu = sparse_lu(pattern, LU_PREFIX, cse=cse)
     return [rhs_f, jac_f, lu.factor, lu.solve], lu
 
@@ -347,7 +351,12 @@ class DriverCall:
 
     @classmethod
     def of(
-        cls, nx: int, t_out: np.ndarray, settings: IntegratorSettings, breakpoints: Sequence[float]
+        cls,
+        nx: int,
+        t_out: np.ndarray,
+        settings: IntegratorSettings,
+        breakpoints: Sequence[float],
+        p: np.ndarray | None = None,
     ) -> DriverCall:
         """Options from the settings and the schedule; a result with an empty output buffer.
 
@@ -361,8 +370,11 @@ class DriverCall:
             ``rtol``, ``atol`` and ``max_steps``.
         breakpoints : sequence of float
             Restart times, reconciled with ``t_out`` by :func:`~generated.integrate.schedule`.
+        p : ndarray, optional
+            The closed loop's parameters (whole-loop driver); default none.
         """
         sched = schedule(t_out, breakpoints)
+        pv = np.ascontiguousarray(np.zeros(0) if p is None else p, dtype=float).ravel()
         tq = np.ascontiguousarray(sched.targets, dtype=float)
         bps = np.ascontiguousarray(sched.breaks, dtype=float)
         X = np.full((len(sched.t_out), nx), np.nan)
@@ -374,8 +386,10 @@ class DriverCall:
             t_out=dptr(tq),
             nb=len(bps),
             breaks=dptr(bps),
+            np=len(pv),
+            p=dptr(pv),
         )
-        return cls(sched, options, Result(x_out=dptr(X)), X, (tq, bps))
+        return cls(sched, options, Result(x_out=dptr(X)), X, (tq, bps, pv))
 
     def trajectory(
         self, method: str, wall0: float, progress: Callable[[float], None] | None = None
@@ -398,6 +412,7 @@ def run(
     *,
     breakpoints: Sequence[float] = (),
     progress: Callable[[float], None] | None = None,
+    p: np.ndarray | None = None,
 ) -> Trajectory:
     """Integrate with the native driver of a library built with :func:`toolchain`.
 
@@ -418,6 +433,8 @@ def run(
         within its tolerance of a breakpoint is integrated to the breakpoint.
     progress : callable, optional
         Called once with the time reached (the run is one C call).
+    p : ndarray, optional
+        The closed loop's runtime parameters (as many as the library takes; default none).
 
     Returns
     -------
@@ -428,7 +445,7 @@ def run(
     wall0 = time.perf_counter()
     lib = load(Path(library))
     x = np.ascontiguousarray(x0, dtype=float).ravel()
-    call = DriverCall.of(x.size, t_out, settings, breakpoints)
+    call = DriverCall.of(x.size, t_out, settings, breakpoints, p)
     lib.hitl_native_run(x.size, dptr(x), ctypes.byref(call.options), ctypes.byref(call.result))
     return call.trajectory("native", wall0, progress)
 

@@ -139,10 +139,29 @@ def test_blow_up_gives_an_incomplete_trajectory_with_the_reason(cg):
         tr.raise_if_incomplete()
 
 
-def test_native_functions_need_an_ode_without_parameters():
-    t, x, p = ca.SX.sym("t"), ca.SX.sym("x", 2), ca.SX.sym("p")
-    f = ca.Function("withp", [t, x, E, p, E], [x * p, E, E, E], ca.dyn_in(), ca.dyn_out())
-    with pytest.raises(BuildError, match="parameters p"):
+def test_parameters_are_inputs_of_one_library(cg):
+    # x' = -k x + c: x(t) = c/k + (x0 - c/k) exp(-k t), for every (k, c) with one library
+    t, x, p = ca.SX.sym("t"), ca.SX.sym("x", 2), ca.SX.sym("p", 2)
+    f = ca.Function(
+        "withp", [t, x, E, p, E], [-p[0] * x + p[1], E, E, E], ca.dyn_in(), ca.dyn_out()
+    )
+    lib = native.build(f, cg)
+    t_out = output_grid(2.0, 0.25)
+    s = IntegratorSettings(method="native", rtol=1e-10, atol=1e-12)
+    x0 = np.array([1.0, -2.0])
+    for k, c in ((0.5, 0.0), (3.0, 1.5)):
+        tr = native.run(lib.path, x0, t_out, s, p=np.array([k, c]))
+        exact = c / k + (x0[None, :] - c / k) * np.exp(-k * t_out[:, None])
+        np.testing.assert_allclose(tr.x, exact, rtol=1e-7, atol=1e-9)
+    assert native.build(f, cg).path == lib.path  # same code: the cached library
+    with pytest.raises(IntegrationError, match="1 parameters given, the library takes 2"):
+        native.run(lib.path, x0, t_out, s, p=np.array([1.0]))
+
+
+def test_native_functions_need_an_ode():
+    t, x, z = ca.SX.sym("t"), ca.SX.sym("x", 2), ca.SX.sym("z")
+    f = ca.Function("withz", [t, x, z, E, E], [x * z, z, E, E], ca.dyn_in(), ca.dyn_out())
+    with pytest.raises(BuildError, match="algebraic states z"):
         native.native_functions(f)
 
 

@@ -32,6 +32,7 @@ typedef struct {
   casadi_int *jcol, *jrow; /* CCS of nat_jac's output: colind[nx+1], row[nnz] */
   casadi_int jnnz;
   int nx;
+  const casadi_real *p; /* the run's parameters: third input of nat_rhs and nat_jac */
   long n_rhs, n_jac, n_fac, n_piv_fail;
   char *msg;
   int msglen;

@@ -2,8 +2,8 @@
  * Native CVODE driver of the hitl-formation toolkit (generated/native.py).
  *
  * This file is appended to the C that CasADi generates for
- *   nat_rhs(t, x) -> xdot          the closed loop's right-hand side
- *   nat_jac(t, x) -> J             its Jacobian on the pattern of M = I - gamma J
+ *   nat_rhs(t, x, p) -> xdot       the closed loop's right-hand side (p: its parameters)
+ *   nat_jac(t, x, p) -> J             its Jacobian on the pattern of M = I - gamma J
  *   nat_lu_factor(M) -> (LU, piv)  sparse LU without pivoting (generated/sparse_lu.py)
  *   nat_lu_solve(LU, b) -> x
  * and compiled with it into one shared library, linked against SUNDIALS 7.9 (CVODE,
@@ -105,6 +105,7 @@ static int hitl_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data) {
   casadi_real *out = N_VGetArrayPointer(ydot);
   c->arg[0] = &tt;
   c->arg[1] = N_VGetArrayPointer(y);
+  c->arg[2] = c->p;
   c->res[0] = out;
   c->n_rhs++;
   if (nat_rhs(c->arg, c->res, c->iw, c->w, 0)) return -1;
@@ -120,6 +121,7 @@ static int hitl_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, void *d
   hitl_jac_prepare(c, J);
   c->arg[0] = &tt;
   c->arg[1] = N_VGetArrayPointer(y);
+  c->arg[2] = c->p;
   (void)fy; (void)t1; (void)t2; (void)t3;
   return nat_jac(c->arg, c->res, c->iw, c->w, 0) ? -1 : 0;
 }
@@ -145,6 +147,13 @@ CASADI_SYMBOL_EXPORT int hitl_native_run(int nx, const double *x0, const hitl_op
   hitl_result_start(r);
   c.msg = r->msg;
   c.msglen = HITL_MSG_LEN;
+  c.p = o->p;
+  if (o->np != (int)nat_rhs_sparsity_in(2)[0] || (o->np > 0 && !o->p)) {
+    snprintf(r->msg, HITL_MSG_LEN, "HITL_BAD_PARAMETERS: %d parameters given, the library takes %d",
+             o->np, (int)nat_rhs_sparsity_in(2)[0]);
+    r->flag = -1;
+    return -1;
+  }
   hitl_work_size(nat_rhs_work, sz);
   hitl_work_size(nat_jac_work, sz);
   hitl_work_size(nat_lu_factor_work, sz);

@@ -24,6 +24,8 @@ typedef struct {
   const double *t_out;  /* nt output times, t_out[0] the start */
   int nb;               /* number of restart times */
   const double *breaks; /* nb restart times, strictly inside (t_out[0], t_out[nt-1]) */
+  int np;               /* length of p (the whole-loop driver's third input; 0 = none) */
+  const double *p;      /* the closed loop's runtime parameters, held over the run */
 } hitl_options;
 
 /* What a run returns: the output rows, CVODE's counters, its last flag and message. */

@@ -143,7 +143,13 @@ class Native(Solver):
         from generated import native
 
         return native.run(
-            built.library.path, x0, t_out, settings, breakpoints=breakpoints, progress=progress
+            built.library.path,
+            x0,
+            t_out,
+            settings,
+            breakpoints=breakpoints,
+            progress=progress,
+            p=built.p,
         )
 
 
