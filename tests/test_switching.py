@@ -318,3 +318,100 @@ def test_switching_marks_the_rows_built_on_V1_and_only_them(tmp_path):
     assert all(tb["claim"].str.startswith(SWITCHING_CLAIMS)[:4])
     # without switches nothing changes
     assert mark_switching(tb, load_scenario(PAPER)).equals(tb)
+
+
+# --------------------------------------------------------------------------- closed loop
+# follower 4 loses follower 2 at 0.5 s (before the observers have converged) and hears it
+# again from 6 s (after the table's tail starts at 5 s); 10 s of the paper's scenario
+LOOP_SWITCHES = [(0.5, 4, 2, 0.0), (6.0, 4, 2, 1.0)]
+# tail criteria of the paper scenario (docs/closed-loop.md): |e_ti,r| and |η_i − η0| per
+# component below 1e-2 on the last quarter of the run
+ET_TAIL, EBAR_TAIL = 1e-2, 1e-2
+
+
+def _numpy_psi(sc, df: pd.DataFrame, weights) -> np.ndarray:  # noqa: ANN001
+    """ψ_i = Σ_j (|a_ij| y_i − a_ij y_j) + a_i0 (y_i − h_i y0), y_i = C0 η_i, as (K, N, n)."""
+    C0 = np.asarray(sc.leader.C0, float)
+    m, N = sc.m, sc.N
+    E = np.stack([df[[f"eta{i + 1}_{k + 1}" for k in range(m)]].to_numpy() for i in range(N)], 1)
+    y0 = df[[f"eta0_{k + 1}" for k in range(m)]].to_numpy() @ C0.T
+    out = np.empty((len(df), N, sc.n))
+    for k, t in enumerate(df["t"].to_numpy()):
+        LB, a0h = weights(t)
+        out[k] = LB @ (E[k] @ C0.T) - np.outer(a0h, y0[k])  # eq. (6) for all followers
+    return out
+
+
+@pytest.fixture(scope="module")
+def switching_run(tmp_path_factory):
+    from generated import api
+    from synthesis.gains import load_gains
+
+    tmp = tmp_path_factory.mktemp("switching-run")
+    path = paper_with(tmp, LOOP_SWITCHES, "horizon = 20.0 => horizon = 10.0")
+    res = api.run(path, out_root=tmp / "out", progress=False)
+    sc = load_scenario(path)
+    gains = load_gains(tmp / "out" / sc.name / "gains.json", sc)
+    return sc, gains, res
+
+
+def test_link_cut_and_restored_keeps_every_follower_tracking(switching_run):
+    sc, _, res = switching_run
+    assert res.meta["complete"]
+    df = res.frame
+    t = df["t"].to_numpy()
+    tail = t >= 0.75 * t[-1]
+    eta0 = df[[f"eta0_{k + 1}" for k in range(sc.m)]].to_numpy()
+    for i in range(sc.N):
+        et = df[[f"et{i + 1}_{r + 1}" for r in range(sc.n)]].to_numpy()
+        eta = df[[f"eta{i + 1}_{k + 1}" for k in range(sc.m)]].to_numpy()
+        assert np.abs(et[tail]).max() < ET_TAIL, i
+        assert np.abs(eta[tail] - eta0[tail]).max() < EBAR_TAIL, i
+
+
+@pytest.mark.xfail(
+    reason="the closed loop does not read graph.topologies() yet: remove this marker when it does",
+    strict=True,
+)
+def test_logged_psi_is_the_switched_graphs_coupling(switching_run):
+    from symbolic.closed_loop import build_closed_loop
+
+    sc, gains, res = switching_run
+    cl = build_closed_loop(sc, gains)
+    K = len(res.trajectory.t)
+    outs = cl.outputs.map(K)(res.trajectory.t.reshape(1, -1), res.trajectory.x.T)
+    named = dict(zip(cl.outputs.name_out(), outs, strict=True))
+    # map concatenates the K outputs (N×n each) side by side: N × (K·n)
+    psi = np.asarray(named["psi"]).reshape(sc.N, K, sc.n).transpose(1, 0, 2)
+    df = res.frame
+    want = _numpy_psi(sc, df, lambda t: weights_at(sc.graph, t))
+    scale = np.abs(want).max()
+    np.testing.assert_allclose(psi, want, rtol=0, atol=1e-9 * scale)
+    # the cut is visible: with the base graph's weights follower 4's ψ differs while it lasts
+    t = df["t"].to_numpy()
+    cut = (t >= 0.5) & (t < 6.0)
+    base = _numpy_psi(sc, df.loc[cut], lambda t: (LB_BASE, PIN))
+    assert np.abs(base[:, 3] - psi[cut, 3]).max() > 1e3 * 1e-9 * scale
+
+
+def test_a_switching_runs_table_marks_the_V1_rows_and_restarts_theorem2(switching_run):
+    from verify.table import bounds_table
+
+    sc, gains, res = switching_run
+    tb = bounds_table(sc, res.frame, gains=gains)
+    marked = tb["note"].str.startswith(SWITCHING_NOTE)
+    on_v1 = tb["claim"].str.startswith(SWITCHING_CLAIMS)
+    assert on_v1.any() and (marked == on_v1).all()
+    assert set(tb.loc[marked, "kind"]) == {"info"}
+    # Theorem 2's provable windows start after the last switch (6 s), not before
+    assert (_provable_starts(tb) > 6.0).all()
+    # the same trajectory read against the scenario without switches: nothing marked
+    plain = dataclasses.replace(sc, graph=Graph(sc.graph.adjacency, sc.graph.pinning))
+    tp = bounds_table(plain, res.frame, gains=gains)
+    assert not tp["note"].str.startswith(SWITCHING_NOTE).any()
+
+
+def _provable_starts(tb: pd.DataFrame) -> np.ndarray:
+    prov = tb[tb["claim"].str.contains("provable variant")]
+    assert not prov.empty
+    return prov["window"].str.extract(r"\[([-\d.e+]+),")[0].astype(float).to_numpy()
