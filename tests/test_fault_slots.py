@@ -419,3 +419,34 @@ def test_closed_loop_with_slots_matches_the_type_specific_faults(tmp_path):
     assert plain.breakpoints() == slotted.breakpoints() == (0.2, 0.25, 0.3, 0.4, 0.45)
     scale = np.maximum(np.abs(X0).max(axis=0), 1.0)
     assert np.max(np.abs(X1 - X0) / scale) < 1e-7
+
+
+def test_faults_of_any_type_on_any_follower_are_one_structure(tmp_path):
+    """With fault_slots, moving faults between followers and changing their types leaves
+    the structure key (what the compiled library depends on) unchanged; without, it does not."""
+    pytest.importorskip("generated.api")
+    from generated import api
+    from symbolic.parameters import layout_of, param_values, structure_key
+
+    moved = {
+        0: [ONE["intermittent"]],
+        2: [dict(ONE["abrupt"], onset=0.1), dict(ONE["bias"], onset=0.2)],
+        3: [],
+    }
+    variants = {}
+    for slots in (None, 2):
+        for name, faults in (("file", {}), ("moved", moved), ("none", dict.fromkeys(range(5), []))):
+            data = tomllib.loads((SCENARIOS / "faults-example.toml").read_text())
+            for i, fl in faults.items():
+                data["followers"][i]["faults"] = fl
+            if slots is not None:
+                data["options"]["fault_slots"] = slots
+            variants[slots, name] = scenario_from_dict(data, path=tmp_path / "x.toml", sha256=name)
+    gains, _ = api.ensure_gains(variants[None, "file"], tmp_path)
+    keys = {k: structure_key(sc, gains) for k, sc in variants.items()}
+    assert keys[2, "file"] == keys[2, "moved"] == keys[2, "none"]
+    assert keys[None, "file"] != keys[None, "moved"]
+    sizes = {layout_of(variants[2, name]).size for name in ("file", "moved", "none")}
+    assert len(sizes) == 1
+    p_file, p_moved = (param_values(variants[2, name], gains) for name in ("file", "moved"))
+    assert not np.array_equal(p_file, p_moved)  # the faults are in the numbers
