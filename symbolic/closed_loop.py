@@ -38,7 +38,7 @@ from symbolic.network import ASSEMBLIES, GraphMatrices, apply_agents, coupling, 
 from symbolic.observer import ObserverGains, observer_function
 from symbolic.parameters import (
     ParamLayout,
-    graph_weights,
+    graph_pattern,
     layout_of,
     param_layout,
     param_values,
@@ -293,29 +293,36 @@ def fault_values(sc: Scenario, lay: ParamLayout) -> ca.Function:
     return ca.Function("faults", [t, p], [ca.horzcat(*cols)], ["t", "p"], ["GF"])
 
 
-def graph_coupling(sc: Scenario, gains: Gains, lay: ParamLayout, p: Any) -> tuple[Any, Any]:
-    """``L_Bᵀ`` and ``(a0 ∘ h)ᵀ`` as sparse matrices whose nonzeros are read from p.
+def graph_coupling(sc: Scenario, lay: ParamLayout, t: Any, p: Any) -> tuple[Any, Any]:
+    """``L_Bᵀ`` and ``(a0 ∘ h)ᵀ`` at time t as sparse matrices whose nonzeros are read from p.
 
-    The pattern is the scenario graph's (structure); the weights are parameters, so a
-    link's weight can change without new code.
+    The pattern is the union of the topologies the graph reaches (structure); the
+    weights of topology k and its start time are parameters. With switching times
+    s_1 < … < s_{K−1}, the weights are v_0 + Σ_k step(t − s_k)(v_k − v_{k−1}):
+    piecewise constant and right-continuous (the new graph holds from s_k on).
 
     Parameters
     ----------
     sc : Scenario
-    gains : Gains
-        Supplies the gauge h.
     lay : ParamLayout
+    t : casadi.SX or casadi.MX
+        Time.
     p : casadi.SX or casadi.MX
         The parameter vector.
     """
-    h = np.diag(np.atleast_2d(gains.H)).astype(float)
-    LBt, a0h = graph_weights(sc, h)
+    L, a = graph_pattern(sc)
+    nw = int(L.sum() + a.sum())
     w = lay.get(p, "graph")
+    times = lay.get(p, "graph_times")
+    v = w[0:nw]
+    for k in range(times.numel()):
+        jump = w[(k + 1) * nw : (k + 2) * nw] - w[k * nw : (k + 1) * nw]
+        v = v + ca.if_else(t >= times[k], 1.0, 0.0) * jump
     out, k = [], 0
-    for a in (LBt, a0h):
-        cols, rows = np.nonzero(a.T)
-        sp = ca.Sparsity.triplet(a.shape[0], a.shape[1], rows.tolist(), cols.tolist())
-        out.append(type(p)(sp, w[k : k + sp.nnz()]))
+    for mask in (L, a):
+        cols, rows = np.nonzero(mask.T)
+        sp = ca.Sparsity.triplet(mask.shape[0], mask.shape[1], rows.tolist(), cols.tolist())
+        out.append(type(p)(sp, v[k : k + sp.nnz()]))
         k += sp.nnz()
     return out[0], out[1]
 
@@ -596,7 +603,7 @@ def _network(
     poff, npar = param_layout(n, saturated(sc))
     P = ca.reshape(play.get(pv, "agents"), npar, N)
     GF = fault_values(sc, play)(t, pv)
-    W = graph_coupling(sc, gains, play, pv)
+    W = graph_coupling(sc, play, t, pv)
     lead = leader_function(sc.leader, parametric=True)
     u0_lits = [play.get(pv, k) for k in play.slices if k.startswith("expr:leader.u0")]
     lits = ca.vertcat(*u0_lits) if u0_lits else type(pv)(0, 1)

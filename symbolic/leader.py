@@ -12,8 +12,8 @@ def operator_input(leader: Leader, t: ca.SX, lits: ca.SX | None = None) -> ca.SX
     """The operator's command u0(t) as a CasADi expression of ``t`` (p×1).
 
     From the scenario's expressions, or from its CSV trace through a linear
-    ``ca.interpolant``; outside the trace's time range the end values are held
-    (t is clamped), so the command stays bounded.
+    ``ca.interpolant`` (``u0_hold``: piecewise constant, ``ca.pw_const``); outside the
+    trace's time range the end values are held (t is clamped), so the command stays bounded.
 
     Parameters
     ----------
@@ -37,6 +37,8 @@ def operator_input(leader: Leader, t: ca.SX, lits: ca.SX | None = None) -> ca.SX
             k += nl
         return ca.vertcat(*out)
     tr = np.asarray(leader.u0_trace)
+    if leader.u0_hold:  # zero-order hold, right-continuous; every row is a breakpoint
+        return ca.vertcat(*[_held(t, tr[:, 0], tr[:, 1 + k]) for k in range(tr.shape[1] - 1)])
     tc = ca.fmin(ca.fmax(t, float(tr[0, 0])), float(tr[-1, 0]))
     # one interpolant per input: linear in t, the trace's own knots
     return ca.vertcat(
@@ -45,6 +47,14 @@ def operator_input(leader: Leader, t: ca.SX, lits: ca.SX | None = None) -> ca.SX
             for k in range(tr.shape[1] - 1)
         ]
     )
+
+
+def _held(t: ca.SX, ts: np.ndarray, vs: np.ndarray) -> ca.SX:
+    """Zero-order hold of ``vs`` at times ``ts``; only rows that change the value enter."""
+    jumps = np.flatnonzero(vs[1:] != vs[:-1]) + 1
+    if jumps.size == 0:
+        return ca.SX(float(vs[0]))
+    return ca.pw_const(t, ca.DM(ts[jumps]), ca.DM(np.concatenate([vs[:1], vs[jumps]])))
 
 
 def leader_function(leader: Leader, parametric: bool = False) -> ca.Function:

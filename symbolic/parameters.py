@@ -9,9 +9,12 @@ through one flat vector ``p`` instead of being written into the generated C:
 * ``expr:<where>``: the literals of each expression of t (the operator's u0, the health
   g_i(t) with its faults, the bias f_i(t)): ``2*cos(t)`` is the template ``#*cos(t)``
   with the parameter 2 (:meth:`core.expressions.Expr.literals`);
-* ``graph``: the nonzero weights of ``L + B`` and ``a0 ∘ h`` (the coupling of eq. (6)).
+* ``graph``, ``graph_times``: the nonzero weights of ``L + B`` and ``a0 ∘ h`` (the
+  coupling of eq. (6)) of every topology a switching graph reaches, and the times it
+  switches.
 
-What is left is the *structure*: the graph's pattern, the follower models, the
+What is left is the *structure*: the graph's pattern (the union over its topologies)
+and number of topologies, the follower models, the
 options, the expressions' templates, the leader matrices and the certified gains.
 :func:`structure_key` hashes exactly that, so two scenarios with equal keys are the
 same code with different ``p`` (tests/test_parameters.py checks it against the
@@ -28,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from core.errors import ScenarioError
 from core.expressions import Expr
 from core.graph import pinned_laplacian
 from core.scenario import Scenario
@@ -141,49 +145,97 @@ def expressions(sc: Scenario) -> dict[str, Expr]:
     return out
 
 
-def graph_weights(sc: Scenario, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``L_Bᵀ`` and ``(a0 ∘ h)ᵀ`` of the scenario's graph (dense; the code keeps their patterns).
+def graph_weights(adjacency: Any, pinning: Any, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``L_Bᵀ`` and ``(a0 ∘ h)ᵀ`` of one graph (dense).
+
+    Parameters
+    ----------
+    adjacency : ndarray
+        N×N, a_ij.
+    pinning : ndarray
+        N, a_i0.
+    h : ndarray
+        The gauge signs (from the certified gains).
+    """
+    A = np.asarray(adjacency, dtype=float)
+    a0 = np.asarray(pinning, dtype=float)
+    return pinned_laplacian(A, a0).toarray().T, (a0 * h).reshape(1, -1)
+
+
+def graph_pattern(sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """Where ``L_Bᵀ`` and ``(a0 ∘ h)ᵀ`` can be nonzero over every topology the run reaches.
 
     Parameters
     ----------
     sc : Scenario
-    h : ndarray
-        The gauge signs (from the certified gains).
     """
-    A = np.asarray(sc.graph.adjacency, dtype=float)
-    a0 = np.asarray(sc.graph.pinning, dtype=float)
-    return pinned_laplacian(A, a0).toarray().T, (a0 * h).reshape(1, -1)
+    N = sc.N
+    L, a = np.zeros((N, N), bool), np.zeros((1, N), bool)
+    for top in sc.graph.topologies():
+        LBt, a0h = graph_weights(top.adjacency, top.pinning, np.ones(N))
+        L |= LBt != 0
+        a |= a0h != 0
+    return L, a
 
 
-def nonzeros(a: np.ndarray) -> np.ndarray:
-    """The nonzeros of ``a`` in CasADi's column-major order.
+def graph_values(sc: Scenario, h: np.ndarray, adjacency: Any, pinning: Any) -> np.ndarray:
+    """The ``graph`` weights of one topology on ``sc``'s pattern (:func:`graph_pattern`).
+
+    A link of the pattern that the topology lacks gets weight 0 (a cut link); a link
+    outside the pattern is refused (it would need other code).
 
     Parameters
     ----------
-    a : ndarray
-        A dense matrix.
+    sc : Scenario
+        Fixes the pattern.
+    h : ndarray
+        Gauge signs.
+    adjacency, pinning : ndarray
+        The topology.
+
+    Raises
+    ------
+    ScenarioError
+        If the topology has a link outside the pattern.
     """
-    cols, rows = np.nonzero(a.T)
-    return a[rows, cols]
+    L, a = graph_pattern(sc)
+    LBt, a0h = graph_weights(adjacency, pinning, h)
+    if np.any(LBt[~L] != 0) or np.any(a0h[~a] != 0):
+        raise ScenarioError(
+            sc.path, "graph", "a link outside the compiled graph's pattern", "a link of the graph"
+        )
+    return np.concatenate([LBt.T[L.T], a0h.T[a.T]])  # CasADi's column-major nonzeros
+
+
+def nonzeros_count(sc: Scenario) -> int:
+    """Weights per topology in the ``graph`` block.
+
+    Parameters
+    ----------
+    sc : Scenario
+    """
+    L, a = graph_pattern(sc)
+    return int(L.sum() + a.sum())
 
 
 def layout_of(sc: Scenario) -> ParamLayout:
     """The parameter layout of ``sc`` (sizes only: equal for equal structures).
+
+    ``graph`` holds the weights of every topology in turn, ``graph_times`` the
+    switching times between them (:func:`symbolic.closed_loop.graph_coupling`).
 
     Parameters
     ----------
     sc : Scenario
     """
     _, npar = param_layout(sc.n, sc.controller.u_max is not None)
-    A = np.asarray(sc.graph.adjacency, dtype=float)
-    a0 = np.asarray(sc.graph.pinning, dtype=float)
-    n_graph = int(np.count_nonzero(pinned_laplacian(A, a0).toarray()) + np.count_nonzero(a0))
-    sizes = [("agents", npar * sc.N), ("graph", n_graph)]
+    K = len(sc.graph.topologies())
+    sizes = [("agents", npar * sc.N), ("graph", K * nonzeros_count(sc)), ("graph_times", K - 1)]
     sizes += [(k, len(e.literals())) for k, e in expressions(sc).items()]
     slices, k = {}, 0
-    for name, s in sizes:
-        slices[name] = slice(k, k + s)
-        k += s
+    for name, size in sizes:
+        slices[name] = slice(k, k + size)
+        k += size
     return ParamLayout(slices, k)
 
 
@@ -200,8 +252,11 @@ def param_values(sc: Scenario, gains: Gains) -> np.ndarray:
     p = np.zeros(lay.size)
     p[lay.slices["agents"]] = param_matrix(sc).ravel(order="F")  # agent-major
     h = np.diag(np.atleast_2d(gains.H)).astype(float)
-    LBt, a0h = graph_weights(sc, h)
-    p[lay.slices["graph"]] = np.concatenate([nonzeros(LBt), nonzeros(a0h)])
+    tops = sc.graph.topologies()
+    p[lay.slices["graph"]] = np.concatenate(
+        [graph_values(sc, h, top.adjacency, top.pinning) for top in tops]
+    )
+    p[lay.slices["graph_times"]] = [top.t_start for top in tops[1:]]
     for name, e in expressions(sc).items():
         p[lay.slices[name]] = e.literals()
     return p
@@ -234,7 +289,6 @@ def structure(sc: Scenario, gains: Gains) -> dict[str, Any]:
     gains : Gains
     """
     L = sc.leader
-    A = np.asarray(sc.graph.adjacency, dtype=float)
     trace = None if L.u0_trace is None else hashlib.sha256(L.u0_trace.tobytes()).hexdigest()
     return {
         "leader": {
@@ -245,8 +299,8 @@ def structure(sc: Scenario, gains: Gains) -> dict[str, Any]:
             "u0_trace": trace,
         },
         "graph": {
-            "adjacency": np.sign(A).astype(int).tolist(),
-            "pinning": np.sign(sc.graph.pinning).astype(int).tolist(),
+            "pattern": [m.astype(int).tolist() for m in graph_pattern(sc)],
+            "topologies": len(sc.graph.topologies()),
         },
         "followers": [
             {
