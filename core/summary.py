@@ -176,17 +176,22 @@ def _follower_lines(s: Scenario) -> list[str]:
     for i, fo in enumerate(s.followers):
         lines += [
             f"  {i + 1}: {fo.model}, p(0) = {_vec(fo.p0)}, q(0) = {_vec(fo.q0)}, b0 = {_vec(fo.b0)}",
-            f"     g(t) = {_health_text(fo)} (min {_num(fo.g.minimum)})",
-            f"     f(t) = [{', '.join(_bias_texts(fo))}], |f_r| <= d = {_vec(fo.d)}",
+            f"     g(t) = {_health_text(fo, s.options.fault_slots)} (min {_num(fo.g.minimum)})",
+            f"     f(t) = [{', '.join(_bias_texts(fo, s.options.fault_slots))}], "
+            f"|f_r| <= d = {_vec(fo.d)}",
         ]
         lines += [f"     fault {k + 1}: {fa.describe()}" for k, fa in enumerate(fo.faults)]
     return lines
 
 
-def _health_text(fo: Follower) -> str:
+def _health_text(fo: Follower, slots: int | None = None) -> str:
     """g_i as written (the file's g, times the faults listed below), with its switching times."""
     e = fo.g.expr
-    if any(not fa.is_bias for fa in fo.faults):  # e = g_file * product of fault factors
+    lost = any(not fa.is_bias for fa in fo.faults)
+    if slots:  # e = g_file * product of the generic form's slots (options.fault_slots)
+        g = _text(e.node[2]) + (" x the faults below" if lost else "")
+        g += f" (generic form, {slots} fault slots)"
+    elif lost:  # e = g_file * product of fault factors
         g = f"{_text(e.node[2])} x the faults below"
     else:
         g = e.text if not e.is_constant() else _num(fo.g.minimum)
@@ -197,9 +202,12 @@ def _health_text(fo: Follower) -> str:
     return g
 
 
-def _bias_texts(fo: Follower) -> list[str]:
+def _bias_texts(fo: Follower, slots: int | None = None) -> list[str]:
     """f_ir as written in the file, plus the bias faults listed below."""
-    if not any(fa.is_bias for fa in fo.faults):
+    biased = any(fa.is_bias for fa in fo.faults)
+    if slots and not biased:  # e = f_file + the generic form's slots, each adding 0
+        return [_text(e.node[2]) for e in fo.f]
+    if not biased:
         return [e.text for e in fo.f]
     return [f"{_text(e.node[2])} + biases below" for e in fo.f]
 
@@ -238,7 +246,8 @@ def _option_lines(s: Scenario) -> list[str]:
         f"options      sign = {sign}, ghat law = {Op.ghat_law}, "
         f"feedforward = {'on' if Op.feedforward else 'off (eq. (29) as printed)'}, "
         f"ablation (42) = {'on' if Op.ablation else 'off'}",
-        f"             derivatives = {deriv}, tau threshold = {_num(Op.tau_threshold)}",
+        f"             derivatives = {deriv}, tau threshold = {_num(Op.tau_threshold)}"
+        + ("" if Op.fault_slots is None else f", fault slots = {Op.fault_slots}"),
     ]
 
 

@@ -450,3 +450,14 @@ def test_faults_of_any_type_on_any_follower_are_one_structure(tmp_path):
     assert len(sizes) == 1
     p_file, p_moved = (param_values(variants[2, name], gains) for name in ("file", "moved"))
     assert not np.array_equal(p_file, p_moved)  # the faults are in the numbers
+
+
+def test_summary_names_the_slots_and_shows_g_and_f_as_written(tmp_path):
+    from core.summary import summarize
+
+    text = summarize(_example(tmp_path, slots=2))
+    assert "fault slots = 2" in text
+    assert "0.95 x the faults below (generic form, 2 fault slots)" in text
+    assert "g(t) = 0.95 (generic form, 2 fault slots)" in text  # follower 5: no fault
+    assert "mod(" not in text and "step(" not in text  # the slots' trees are not printed
+    assert "fault slots" not in summarize(_example(tmp_path, slots=None))
