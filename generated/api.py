@@ -547,6 +547,12 @@ class RunResult:
         return self.record.to_dict()
 
 
+def _structure(built: Built) -> str:
+    """The structure key of a build's closed loop ("" for a loop built without parameters)."""
+    par = getattr(built.closed_loop, "parametric", None)
+    return par.structure_key if par is not None else ""
+
+
 def _timed(f: Callable[..., Any], *args: Any) -> tuple[Any, float]:
     """``f(*args)`` and its wall time in seconds."""
     t0 = time.perf_counter()
@@ -627,7 +633,9 @@ def run(
         csv=(len(df), csv_sha),
         inputs=run_inputs(sc, ginfo.sha256, method),
         libraries=library_hashes(built),
-        library=LibraryRecord.of(built.library, codegen, requested),
+        library=LibraryRecord.of(
+            built.library, codegen, requested, _structure(built), len(built.p)
+        ),
         wall_seconds=WallSeconds(**wall, total=time.perf_counter() - t_all),
     )
     meta_path = atomic_write_text(root / sc.name / "meta.json", record.to_json())

@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+import numpy as np
 
 from core.artifacts import OUT_ROOT, sha256_file
 from core.errors import SynthesisError
@@ -26,6 +30,41 @@ class GainsInfo:
     seconds: float
 
 
+#: gains synthesized in this process, by :func:`synthesis_inputs` key
+_SYNTHESIZED: dict[str, Gains] = {}
+#: observer settings synthesis does not read (the observer's runtime numbers)
+_NOT_SYNTHESIS = ("alpha1", "alpha1_bar", "phi0", "phi_min")
+
+
+def synthesis_inputs(sc: Scenario) -> str:
+    """SHA-256 of what synthesis reads: the leader's matrices and bound, the graph, the observer.
+
+    Scenarios with equal keys get the same gains (a study's samples that vary only
+    controller gains, faults, offsets or initial states synthesize once).
+
+    Parameters
+    ----------
+    sc : Scenario
+    """
+    L, G, o = sc.leader, sc.graph, sc.observer
+    obs = {f.name: getattr(o, f.name) for f in dataclasses.fields(o)}
+    parts = {
+        "A0": L.A0,
+        "B0": L.B0,
+        "C0": L.C0,
+        "alpha": L.alpha,
+        "adjacency": G.adjacency,
+        "pinning": G.pinning,
+        "switches": [dataclasses.astuple(s) for s in G.switches],
+        **{k: v for k, v in obs.items() if k not in _NOT_SYNTHESIS},
+    }
+    text = json.dumps(
+        {k: np.asarray(v).tolist() if v is not None else None for k, v in parts.items()},
+        sort_keys=True,
+    )
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
 def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gains, GainsInfo]:
     """Read ``out/<name>/gains.json`` if it belongs to this scenario, else synthesize and write it.
 
@@ -33,6 +72,8 @@ def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gain
     it is then re-certified (:func:`synthesis.gains.recertified`: it must match the
     scenario and pass every certificate check not confined to scenario-given gains).
     A malformed or failing file is refused in one line, whatever ``STRICT`` says.
+    Gains this process synthesized for equal :func:`synthesis_inputs` are re-certified
+    for ``sc`` and reused instead of solving the LMIs again.
 
     Parameters
     ----------
@@ -53,6 +94,7 @@ def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gain
         gf = read_gains_file(path)  # a malformed file is refused, never overwritten
         if gf.scenario_sha256 == sc.sha256:  # reused only after a fresh certificate
             gains = recertified(gf.gains, str(path), sc)
+            _SYNTHESIZED.setdefault(synthesis_inputs(sc), gains)
             return gains, GainsInfo(path, gf.sha256, True, time.perf_counter() - t0)
     try:
         from synthesis import synthesize
@@ -60,7 +102,11 @@ def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gain
         raise SynthesisError(
             f"{path}: missing or stale and synthesis.synthesize is not available (run make synth)"
         ) from None
-    gains = synthesize(sc)
+    key = synthesis_inputs(sc)
+    if key in _SYNTHESIZED:  # same synthesis inputs: re-certified for this scenario
+        gains = recertified(_SYNTHESIZED[key], f"{path} (synthesized in this process)", sc)
+    else:
+        gains = _SYNTHESIZED[key] = synthesize(sc)
     if gains.info.get("scenario_sha256") != sc.sha256:  # variants carry their own hash
         gains = dataclasses.replace(gains, info={**gains.info, "scenario_sha256": sc.sha256})
     save_gains(gains, path)

@@ -56,6 +56,11 @@ class LibraryRecord:
         Whether MX Functions were expanded to SX before generating code.
     casadi : str
         The CasADi version.
+    structure : str
+        The closed loop's structure key (:func:`symbolic.parameters.structure_key`):
+        runs with equal keys execute the same library with their own numbers.
+    parameters : int
+        Length of the runtime parameter vector p the library was called with.
     """
 
     key: str
@@ -69,9 +74,18 @@ class LibraryRecord:
     jacobian_requested: str
     expand: bool
     casadi: str
+    structure: str = ""
+    parameters: int = 0
 
     @classmethod
-    def of(cls, lib: Library, codegen: CodegenSettings, requested: str) -> LibraryRecord:
+    def of(
+        cls,
+        lib: Library,
+        codegen: CodegenSettings,
+        requested: str,
+        structure: str = "",
+        parameters: int = 0,
+    ) -> LibraryRecord:
         """The record of ``lib`` built with ``codegen`` (``requested``: the asked-for Jacobian).
 
         Parameters
@@ -81,6 +95,10 @@ class LibraryRecord:
             With its Jacobian strategy resolved.
         requested : str
             The strategy before resolution.
+        structure : str
+            The closed loop's structure key.
+        parameters : int
+            Length of p.
         """
         return cls(
             key=lib.key,
@@ -94,6 +112,8 @@ class LibraryRecord:
             jacobian_requested=requested,
             expand=codegen.expand,
             casadi=ca.__version__,
+            structure=structure,
+            parameters=parameters,
         )
 
 
