@@ -37,6 +37,12 @@ def main(argv: list[str]) -> int:
     rp.add_argument("--ids", type=int, nargs="+", help="only these sample ids (default all)")
     rp.add_argument("--out", default=None, help="output root (default out/ or $HITL_OUT)")
     rp.add_argument("--batch", type=int, default=10, help="rows per atomic commit (default 10)")
+    rp.add_argument(
+        "--workers", type=int, default=None, help="local worker processes (default: cores)"
+    )
+    rp.add_argument(
+        "--keep-runs", action="store_true", help="also write each sample's scenario and run files"
+    )
     args = ap.parse_args(argv)
     if args.cmd == "run":
         return _run(args, argv)
@@ -72,8 +78,16 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
     if args.ids is not None and any(k < 0 for k in args.ids):
         raise UsageError("--ids: sample ids are integers >= 0")
     command = " ".join(["python -m sweep", *argv])
+    if args.workers is not None and args.workers < 1:
+        raise UsageError("--workers: give a number of worker processes >= 1")
     path = run_study(
-        args.study, out_root=args.out or OUT_ROOT, batch=args.batch, ids=args.ids, command=command
+        args.study,
+        out_root=args.out or OUT_ROOT,
+        batch=args.batch,
+        ids=args.ids,
+        command=command,
+        workers=args.workers,
+        keep=args.keep_runs,
     )
     print(f"results: {path}")
     print(f"report: {path.parent / 'report.md'}")

@@ -15,6 +15,7 @@ import math
 import os
 import re
 import sys
+import tempfile
 import time
 import traceback
 import uuid
@@ -90,8 +91,8 @@ def _study(path: str) -> Study:
     return load_study(path)
 
 
-def run_sample(study_path: str, sample_id: int, folder: str) -> dict[str, Any]:
-    """Draw, write, simulate and verify one sample; never raises for a sample's own fault.
+def run_sample(study_path: str, sample_id: int, folder: str, keep: bool = False) -> dict[str, Any]:
+    """Draw, simulate and verify one sample; never raises for a sample's own fault.
 
     Parameters
     ----------
@@ -101,6 +102,9 @@ def run_sample(study_path: str, sample_id: int, folder: str) -> dict[str, Any]:
         0-based id.
     folder : str
         The study's output folder (:class:`StudyPaths`).
+    keep : bool
+        Also write the sample's scenario file (``samples/``) and its run (trajectory.csv,
+        meta.json, gains.json under ``runs/``); default: the run stays in memory.
 
     Returns
     -------
@@ -117,7 +121,7 @@ def run_sample(study_path: str, sample_id: int, folder: str) -> dict[str, Any]:
         row["status"] = f"refused: {sample.reason}"
     else:
         try:
-            row.update(_simulate_and_verify(sample, paths))
+            row.update(_simulate_and_verify(sample, paths, keep))
             row["status"] = "ok"
         except Exception as exc:  # noqa: BLE001 - any failure of one sample is recorded
             row["status"] = f"failed: {_one_line(exc)}"
@@ -155,23 +159,51 @@ def _scalar(v: Any) -> Any:
     return json.dumps(v)
 
 
-def _simulate_and_verify(sample: Sample, paths: StudyPaths) -> dict[str, Any]:
-    """Write the scenario file, run it and summarize its bounds table."""
+def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[str, Any]:
+    """Run the sample (written to disk or in memory) and summarize its bounds table."""
+    from verify import pipeline as P
+
+    if keep:
+        run = _run_written(sample, paths)
+        v = P.verify_run(run, out_root=paths.runs)
+    else:
+        with tempfile.TemporaryDirectory(prefix="hitl-sample-") as tmp:
+            run = _run_in_memory(sample, Path(tmp))
+            v = P.verify_run(run, out_root=Path(tmp))  # reads the gains written there
+    return {
+        "steps": run.meta.get("steps"),
+        "library": library_key(run.meta),
+        **summarize_table(v.table),
+        **theorem2_entry(v.table, sample.scenario, run.frame, v.config),
+        "tail_max_et": tail_max_et(run.frame, v.config.tail_fraction),
+    }
+
+
+def _run_written(sample: Sample, paths: StudyPaths) -> Any:
+    """``make sim`` of the written scenario file: samples/<name>.toml, runs/<name>/."""
     from generated import api
     from verify import pipeline as P
 
     scenario_file = write_scenario(sample, paths.samples)
     res = api.run(scenario_file, out_root=paths.runs, progress=False)
-    run = P.Run(sample.scenario, res.frame, res.trajectory.x, res.meta, res.csv_path.parent)
-    v = P.verify_run(run, out_root=paths.runs)
-    meta = res.meta
-    return {
-        "steps": meta.get("steps"),
-        "library": library_key(meta),
-        **summarize_table(v.table),
-        **theorem2_entry(v.table, sample.scenario, res.frame, v.config),
-        "tail_max_et": tail_max_et(res.frame, v.config.tail_fraction),
-    }
+    return P.Run(sample.scenario, res.frame, res.trajectory.x, res.meta, res.csv_path.parent)
+
+
+def _run_in_memory(sample: Sample, root: Path) -> Any:
+    """The same steps as :func:`generated.api.run` (gains, build, integrate, outputs)
+    without writing the trajectory; only gains.json goes to ``root``."""
+    from generated import api
+    from verify import pipeline as P
+
+    sc = sample.scenario
+    gains, _ = api.ensure_gains(sc, root)
+    codegen = api.resolve_codegen(sc.N)
+    built = api.build(sc, gains, sc.integration.method, codegen)
+    traj = api.simulate(built, sc, api.integrator_settings(sc, sc.integration.method, codegen))
+    traj.raise_if_incomplete()
+    frame = api.trajectory_frame(built, sc, traj)
+    meta = {"steps": traj.stats.get("steps"), "library": {"key": built.library.key}}
+    return P.Run(sc, frame, traj.x, meta, root / sc.name)
 
 
 def library_key(meta: dict[str, Any]) -> str:
@@ -375,9 +407,36 @@ def _column_order(table: pd.DataFrame) -> pd.DataFrame:
 
 
 # --------------------------------------------------------------------------- the study
-def _client(scheduler: str | None) -> Any:
+@dataclass(frozen=True)
+class RunOptions:
+    """How a study runs.
+
+    Attributes
+    ----------
+    scheduler : str or None
+        A Dask scheduler address; None: ``$DASK_SCHEDULER``, else a local cluster.
+    workers : int or None
+        Worker processes of the local cluster (default: one per core).
+    batch : int
+        Rows per atomic commit.
+    keep : bool
+        Write each sample's scenario file and run (:func:`run_sample`).
+    """
+
+    scheduler: str | None = None
+    workers: int | None = None
+    batch: int = 10
+    keep: bool = False
+
+    @property
+    def own_cluster(self) -> bool:
+        """Whether the run starts (and closes) its own local cluster."""
+        return not (self.scheduler or os.environ.get("DASK_SCHEDULER"))
+
+
+def _client(scheduler: str | None, workers: int | None = None) -> Any:
     """A client of ``scheduler`` (or ``$DASK_SCHEDULER``), else of a new local cluster
-    with one single-threaded worker process per core."""
+    with ``workers`` single-threaded worker processes (default one per core)."""
     from distributed import Client, LocalCluster
 
     address = scheduler or os.environ.get("DASK_SCHEDULER")
@@ -390,7 +449,10 @@ def _client(scheduler: str | None) -> Any:
                 "start `dask scheduler` and `dask worker` there, or unset DASK_SCHEDULER"
             ) from exc
     cluster = LocalCluster(
-        n_workers=os.cpu_count() or 1, threads_per_worker=1, processes=True, dashboard_address=None
+        n_workers=workers or os.cpu_count() or 1,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
     )
     return Client(cluster)
 
@@ -409,6 +471,8 @@ def run_study(
     batch: int = 10,
     ids: Iterable[int] | None = None,
     command: str | None = None,
+    workers: int | None = None,
+    keep: bool = False,
 ) -> Path:
     """Run the study's samples not yet in ``results.parquet``; return the results path.
 
@@ -427,6 +491,12 @@ def run_study(
         Which samples (default all); those already in the results are skipped.
     command : str, optional
         The command recorded with the results (default ``sys.argv``).
+    workers : int, optional
+        Worker processes of the local cluster (default one per core; not used with a
+        scheduler).
+    keep : bool
+        Write each sample's scenario file and run files (default: in memory, only the
+        results and the report are written).
 
     Returns
     -------
@@ -451,7 +521,8 @@ def run_study(
         "study": str(Path(study_path)),
     }
     if todo or not paths.results.is_file():
-        _execute(str(Path(study_path).resolve()), todo, paths, done, batch, info, scheduler)
+        opts = RunOptions(scheduler, workers, batch, keep)
+        _execute(str(Path(study_path).resolve()), todo, paths, done, info, opts)
     from sweep.report import write_report
 
     write_report(paths.results)
@@ -463,35 +534,35 @@ def _execute(
     todo: list[int],
     paths: StudyPaths,
     done: pd.DataFrame,
-    batch: int,
     info: dict[str, str],
-    scheduler: str | None,
+    opts: RunOptions,
 ) -> None:
     """Submit ``todo`` (a bounded window in flight) and commit rows as they finish."""
     from distributed import as_completed
     from tqdm import tqdm
 
-    own = not (scheduler or os.environ.get("DASK_SCHEDULER"))
-    client = _client(scheduler) if todo else None
+    client = _client(opts.scheduler, opts.workers) if todo else None
     pending: list[dict] = []
     failures = 0
     try:
         with tqdm(total=len(todo), desc="samples", unit="sample", file=sys.stderr) as bar:
-            for row in _results(client, as_completed, study_path, todo, paths):
+            for row in _results(client, as_completed, study_path, todo, paths, opts.keep):
                 pending.append(row)
                 failures += row["status"] != "ok"
                 bar.update(1)
                 bar.set_postfix(not_ok=failures)
-                if len(pending) >= max(1, batch):
+                if len(pending) >= max(1, opts.batch):
                     done = commit_rows(paths.results, done, pending, info)
                     pending = []
     finally:
         commit_rows(paths.results, done, pending, info)
         if client is not None:
-            _close(client, own)
+            _close(client, opts.own_cluster)
 
 
-def _results(client: Any, as_completed: Any, study_path: str, todo: list[int], paths: StudyPaths):
+def _results(
+    client: Any, as_completed: Any, study_path: str, todo: list[int], paths: StudyPaths, keep: bool
+):
     """Yield rows as tasks finish, keeping about two tasks per worker thread in flight.
 
     A task that dies with its worker (e.g. a crash inside the compiled library) yields a
@@ -506,7 +577,8 @@ def _results(client: Any, as_completed: Any, study_path: str, todo: list[int], p
     ids: dict[str, int] = {}
 
     def submit(k: int) -> Any:
-        fut = client.submit(run_sample, study_path, k, folder, key=f"sample-{k}-{tag}", pure=False)
+        key = f"sample-{k}-{tag}"
+        fut = client.submit(run_sample, study_path, k, folder, keep, key=key, pure=False)
         ids[fut.key] = k
         return fut
 

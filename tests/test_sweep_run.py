@@ -39,7 +39,9 @@ def setup(tmp_path_factory):
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("HITL_BUILD_DIR", str(root / "build"))  # inherited by the worker processes
         mp.delenv("DASK_SCHEDULER", raising=False)
-        partial = run_study(root / "study.toml", out_root=root / "out", ids=[0, 2], batch=1)
+        partial = run_study(
+            root / "study.toml", out_root=root / "out", ids=[0, 2], batch=1, keep=True
+        )
         first = pd.read_parquet(partial)
         full = pd.read_parquet(run_study(root / "study.toml", out_root=root / "out", batch=3))
         yield {"root": root, "first": first, "full": full, "mp": mp}
@@ -57,11 +59,17 @@ def test_one_ok_row_per_sample_with_the_drawn_values(setup):
         assert row["seed"] == str(s.seed)
         for key, vals in s.params.items():
             assert [row[f"param:{key}[{k + 1}]"] for k in range(len(vals))] == vals
-        # the written scenario file is the sample (read back by TOML, not by our code)
-        written = tomllib.loads(
-            (setup["root"] / f"out/tiny/samples/{row['name']}.toml").read_text()
-        )
-        assert written["followers"][0]["p0"] == s.params["followers[1].p0"]
+        # ids 0 and 2 ran with keep=True: the written scenario file is the sample (read
+        # back by TOML, not by our code); 1 and 3 ran in memory and wrote no file
+        file = setup["root"] / f"out/tiny/samples/{row['name']}.toml"
+        if s.id in (0, 2):
+            written = tomllib.loads(file.read_text())
+            assert written["followers"][0]["p0"] == s.params["followers[1].p0"]
+            assert (setup["root"] / f"out/tiny/runs/{row['name']}/trajectory.csv").is_file()
+        else:
+            assert (
+                not file.exists() and not (setup["root"] / f"out/tiny/runs/{row['name']}").exists()
+            )
     assert (full["steps"] > 0).all() and full["guaranteed_held"].all()
     assert (full["n_guaranteed"] >= 1).all()  # the T1 floor inequality row is guaranteed here
 
@@ -103,7 +111,9 @@ def test_refused_sample_is_recorded_and_the_study_goes_on(setup):
     assert "| refused | 1 |" in report and f"- id {refused[0]}: refused:" in report
 
 
-def test_explicit_scheduler_gives_the_same_rows(setup):
+def test_explicit_scheduler_and_written_runs_give_the_same_rows(setup):
+    """ids 1, 3 through a scheduler with keep=True (api.run, files) equal the local
+    in-memory rows of the same samples."""
     from distributed import LocalCluster
 
     root = setup["root"]
@@ -118,13 +128,14 @@ def test_explicit_scheduler_gives_the_same_rows(setup):
         setup["mp"].setenv("DASK_SCHEDULER", cluster.scheduler_address)
         try:
             res = pd.read_parquet(
-                run_study(root / "study.toml", out_root=root / "remote", ids=[1, 3])
+                run_study(root / "study.toml", out_root=root / "remote", ids=[1, 3], keep=True)
             )
         finally:
             setup["mp"].delenv("DASK_SCHEDULER")
     default = setup["full"][setup["full"]["id"].isin([1, 3])].reset_index(drop=True)
     cols = [c for c in default.columns if c not in TIMING]
     pd.testing.assert_frame_equal(res[cols], default[cols], check_exact=True)
+    assert len(list((root / "remote/tiny/runs").glob("*/trajectory.csv"))) == 2
 
 
 def test_cli_bad_id_is_one_line_and_writes_nothing(setup, capsys):
