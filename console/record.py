@@ -10,9 +10,10 @@
   ``console.csv``     the states the console logged at every quantum (trajectory.csv's
                       state columns), to compare with the replay's trajectory.csv
 
-A link cut or restored during the run cannot be written: a scenario's graph is fixed
-for the whole run. Such a record keeps ``u0.csv`` and ``console.csv`` and says so
-instead of writing a scenario that would replay a different run.
+and each link cut or restored as a ``[[graph.switches]]`` table. The scenario is loaded
+back before the record is reported; one the loader refuses (a cut that leaves a
+follower unreachable from the leader, which a scenario may not have) is removed and the
+record says why, keeping ``u0.csv`` and ``console.csv``.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ import numpy as np
 
 from console.engine import Change
 from core.artifacts import atomic_write_text
+from core.errors import ToolkitError
+from core.scenario import load_scenario
 from sweep.sampler import scenario_toml
 
 TRACE_NAME, LOG_NAME = "u0.csv", "console.csv"
@@ -66,9 +69,17 @@ class Record:
 
 
 def u0_rows(
-    changes: Sequence[Change], u0_start: Sequence[float], t_end: float
+    changes: Sequence[Change],
+    u0_start: Sequence[float],
+    t_end: float,
+    restarts: Sequence[float] = (),
 ) -> list[list[float]]:
     """The held operator command as trace rows: (t, u0...) at 0, at each change, at ``t_end``.
+
+    A row is also written at every time the console restarted its integrator without a
+    change (``restarts``), with the command then held: a held trace's rows are the
+    replay's breakpoints, so the replay restarts where the console did and takes the
+    same steps.
 
     Parameters
     ----------
@@ -77,19 +88,21 @@ def u0_rows(
     u0_start : sequence of float
         The command at t = 0 before any change.
     t_end : float
-        The last logged time (> 0); changes after it are dropped.
+        The last logged time (> 0); changes at or after it are dropped.
+    restarts : sequence of float
+        Times the console's integrator restarted.
     """
-    rows = [[0.0, *map(float, u0_start)]]
+    rows = {0.0: [float(v) for v in u0_start]}
     for c in changes:
-        if c.kind != "u0" or c.t > t_end:
-            continue
-        if c.t == rows[-1][0]:
-            rows[-1] = [c.t, *c.values]
-        else:
-            rows.append([c.t, *c.values])
-    if rows[-1][0] < t_end:
-        rows.append([t_end, *rows[-1][1:]])
-    return rows
+        if c.kind == "u0" and c.t < t_end:
+            rows[c.t] = list(c.values)
+    knots = sorted(rows)
+    for t in restarts:
+        if 0.0 < t < t_end and t not in rows:
+            j = int(np.searchsorted(knots, t, side="right")) - 1
+            rows[t] = rows[knots[j]]
+    rows.setdefault(t_end, rows[max(k for k in rows if k < t_end)] if t_end > 0 else rows[0.0])
+    return [[t, *rows[t]] for t in sorted(rows)]
 
 
 def replay_table(
@@ -136,6 +149,18 @@ def replay_table(
                 )
                 bias[i] = new
         fo["g"] = g if len(g) > 1 else g[0][1]
+    data["graph"].pop("switches", None)  # the console's no-op switch (console.scenario)
+    links = [c for c in changes if c.kind == "link" and c.t < t_end]
+    if links:
+        data["graph"]["switches"] = [
+            {
+                "time": c.t,
+                "follower": c.follower + 1,
+                "neighbour": c.neighbour + 1,
+                "weight": c.values[0],
+            }
+            for c in links
+        ]
     integ = data.setdefault("integration", {})
     integ["horizon"], integ["output_step"] = t_end, h
     return data
@@ -151,6 +176,7 @@ def write_record(
     x_log: np.ndarray,
     columns: Sequence[str],
     h: float,
+    restarts: Sequence[float] = (),
 ) -> Record:
     """Write ``u0.csv``, ``console.csv`` and, when replayable, the scenario (atomically).
 
@@ -172,23 +198,28 @@ def write_record(
         Names of ``x_log``'s columns.
     h : float
         The console's quantum.
+    restarts : sequence of float
+        Times the console's integrator restarted (rows of the trace, see :func:`u0_rows`).
     """
     folder.mkdir(parents=True, exist_ok=True)
     t_end = float(t_log[-1])
     lines = ["t," + ",".join(columns)]
     lines += [",".join(repr(float(v)) for v in (t, *x)) for t, x in zip(t_log, x_log, strict=True)]
     atomic_write_text(folder / LOG_NAME, "\n".join(lines) + "\n")
-    rows = u0_rows(changes, u0_start, t_end) if t_end > 0 else []
+    rows = u0_rows(changes, u0_start, t_end, restarts) if t_end > 0 else []
     p = len(u0_start)
     head = "t," + ",".join(f"u0_{k}" for k in range(1, p + 1))
     body = [",".join(repr(float(v)) for v in r) for r in rows]
     atomic_write_text(folder / TRACE_NAME, "\n".join([head, *body]) + "\n")
-    used = [c for c in changes if c.t <= t_end]
+    used = [c for c in changes if c.t < t_end]
     if t_end <= 0:
         return Record(folder, None, len(t_log), t_end, "nothing to replay yet (t = 0)")
-    if any(c.kind == "link" for c in used):
-        reason = "the run cut or restored a link; a scenario's graph is fixed for the whole run"
-        return Record(folder, None, len(t_log), t_end, reason)
     data = replay_table(table, used, nominal_health, t_end, h)
+    data["name"] = f"{table['name']}-{folder.name}"
     path = atomic_write_text(folder / f"{data['name']}.toml", scenario_toml(data))
+    try:
+        load_scenario(path)
+    except ToolkitError as exc:
+        path.unlink()
+        return Record(folder, None, len(t_log), t_end, f"the replay is not a valid scenario: {exc}")
     return Record(folder, path, len(t_log), t_end)

@@ -162,7 +162,7 @@ class Session:
     def frame(self) -> dict[str, Any]:
         """The state message every page receives."""
         loop = self.loop
-        st = loop.settings
+        st = loop.target  # what the operator set (it lands at the end of the next call)
         return {
             "type": "state",
             "t": loop.t,
@@ -184,4 +184,3 @@ class Session:
     def log_array(self) -> tuple[np.ndarray, np.ndarray]:
         """The logged times and states from t = 0."""
         return np.array(self.log_t), np.array(self.log_x)
-

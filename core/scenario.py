@@ -153,6 +153,7 @@ class Leader:
     u0: tuple[Expr, ...] | None  # p expressions of t, or None when a CSV trace is used
     u0_trace: np.ndarray | None  # (K, 1+p): columns t, u0_1..u0_p (piecewise linear)
     alpha: float  # ‖u0‖ ≤ α
+    u0_hold: bool = False  # the trace is held constant from each row to the next (zero-order hold)
 
     @property
     def m(self) -> int:
@@ -161,8 +162,9 @@ class Leader:
     def u0_numpy(self, t: Any) -> np.ndarray:
         """u0 at time(s) ``t`` with numpy: shape (p,) for a scalar t, (p, len(t)) for an array.
 
-        Expressions are evaluated directly; a CSV trace is interpolated linearly
-        (the same meaning the closed loop gives it).
+        Expressions are evaluated directly; a CSV trace is interpolated linearly, or
+        held from each row to the next with ``u0_hold`` (the meaning the closed loop
+        gives it).
 
         Parameters
         ----------
@@ -174,6 +176,9 @@ class Leader:
             return np.array([np.broadcast_to(e.numpy(ts), ts.shape) for e in self.u0])
         tr = self.u0_trace
         assert tr is not None
+        if self.u0_hold:  # right-continuous: row j's value from its time t_j on
+            j = np.clip(np.searchsorted(tr[:, 0], ts, side="right") - 1, 0, len(tr) - 1)
+            return np.moveaxis(tr[j, 1:], -1, 0)
         return np.array([np.interp(ts, tr[:, 0], tr[:, 1 + k]) for k in range(tr.shape[1] - 1)])
 
     @property
@@ -397,6 +402,8 @@ class Scenario:
         if self.leader.u0 is not None:
             for e in self.leader.u0:
                 times.update(e.breakpoints())
+        elif self.leader.u0_hold:  # each row of a held trace is a jump
+            times.update(float(t) for t in self.leader.u0_trace[:, 0])
         exact |= set(switch_times(self.graph.switches))  # the graph switches exactly then
         # a root found numerically in f may differ from a fault's onset by rounding: keep the onset
         times = {t for t in times if not any(_near(t, x) for x in exact)} | exact
@@ -553,6 +560,7 @@ LEADER: dict[str, Setting] = {
     "eta0": declare(zeros("m"), "vector", dims=("m", "")),
     "u0": declare(EITHER, "expressions", dims=("p", "")),
     "u0_csv": declare(EITHER, "string"),
+    "u0_hold": declare(False, "boolean"),
     "alpha": declare(REQUIRED, "number", POSITIVE),
 }
 #: ``[graph]``; adjacency sets N
@@ -967,7 +975,10 @@ def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) 
             f"{where_u} reaches ||u0|| = {u_peak:.6g} > alpha = {alpha:.6g}",
             "alpha >= sup ||u0(t)|| on [0, horizon] (the bound the followers design for)",
         )
-    return Leader(A0=A0, B0=B0, C0=C0, eta0=eta0, u0=u0, u0_trace=trace, alpha=alpha)
+    hold = _key(ctx, LEADER, L, "leader", "u0_hold", sizes)
+    if hold and trace is None:
+        raise ctx.err("leader.u0_hold", "applies to u0_csv only", "u0_csv, or no u0_hold")
+    return Leader(A0=A0, B0=B0, C0=C0, eta0=eta0, u0=u0, u0_trace=trace, alpha=alpha, u0_hold=hold)
 
 
 def _u0_expressions(ctx: _Ctx, raw: Any, p: int) -> tuple[Expr, ...]:

@@ -125,7 +125,8 @@ def _leader_lines(s: Scenario) -> list[str]:
         assert tr is not None
         lines.append(
             f"             u0(t) from a CSV trace: {len(tr)} rows on "
-            f"[{_num(tr[0, 0])}, {_num(tr[-1, 0])}] s, linear between rows"
+            f"[{_num(tr[0, 0])}, {_num(tr[-1, 0])}] s, "
+            + ("held from each row to the next" if L.u0_hold else "linear between rows")
         )
     return lines
 

@@ -297,6 +297,7 @@ def structure(sc: Scenario, gains: Gains) -> dict[str, Any]:
             "C0": _plain(L.C0),
             "u0": None if L.u0 is None else [e.template() for e in L.u0],
             "u0_trace": trace,
+            "u0_hold": L.u0_hold,  # a held trace is other code than an interpolated one
         },
         "graph": {
             "pattern": [m.astype(int).tolist() for m in graph_pattern(sc)],

@@ -151,7 +151,12 @@ def test_u0_trace_rows_hold_each_command_from_its_change() -> None:
 
 def test_replay_table_writes_health_tables_and_bias_steps() -> None:
     """Health changes become a g table; bias changes become bias faults of the difference."""
-    table = {"name": "x", "leader": {"u0": ["0"]}, "followers": [{"g": 1.0}, {"g": 0.9}]}
+    table = {
+        "name": "x",
+        "leader": {"u0": ["0"]},
+        "graph": {},
+        "followers": [{"g": 1.0}, {"g": 0.9}],
+    }
     ch = [
         Change(0.5, "health", 1, values=(0.7,)),
         Change(1.0, "bias", 0, values=(1.0, 2.0)),
@@ -272,20 +277,23 @@ def test_integrator_failure_is_shown_and_reset_recovers() -> None:
 
 
 def test_pause_scale_and_held_command_against_closed_form() -> None:
-    """A held u0 = a from t_a moves the leader as η0_1 = a (t − t_a)² / 2; pause freezes the
-    clock; scale 4 runs four simulated seconds per wall second."""
+    """A held u0 = a landing at t_a moves the leader as η0_1 = a (t − t_a)² / 2; pause
+    freezes the clock; scale 4 runs four simulated seconds per wall second."""
     hub = fake_hub()
     with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
         _drive(ws)
         ws.send(json.dumps({"type": "pause"}))
         _states(ws, 0.2)
-        t_a = hub.session.loop.t
+        t_pause = hub.session.loop.t
         ws.send(json.dumps({"type": "u0", "value": [2.0]}))
         ws.send(json.dumps({"type": "scale", "value": 4.0}))
         ws.send(json.dumps({"type": "resume"}))
         frames, _ = _states(ws, 1.5)
         f = frames[-1]
-        assert f["y0"][0] == pytest.approx((f["t"] - t_a) ** 2, rel=1e-9)  # a/2 = 1
+        # the command lands at the end of the first call after the pause (one frame later)
+        (change,) = hub.session.loop.changes
+        assert change.kind == "u0" and t_pause < change.t <= t_pause + 4 * 0.25
+        assert f["y0"][0] == pytest.approx((f["t"] - change.t) ** 2, rel=1e-9)  # a/2 = 1
         assert f["ratio"] == pytest.approx(4.0, rel=0.1)
         ws.send(json.dumps({"type": "pause"}))
         frames, _ = _states(ws, 0.5)

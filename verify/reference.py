@@ -238,9 +238,9 @@ class Reference:
         else:
             tr = np.asarray(L.u0_trace)
             ts = tr[:, 0]
-            u = np.array([np.interp(t, ts, tr[:, 1 + k]) for k in range(self.p)])
+            u = L.u0_numpy(t)
             j = np.searchsorted(ts, t, side="right") - 1
-            if t < ts[0] or t > ts[-1] or j >= len(ts) - 1:
+            if L.u0_hold or t < ts[0] or t > ts[-1] or j >= len(ts) - 1:
                 ud = np.zeros(self.p)
             else:
                 ud = (tr[j + 1, 1:] - tr[j, 1:]) / (ts[j + 1] - ts[j])

@@ -1,0 +1,114 @@
+"""Wiring: a scenario file -> console scenario -> gains -> compiled loop -> session -> server.
+
+``python -m console serve SCENARIO`` (``make console``) calls :func:`open_console` and
+:func:`serve`; tests call :func:`open_console` and run the :class:`~console.server.Hub`
+on a port of their own.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from console.engine import LiveLoop
+from console.record import write_record
+from console.scenario import BIAS_MAX, console_scenario, console_table
+from console.server import Hub, create_app, is_loopback
+from console.session import Session
+from core.artifacts import OUT_ROOT
+from core.errors import UsageError
+
+
+@dataclass
+class Console:
+    """An opened console: its scenario table, loop, session and hub."""
+
+    table: dict
+    loop: LiveLoop
+    session: Session
+    hub: Hub
+    out: Path
+
+
+def open_console(
+    path: str | Path,
+    *,
+    out_root: str | Path | None = None,
+    bias_max: float = BIAS_MAX,
+    fps: float = 30.0,
+    allow_remote: bool = False,
+) -> Console:
+    """Build everything a console needs for the scenario file at ``path``.
+
+    Parameters
+    ----------
+    path : str or Path
+        A scenario file (default of ``make console``: the paper's).
+    out_root : str or Path, optional
+        Where gains and records go (``<out_root>/<name>-console/``; default ``out/``).
+    bias_max : float
+        Largest bias component the operator may add.
+    fps : float
+        Frames per second streamed to the pages (20-60).
+    allow_remote : bool
+        Accept non-loopback peers.
+
+    Raises
+    ------
+    ToolkitError
+        A bad scenario, a failed synthesis or build: one line.
+    """
+    from generated import api
+
+    table = console_table(path, bias_max)
+    sc = console_scenario(path, table)
+    root = Path(out_root or OUT_ROOT)
+    gains, _ = api.ensure_gains(sc, root)
+    built = api.build(sc, gains)
+    loop = LiveLoop(sc, gains, built, bias_max)
+    out = root / sc.name
+    session = Session(loop, recorder=lambda s: _save(s, table, out))
+    hub = Hub(session, loop.limits, fps=fps, allow_remote=allow_remote, title=sc.name)
+    return Console(table, loop, session, hub, out)
+
+
+def _save(session: Session, table: dict, out: Path) -> dict[str, Any]:
+    """Write the run so far under ``out/record-<time>/`` and say where."""
+    loop = session.loop
+    t, X = session.log_array()
+    folder = out / time.strftime("record-%Y%m%d-%H%M%S")
+    rec = write_record(
+        folder,
+        table,
+        loop.changes,
+        loop.nominal.u0.tolist(),
+        loop.nominal.health.tolist(),
+        t,
+        loop.state_table(X),
+        loop.state_columns(),
+        loop.quantum,
+        loop.restarts,
+    )
+    return rec.message()
+
+
+def serve(console: Console, host: str = "127.0.0.1", port: int = 8765) -> None:
+    """Serve the console until interrupted (uvicorn; one process, one event loop).
+
+    Parameters
+    ----------
+    console : Console
+    host : str
+        Address to bind; a non-loopback one needs ``allow_remote``.
+    port : int
+    """
+    import uvicorn
+
+    if not is_loopback(host) and host != "localhost" and not console.hub.allow_remote:
+        raise UsageError(f"--host {host}: not a loopback address (add --allow-remote to serve it)")
+    print(f"console: http://{host}:{port}/  (Ctrl-C stops it)", flush=True)
+    uvicorn.run(
+        create_app(console.hub), host=host, port=port, log_level="warning", ws="websockets-sansio"
+    )
