@@ -22,7 +22,7 @@ from helpers import ROOT, SCENARIOS
 
 from core.errors import ScenarioError
 from core.expressions import Expr
-from core.faults import Fault, Slot, slot_activation
+from core.faults import Fault, Slot, fault_times, slot_activation
 from core.scenario import Scenario, load_scenario, scenario_from_dict
 
 HORIZON = 10.0
@@ -282,6 +282,30 @@ def test_right_continuous_at_each_switch(tmp_path):
         e = sc.followers[0].g.expr
         np.testing.assert_array_equal(_casadi(e, bps, parametric), at)
         np.testing.assert_array_equal(_casadi(e, np.nextafter(bps, -np.inf), parametric), before)
+
+
+def test_random_intermittent_switches_are_where_the_form_switches():
+    """500 seeded random intermittent faults: every switching time of the generic form is
+    right-continuous (new value at it, old value at the float before) and a few units in
+    the last place from the documented onset + k P (+ duty P)."""
+    rng = np.random.default_rng(2026)
+    worst = 0
+    for _ in range(500):
+        fa = Fault(
+            "intermittent",
+            onset=rng.uniform(1.0, 15.0),
+            severity=0.3,
+            period=rng.uniform(0.5, 3.0),
+            duty=rng.uniform(0.2, 0.8),
+        )
+        got = np.array(fault_times((fa,), 20.0, slots=1))
+        nominal = np.array(fa.times(20.0))
+        act = Expr("act", slot_activation(Slot.of(fa)))
+        on = np.tile([1.0, 0.0], got.size // 2)
+        np.testing.assert_array_equal(_values(act, got), on)
+        np.testing.assert_array_equal(_values(act, np.nextafter(got, -np.inf)), 1.0 - on)
+        worst = max(worst, int(np.abs(got.view(np.int64) - nominal.view(np.int64)).max()))
+    assert worst <= 4
 
 
 # --------------------------------------------------------------------------- structure
