@@ -12,14 +12,18 @@ compared with the closed-form solution of η̇0 = A0 η0 + B0 u0 for the held co
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import subprocess
 import sys
+import time
 import tomllib
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from console_fake import running
 from helpers import PAPER
 
 from console.app import open_console
@@ -29,6 +33,7 @@ from core.scenario import load_scenario
 from sweep.sampler import scenario_toml
 
 FPS = 30.0
+CHROMIUM = Path("/usr/bin/chromium")
 #: tick -> message the driving page sends before that tick
 SCRIPT = {
     5: {"type": "u0", "value": [2.0]},
@@ -159,3 +164,54 @@ def test_held_trace_keys(tmp_path: Path) -> None:
     (tmp_path / "s.toml").write_text(scenario_toml(d), encoding="utf-8")
     with pytest.raises(ScenarioError, match=r"leader\.u0_hold: applies to u0_csv only"):
         load_scenario(tmp_path / "s.toml")
+
+
+def test_page_drives_the_compiled_loop(recorded, tmp_path: Path) -> None:
+    """In headless chromium on the compiled loop: holding → (u0 = +α) moves the leader's
+    output along C0 B0-driven η0; the followers follow: over the last second each moves
+    with the leader (displacement within 20 % of the leader's) and stays near its slot."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    if not CHROMIUM.exists():
+        pytest.skip(
+            f"{CHROMIUM} is missing and could not be installed (make chromium: apt-get as root)"
+        )
+    con = recorded[0]
+    con.session.clock = time.perf_counter
+    con.session.handle(parse_message('{"type": "reset"}', con.loop.limits))
+    loop = con.loop
+    with running(con.hub) as port, sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
+        try:
+            page = browser.new_page(viewport={"width": 1200, "height": 720})
+            page.goto(f"http://127.0.0.1:{port}/")
+            page.wait_for_function(
+                "document.getElementById('role').textContent.startsWith('driver')"
+            )
+            time.sleep(2.0)  # the start-up transient (followers start away from their slots)
+            page.keyboard.down("ArrowRight")
+            time.sleep(1.0)
+            y0a, Pa = _positions(loop)
+            time.sleep(1.0)
+            y0b, Pb = _positions(loop)
+            page.keyboard.up("ArrowRight")
+            deadline = time.monotonic() + 20  # the release lands after the integrator call
+            while len(loop.changes) < 2 and not loop.failure and time.monotonic() < deadline:
+                time.sleep(0.05)
+            time.sleep(0.3)
+            page.screenshot(path=str(tmp_path / "console-live.png"))
+            shot = os.environ.get("HITL_CONSOLE_SCREENSHOT")
+            if shot:
+                shutil.copy(tmp_path / "console-live.png", shot)
+        finally:
+            browser.close()
+    u0s = [c.values for c in loop.changes if c.kind == "u0"]
+    assert u0s == [(2.0,), (0.0,)] and not loop.failure
+    step = y0b - y0a
+    assert step[0] > 0.5 and np.allclose(step[1], 2 * step[0])  # y0 = C0 η0 moves along (1, 2)
+    moved = Pb - Pa
+    assert np.all(np.linalg.norm(moved - step, axis=1) < 0.2 * np.linalg.norm(step))
+
+
+def _positions(loop) -> tuple[np.ndarray, np.ndarray]:
+    s = loop.signals(loop.x)
+    return np.array(s["y0"]), np.array(s["p"])
