@@ -579,6 +579,23 @@ def _slim(f: ca.Function, keep: Sequence[str] | None) -> ca.Function:
     )
 
 
+def _parameters_at(sc: Scenario, t: Any, pv: Any) -> tuple[Any, dict, Any, Any, ca.Function]:
+    """Per-agent numbers (npar×N) and their offsets, g/f values, graph weights, the leader."""
+    play = layout_of(sc)
+    poff, npar = param_layout(sc.n, saturated(sc))
+    P = ca.reshape(play.get(pv, "agents"), npar, sc.N)
+    GF = fault_values(sc, play)(t, pv)
+    W = graph_coupling(sc, play, t, pv)
+    return P, poff, GF, W, leader_function(sc.leader, parametric=True)
+
+
+def _u0_literals(sc: Scenario, pv: Any) -> Any:
+    """The literals of the operator's u0 expressions, in input order."""
+    play = layout_of(sc)
+    lits = [play.get(pv, k) for k in play.slices if k.startswith("expr:leader.u0")]
+    return ca.vertcat(*lits) if lits else type(pv)(0, 1)
+
+
 def _network(
     sc: Scenario,
     gains: Gains,
@@ -597,17 +614,10 @@ def _network(
     m, n, N = sc.m, sc.n, sc.N
     filtered = sc.options.derivatives == "filtered"
     lay = make_layout(m, n, N, filtered)
-    play = layout_of(sc)
     gm: GraphMatrices = graph_matrices(sc.graph, gains)
     og = observer_gains(sc, gains)
-    poff, npar = param_layout(n, saturated(sc))
-    P = ca.reshape(play.get(pv, "agents"), npar, N)
-    GF = fault_values(sc, play)(t, pv)
-    W = graph_coupling(sc, play, t, pv)
-    lead = leader_function(sc.leader, parametric=True)
-    u0_lits = [play.get(pv, k) for k in play.slices if k.startswith("expr:leader.u0")]
-    lits = ca.vertcat(*u0_lits) if u0_lits else type(pv)(0, 1)
-    eta0dot, eta0ddot, y0, y0dot, y0ddot, u0, u0dot = lead(t, x[:m], lits)
+    P, poff, GF, W, lead = _parameters_at(sc, t, pv)
+    eta0dot, eta0ddot, y0, y0dot, y0ddot, u0, u0dot = lead(t, x[:m], _u0_literals(sc, pv))
     eta0 = x[:m]
     X = ca.reshape(x[m:], lay.agent_size, N)
     E = X[lay.agent_offsets["eta"], :]
