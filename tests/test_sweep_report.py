@@ -1,0 +1,86 @@
+"""The study report from a results table: the fault scatter data, the per-type table, the
+figures and the rerun command of a sample whose guaranteed check fails.
+
+Independent truths: the drawn values of studies/faults.toml's samples (the sampler, not
+the report) placed in a hand-made results table, counts and medians recomputed here, and
+the rerun command executed: it must write the scenario file it then names.
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from helpers import ROOT
+
+from sweep.report import fault_points, write_report
+from sweep.run import commit_rows, param_columns
+from sweep.sampler import samples
+from sweep.study import load_study
+
+FAULTS = ROOT / "studies" / "faults.toml"
+
+
+def _table(tmp_path):
+    """Rows for samples 0..11 of faults.toml: drawn values real, results made up; id 5 fails
+    a guaranteed row, id 7 is failed."""
+    rows = []
+    for s in samples(load_study(FAULTS), ids=range(12)):
+        row = {"id": s.id, "seed": str(s.seed), "name": s.scenario_data["name"]}
+        row.update(param_columns(s), status="ok", tail_max_et=1e-3 * (s.id + 1))
+        row.update(
+            guaranteed_held=s.id != 5, guaranteed_failed="T2 bound (follower 2)" * (s.id == 5)
+        )
+        row.update(
+            consistency_held=True, n_consistency=1, n_guaranteed=3, **{"t2_entry:1": 2.0 + s.id}
+        )
+        rows.append(row)
+    rows[7]["status"] = "failed: IntegrationError: gave up"
+    path = tmp_path / "faults" / "results.parquet"
+    path.parent.mkdir()
+    info = {"date": "2026-12-01T00:00:00+00:00", "command": "test", "study": str(FAULTS)}
+    return commit_rows(path, pd.DataFrame(), rows, info), path
+
+
+def test_fault_points_are_the_drawn_faults_of_the_ok_samples(tmp_path):
+    table, _ = _table(tmp_path)
+    pts = fault_points(table).set_index("id")
+    truth = {s.id: s.params for s in samples(load_study(FAULTS), ids=range(12))}
+    assert sorted(pts.index) == [k for k in range(12) if k != 7]  # one fault each, failed left out
+    for k, p in pts.iterrows():
+        assert p["type"] == truth[k]["faults[1].type"] and p["onset"] == truth[k]["faults[1].onset"]
+        if p["type"] == "bias":
+            assert np.isnan(p["severity"])
+            assert p["bias"] == np.hypot(*truth[k]["faults[1].amplitude"])
+        else:
+            assert p["severity"] == truth[k]["faults[1].severity"] and np.isnan(p["bias"])
+        assert p["tail_max_et"] == 1e-3 * (k + 1)
+
+
+def test_report_has_the_figures_the_type_table_and_a_working_rerun_command(tmp_path):
+    table, path = _table(tmp_path)
+    text = write_report(path).read_text()
+    for fig in ("tail_error", "theorem2_entry", "error_vs_severity", "error_vs_onset"):
+        data = (path.parent / "figures" / f"{fig}.png").read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and f"figures/{fig}.png" in text
+    ok = table[table["status"] == "ok"]
+    for kind, grp in ok.groupby("param:faults[1].type"):
+        med = np.median(grp["tail_max_et"])
+        assert f"| {kind} | {len(grp)} | {med:.4g} |" in text
+    line = next(x for x in text.splitlines() if x.startswith("- id 5 "))
+    assert "T2 bound (follower 2)" in line
+    write, _, sim = re.search(r"`(.+)`", line).group(1).partition(" && ")
+    argv = shlex.split(write)
+    assert argv[:3] == ["python", "-m", "sweep"]
+    proc = subprocess.run([sys.executable, *argv[1:]], cwd=ROOT, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    scenario = sim.removeprefix("make sim SCENARIO=")
+    written = tomllib.loads(Path(scenario).read_text())
+    assert written["name"] == "faults-0005"
+    assert "- id 7: failed: IntegrationError" in text
