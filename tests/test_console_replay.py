@@ -168,8 +168,10 @@ def test_held_trace_keys(tmp_path: Path) -> None:
 
 def test_page_drives_the_compiled_loop(recorded, tmp_path: Path) -> None:
     """In headless chromium on the compiled loop: holding → (u0 = +α) moves the leader's
-    output along C0 B0-driven η0; the followers follow: over the last second each moves
-    with the leader (displacement within 20 % of the leader's) and stays near its slot."""
+    output y0 = C0 η0 along (1, 2); the followers follow: over the last second of the
+    drive each moves with the leader (displacement within 20 % of the leader's); the fault
+    buttons set g_2 = 0.6 × 0.95 and cut the link 3 <- 2. The screenshot is docs/console.png
+    (HITL_CONSOLE_SCREENSHOT=docs/console.png)."""
     sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
     if not CHROMIUM.exists():
         pytest.skip(
@@ -194,10 +196,12 @@ def test_page_drives_the_compiled_loop(recorded, tmp_path: Path) -> None:
             time.sleep(1.0)
             y0b, Pb = _positions(loop)
             page.keyboard.up("ArrowRight")
-            deadline = time.monotonic() + 20  # the release lands after the integrator call
-            while len(loop.changes) < 2 and not loop.failure and time.monotonic() < deadline:
+            page.click("button[data-health='2']")  # a health fault: g_2 × 0.6
+            page.click("button[data-link='3,2']")  # cut follower 3's link from follower 2
+            deadline = time.monotonic() + 20  # changes land after the integrator call
+            while len(loop.changes) < 4 and not loop.failure and time.monotonic() < deadline:
                 time.sleep(0.05)
-            time.sleep(0.3)
+            time.sleep(1.0)
             page.screenshot(path=str(tmp_path / "console-live.png"))
             shot = os.environ.get("HITL_CONSOLE_SCREENSHOT")
             if shot:
@@ -206,6 +210,8 @@ def test_page_drives_the_compiled_loop(recorded, tmp_path: Path) -> None:
             browser.close()
     u0s = [c.values for c in loop.changes if c.kind == "u0"]
     assert u0s == [(2.0,), (0.0,)] and not loop.failure
+    faults = [(c.kind, c.follower, c.values) for c in loop.changes if c.kind != "u0"]
+    assert ("health", 1, (pytest.approx(0.57),)) in faults and ("link", 2, (0.0,)) in faults
     step = y0b - y0a
     assert step[0] > 0.5 and np.allclose(step[1], 2 * step[0])  # y0 = C0 η0 moves along (1, 2)
     moved = Pb - Pa
