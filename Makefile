@@ -65,6 +65,7 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.bench
 	$(PY) -m benchmarks.steps
 	$(PY) -m benchmarks.precision
+	$(PY) -m benchmarks.study
 
 clean:
 	rm -rf out generated/build .pytest_cache
