@@ -30,7 +30,13 @@ def _parser() -> CliParser:
 
 
 def main(argv: list[str]) -> int:
-    """Entry point; see the module docstring."""
+    """Entry point; see the module docstring.
+
+    Parameters
+    ----------
+    argv : list of str
+        The command line after ``python -m console``.
+    """
     from console.app import open_console, serve
 
     args = _parser().parse_args(argv)

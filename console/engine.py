@@ -131,23 +131,61 @@ class LoopBase:
 
     # ---------------------------------------------------------------- changes
     def set_u0(self, values: tuple[float, ...]) -> None:
-        """Hold the operator's command ``values`` from the end of the next call on."""
+        """Hold the operator's command from the end of the next call on.
+
+        Parameters
+        ----------
+        values : tuple of float
+            u0, p components.
+        """
         self.target.u0 = np.array(values, dtype=float)
 
     def set_health(self, i: int, g: float) -> None:
-        """Set follower i's actuator health g_i (0-based i)."""
+        """Set a follower's actuator health from the end of the next call on.
+
+        Parameters
+        ----------
+        i : int
+            Follower, 0-based.
+        g : float
+            Health g_i in (0, 1].
+        """
         self.target.health[i] = g
 
     def set_bias(self, i: int, values: tuple[float, ...]) -> None:
-        """Set the bias added to follower i's f_i (0-based i)."""
+        """Set the bias added to a follower's f_i from the end of the next call on.
+
+        Parameters
+        ----------
+        i : int
+            Follower, 0-based.
+        values : tuple of float
+            The bias, n components.
+        """
         self.target.bias[i] = values
 
     def set_link(self, i: int, j: int, cut: bool) -> None:
-        """Cut (weight 0) or restore the edge i <- j (j = -1: the leader's pinning)."""
+        """Cut (weight 0) or restore an edge from the end of the next call on.
+
+        Parameters
+        ----------
+        i : int
+            Follower that hears, 0-based.
+        j : int
+            Follower heard, 0-based; -1 for the leader (the pinning a_i0).
+        cut : bool
+            True: weight 0; False: the scenario's weight.
+        """
         self.target.weights[(i, j)] = 0.0 if cut else self.nominal.weights[(i, j)]
 
     def clear(self, i: int) -> None:
-        """Remove every fault of follower i: nominal health, no bias, its links restored."""
+        """Remove every fault of a follower: nominal health, no bias, its links restored.
+
+        Parameters
+        ----------
+        i : int
+            Follower, 0-based.
+        """
         self.target.health[i] = self.nominal.health[i]
         self.target.bias[i] = self.nominal.bias[i]
         for ii, j in self.nominal.weights:
@@ -155,7 +193,13 @@ class LoopBase:
                 self.target.weights[(i, j)] = self.nominal.weights[(i, j)]
 
     def pending(self, t: float) -> list[Change]:
-        """The changes from the current settings to the target, dated ``t``."""
+        """The changes from the current settings to the target.
+
+        Parameters
+        ----------
+        t : float
+            The time they are dated (when they land).
+        """
         old, new = self.settings, self.target
         out = []
         if np.any(old.u0 != new.u0):
@@ -213,11 +257,25 @@ class LoopBase:
         return Advance(res.t[1:], res.x[1:], res.failure, res.steps)
 
     def integrate(self, x0: np.ndarray, t_out: np.ndarray) -> Advance:
-        """States at ``t_out`` (``t_out[0]`` is now, ``x0`` the state there); subclasses."""
+        """States at the output times; subclasses.
+
+        Parameters
+        ----------
+        x0 : ndarray
+            The state at ``t_out[0]`` (now).
+        t_out : ndarray
+            Output times, the first one now.
+        """
         raise NotImplementedError
 
     def signals(self, x: np.ndarray) -> dict[str, Any]:
-        """What the page draws at state ``x`` and the current time; subclasses."""
+        """What the page draws at the current time; subclasses.
+
+        Parameters
+        ----------
+        x : ndarray
+            The state.
+        """
         raise NotImplementedError
 
     def state_columns(self) -> list[str]:
@@ -225,7 +283,13 @@ class LoopBase:
         return [f"x{k}" for k in range(1, self.x.size + 1)]
 
     def state_table(self, X: np.ndarray) -> np.ndarray:
-        """Logged states ``X`` (K, nx) as the columns of :meth:`state_columns`."""
+        """Logged states as the columns of :meth:`state_columns`.
+
+        Parameters
+        ----------
+        X : ndarray, shape (K, nx)
+            States, one row per time.
+        """
         return X
 
 
@@ -374,7 +438,15 @@ class LiveLoop(LoopBase):
 
     # ---------------------------------------------------------------- time
     def integrate(self, x0: np.ndarray, t_out: np.ndarray) -> Advance:
-        """The compiled loop from ``x0`` at ``t_out[0]``; restarts there (a breakpoint)."""
+        """The compiled loop from ``x0`` at ``t_out[0]`` (a restart, as at a breakpoint).
+
+        Parameters
+        ----------
+        x0 : ndarray
+            The state at ``t_out[0]``.
+        t_out : ndarray
+            Output times (multiples of the quantum).
+        """
         from generated.api import integrate_built
 
         traj = integrate_built(self.bound(), x0, t_out, self.settings_int, [])
@@ -382,7 +454,13 @@ class LiveLoop(LoopBase):
         return Advance(traj.t, traj.x, fail, int(traj.stats.get("steps", 0) or 0))
 
     def signals(self, x: np.ndarray) -> dict[str, Any]:
-        """Leader output, followers, formation slots, error norms, ĝ_i, |u_i| at state x."""
+        """Leader output, followers, formation slots, error norms, ĝ_i and |u_i|.
+
+        Parameters
+        ----------
+        x : ndarray
+            The state (at the current time).
+        """
         b = self.bound()
         out = b.outputs_p.call({"t": self.t, "x": x, "p": b.p})
         o = {k: np.asarray(v, dtype=float) for k, v in out.items()}
@@ -416,7 +494,13 @@ class LiveLoop(LoopBase):
         return cols
 
     def state_table(self, X: np.ndarray) -> np.ndarray:
-        """Logged states ``X`` (K, nx) as :meth:`state_columns`'s columns."""
+        """Logged states as :meth:`state_columns`'s columns.
+
+        Parameters
+        ----------
+        X : ndarray, shape (K, nx)
+            States, one row per time.
+        """
         sl = self.layout.slices
         blocks = [X[:, sl["eta0"]]]
         for i in range(self.sc.N):

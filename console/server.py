@@ -47,7 +47,13 @@ MAX_REPLIES = 4096
 
 
 def is_loopback(host: str | None) -> bool:
-    """Whether ``host`` (an address as the socket reports it) is a loopback address."""
+    """Whether an address is a loopback address.
+
+    Parameters
+    ----------
+    host : str or None
+        The address as the socket reports it (``"localhost"`` counts as loopback).
+    """
     if not host:
         return False
     try:
@@ -66,10 +72,24 @@ class Page:
     wake: asyncio.Event = field(default_factory=asyncio.Event)
 
     def push_reply(self, msg: dict[str, Any]) -> None:
+        """Queue a reply (never dropped below :data:`MAX_REPLIES`).
+
+        Parameters
+        ----------
+        msg : dict
+            The JSON object to send.
+        """
         self.replies.append(json.dumps(msg))
         self.wake.set()
 
     def push_frame(self, text: str) -> None:
+        """Replace the frame waiting to be sent by the newest.
+
+        Parameters
+        ----------
+        text : str
+            The frame as JSON text.
+        """
         self.frame = text
         self.wake.set()
 
@@ -136,11 +156,23 @@ class Hub:
 
     # ---------------------------------------------------------------- pages
     def allowed(self, host: str | None) -> bool:
-        """Whether a peer at ``host`` may connect."""
+        """Whether a peer may connect.
+
+        Parameters
+        ----------
+        host : str or None
+            The peer's address.
+        """
         return self.allow_remote or is_loopback(host)
 
     async def serve_page(self, ws: WebSocket) -> None:
-        """One page's socket: accept, read and answer its messages, clean up on close."""
+        """One page's socket: accept, read and answer its messages, clean up on close.
+
+        Parameters
+        ----------
+        ws : WebSocket
+            The page's socket (closed with 1008 if the peer or its origin is refused).
+        """
         if not self.allowed(ws.client.host if ws.client else None) or not _same_origin(ws):
             await ws.close(code=1008)
             return
@@ -169,7 +201,15 @@ class Hub:
                 await writer
 
     def on_message(self, page: Page, raw: str) -> None:
-        """Validate and apply one message; every refusal is an error reply, nothing raises."""
+        """Validate and apply one message; every refusal is an error reply, nothing raises.
+
+        Parameters
+        ----------
+        page : Page
+            The page that sent it (its role decides what it may do).
+        raw : str
+            The message text.
+        """
         try:
             cmd = parse_message(raw, self.limits)
             if cmd.kind == "drive":

@@ -84,6 +84,11 @@ class Session:
     def handle(self, cmd: Command) -> dict[str, Any] | None:
         """Apply one validated command; a reply for the page, or None.
 
+        Parameters
+        ----------
+        cmd : Command
+            From :func:`console.protocol.parse_message`.
+
         Raises
         ------
         MessageError

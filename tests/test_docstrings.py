@@ -21,7 +21,7 @@ from types import ModuleType
 
 import pytest
 
-PACKAGES = ["core", "synthesis", "symbolic", "generated", "verify", "benchmarks", "sweep"]
+PACKAGES = ["core", "synthesis", "symbolic", "generated", "verify", "benchmarks", "sweep", "console"]
 # modules neither imported nor checked
 EXCLUDED_MODULES: set[str] = set()
 
