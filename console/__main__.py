@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import sys
 
-from core.errors import CliParser, run_cli
+from console.server import FPS_RANGE
+from core.errors import CliParser, UsageError, run_cli
 
 
 def _parser() -> CliParser:
@@ -37,9 +38,12 @@ def main(argv: list[str]) -> int:
     argv : list of str
         The command line after ``python -m console``.
     """
-    from console.app import open_console, serve
+    from console.app import check_host, open_console, serve
 
     args = _parser().parse_args(argv)
+    check_host(args.host, args.allow_remote)  # before the (slow) build
+    if not FPS_RANGE[0] <= args.fps <= FPS_RANGE[1]:
+        raise UsageError(f"--fps: {args.fps:g} (expected {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g})")
     con = open_console(
         args.scenario,
         out_root=args.out,

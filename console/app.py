@@ -94,6 +94,25 @@ def _save(session: Session, table: dict, out: Path) -> dict[str, Any]:
     return rec.message()
 
 
+def check_host(host: str, allow_remote: bool) -> None:
+    """Refuse to bind a non-loopback address unless remote peers are allowed.
+
+    Parameters
+    ----------
+    host : str
+        The address to bind.
+    allow_remote : bool
+        ``--allow-remote`` was given.
+
+    Raises
+    ------
+    UsageError
+        One line naming ``--host`` and the fix.
+    """
+    if not is_loopback(host) and not allow_remote:
+        raise UsageError(f"--host {host}: not a loopback address (add --allow-remote to serve it)")
+
+
 def serve(console: Console, host: str = "127.0.0.1", port: int = 8765) -> None:
     """Serve the console until interrupted (uvicorn; one process, one event loop).
 
@@ -106,8 +125,7 @@ def serve(console: Console, host: str = "127.0.0.1", port: int = 8765) -> None:
     """
     import uvicorn
 
-    if not is_loopback(host) and host != "localhost" and not console.hub.allow_remote:
-        raise UsageError(f"--host {host}: not a loopback address (add --allow-remote to serve it)")
+    check_host(host, console.hub.allow_remote)
     print(f"console: http://{host}:{port}/  (Ctrl-C stops it)", flush=True)
     uvicorn.run(
         create_app(console.hub), host=host, port=port, log_level="warning", ws="websockets-sansio"

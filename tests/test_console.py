@@ -345,3 +345,22 @@ def test_page_drives_the_leader_and_followers_follow(tmp_path: Path) -> None:
             assert (tmp_path / "console.png").stat().st_size > 10_000
         finally:
             browser.close()
+
+
+@pytest.mark.parametrize(
+    ("argv", "text"),
+    [
+        (["serve", "scenarios/paper.toml", "--host", "0.0.0.0"], "--host 0.0.0.0: not a loopback"),
+        (["serve", "scenarios/paper.toml", "--fps", "100"], "--fps: 100 (expected 20 to 60)"),
+        (["serve", "missing.toml"], "missing.toml"),
+        (["serve", "scenarios/paper.toml", "--bias-max", "-1"], "--bias-max"),
+    ],
+)
+def test_cli_errors_are_one_line(argv: list[str], text: str, capsys) -> None:
+    """Bad command lines stop before anything is built: one line on stderr, exit 2."""
+    from console.__main__ import main
+    from core.errors import run_cli
+
+    assert run_cli(main, argv) == 2
+    err = capsys.readouterr().err
+    assert text in err and err.count("\n") == 1
