@@ -148,7 +148,18 @@ def _graph_lines(s: Scenario) -> list[str]:
         f"graph        {kind}; edges j->i (i hears j, weight if not 1): "
         + (", ".join(edges) or "none"),
         "             pinned (hear the leader, a_i0): " + ", ".join(pinned),
-    ]
+    ] + _switch_lines(s)
+
+
+def _switch_lines(s: Scenario) -> list[str]:
+    """The ``[[graph.switches]]``, one line per switching time (none without switches)."""
+    lines = []
+    for top in s.graph.topologies()[1:]:
+        links = ", ".join(
+            f"{sw.link} = {_num(sw.weight)}" for sw in s.graph.switches if sw.time == top.t_start
+        )
+        lines.append(f"             from t = {_num(top.t_start)} s: {links}")
+    return lines
 
 
 def _model_lines(s: Scenario, models: dict[tuple[str, tuple], ELModel]) -> list[str]:

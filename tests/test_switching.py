@@ -149,6 +149,14 @@ def test_weights_at_on_a_signed_graph_uses_absolute_degrees(tmp_path):
     np.testing.assert_array_equal(a0h, [1.0, 0.5, 0.0, 0.0, 0.0])
 
 
+def test_summary_lists_each_switching_time(tmp_path):
+    from core.summary import summarize
+
+    text = summarize(load_scenario(paper_with(tmp_path, CUT_RESTORE)))
+    assert "from t = 5 s: a_4,2 = 0" in text and "from t = 10 s: a_4,2 = 1" in text
+    assert "from t = " not in summarize(load_scenario(PAPER))
+
+
 # --------------------------------------------------------------------------- refusals
 def test_cutting_the_only_path_names_the_followers_and_the_time(tmp_path):
     msg = refused(tmp_path, [(5.0, 5, 4, 0.0)])
