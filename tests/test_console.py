@@ -364,3 +364,34 @@ def test_cli_errors_are_one_line(argv: list[str], text: str, capsys) -> None:
     assert run_cli(main, argv) == 2
     err = capsys.readouterr().err
     assert text in err and err.count("\n") == 1
+
+
+def test_record_refuses_a_replay_the_loader_refuses(tmp_path: Path) -> None:
+    """A record whose link cut leaves follower 1 without the leader writes the trace and
+    the log but no scenario, and says why; without such a cut the written scenario loads
+    with the held trace, the health table and the bias fault, their times breakpoints."""
+    from helpers import PAPER
+
+    from console.record import write_record
+    from console.scenario import console_table
+    from core.scenario import load_scenario
+
+    table = console_table(PAPER)
+    t = np.arange(201) * 0.01
+    X = np.zeros((len(t), 2))
+    args = (table, [0.0], [0.95] * 5, t, X, ["a", "b"], 0.01)
+    cut = [Change(1.0, "link", 0, -1, (0.0,))]
+    rec = write_record(tmp_path / "cut", args[0], cut, *args[1:])
+    assert rec.scenario is None and "cannot be reached" in rec.reason
+    assert (tmp_path / "cut" / "u0.csv").exists() and (tmp_path / "cut" / "console.csv").exists()
+    ok = [
+        Change(0.5, "u0", values=(2.0,)),
+        Change(0.7, "health", 2, values=(0.6,)),
+        Change(1.2, "bias", 3, values=(1.0, -1.0)),
+    ]
+    rec = write_record(tmp_path / "ok", args[0], ok, *args[1:])
+    sc = load_scenario(rec.scenario)
+    assert sc.leader.u0_hold and sc.integration.horizon == 2.0
+    assert {0.5, 0.7, 1.2} <= set(sc.breakpoints())
+    assert sc.leader.u0_numpy(0.49)[0] == 0.0 and sc.leader.u0_numpy(0.5)[0] == 2.0
+    assert sc.followers[2].g.expr.numpy(0.7) == pytest.approx(0.6)
