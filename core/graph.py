@@ -316,7 +316,9 @@ class SwitchedGraph(Protocol):
     adjacency: np.ndarray
     pinning: np.ndarray
 
-    def topologies(self) -> tuple[Topology, ...]: ...
+    def topologies(self) -> tuple[Topology, ...]:
+        """The piecewise-constant graph, base graph first (``t_start`` = 0)."""
+        ...
 
 
 def switch_times(switches: tuple[Switch, ...]) -> tuple[float, ...]:
