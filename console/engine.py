@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from console.protocol import Limits
+from core.errors import BuildError
 
 
 @dataclass(frozen=True)
@@ -343,8 +344,12 @@ class LiveLoop(LoopBase):
         from generated import api
         from symbolic.parameters import layout_of
 
-        if built.outputs_p is None:
-            raise ValueError("the build has no parametric functions (rebuild it)")
+        if built.outputs_p is None or built.dag is not None:
+            raise BuildError(
+                f"{sc.path}: the console needs a library that takes runtime parameters; "
+                "the graph-ordered native build (above 20 followers) does not "
+                '(set integration.method = "cvodes")'
+            )
         self.sc, self.gains, self.built = sc, gains, built
         self.settings_int = api.integrator_settings(sc)
         self.p0 = np.asarray(built.p, dtype=float)
@@ -358,7 +363,7 @@ class LiveLoop(LoopBase):
         ]
         self.graph_slice, self.times_slice = lay.slices["graph"], lay.slices["graph_times"]
         if self.times_slice.stop - self.times_slice.start != 1:
-            raise ValueError("the console scenario's graph must have exactly one (no-op) switch")
+            raise BuildError(f"{sc.path}: graph: the console scenario needs exactly one switch")
         A = np.asarray(sc.graph.adjacency, dtype=float)
         a0 = np.asarray(sc.graph.pinning, dtype=float)
         self.h = np.diag(np.atleast_2d(gains.H)).astype(float)
