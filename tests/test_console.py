@@ -321,6 +321,8 @@ def test_page_drives_the_leader_and_followers_follow(tmp_path: Path) -> None:
         browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
         try:
             page = browser.new_page(viewport={"width": 1200, "height": 720})
+            js_errors: list[str] = []
+            page.on("pageerror", lambda exc: js_errors.append(str(exc)))
             page.goto(f"http://127.0.0.1:{port}/")
             page.wait_for_function(
                 "document.getElementById('role').textContent.startsWith('driver')"
@@ -343,6 +345,7 @@ def test_page_drives_the_leader_and_followers_follow(tmp_path: Path) -> None:
             assert loop.settings.health[1] == pytest.approx(0.6)
             assert page.text_content("#t") not in ("", "0")
             assert (tmp_path / "console.png").stat().st_size > 10_000
+            assert js_errors == []  # the page's script ran without an exception
         finally:
             browser.close()
 

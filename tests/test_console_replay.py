@@ -185,6 +185,8 @@ def test_page_drives_the_compiled_loop(recorded, tmp_path: Path) -> None:
         browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
         try:
             page = browser.new_page(viewport={"width": 1200, "height": 720})
+            js_errors: list[str] = []
+            page.on("pageerror", lambda exc: js_errors.append(str(exc)))
             page.goto(f"http://127.0.0.1:{port}/")
             page.wait_for_function(
                 "document.getElementById('role').textContent.startsWith('driver')"
@@ -206,6 +208,7 @@ def test_page_drives_the_compiled_loop(recorded, tmp_path: Path) -> None:
             shot = os.environ.get("HITL_CONSOLE_SCREENSHOT")
             if shot:
                 shutil.copy(tmp_path / "console-live.png", shot)
+            assert js_errors == []  # the page's script ran without an exception
         finally:
             browser.close()
     u0s = [c.values for c in loop.changes if c.kind == "u0"]
