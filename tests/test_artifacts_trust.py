@@ -317,9 +317,15 @@ def test_manifest_of_another_key_is_rebuilt(tmp_path, capsys):
 
 
 def test_swapped_library_gives_the_right_trajectory(env, base_run, tmp_path):
-    """Another scenario's library of the same state size in this key's folder: rebuilt."""
-    other = env["root"] / "k2.toml"
-    other.write_text(SMALL.replace("k2 = 1.0", "k2 = 3.0").replace('"small"', '"k2"'))
+    """Another structure's library of the same state size in this key's folder: rebuilt.
+
+    (Numbers such as k2 are runtime parameters and share the library; the operator's
+    expression form is structure.)
+    """
+    other = env["root"] / "sin.toml"
+    text = SMALL.replace('u0 = ["2*cos(t)"]', 'u0 = ["2*sin(t)"]').replace('"small"', '"sin"')
+    assert text != SMALL
+    other.write_text(text)
     rb = api.run(other, codegen=env["cg"], out_root=tmp_path, progress=False)
     assert rb.trajectory.x.shape == base_run.trajectory.x.shape
     assert not np.array_equal(rb.trajectory.x, base_run.trajectory.x)
