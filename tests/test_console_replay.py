@@ -224,3 +224,25 @@ def test_page_drives_the_compiled_loop(recorded, tmp_path: Path) -> None:
 def _positions(loop) -> tuple[np.ndarray, np.ndarray]:
     s = loop.signals(loop.x)
     return np.array(s["y0"]), np.array(s["p"])
+
+
+def test_integrator_failure_on_the_compiled_loop(tmp_path: Path) -> None:
+    """With a step limit CVODE cannot meet, the frame carries the integrator's reason, a
+    change is refused naming reset, and reset starts again from t = 0 (same library)."""
+    from console.protocol import MessageError
+
+    path = _three_followers(tmp_path)
+    d = tomllib.loads(path.read_text(encoding="utf-8"))
+    d["integration"]["max_steps"] = 20
+    path.write_text(scenario_toml(d), encoding="utf-8")
+    con = open_console(path, out_root=tmp_path / "out")
+    now = [0.0]
+    s = con.session
+    s.clock, s.last_wall = (lambda: now[0]), 0.0
+    now[0] += 0.2
+    frame = s.tick()
+    assert frame["failure"] and frame["t"] < 0.2
+    with pytest.raises(MessageError, match="send reset"):
+        s.handle(parse_message('{"type": "u0", "value": [1.0]}', con.loop.limits))
+    s.handle(parse_message('{"type": "reset"}', con.loop.limits))
+    assert s.frame()["failure"] == "" and s.frame()["t"] == 0.0
