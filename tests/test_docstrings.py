@@ -21,7 +21,16 @@ from types import ModuleType
 
 import pytest
 
-PACKAGES = ["core", "synthesis", "symbolic", "generated", "verify", "benchmarks", "sweep", "console"]
+PACKAGES = [
+    "core",
+    "synthesis",
+    "symbolic",
+    "generated",
+    "verify",
+    "benchmarks",
+    "sweep",
+    "console",
+]
 # modules neither imported nor checked
 EXCLUDED_MODULES: set[str] = set()
 

@@ -15,7 +15,16 @@ import subprocess
 import pytest
 from helpers import ROOT
 
-PACKAGES = ("core", "synthesis", "symbolic", "generated", "verify", "benchmarks", "sweep", "console")
+PACKAGES = (
+    "core",
+    "synthesis",
+    "symbolic",
+    "generated",
+    "verify",
+    "benchmarks",
+    "sweep",
+    "console",
+)
 MAX_LINES = 80
 MARKER = "# fmt" + ": " + "skip"
 
