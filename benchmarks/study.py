@@ -49,6 +49,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from benchmarks.bench import BenchError
 from core.artifacts import OUT_ROOT, atomic_write_text
 from core.errors import run_cli
 
@@ -90,7 +91,8 @@ def _sweep(args: list[str], env: dict[str, str] | None = None) -> float:
         text=True,
     )
     if proc.returncode != 0:
-        raise RuntimeError(f"python -m sweep {' '.join(args)}: {proc.stderr.strip()[-500:]}")
+        last = (proc.stderr.strip().splitlines() or ["?"])[-1]
+        raise BenchError(f"python -m sweep {' '.join(args)} failed: {last}")
     return time.perf_counter() - t0
 
 
