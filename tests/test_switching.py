@@ -377,10 +377,6 @@ def test_link_cut_and_restored_keeps_every_follower_tracking(switching_run):
         assert np.abs(eta[tail] - eta0[tail]).max() < EBAR_TAIL, i
 
 
-@pytest.mark.xfail(
-    reason="the closed loop does not read graph.topologies() yet: remove this marker when it does",
-    strict=True,
-)
 def test_logged_psi_is_the_switched_graphs_coupling(switching_run):
     from symbolic.closed_loop import build_closed_loop
 

@@ -265,10 +265,11 @@ def bounds_table(
 def mark_switching(table: pd.DataFrame, scenario: Scenario) -> pd.DataFrame:
     """The rows of :data:`SWITCHING_CLAIMS` as ``info``, noted, when the graph switches.
 
-    V1 (17) is built on the base graph's Lemma 3 Z and l̄_ii; after the first switch its
-    derivative no longer obeys Theorem 1's inequality, so its rows, the decay rate taken
-    from the base graph's w, the Definition 1 bound that integrates V1, and Lemma 1's
-    reaching time from V2(0) (V2 may jump at a switch) are neither passes nor failures.
+    V1 (17) is built on the base graph's Lemma 3 Z and l̄_ii; after the first switch
+    Theorem 1's inequality for it no longer follows from the proof (it may still hold), so
+    its rows, the decay rate taken from the base graph's w, the Definition 1 bound that
+    integrates V1, and Lemma 1's reaching time from V2(0) (V2 may jump at a switch) are
+    neither passes nor failures.
     Without switches the table is returned unchanged.
 
     Parameters
