@@ -302,7 +302,7 @@ def test_synthesised_lambda1_serves_the_weakest_topology(tmp_path):
 
 # --------------------------------------------------------------------------- verify rows
 def _table(rows: list[tuple[str, str, str]]) -> pd.DataFrame:
-    return pd.DataFrame(rows, columns=["claim", "kind", "note"])
+    return pd.DataFrame(rows, columns=["claim", "kind", "note"]).assign(window="[0, 20] s")
 
 
 def test_switching_marks_the_rows_built_on_V1_and_only_them(tmp_path):
@@ -326,6 +326,17 @@ def test_switching_marks_the_rows_built_on_V1_and_only_them(tmp_path):
     assert all(tb["claim"].str.startswith(SWITCHING_CLAIMS)[:4])
     # without switches nothing changes
     assert mark_switching(tb, load_scenario(PAPER)).equals(tb)
+
+
+def test_paper_rows_are_marked_only_when_a_switch_lies_in_their_window(tmp_path):
+    sc = load_scenario(paper_with(tmp_path, CUT_RESTORE))  # switches at 5 s and 10 s
+    claim = "T2 |chi_si| <= chi_bar_si (31), paper"
+    windows = ["[10, 20] s", "[10.01, 20] s", "[4, 5] s", "[5.5, 9.9] s", "[0, 4.99] s"]
+    tb = pd.DataFrame({"claim": claim, "kind": "paper", "note": "", "window": windows})
+    out = mark_switching(tb, sc)
+    assert list(out["kind"]) == ["info", "paper", "info", "paper", "paper"]
+    assert out["note"][0] == f"{SWITCHING_NOTE} (a switch at t = 10 s lies in the window)"
+    assert out["note"][2].startswith(f"{SWITCHING_NOTE} (a switch at t = 5 s")
 
 
 # --------------------------------------------------------------------------- closed loop
@@ -405,7 +416,9 @@ def test_a_switching_runs_table_marks_the_V1_rows_and_restarts_theorem2(switchin
     tb = bounds_table(sc, res.frame, gains=gains)
     marked = tb["note"].str.startswith(SWITCHING_NOTE)
     on_v1 = tb["claim"].str.startswith(SWITCHING_CLAIMS)
-    assert on_v1.any() and (marked == on_v1).all()
+    # the paper's rows on the tail [5, 10] s hold the restore at 6 s
+    paper_tail = tb["claim"].str.endswith(", paper") & tb["window"].eq("[5, 10] s")
+    assert on_v1.any() and paper_tail.any() and (marked == (on_v1 | paper_tail)).all()
     assert set(tb.loc[marked, "kind"]) == {"info"}
     # Theorem 2's provable windows start after the last switch (6 s), not before
     assert (_provable_starts(tb) > 6.0).all()

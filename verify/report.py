@@ -359,7 +359,8 @@ def switching_statement(sc: Scenario, table: pd.DataFrame) -> list[str]:
         "The graph switches (`[[graph.switches]]`, outside the paper's theorems): "
         + "; ".join(held)
         + f". The {n} rows built on V1 of the base graph (Theorem 1's dV1/dt and decay rate, "
-        "the derived Definition 1 bound) and Lemma 1's reaching time from V2(0) are shown as "
+        "the derived Definition 1 bound), Lemma 1's reaching time from V2(0) and the paper's "
+        "rows whose window holds a switch (they measure its transient) are shown as "
         "`info` with the note 'invalidated by switching topology'; Theorem 2's provable rows "
         f"restart their comparison lemma after the last switch ({tops[-1].t_start:g} s).",
         "",

@@ -269,7 +269,8 @@ def mark_switching(table: pd.DataFrame, scenario: Scenario) -> pd.DataFrame:
     Theorem 1's inequality for it no longer follows from the proof (it may still hold), so
     its rows, the decay rate taken from the base graph's w, the Definition 1 bound that
     integrates V1, and Lemma 1's reaching time from V2(0) (V2 may jump at a switch) are
-    neither passes nor failures.
+    neither passes nor failures. So are the paper's rows (asymptotic claims measured on a
+    window) whose window holds a switch: there they measure the switch's transient.
     Without switches the table is returned unchanged.
 
     Parameters
@@ -283,10 +284,32 @@ def mark_switching(table: pd.DataFrame, scenario: Scenario) -> pd.DataFrame:
     if not times:
         return table
     out = table.copy()
-    sel = out["claim"].str.startswith(SWITCHING_CLAIMS)
-    note = f"{SWITCHING_NOTE} (first switch at t = {times[0]:g} s)"
-    out.loc[sel, "kind"] = "info"
-    out.loc[sel, "note"] = [f"{note}; {n}" if n else note for n in out.loc[sel, "note"]]
+    notes = {}
+    for k, (claim, kind, window) in enumerate(
+        zip(out["claim"], out["kind"], _windows(out), strict=True)
+    ):
+        inside = [ts for ts in times if window[0] <= ts <= window[1]]
+        if claim.startswith(SWITCHING_CLAIMS):
+            notes[k] = f"{SWITCHING_NOTE} (first switch at t = {times[0]:g} s)"
+        elif kind == "paper" and inside:
+            notes[k] = f"{SWITCHING_NOTE} (a switch at t = {inside[0]:g} s lies in the window)"
+    for k, note in notes.items():
+        old = out.iloc[k, out.columns.get_loc("note")]
+        out.iloc[k, out.columns.get_loc("kind")] = "info"
+        out.iloc[k, out.columns.get_loc("note")] = f"{note}; {old}" if old else note
+    return out
+
+
+def _windows(table: pd.DataFrame) -> list[tuple[float, float]]:
+    """Each row's window ``[a, b] s`` as numbers (an empty interval when it has none)."""
+    col = table["window"] if "window" in table else pd.Series([""] * len(table))
+    parts = col.astype(str).str.extract(r"\[\s*([^,\]]+),\s*([^\]]+)\]")
+    out = []
+    for a, b in zip(parts[0], parts[1], strict=True):
+        try:
+            out.append((float(a), float(b)))
+        except (TypeError, ValueError):
+            out.append((math.inf, -math.inf))
     return out
 
 
