@@ -185,6 +185,12 @@ class Reference:
         self.h = np.diag(np.atleast_2d(gn.H)).astype(float)
         self.LB = np.diag(np.abs(A).sum(1) + self.a0) - A
         self.a0h = self.a0 * self.h
+        # a switching graph: (t_start, L + B, a0 ∘ h) of every topology, h of the gains
+        self.tops = [
+            (tp.t_start, np.diag(np.abs(tp.adjacency).sum(1) + tp.pinning) - tp.adjacency)
+            + (tp.pinning * self.h,)
+            for tp in sc.graph.topologies()
+        ]
         o, c = sc.observer, sc.controller
         self.alpha_sum = np.asarray(o.alpha1) + np.asarray(o.alpha1_bar)
         self.phi_min = float(o.phi_min)
@@ -376,7 +382,7 @@ class Reference:
         """
         S = self.split(x)
         u0, u0d, e0d, e0dd = self.leader(t, S["eta0"])
-        obs = self._observer(S, e0d, e0dd)
+        obs = self._observer(S, e0d, e0dd, t)
         Ed, Edd, Eddd = obs["etadot"], obs["etaddot"], obs["eta3dot"]
         b, bd, bdd = self.formation(Ed, Edd, Eddd)
         out: dict[str, np.ndarray] = {}
@@ -399,8 +405,20 @@ class Reference:
         out.update(Psi=ctl["Psi"], u=ctl["u"], qdot=qd, u0=u0, u0dot=u0d)
         return out
 
+    def weights(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(L + B, a0 ∘ h)`` of the topology that holds at ``t`` (right-continuous).
+
+        Parameters
+        ----------
+        t : float
+            Time.
+        """
+        if len(self.tops) == 1:
+            return self.LB, self.a0h
+        return next(tp for tp in reversed(self.tops) if tp[0] <= t)[1:]
+
     def _observer(
-        self, S: dict[str, np.ndarray], e0d: np.ndarray, e0dd: np.ndarray
+        self, S: dict[str, np.ndarray], e0d: np.ndarray, e0dd: np.ndarray, t: float = 0.0
     ) -> dict[str, np.ndarray]:
         """The distributed observer's rates and its oracle derivatives η̇_i, η̈_i, η⃛_i.
 
@@ -410,11 +428,14 @@ class Reference:
             The state's named views (:meth:`split`).
         e0d, e0dd : ndarray
             η̇0 and η̈0 of the leader.
+        t : float
+            Time (picks the topology of a switching graph).
         """
         A0, B0, C0 = self.A0, self.B0, self.C0
         y0, y0d, y0dd = C0 @ S["eta0"], C0 @ e0d, C0 @ e0dd
         E, mu, phi = S["eta"], S["mu"], S["phi"]
-        LB, a0h = self.LB, self.a0h[:, None]
+        LB, a0h = self.weights(t)
+        a0h = a0h[:, None]
         # eq. (6): ψ_i = Σ_j (|a_ij| C0η_i − a_ij C0η_j) + a_i0 (C0η_i − h_i y0)
         psi = LB @ E @ C0.T - a0h * y0
         ehat = mu + psi @ self.Gamma.T  # eq. (7)
