@@ -9,10 +9,14 @@ and with the printed one (χᵀMΨ), which must make it fail.
 
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
+
 import numpy as np
 import pytest
 from helpers import integrate, paper_loop, printed_law_ode, trajectory_frame
 
+from verify import lyapunov as L
 from verify.bounds import theorem1_rates
 from verify.lyapunov import (
     check_theorem1,
@@ -137,3 +141,116 @@ def test_states_read_back_from_the_trajectory_csv_columns(loop):
     sc, _, cl, grid, X = loop
     df = trajectory_frame(sc, cl, grid, X)
     np.testing.assert_array_equal(states_from_frame(cl, sc, df), X)
+
+
+# ------------------------------------------------- per-structure Functions against the MX path
+def _mx_path(cl):
+    """The same closed loop without its parametric Functions: verify's MX path."""
+    return dataclasses.replace(cl, parametric=None)
+
+
+def _assert_same(new: np.ndarray, old: np.ndarray) -> None:
+    """Equal to rounding: |new − old| ≤ 1e-12 of the largest |old| (exactly equal when 0)."""
+    scale = float(np.max(np.abs(old)))
+    assert np.all(np.isfinite(new))
+    assert np.max(np.abs(new - old)) <= 1e-12 * scale, np.max(np.abs(new - old)) / scale
+
+
+def _assert_checks_equal(sc, gains, cl, t, X) -> None:
+    """Theorem 1/2 sides and every output: fast path == MX path."""
+    r = theorem1_rates(sc, gains)
+    new1, old1 = (
+        check_theorem1(cl, t, X, r.supported),
+        check_theorem1(_mx_path(cl), t, X, r.supported),
+    )
+    _assert_same(new1.lhs, old1.lhs)
+    _assert_same(new1.rhs, old1.rhs)
+    assert np.array_equal(new1.holds, old1.holds)
+    for new, old in zip(
+        check_theorem2(cl, sc, t, X), check_theorem2(_mx_path(cl), sc, t, X), strict=True
+    ):
+        _assert_same(new.lhs, old.lhs)
+        _assert_same(new.rhs, old.rhs)
+        assert np.array_equal(new.holds, old.holds)
+    new_o, old_o = outputs_at(cl, t, X), outputs_at(_mx_path(cl), t, X)
+    assert new_o.keys() == old_o.keys()
+    for k in old_o:
+        _assert_same(new_o[k], old_o[k])
+
+
+@pytest.mark.parametrize("name", ["V1", "V2"])
+def test_fast_vdot_matches_finite_difference_along_trajectory(loop, name, monkeypatch):
+    """The per-structure (t, x, p) Function's V̇ against a central difference of its own V."""
+    monkeypatch.setattr(L, "COMPILE_FROM_USE", 10**9)
+    L.clear_cache()
+    sc, _, cl, grid, X = loop
+    V, Vd = L.evaluate_p(L.fast_functions(cl), name, grid, X, cl.p0)[:2]
+    V, Vd = V[:, :, 0], Vd[:, :, 0]
+    for tc in T_CHECK:
+        k, kp, km = _at(grid, tc), _at(grid, tc + H), _at(grid, tc - H)
+        fd = (V[kp] - V[km]) / (grid[kp] - grid[km])
+        np.testing.assert_allclose(Vd[k], fd, rtol=1e-5, atol=1e-5 * np.abs(V[k]).max())
+
+
+def test_fast_path_equals_mx_path_on_the_paper_scenario(loop, monkeypatch):
+    monkeypatch.setattr(L, "COMPILE_FROM_USE", 10**9)  # SX virtual machine
+    L.clear_cache()
+    sc, gains, cl, grid, X = loop
+    _assert_checks_equal(sc, gains, cl, grid, X)
+    assert not L.fast_functions(cl).compiled
+
+
+@pytest.fixture(scope="module")
+def fault_runs(tmp_path_factory):
+    """Two samples of studies/faults.toml (one structure), simulated by the native library."""
+    from generated import api
+    from sweep.sampler import make_sample
+    from sweep.study import load_study
+
+    out = tmp_path_factory.mktemp("faults")
+    study = load_study(Path(__file__).resolve().parents[1] / "studies" / "faults.toml")
+    runs = []
+    for k in (1, 2):
+        sc = make_sample(study, k).scenario
+        gains, _ = api.ensure_gains(sc, out)
+        codegen = api.resolve_codegen(sc.N)
+        built = api.build(sc, gains, sc.integration.method, codegen)
+        traj = api.simulate(built, sc, api.integrator_settings(sc, sc.integration.method, codegen))
+        traj.raise_if_incomplete()
+        runs.append((sc, gains, built.closed_loop, traj.t, traj.x))
+    return runs
+
+
+@pytest.mark.parametrize("compile_from", [10**9, 1], ids=["sx", "compiled"])
+def test_fast_path_equals_mx_path_on_fault_samples(fault_runs, compile_from, monkeypatch):
+    """Both samples go through the Functions built for the first, each with its own p."""
+    monkeypatch.setattr(L, "COMPILE_FROM_USE", compile_from)
+    L.clear_cache()
+    (*_, cl1, _, _), (*_, cl2, _, _) = fault_runs
+    assert not np.array_equal(cl1.p0, cl2.p0)  # different faults: different numbers in p
+    for sc, gains, cl, t, X in fault_runs:
+        _assert_checks_equal(sc, gains, cl, t, X)
+    entries = {id(L.fast_functions(run[2])) for run in fault_runs}
+    assert len(entries) == 1  # one structure, one set of Functions
+    entry = L.fast_functions(fault_runs[0][2])
+    assert entry.compiled == (compile_from == 1)
+    assert all(f.is_a("SXFunction") != entry.compiled for f in entry.functions.values())
+
+
+def test_closed_loop_of_a_second_sample_reuses_the_first_structure(fault_runs):
+    """verify's closed loop for the second sample: its own numbers on the first's Functions."""
+    from symbolic.closed_loop import build_closed_loop
+
+    L.clear_cache()
+    (sc1, g1, *_), (sc2, g2, _, t, X) = fault_runs
+    first = L.closed_loop(sc1, g1)
+    second = L.closed_loop(sc2, g2)
+    assert second.parametric is first.parametric
+    fresh = build_closed_loop(sc2, g2)
+    np.testing.assert_array_equal(second.p0, fresh.p0)
+    np.testing.assert_array_equal(second.x0, fresh.x0)
+    k = len(t) // 2
+    got = second.outputs(t[k], X[k])
+    want = fresh.outputs(t[k], X[k])
+    for a, b in zip(got, want, strict=True):
+        _assert_same(np.asarray(a), np.asarray(b))

@@ -9,18 +9,39 @@ Theorem 1 (eq. (27)): V̇1 ≤ −δ̃ V1; with the φ floor φ_min > 0, V̇1 �
 Theorem 2 (eqs. (36)–(38)): per follower,
 V̇2i ≤ −χᵀKχ − ½k2‖θ̂ − d‖² + ½k2‖d‖² (+ Σ_r θ̂_r(|χ_r| − χ_r sgn_ε(χ_r)) with a boundary
 layer; + the σ-modification's exact term −(gσ/γ)(ĝ − 1/g)(ĝ − ĝ0) when that law is on).
+
+Speed (docs/verification.md, 'Evaluation cost'): for a closed loop with runtime parameters
+(``cl.parametric``) the Functions evaluated along a trajectory, ``(t, x, p) -> (V1, V̇1)``,
+``(t, x, p) -> (V2, V̇2, χ)`` and the outputs, are built once per structure key from the
+parametric loop, expanded to SX, kept in this process (:func:`fast_functions`) and mapped
+over the output times with the run's own p as a non-mapped input; from the
+:data:`COMPILE_FROM_USE`-th verification of one structure in a process (a study) they are
+compiled to C through the content-addressed build cache. A closed loop without
+``parametric``, or a check with another vector field (``ode=``), takes the MX path
+(:func:`lyapunov_derivative`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import hashlib
+import sys
+from collections import OrderedDict
+from dataclasses import dataclass, field
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
+from core.errors import BuildError
 from core.scenario import Scenario
 from verify.bounds import VerifyConfig, VerifyError
+
+#: a structure's verify Functions are compiled to C from its this-many-th verification in one
+#: process: a study's samples share one structure, a single run (one use) stays in CasADi's SX
+#: virtual machine (docs/verification.md, 'Evaluation cost')
+COMPILE_FROM_USE = 2
+#: structures whose Functions are kept per process (a random-graph study has one per sample)
+CACHE_SIZE = 8
 
 
 @dataclass(frozen=True)
@@ -167,6 +188,11 @@ def evaluate(fun: ca.Function, t: np.ndarray, X: np.ndarray) -> list[np.ndarray]
     """
     K = len(t)
     res = fun.map(K)(np.asarray(t, dtype=float).reshape(1, K), np.asarray(X, dtype=float).T)
+    return _blocks(fun, res, K)
+
+
+def _blocks(fun: ca.Function, res: Any, K: int) -> list[np.ndarray]:
+    """A K-fold map's outputs as one (K, rows, cols) array per output of ``fun``."""
     res = res if isinstance(res, tuple | list) else [res]
     out = []
     for j, r in enumerate(res):
@@ -174,6 +200,241 @@ def evaluate(fun: ca.Function, t: np.ndarray, X: np.ndarray) -> list[np.ndarray]
         a = np.asarray(ca.DM(r).full(), dtype=float)  # rows × (cols·K), sample k in block k
         out.append(a.reshape(rows, K, cols).transpose(1, 0, 2))
     return out
+
+
+# ----------------------------------------------------------- per-structure Functions (fast path)
+@dataclass
+class FastFunctions:
+    """The verify Functions of one structure, with p an input (:func:`fast_functions`).
+
+    Attributes
+    ----------
+    functions : dict
+        ``"V1"``: ``(t, x, p) -> (V1, V1_dot)``; ``"V2"``: ``(t, x, p) -> (V2, V2_dot, chi)``;
+        ``"outputs"``: ``(t, x, p) -> outputs``. SX (or MX when the loop cannot be expanded)
+        until compiled, then the compiled library's Functions.
+    runs : set of str
+        Digests of the distinct runs (p, x(0), output times) verified with these Functions
+        in this process, counted until they are compiled.
+    compiled : bool
+        Whether :attr:`functions` come from a compiled library.
+    maps : dict
+        ``(name, K)`` -> the K-fold serial map with p not mapped.
+    """
+
+    functions: dict[str, ca.Function]
+    runs: set[str] = field(default_factory=set)
+    compiled: bool = False
+    maps: dict[tuple[str, int], ca.Function] = field(default_factory=dict)
+
+
+_FAST: OrderedDict[str, FastFunctions] = OrderedDict()
+_PARAMETRIC: OrderedDict[str, Any] = OrderedDict()
+
+
+def clear_cache() -> None:
+    """Forget every structure's verify Functions and closed loop kept in this process."""
+    _FAST.clear()
+    _PARAMETRIC.clear()
+    _LAST_INPUTS.clear()
+
+
+def _remember(cache: OrderedDict, key: str, value: Any) -> Any:
+    """Put ``value`` in the LRU ``cache`` under ``key`` (at most :data:`CACHE_SIZE` entries)."""
+    cache[key] = value
+    cache.move_to_end(key)
+    while len(cache) > CACHE_SIZE:
+        cache.popitem(last=False)
+    return value
+
+
+def _expanded(f: ca.Function) -> ca.Function:
+    """``f`` as SX when it expands (every block of the loop does), else ``f`` itself."""
+    try:
+        return f.expand()
+    except RuntimeError:  # e.g. a call CasADi cannot expand: the MX Function still works
+        return f
+
+
+def _derivative_p(par: Any, nx: int, name: str, extra: tuple[str, ...] = ()) -> ca.Function:
+    """``(t, x, p) -> (V, V̇, *extra)`` from the parametric outputs and ode, SX when possible."""
+    outs_f, ode_f = _expanded(par.outputs), _expanded(par.ode)
+    Sym = ca.SX if outs_f.is_a("SXFunction") and ode_f.is_a("SXFunction") else ca.MX
+    t, x, p = Sym.sym("t"), Sym.sym("x", nx), Sym.sym("p", par.layout.size)
+    outs = dict(zip(outs_f.name_out(), outs_f.call([t, x, p]), strict=True))
+    if name not in outs:
+        raise VerifyError(
+            f"closed loop has no output {name!r} (outputs: {', '.join(outs)}); update verify"
+        )
+    V = ca.vec(outs[name])
+    xdot = ode_f.call([t, x, p])[0]
+    # the same exact derivative along the flow as lyapunov_derivative: ∂V/∂x · f + ∂V/∂t
+    Vdot = ca.jtimes(V, x, xdot) + ca.jacobian(V, t)
+    return ca.Function(
+        f"verify_{name}_dot",
+        [t, x, p],
+        [V, Vdot, *(outs[e] for e in extra)],
+        ["t", "x", "p"],
+        [name, f"{name}_dot", *extra],
+    )
+
+
+def fast_functions(cl: Any, run: str = "") -> FastFunctions:
+    """The per-structure verify Functions of ``cl`` (built on first use, then reused).
+
+    Parameters
+    ----------
+    cl : ClosedLoop
+        A closed loop with ``parametric`` (its structure key names the cache entry).
+    run : str
+        Identifies the run being verified (:func:`run_digest`); the several checks of one
+        run count once.
+
+    Returns
+    -------
+    FastFunctions
+        From the :data:`COMPILE_FROM_USE`-th distinct run of the structure its Functions
+        are compiled to C (:func:`generated.codegen.build_library`, content-hash cache).
+    """
+    par = cl.parametric
+    entry = _FAST.get(par.structure_key)
+    if entry is None:
+        nx = cl.layout.nx
+        funs = {
+            "V1": _derivative_p(par, nx, "V1"),
+            "V2": _derivative_p(par, nx, "V2", ("chi",)),
+            "outputs": _expanded(par.outputs),
+        }
+        entry = FastFunctions(funs)
+    _remember(_FAST, par.structure_key, entry)
+    if not entry.compiled:
+        entry.runs.add(run)
+        if len(entry.runs) >= COMPILE_FROM_USE:
+            _compile(entry)
+    return entry
+
+
+def _compile(entry: FastFunctions) -> None:
+    """Replace ``entry``'s SX Functions by their compiled C (kept SX if gcc fails)."""
+    from generated.codegen import build_library, renamed
+
+    entry.compiled = True  # tried once per structure and process, whatever the outcome
+    if not all(f.is_a("SXFunction") for f in entry.functions.values()):
+        return  # MX that does not expand: C would not be faster than its virtual machine
+    named = {k: renamed(f, f"verify_{k}") for k, f in entry.functions.items()}
+    try:
+        lib = build_library(list(named.values()))
+    except BuildError as exc:
+        print(f"verify: evaluating in CasADi, not compiled ({exc})", file=sys.stderr)
+        return
+    entry.functions = {k: lib.function(f.name()) for k, f in named.items()}
+    entry.maps.clear()
+
+
+def evaluate_p(
+    entry: FastFunctions, name: str, t: np.ndarray, X: np.ndarray, p: np.ndarray
+) -> list[np.ndarray]:
+    """Evaluate ``entry.functions[name]`` at K samples with one parameter vector p.
+
+    Parameters
+    ----------
+    entry : FastFunctions
+        From :func:`fast_functions`.
+    name : str
+        ``"V1"``, ``"V2"`` or ``"outputs"``.
+    t : ndarray
+        K sample times.
+    X : ndarray
+        (K, nx) states at those times.
+    p : ndarray
+        The run's parameter vector (``cl.p0``), the same at every sample.
+
+    Returns
+    -------
+    list of ndarray
+        One (K, rows, cols) array per output.
+    """
+    fun = entry.functions[name]
+    K = len(t)
+    fmap = entry.maps.get((name, K))
+    if fmap is None:  # p is not mapped: one copy serves the K samples
+        fmap = entry.maps[(name, K)] = fun.map(f"{fun.name()}_map", "serial", K, [2], [])
+    res = fmap.call([*_casadi_inputs(t, X), ca.DM(np.asarray(p, dtype=float))])
+    return _blocks(fun, res, K)
+
+
+_LAST_INPUTS: dict[str, tuple[ca.DM, ca.DM]] = {}
+
+
+def _casadi_inputs(t: np.ndarray, X: np.ndarray) -> tuple[ca.DM, ca.DM]:
+    """(1×K times, nx×K states) as DM, the last conversion reused for identical bytes.
+
+    Converting 2001 states to a DM costs more than evaluating the compiled V̇1 at them;
+    one run's checks (three V1 rates, V2) convert once. The key is the SHA-256 of the
+    bytes themselves, so changed numbers are always converted again.
+    """
+    t = np.ascontiguousarray(t, dtype=float)
+    X = np.ascontiguousarray(X, dtype=float)
+    h = hashlib.sha256(t.tobytes())
+    h.update(X.tobytes())
+    h.update(repr(X.shape).encode())
+    key = h.hexdigest()
+    if key not in _LAST_INPUTS:
+        _LAST_INPUTS.clear()
+        _LAST_INPUTS[key] = (ca.DM(t.reshape(1, -1)), ca.DM(X.T))
+    return _LAST_INPUTS[key]
+
+
+def _fast(cl: Any, ode: ca.Function | None, t: np.ndarray, X: np.ndarray) -> FastFunctions | None:
+    """The fast path's Functions for ``cl``, or None when the MX path must be taken."""
+    if ode is not None or getattr(cl, "parametric", None) is None or cl.p0 is None:
+        return None
+    return fast_functions(cl, run_digest(cl.p0, t, X))
+
+
+def run_digest(p: np.ndarray, t: np.ndarray, X: np.ndarray) -> str:
+    """A digest of a run: its parameters, first state and output times (not the whole X).
+
+    Parameters
+    ----------
+    p : ndarray
+        Parameter vector.
+    t : ndarray
+        Output times.
+    X : ndarray
+        (K, nx) states.
+    """
+    h = hashlib.sha256(np.asarray(p, dtype=float).tobytes())
+    h.update(np.asarray(t, dtype=float).tobytes())
+    if len(X):
+        h.update(np.asarray(X[0], dtype=float).tobytes())
+    return h.hexdigest()
+
+
+def closed_loop(sc: Scenario, gains: Any) -> Any:
+    """The closed loop of ``sc``, its parametric Functions reused per structure in this process.
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+
+    Returns
+    -------
+    ClosedLoop
+        :func:`symbolic.closed_loop.bind` of the cached parametric loop with ``sc``'s
+        numbers, or a new :func:`symbolic.closed_loop.build_closed_loop` for a new structure.
+    """
+    from symbolic.closed_loop import bind, build_closed_loop
+    from symbolic.parameters import structure_key
+
+    par = _PARAMETRIC.get(structure_key(sc, gains))
+    if par is None:
+        cl = build_closed_loop(sc, gains)
+        if cl.parametric is not None:
+            _remember(_PARAMETRIC, cl.parametric.structure_key, cl.parametric)
+        return cl
+    return bind(par, sc, gains)
 
 
 def outputs_at(cl: Any, t: np.ndarray, X: np.ndarray) -> dict[str, np.ndarray]:
@@ -188,7 +449,11 @@ def outputs_at(cl: Any, t: np.ndarray, X: np.ndarray) -> dict[str, np.ndarray]:
     X : ndarray
         (K, nx) states at those times.
     """
-    vals = evaluate(cl.outputs, t, X)
+    fast = _fast(cl, None, t, X)
+    if fast is None:
+        vals = evaluate(cl.outputs, t, X)
+    else:
+        vals = evaluate_p(fast, "outputs", t, X, cl.p0)
     return dict(zip(cl.outputs.name_out(), vals, strict=True))
 
 
@@ -265,7 +530,11 @@ def check_theorem1(
     InequalityCheck
     """
     cfg = config or VerifyConfig()
-    V, Vd = evaluate(lyapunov_derivative(cl, "V1", ode), t, X)
+    fast = _fast(cl, ode, t, X)
+    if fast is None:
+        V, Vd = evaluate(lyapunov_derivative(cl, "V1", ode), t, X)
+    else:
+        V, Vd = evaluate_p(fast, "V1", t, X, cl.p0)
     V, Vd = V[:, 0, 0], Vd[:, 0, 0]
     rhs = -rate * V + offset  # eq. (27); + c_φ with the φ floor
     scale = np.abs(Vd) + rate * np.abs(V) + abs(offset) + 1e-300
@@ -404,9 +673,14 @@ def check_theorem2(
     """
     cfg = config or VerifyConfig()
     t = np.asarray(t, float)
-    V, Vd = evaluate(lyapunov_derivative(cl, "V2", ode), t, X)
+    fast = _fast(cl, ode, t, X)
+    if fast is None:
+        V, Vd = evaluate(lyapunov_derivative(cl, "V2", ode), t, X)
+        vals = outputs_at(cl, t, X)
+    else:
+        V, Vd, chi_all = evaluate_p(fast, "V2", t, X, cl.p0)
+        vals = {"chi": chi_all}
     Vd = Vd[:, :, 0]  # (K, N)
-    vals = outputs_at(cl, t, X)
     out = []
     for i in range(scenario.N):
         chi = agent_block(vals, "chi", i)

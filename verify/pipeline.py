@@ -21,7 +21,7 @@ import pandas as pd
 from core.artifacts import OUT_ROOT
 from core.scenario import Scenario
 from verify.bounds import VerifyConfig, VerifyError, theorem1_floor, theorem1_rates
-from verify.lyapunov import check_theorem1, check_theorem2
+from verify.lyapunov import check_theorem1, check_theorem2, closed_loop
 from verify.report import Verification, ablation_statement
 from verify.table import bounds_table
 
@@ -181,9 +181,7 @@ def verify_run(
     notes = list(run.notes)
     t1, t2 = [], []
     if lyapunov:
-        from symbolic.closed_loop import build_closed_loop
-
-        cl = build_closed_loop(sc, gains)
+        cl = closed_loop(sc, gains)  # the symbolic loop is built once per structure
         X = run.X if run.X is not None else states_from_frame(cl, sc, run.frame)
         t = run.frame["t"].to_numpy(float)
         rates = theorem1_rates(sc, gains)
