@@ -254,3 +254,17 @@ def test_closed_loop_of_a_second_sample_reuses_the_first_structure(fault_runs):
     want = fresh.outputs(t[k], X[k])
     for a, b in zip(got, want, strict=True):
         _assert_same(np.asarray(a), np.asarray(b))
+
+
+def test_another_runs_p_gives_other_values(fault_runs, monkeypatch):
+    """The comparison above sees p: sample 2's states with sample 1's p differ from the MX path."""
+    monkeypatch.setattr(L, "COMPILE_FROM_USE", 10**9)
+    L.clear_cache()
+    (*_, cl1, _, _), (sc2, _, cl2, t, X) = fault_runs
+    entry = L.fast_functions(cl2)
+    wrong = L.evaluate_p(entry, "V2", t, X, cl1.p0)[1][:, :, 0]
+    right = L.evaluate_p(entry, "V2", t, X, cl2.p0)[1][:, :, 0]
+    mx = np.array([c.lhs for c in check_theorem2(_mx_path(cl2), sc2, t, X)]).T
+    _assert_same(right, mx)
+    with pytest.raises(AssertionError):
+        _assert_same(wrong, mx)
