@@ -4,7 +4,10 @@ A short stretch of the paper's closed loop is integrated with CVODES on the
 symbolic model (no generated C, tight tolerances). The exact V̇ by AD is compared
 with a central finite difference of V along that trajectory (only here, in the
 test), and the Theorem 2 inequality is checked with the reconstructed adaptive law
-and with the printed one (χᵀMΨ), which must make it fail.
+and with the printed one (χᵀMΨ), which must make it fail. The per-structure
+(t, x, p) Functions of the fast path are compared with the MX path (AD through the
+closed loop with the numbers fixed) on that stretch and on two native runs of
+studies/faults.toml samples that share one structure.
 """
 
 from __future__ import annotations
