@@ -256,11 +256,13 @@ def _expanded(f: ca.Function) -> ca.Function:
         return f
 
 
-def _derivative_p(par: Any, nx: int, name: str, extra: tuple[str, ...] = ()) -> ca.Function:
-    """``(t, x, p) -> (V, V̇, *extra)`` from the parametric outputs and ode, SX when possible."""
-    outs_f, ode_f = _expanded(par.outputs), _expanded(par.ode)
+def _derivative_p(
+    outs_f: ca.Function, ode_f: ca.Function, name: str, extra: tuple[str, ...] = ()
+) -> ca.Function:
+    """``(t, x, p) -> (V, V̇, *extra)`` from the (t, x, p) outputs and ode, SX when both are."""
     Sym = ca.SX if outs_f.is_a("SXFunction") and ode_f.is_a("SXFunction") else ca.MX
-    t, x, p = Sym.sym("t"), Sym.sym("x", nx), Sym.sym("p", par.layout.size)
+    t = Sym.sym("t")
+    x, p = Sym.sym("x", outs_f.size_in(1)), Sym.sym("p", outs_f.size_in(2))
     outs = dict(zip(outs_f.name_out(), outs_f.call([t, x, p]), strict=True))
     if name not in outs:
         raise VerifyError(
@@ -299,11 +301,11 @@ def fast_functions(cl: Any, run: str = "") -> FastFunctions:
     par = cl.parametric
     entry = _FAST.get(par.structure_key)
     if entry is None:
-        nx = cl.layout.nx
+        outs_f, ode_f = _expanded(par.outputs), _expanded(par.ode)
         funs = {
-            "V1": _derivative_p(par, nx, "V1"),
-            "V2": _derivative_p(par, nx, "V2", ("chi",)),
-            "outputs": _expanded(par.outputs),
+            "V1": _derivative_p(outs_f, ode_f, "V1"),
+            "V2": _derivative_p(outs_f, ode_f, "V2", ("chi",)),
+            "outputs": outs_f,
         }
         entry = FastFunctions(funs)
     _remember(_FAST, par.structure_key, entry)
