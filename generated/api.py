@@ -38,7 +38,14 @@ from core.artifacts import OUT_ROOT, atomic_write_text
 from core.errors import ScenarioError
 from core.scenario import Scenario
 from generated import solvers
-from generated.codegen import CodegenSettings, Library, build_library, check_dyn_signature, renamed
+from generated.codegen import (
+    CodegenSettings,
+    Library,
+    build_library,
+    check_dyn_signature,
+    entry_problem,
+    renamed,
+)
 from generated.gains_cache import GainsInfo, ensure_gains
 from generated.integrate import IntegratorSettings, Trajectory, output_grid
 from generated.meta import LibraryRecord, RunMeta, WallSeconds
@@ -248,8 +255,35 @@ def fix_parameters(f: ca.Function, p: np.ndarray) -> ca.Function:
     return ca.Function(f.name(), ins, f.call(args), names, list(f.name_out()))
 
 
+@dataclass(frozen=True)
+class _Compiled:
+    """What a process keeps of a build for later scenarios of its structure.
+
+    No loaded Function: a library is loaded afresh (after its cache entry is checked
+    again) for every run, so a library replaced on disk is never called from memory.
+    """
+
+    closed_loop: Any
+    library: Library
+    form: str
+
+
 #: compiled builds of this process by (structure key, method, codegen settings)
-_BUILDS: dict[tuple, Built] = {}
+_BUILDS: dict[tuple, _Compiled] = {}
+
+
+def _reuse(c: _Compiled, sc: Scenario, gains: Gains) -> Built | None:
+    """``c``'s library bound to ``sc``; None when its cache entry no longer checks out."""
+    from symbolic.closed_loop import bind
+
+    lib = c.library
+    if entry_problem(lib.folder, lib.key) is not None:
+        return None
+    cl = c.closed_loop
+    cl = bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks)
+    lib = dataclasses.replace(lib, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0)
+    timings = {"symbolic_build": 0.0, "codegen": 0.0, "compile": 0.0}
+    return _loaded(cl, lib, c.form, timings)
 
 
 def build(
@@ -288,7 +322,10 @@ def build(
     cascade = solvers.get(method).prepare(sc, gains)
     key = (structure_key(sc, gains), method, settings) if cascade is None else None
     if closed_loop is None and key in _BUILDS:
-        return _BUILDS[key].bind(sc, gains)
+        reused = _reuse(_BUILDS[key], sc, gains)
+        if reused is not None:
+            return reused
+        del _BUILDS[key]  # its entry changed on disk: build again (the cache says why)
     if closed_loop is None:
         from symbolic.closed_loop import build_closed_loop
 
@@ -297,7 +334,7 @@ def build(
         closed_loop, method, settings, t_symbolic_start=t0, cascade=cascade
     )
     if key is not None and closed_loop.parametric is not None:
-        _BUILDS[key] = built
+        _BUILDS[key] = _Compiled(built.closed_loop, built.library, built.form)
     return built
 
 
@@ -356,12 +393,11 @@ def build_from_closed_loop(
     t0 = time.perf_counter() if t_symbolic_start is None else t_symbolic_start
     form = solver.form
     par = cl.parametric
-    p = np.zeros(0) if par is None else np.asarray(cl.p0, dtype=float)
-    src_dyn, src_out = (cl, cl) if par is None else (par, par)
-    src, name = (src_dyn.dae_dyn, DAE_NAME) if form == "dae" else (src_dyn.ode_dyn, ODE_NAME)
+    src_fns = cl if par is None else par
+    src, name = (src_fns.dae_dyn, DAE_NAME) if form == "dae" else (src_fns.ode_dyn, ODE_NAME)
     check_dyn_signature(src, f"closed loop {form}_dyn")
     dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
-    outs = renamed(src_out.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
+    outs = renamed(src_fns.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
     plan = solver.build(dyn, cl, settings, cascade)
     dag_lib = plan.companion
     t_sym = time.perf_counter() - t0
@@ -376,19 +412,27 @@ def build_from_closed_loop(
         "codegen": lib.codegen_seconds + (dag_lib.codegen_seconds if dag_lib else 0.0),
         "compile": lib.compile_seconds + (dag_lib.compile_seconds if dag_lib else 0.0),
     }
-    dyn_p, outputs_p = lib.function(name), lib.function(OUT_NAME)
-    bound = par is not None
+    return _loaded(cl, lib, form, timings, dag=(dag_lib, plan.data) if dag_lib else None)
+
+
+def _loaded(cl: Any, lib: Library, form: str, timings: dict[str, float], dag: Any = None) -> Built:
+    """Load the closed loop's Functions from ``lib`` and fill in ``cl``'s numbers."""
+    dyn_p = lib.function(DAE_NAME if form == "dae" else ODE_NAME)
+    outputs_p = lib.function(OUT_NAME)
+    if cl.parametric is None:
+        return Built(cl, lib, dyn_p, outputs_p, form, timings, dag=dag)
+    p = np.asarray(cl.p0, dtype=float)
     return Built(
         cl,
         lib,
-        fix_parameters(dyn_p, p) if bound else dyn_p,
-        fix_parameters(outputs_p, p) if bound else outputs_p,
+        fix_parameters(dyn_p, p),
+        fix_parameters(outputs_p, p),
         form,
         timings,
-        dag=(dag_lib, plan.data) if dag_lib else None,
+        dag=dag,
         p=p,
-        dyn_p=dyn_p if bound else None,
-        outputs_p=outputs_p if bound else None,
+        dyn_p=dyn_p,
+        outputs_p=outputs_p,
     )
 
 
