@@ -201,7 +201,12 @@ def test_page_drives_the_compiled_loop(recorded, tmp_path: Path) -> None:
             page.click("button[data-health='2']")  # a health fault: g_2 × 0.6
             page.click("button[data-link='3,2']")  # cut follower 3's link from follower 2
             deadline = time.monotonic() + 20  # changes land after the integrator call
-            while len(loop.changes) < 4 and not loop.failure and time.monotonic() < deadline:
+
+            def landed() -> bool:  # both u0 changes (hold, release) and both faults
+                kinds = [c.kind for c in loop.changes]
+                return kinds.count("u0") >= 2 and len(kinds) >= 4
+
+            while not landed() and not loop.failure and time.monotonic() < deadline:
                 time.sleep(0.05)
             time.sleep(1.0)
             page.screenshot(path=str(tmp_path / "console-live.png"))
@@ -211,8 +216,9 @@ def test_page_drives_the_compiled_loop(recorded, tmp_path: Path) -> None:
             assert js_errors == []  # the page's script ran without an exception
         finally:
             browser.close()
+    assert not loop.failure, loop.failure
     u0s = [c.values for c in loop.changes if c.kind == "u0"]
-    assert u0s == [(2.0,), (0.0,)] and not loop.failure
+    assert u0s == [(2.0,), (0.0,)], [(c.t, c.kind, c.values) for c in loop.changes]
     faults = [(c.kind, c.follower, c.values) for c in loop.changes if c.kind != "u0"]
     assert ("health", 1, (pytest.approx(0.57),)) in faults and ("link", 2, (0.0,)) in faults
     step = y0b - y0a
