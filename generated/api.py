@@ -67,6 +67,7 @@ from generated.trajectory_file import (
     trajectory_frame,
     trajectory_text,
 )
+from symbolic.closed_loop import fix_parameters
 from synthesis.gains import Gains
 
 #: the names other packages use, from this module or re-exported from the modules above
@@ -162,8 +163,8 @@ class Built:
 
     The library takes the closed loop's runtime parameters p as an input
     (:mod:`symbolic.parameters`); :attr:`dyn` and :attr:`outputs` are the library's
-    Functions with :attr:`p` filled in, :meth:`bind` gives the same library bound to
-    another scenario of the same structure.
+    Functions with :attr:`p` filled in; :func:`build` binds the same library to every
+    later scenario of the same structure.
 
     Attributes
     ----------
@@ -199,60 +200,6 @@ class Built:
     p: np.ndarray = field(default_factory=lambda: np.zeros(0))
     dyn_p: ca.Function | None = None
     outputs_p: ca.Function | None = None
-
-    def bind(self, sc: Scenario, gains: Gains) -> Built:
-        """The same library bound to ``sc`` (same structure): new p, x(0) and breakpoints.
-
-        Parameters
-        ----------
-        sc : Scenario
-        gains : Gains
-
-        Raises
-        ------
-        ScenarioError
-            If ``sc``'s structure differs from the library's.
-        """
-        from symbolic.closed_loop import bind
-
-        cl = self.closed_loop
-        if self.dag is not None or cl.parametric is None:
-            raise ScenarioError(sc.path, "structure", "this build cannot be re-bound", "rebuild")
-        cl = bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks)
-        lib = dataclasses.replace(
-            self.library, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0
-        )
-        return dataclasses.replace(
-            self,
-            closed_loop=cl,
-            library=lib,
-            p=cl.p0,
-            dyn=fix_parameters(self.dyn_p, cl.p0),
-            outputs=fix_parameters(self.outputs_p, cl.p0),
-            timings=dict.fromkeys(self.timings, 0.0),
-        )
-
-
-def fix_parameters(f: ca.Function, p: np.ndarray) -> ca.Function:
-    """``f`` with its input ``p`` filled in (kept, empty, in integrator form; else removed).
-
-    Parameters
-    ----------
-    f : casadi.Function
-        A Function with an input named ``p``.
-    p : ndarray
-        Its value.
-    """
-    names = list(f.name_in())
-    k = names.index("p")
-    ins = [ca.MX.sym(n, f.sparsity_in(i)) for i, n in enumerate(names)]
-    args = list(ins)
-    args[k] = ca.DM(np.asarray(p, dtype=float).reshape(-1, 1))
-    if names == list(ca.dyn_in()):
-        ins[k] = ca.MX.sym("p", 0, 1)
-    else:
-        del ins[k], names[k]
-    return ca.Function(f.name(), ins, f.call(args), names, list(f.name_out()))
 
 
 @dataclass(frozen=True)
@@ -296,7 +243,7 @@ def build(
     """Symbolic closed loop -> C -> shared library (cached) -> loaded Functions.
 
     A scenario whose structure (:func:`symbolic.parameters.structure_key`) was built
-    before in this process reuses that build with its own numbers (:meth:`Built.bind`):
+    before in this process reuses that build with its own numbers:
     nothing symbolic, no code generation, no compiler.
 
     Parameters

@@ -735,18 +735,26 @@ def build_closed_loop(scenario: Scenario, gains: Gains, *, assembly: str = "map"
     return bind(parametric, sc, gains, lay, assembly, blocks)
 
 
-def _bound(f: ca.Function, p: np.ndarray, name: str) -> ca.Function:
-    """``f`` with its input ``p`` fixed to the numbers ``p`` (the input kept, empty, in dyn form)."""
-    ins = [ca.MX.sym(k, f.sparsity_in(k)) for k in f.name_in()]
-    k = f.name_in().index("p")
+def fix_parameters(f: ca.Function, p: np.ndarray) -> ca.Function:
+    """``f`` with its input ``p`` filled in (kept, empty, in integrator form; else removed).
+
+    Parameters
+    ----------
+    f : casadi.Function
+        A Function with an input named ``p`` (symbolic, or loaded from a library).
+    p : ndarray
+        Its value.
+    """
+    names = list(f.name_in())
+    k = names.index("p")
+    ins = [ca.MX.sym(n, f.sparsity_in(i)) for i, n in enumerate(names)]
     args = list(ins)
-    args[k] = ca.DM(p)
-    if f.name_in() == ca.dyn_in():
-        ins[k] = ca.MX(0, 1)  # integrator form keeps its five inputs, p empty
+    args[k] = ca.DM(np.asarray(p, dtype=float).reshape(-1, 1))
+    if names == list(ca.dyn_in()):
+        ins[k] = ca.MX.sym("p", 0, 1)  # integrator form keeps its five inputs, p empty
     else:
-        del ins[k]
-    names = [n for n in f.name_in() if n != "p" or f.name_in() == ca.dyn_in()]
-    return ca.Function(name, ins, f.call(args), names, f.name_out())
+        del ins[k], names[k]
+    return ca.Function(f.name(), ins, f.call(args), names, list(f.name_out()))
 
 
 def bind(
@@ -791,14 +799,14 @@ def bind(
         )
     lay = lay or make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered")
     p0 = param_values(sc, gains)
-    outputs = _bound(par.outputs, p0, "outputs")
+    outputs = fix_parameters(par.outputs, p0)
     x0 = initial_state(sc, lay, outputs)
     qdd0 = np.array(outputs(0.0, x0)[outputs.name_out().index("qdot")]).reshape(-1)  # agent-major
     return ClosedLoop(
         layout=lay,
-        ode=_bound(par.ode, p0, "ode"),
-        ode_dyn=_bound(par.ode_dyn, p0, "ode_dyn"),
-        dae_dyn=_bound(par.dae_dyn, p0, "dae_dyn"),
+        ode=fix_parameters(par.ode, p0),
+        ode_dyn=fix_parameters(par.ode_dyn, p0),
+        dae_dyn=fix_parameters(par.dae_dyn, p0),
         outputs=outputs,
         x0=x0,
         z0=qdd0,
