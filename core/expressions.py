@@ -14,6 +14,7 @@ from __future__ import annotations
 import ast
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import casadi as ca
@@ -106,13 +107,20 @@ class Expr:
         where the arguments cross. Used to split an integration at known
         discontinuities; a non-affine argument contributes nothing.
         """
-        out: list[float] = []
-        _collect_breaks(self.node, out)
-        return tuple(sorted(set(out)))
+        return _breakpoints_of(self.node)
 
     def is_constant(self) -> bool:
         """True when the expression does not mention ``t``."""
         return not _mentions_t(self.node)
+
+
+@lru_cache(maxsize=1024)
+def _breakpoints_of(node: tuple) -> tuple[float, ...]:
+    """:meth:`Expr.breakpoints` of a tree, remembered: a scenario asks for the same
+    expressions' breakpoints several times, and a study's samples share most trees."""
+    out: list[float] = []
+    _collect_breaks(node, out)
+    return tuple(sorted(set(out)))
 
 
 def parse_expression(text: Any, *, where: str = "expression") -> Expr:

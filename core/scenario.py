@@ -25,6 +25,7 @@ import stat
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, NamedTuple, TypeVar
 
@@ -992,7 +993,7 @@ def _u0_expressions(ctx: _Ctx, raw: Any, p: int) -> tuple[Expr, ...]:
 def _u0_peak(ctx: _Ctx, u0: tuple[Expr, ...], tgrid: np.ndarray) -> float:
     """sup ‖u0(t)‖ on [0, horizon]; refused when not finite."""
     ts = np.unique(np.concatenate([_times(e, tgrid) for e in u0]))
-    u_peak = _sup(lambda t: np.sqrt(sum(_sample(e, t) ** 2 for e in u0)), ts)
+    u_peak = _expr_sup("norm", u0, ts)
     if not math.isfinite(u_peak):
         raise ctx.err(
             "leader.u0", "is not finite somewhere on [0, horizon]", "a bounded operator input"
@@ -1268,7 +1269,7 @@ def _disturbance(
         )
     f = tuple(ctx.expr(e, f"{key}.f[{r}]") for r, e in enumerate(f_raw))
     f = faulted_bias(f, faults) if slots is None else slotted_bias(f, faults, slots)
-    worst = np.array([_sup(lambda t, e=e: np.abs(_sample(e, t)), _times(e, tgrid)) for e in f])
+    worst = np.array([_expr_sup("abs", (e,), _times(e, tgrid)) for e in f])
     for r, w in enumerate(worst):
         if not math.isfinite(w):
             raise ctx.err(
@@ -1310,6 +1311,30 @@ def _times(e: Expr, tgrid: np.ndarray) -> np.ndarray:
 def _sample(e: Expr, ts: np.ndarray) -> np.ndarray:
     """``e`` evaluated on the times ``ts`` as a float array of the same shape."""
     return np.array(np.broadcast_to(e.numpy(ts), ts.shape), dtype=float)
+
+
+def _signal(kind: str, exprs: tuple[Expr, ...], t: np.ndarray) -> np.ndarray:
+    """``|e|``, ``-e`` or ``e`` of the one expression, or the Euclidean norm (``norm``) of all."""
+    if kind == "norm":
+        return np.sqrt(sum(_sample(e, t) ** 2 for e in exprs))
+    v = _sample(exprs[0], t)
+    return {"abs": np.abs, "neg": np.negative, "pos": np.positive}[kind](v)
+
+
+def _expr_sup(kind: str, exprs: tuple[Expr, ...], ts: np.ndarray) -> float:
+    """:func:`_sup` of :func:`_signal` over ``ts``, remembered for equal expressions and times.
+
+    A study's samples share most of their expressions (only the drawn ones change), and
+    each supremum's refinement costs milliseconds; the value depends only on the
+    expression trees and the times, so an equal key gives the identical number.
+    """
+    return _expr_sup_of(kind, exprs, np.ascontiguousarray(ts, dtype=float).tobytes())
+
+
+@lru_cache(maxsize=512)
+def _expr_sup_of(kind: str, exprs: tuple[Expr, ...], ts_bytes: bytes) -> float:
+    ts = np.frombuffer(ts_bytes, dtype=float)
+    return _sup(lambda t: _signal(kind, exprs, t), ts)
 
 
 def _sup(fun: Callable[[np.ndarray], np.ndarray], ts: np.ndarray) -> float:
@@ -1394,8 +1419,8 @@ def _health(ctx: _Ctx, v: Any, key: str, tgrid: np.ndarray) -> Health:
     else:
         expr = ctx.expr(v, key)
         ts = _times(expr, tgrid)
-        lo = -_sup(lambda t: -_sample(expr, t), ts)
-        hi = _sup(lambda t: _sample(expr, t), ts)
+        lo = -_expr_sup("neg", (expr,), ts)
+        hi = _expr_sup("pos", (expr,), ts)
         if not (math.isfinite(lo) and math.isfinite(hi)):
             raise ctx.err(key, "is not finite somewhere on [0, horizon]", "a value in (0, 1]")
         if not (lo > 0.0 and hi <= 1.0 + 1e-12):
@@ -1480,7 +1505,7 @@ def _faulted(
     breaks = tuple(sorted(set(base.breakpoints) | times))
     extra = [x for b in breaks for x in (b, b - 1e-9, b + 1e-9)]
     ts = np.unique(np.concatenate([_times(expr, tgrid), np.array(extra, dtype=float)]))
-    lo = -_sup(lambda t: -_sample(expr, t), ts[(ts >= 0.0) & (ts <= H)])
+    lo = -_expr_sup("neg", (expr,), ts[(ts >= 0.0) & (ts <= H)])
     if not (math.isfinite(lo) and lo > 0.0):  # cannot happen with severities < 1
         raise ctx.err(f"{key}.faults", f"actuator health reaches {lo:.4g}", "severities below 1")
     return Health(expr=expr, breakpoints=breaks, minimum=float(lo))

@@ -137,6 +137,24 @@ def test_sup_bounds_are_not_undersampled(tmp_path):
     np.testing.assert_allclose(s.followers[0].d, [1.0, 0.5], rtol=1e-10)
 
 
+def test_remembered_supremum_is_the_refined_one(tmp_path):
+    # the loader remembers sup |f| per (expression, times); a second load must hit that
+    # memory and give the number a fresh refinement gives, to the bit
+    import core.scenario as S
+
+    text = set_line(paper_text(), "f", '["sin(7.3*t)", "0.5*cos(3.1*t + 0.2)"]')
+    path = write(tmp_path, text, "ok.toml")
+    S._expr_sup_of.cache_clear()
+    first = load_scenario(path)
+    hits = S._expr_sup_of.cache_info().hits
+    again = load_scenario(path)
+    assert S._expr_sup_of.cache_info().hits > hits
+    grid = np.linspace(0.0, first.integration.horizon, 4001)  # the loader's grid
+    for r, e in enumerate(first.followers[0].f):
+        fresh = S._sup(lambda t, e=e: np.abs(e.numpy(t)), S._times(e, grid))
+        assert again.followers[0].d[r] == first.followers[0].d[r] == fresh
+
+
 def test_health_table_and_expression(tmp_path):
     text = set_line(paper_text(), "g", '"1 - 0.5*step(t - 8)"', count=2)  # followers 1 and 2
     text = set_line(text, "g", "[[0.0, 1.0], [5.0, 0.6], [12.0, 0.8]]")  # then follower 1 again
