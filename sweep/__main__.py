@@ -14,6 +14,7 @@ import json
 import sys
 
 from core.errors import CliParser, UsageError, run_cli
+from sweep.run import MAX_CHUNK
 from sweep.sampler import samples, write_scenario
 from sweep.study import load_study
 
@@ -39,6 +40,12 @@ def main(argv: list[str]) -> int:
     rp.add_argument("--batch", type=int, default=10, help="rows per atomic commit (default 10)")
     rp.add_argument(
         "--workers", type=int, default=None, help="local worker processes (default: cores)"
+    )
+    rp.add_argument(
+        "--chunk",
+        type=int,
+        default=None,
+        help=f"samples per Dask task (default: 4+ tasks per worker, at most {MAX_CHUNK})",
     )
     rp.add_argument(
         "--keep-runs", action="store_true", help="also write each sample's scenario and run files"
@@ -80,6 +87,8 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
     command = " ".join(["python -m sweep", *argv])
     if args.workers is not None and args.workers < 1:
         raise UsageError("--workers: give a number of worker processes >= 1")
+    if args.chunk is not None and args.chunk < 1:
+        raise UsageError("--chunk: give a number of samples per task >= 1")
     path = run_study(
         args.study,
         out_root=args.out or OUT_ROOT,
@@ -88,6 +97,7 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
         command=command,
         workers=args.workers,
         keep=args.keep_runs,
+        chunk=args.chunk,
     )
     print(f"results: {path}")
     print(f"report: {path.parent / 'report.md'}")

@@ -19,6 +19,7 @@ import tempfile
 import time
 import traceback
 import uuid
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import lru_cache
@@ -128,6 +129,27 @@ def run_sample(study_path: str, sample_id: int, folder: str, keep: bool = False)
     row["wall_s"] = time.perf_counter() - t0
     row["finished_utc"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
     return row
+
+
+def run_samples(
+    study_path: str, sample_ids: list[int], folder: str, keep: bool = False
+) -> list[dict[str, Any]]:
+    """:func:`run_sample` for each id in turn: one Dask task runs a chunk of samples, so
+    the scheduler's per-task cost is paid once per chunk (docs/studies.md, 'Execution').
+
+    Parameters
+    ----------
+    study_path, folder, keep
+        As for :func:`run_sample`.
+    sample_ids : list of int
+        The chunk's sample ids.
+
+    Returns
+    -------
+    list of dict
+        One row per id, in the order given.
+    """
+    return [run_sample(study_path, k, folder, keep) for k in sample_ids]
 
 
 def _one_line(exc: BaseException) -> str:
@@ -421,17 +443,42 @@ class RunOptions:
         Rows per atomic commit.
     keep : bool
         Write each sample's scenario file and run (:func:`run_sample`).
+    chunk : int or None
+        Samples per Dask task; None: :func:`chunk_size`.
     """
 
     scheduler: str | None = None
     workers: int | None = None
     batch: int = 10
     keep: bool = False
+    chunk: int | None = None
 
     @property
     def own_cluster(self) -> bool:
         """Whether the run starts (and closes) its own local cluster."""
         return not (self.scheduler or os.environ.get("DASK_SCHEDULER"))
+
+
+#: the most samples one task runs: a chunk costs about this many sample times at the end
+#: of a study, when the other workers may already be idle
+MAX_CHUNK = 8
+
+
+def chunk_size(n_samples: int, n_threads: int) -> int:
+    """Samples per task: at least four tasks per worker thread, at most :data:`MAX_CHUNK`.
+
+    A task costs the scheduler a round trip (a few milliseconds, and the client's
+    process shares the machine's cores with the workers); chunks pay it once for
+    several samples while keeping enough tasks to balance the workers.
+
+    Parameters
+    ----------
+    n_samples : int
+        Samples to run.
+    n_threads : int
+        Worker threads of the cluster.
+    """
+    return max(1, min(MAX_CHUNK, n_samples // max(1, 4 * n_threads)))
 
 
 def _client(scheduler: str | None, workers: int | None = None) -> Any:
@@ -473,6 +520,7 @@ def run_study(
     command: str | None = None,
     workers: int | None = None,
     keep: bool = False,
+    chunk: int | None = None,
 ) -> Path:
     """Run the study's samples not yet in ``results.parquet``; return the results path.
 
@@ -497,6 +545,8 @@ def run_study(
     keep : bool
         Write each sample's scenario file and run files (default: in memory, only the
         results and the report are written).
+    chunk : int, optional
+        Samples per Dask task (default :func:`chunk_size`).
 
     Returns
     -------
@@ -521,7 +571,7 @@ def run_study(
         "study": str(Path(study_path)),
     }
     if todo or not paths.results.is_file():
-        opts = RunOptions(scheduler, workers, batch, keep)
+        opts = RunOptions(scheduler, workers, batch, keep, chunk)
         _execute(str(Path(study_path).resolve()), todo, paths, done, info, opts)
     from sweep.report import write_report
 
@@ -546,7 +596,7 @@ def _execute(
     failures = 0
     try:
         with tqdm(total=len(todo), desc="samples", unit="sample", file=sys.stderr) as bar:
-            for row in _results(client, as_completed, study_path, todo, paths, opts.keep):
+            for row in _results(client, as_completed, study_path, todo, paths, opts):
                 pending.append(row)
                 failures += row["status"] != "ok"
                 bar.update(1)
@@ -561,42 +611,55 @@ def _execute(
 
 
 def _results(
-    client: Any, as_completed: Any, study_path: str, todo: list[int], paths: StudyPaths, keep: bool
+    client: Any,
+    as_completed: Any,
+    study_path: str,
+    todo: list[int],
+    paths: StudyPaths,
+    opts: RunOptions,
 ):
     """Yield rows as tasks finish, keeping about two tasks per worker thread in flight.
 
-    A task that dies with its worker (e.g. a crash inside the compiled library) yields a
-    ``failed`` row for its sample; the study goes on.
+    Each task runs a chunk of samples (:func:`run_samples`, :func:`chunk_size`). A task
+    that dies with its worker (e.g. a crash inside the compiled library) is run again one
+    sample per task, so only the sample that crashes gets a ``failed`` row; the study goes on.
     """
     if not todo:
         return
-    window = max(2, 2 * sum(client.nthreads().values()))
-    queue = iter(todo)
+    threads = sum(client.nthreads().values())
+    size = opts.chunk or chunk_size(len(todo), threads)
+    chunks = deque(todo[k : k + size] for k in range(0, len(todo), size))
+    window = max(2, 2 * threads)
     folder = str(paths.folder.resolve())
     tag = uuid.uuid4().hex[:8]
-    ids: dict[str, int] = {}
+    ids: dict[str, list[int]] = {}
 
-    def submit(k: int) -> Any:
-        key = f"sample-{k}-{tag}"
-        fut = client.submit(run_sample, study_path, k, folder, keep, key=key, pure=False)
-        ids[fut.key] = k
+    def submit(chunk: list[int]) -> Any:
+        key = f"samples-{chunk[0]}x{len(chunk)}-{tag}"
+        fut = client.submit(run_samples, study_path, chunk, folder, opts.keep, key=key, pure=False)
+        ids[fut.key] = chunk
         return fut
 
-    stream = as_completed([submit(k) for _, k in zip(range(window), queue, strict=False)])
+    stream = as_completed([submit(chunks.popleft()) for _ in range(min(window, len(chunks)))])
     for fut in stream:
-        yield _row_of(fut, ids[fut.key])
-        nxt = next(queue, None)
-        if nxt is not None:
-            stream.add(submit(nxt))
+        chunk = ids.pop(fut.key)
+        try:
+            rows = fut.result()
+        except Exception as exc:  # noqa: BLE001 - the worker died or the task was lost
+            if len(chunk) > 1:  # find the sample that fails: each on its own
+                chunks.extendleft([k] for k in reversed(chunk))
+                rows = []
+            else:
+                rows = [_failed_row(chunk[0], exc)]
+        yield from rows
+        while chunks and stream.count() < window:
+            stream.add(submit(chunks.popleft()))
 
 
-def _row_of(fut: Any, sample_id: int) -> dict[str, Any]:
-    """The task's row, or a ``failed`` row when the task itself raised."""
-    try:
-        return fut.result()
-    except Exception as exc:  # noqa: BLE001 - the worker died or the task was lost
-        return {
-            "id": sample_id,
-            "status": f"failed: {_one_line(exc)}",
-            "finished_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-        }
+def _failed_row(sample_id: int, exc: BaseException) -> dict[str, Any]:
+    """The row of a sample whose task raised (its worker died, or the task was lost)."""
+    return {
+        "id": sample_id,
+        "status": f"failed: {_one_line(exc)}",
+        "finished_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+    }

@@ -112,8 +112,8 @@ def test_refused_sample_is_recorded_and_the_study_goes_on(setup):
 
 
 def test_explicit_scheduler_and_written_runs_give_the_same_rows(setup):
-    """ids 1, 3 through a scheduler with keep=True (api.run, files) equal the local
-    in-memory rows of the same samples."""
+    """ids 1, 3 through a scheduler with keep=True (api.run, files), as one task of two
+    samples, equal the local in-memory rows of the same samples (one sample per task)."""
     from distributed import LocalCluster
 
     root = setup["root"]
@@ -128,7 +128,9 @@ def test_explicit_scheduler_and_written_runs_give_the_same_rows(setup):
         setup["mp"].setenv("DASK_SCHEDULER", cluster.scheduler_address)
         try:
             res = pd.read_parquet(
-                run_study(root / "study.toml", out_root=root / "remote", ids=[1, 3], keep=True)
+                run_study(
+                    root / "study.toml", out_root=root / "remote", ids=[1, 3], keep=True, chunk=2
+                )
             )
         finally:
             setup["mp"].delenv("DASK_SCHEDULER")
@@ -261,3 +263,63 @@ def test_report_numbers_and_figures_follow_from_the_results(setup):
     for fig in ("tail_error.png", "theorem2_entry.png"):
         data = (folder / "figures" / fig).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 1000
+
+
+class _Future:
+    def __init__(self, key, rows, crash):
+        self.key, self._rows, self._crash = key, rows, crash
+
+    def result(self):
+        if self._crash:
+            raise RuntimeError("worker died")
+        return self._rows
+
+
+class _Stream:
+    """as_completed over futures that are already done, in submission order."""
+
+    def __init__(self, futures):
+        self._todo = list(futures)
+
+    def add(self, fut):
+        self._todo.append(fut)
+
+    def count(self):
+        return len(self._todo)
+
+    def __iter__(self):
+        while self._todo:
+            yield self._todo.pop(0)
+
+
+class _Client:
+    """Runs nothing: a task's rows are its ids, and any task holding ``crash`` dies."""
+
+    def __init__(self, crash):
+        self.crash, self.tasks = crash, []
+
+    def nthreads(self):
+        return {"w1": 1, "w2": 1}
+
+    def submit(self, fn, study, ids, folder, keep, key, pure):
+        self.tasks.append(list(ids))
+        rows = [{"id": k, "status": "ok"} for k in ids]
+        return _Future(key, rows, self.crash in ids)
+
+
+def test_a_crashing_chunk_is_rerun_sample_by_sample(tmp_path):
+    """Only the sample whose task dies gets a failed row; every other id gets its own row
+    once, and the chunk that held the crash is rerun one sample per task."""
+    from sweep.run import RunOptions, StudyPaths, _results, chunk_size
+
+    client = _Client(crash=6)
+    todo = list(range(20))
+    opts = RunOptions(chunk=4)
+    rows = list(_results(client, _Stream, "s.toml", todo, StudyPaths(tmp_path), opts))
+    assert sorted(r["id"] for r in rows) == todo
+    bad = [r for r in rows if r["status"] != "ok"]
+    assert [r["id"] for r in bad] == [6] and "worker died" in bad[0]["status"]
+    assert [4, 5, 6, 7] in client.tasks and all([k] in client.tasks for k in (4, 5, 6, 7))
+    assert max(len(t) for t in client.tasks) == 4
+    # chunks: at least 4 tasks per worker thread, never more than MAX_CHUNK samples
+    assert chunk_size(1000, 2) == 8 and chunk_size(20, 2) == 2 and chunk_size(3, 2) == 1
