@@ -330,16 +330,28 @@ def schedule(t_out: np.ndarray, breakpoints: Sequence[float] = ()) -> Schedule:
         if t0 + tol < b < tf - tol and (not kept or b - kept[-1] > tol):
             kept.append(b)
     breaks = np.array(kept, dtype=float)
+    return Schedule(t_out=t_out, targets=_targets(t_out, breaks, tol), breaks=breaks, tol=tol)
+
+
+def _targets(t_out: np.ndarray, breaks: np.ndarray, tol: float) -> np.ndarray:
+    """``t_out`` with every time after the first moved to its nearest break if within ``tol``.
+
+    The nearest of the two breaks around ``t_out[k]`` (the earlier on a tie), for all
+    rows at once.
+    """
     targets = t_out.copy()
-    for k in range(1, t_out.size if breaks.size else 0):
-        i = int(np.searchsorted(breaks, t_out[k]))
-        near = min(
-            (breaks[c] for c in (i - 1, i) if 0 <= c < breaks.size),
-            key=lambda b, tk=t_out[k]: abs(b - tk),
-        )
-        if abs(near - t_out[k]) <= tol:
-            targets[k] = near
-    return Schedule(t_out=t_out, targets=targets, breaks=breaks, tol=tol)
+    if not breaks.size or t_out.size < 2:
+        return targets
+    tk = t_out[1:]
+    i = np.searchsorted(breaks, tk)
+    lo = breaks[np.maximum(i - 1, 0)]
+    hi = breaks[np.minimum(i, breaks.size - 1)]
+    d_lo = np.where(i >= 1, np.abs(lo - tk), np.inf)
+    d_hi = np.where(i < breaks.size, np.abs(hi - tk), np.inf)
+    near = np.where(d_lo <= d_hi, lo, hi)
+    move = np.abs(near - tk) <= tol
+    targets[1:][move] = near[move]
+    return targets
 
 
 def _plan(t_out: np.ndarray, breakpoints: Sequence[float], chunk: float) -> list[list[tuple]]:

@@ -277,6 +277,22 @@ def load(path: Path) -> ctypes.CDLL:
     Raises
     ------
     BuildError
+        As :func:`open_library`.
+    """
+    return open_library(path)
+
+
+def open_library(path: Path) -> ctypes.CDLL:
+    """Load a native library (not cached) and check it against the headers and the mirror.
+
+    Parameters
+    ----------
+    path : Path
+        A library built with :func:`toolchain`.
+
+    Raises
+    ------
+    BuildError
         If the SUNDIALS it runs against differs from the vendored headers, or its
         structs differ in size from the ctypes mirror (:data:`STRUCTS`).
     """
@@ -413,6 +429,7 @@ def run(
     breakpoints: Sequence[float] = (),
     progress: Callable[[float], None] | None = None,
     p: np.ndarray | None = None,
+    driver: ctypes.CDLL | None = None,
 ) -> Trajectory:
     """Integrate with the native driver of a library built with :func:`toolchain`.
 
@@ -435,6 +452,9 @@ def run(
         Called once with the time reached (the run is one C call).
     p : ndarray, optional
         The closed loop's runtime parameters (as many as the library takes; default none).
+    driver : ctypes.CDLL, optional
+        ``library`` already loaded and checked (:func:`open_library`); default: loaded
+        from ``library`` once per process (:func:`load`).
 
     Returns
     -------
@@ -443,7 +463,7 @@ def run(
         ``lu_factorizations`` and ``pivot_failures``.
     """
     wall0 = time.perf_counter()
-    lib = load(Path(library))
+    lib = driver if driver is not None else load(Path(library))
     x = np.ascontiguousarray(x0, dtype=float).ravel()
     call = DriverCall.of(x.size, t_out, settings, breakpoints, p)
     lib.hitl_native_run(x.size, dptr(x), ctypes.byref(call.options), ctypes.byref(call.result))

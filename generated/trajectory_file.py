@@ -9,6 +9,7 @@ stopped early is written all the same, led by ``# incomplete: t = <t>: <reason>`
 from __future__ import annotations
 
 import io
+from collections import OrderedDict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -66,27 +67,75 @@ _OUTPUT_ALIASES = {
 }
 
 
+#: mapped outputs Functions by (id of the Function, K): (the Function, its map)
+_MAPS: OrderedDict[tuple[int, int], tuple[ca.Function, ca.Function]] = OrderedDict()
+#: how many mapped Functions are kept (one per structure and horizon in use)
+_MAPS_KEPT = 4
+
+
+def _mapped(f: ca.Function, K: int) -> ca.Function:
+    """``f`` evaluated at K times in one call; an input ``p`` is shared by all of them.
+
+    Kept for the next run of the same Function and K (the entry holds ``f``, so its id
+    is not reused while the entry lives).
+    """
+    key = (id(f), K)
+    if key in _MAPS:
+        _MAPS.move_to_end(key)
+        return _MAPS[key][1]
+    shared = [nm == "p" for nm in f.name_in()]
+    F = f.map(K, shared, [False] * f.n_out())
+    _MAPS[key] = (f, F)
+    while len(_MAPS) > _MAPS_KEPT:
+        _MAPS.popitem(last=False)
+    return F
+
+
 def evaluate_outputs(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:
     """All named outputs at every output time: ``name -> array (K, rows, cols)``.
+
+    The library's outputs Function is called once for all times, with the runtime
+    parameters ``built.p`` as its input ``p`` (when it has one), reading and writing
+    numpy arrays directly.
 
     Parameters
     ----------
     built : Built
-        Supplies the compiled ``outputs`` Function.
+        Supplies the compiled ``outputs`` Function (``outputs_p`` and ``p``).
     traj : Trajectory
         The output times and states.
     """
     K = len(traj.t)
-    f = built.outputs
+    f = getattr(built, "outputs_p", None)
+    f = built.outputs if f is None else f
     if K == 0:
         return {nm: np.zeros((0, *f.size_out(j))) for j, nm in enumerate(f.name_out())}
-    res = f.map(K)(traj.t.reshape(1, -1), traj.x.T)
-    res = res if isinstance(res, list | tuple) else [res]
+    F = _mapped(f, K)
+    given = {"t": traj.t, "x": traj.x, "p": getattr(built, "p", None)}  # x: K x nx = nx x K
+    buf, call = F.buffer()
+    args = []  # alive until the call
+    for i, nm in enumerate(f.name_in()):
+        a = np.ascontiguousarray(
+            np.zeros(0) if given.get(nm) is None else given[nm], dtype=float
+        ).ravel()
+        if a.size != F.nnz_in(i):
+            raise BuildError(
+                f"closed loop outputs: input {nm!r} takes {F.nnz_in(i)} values, "
+                f"the run gives {a.size} (inputs t, x and p are known)"
+            )
+        buf.set_arg(i, memoryview(a))
+        args.append(a)
+    res = [np.empty(F.nnz_out(j)) for j in range(F.n_out())]
+    for j, a in enumerate(res):
+        buf.set_res(j, memoryview(a))
+    call()
     out = {}
     for j, nm in enumerate(f.name_out()):
         r, c = f.size_out(j)
-        a = np.array(ca.DM(res[j]).full(), dtype=float)  # r x (c*K), time blocks side by side
-        out[nm] = a.reshape(r, K, c).transpose(1, 0, 2)
+        sp = F.sparsity_out(j)
+        # r x (c*K) by columns, time blocks side by side
+        a = res[j] if sp.is_dense() else ca.DM(sp, res[j]).full().ravel(order="F")
+        out[nm] = a.reshape(K, c, r).transpose(0, 2, 1)
     return out
 
 

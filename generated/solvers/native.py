@@ -150,6 +150,7 @@ class Native(Solver):
             breakpoints=breakpoints,
             progress=progress,
             p=built.p,
+            driver=built.driver,
         )
 
 
