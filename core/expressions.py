@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import ast
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
@@ -98,7 +99,7 @@ class Expr:
             Time(s).
         """
         with np.errstate(all="ignore"):
-            return _eval(self.node, np.asarray(t, dtype=float), _NUMPY)
+            return _numpy_function(self.node)(np.asarray(t, dtype=float))
 
     def breakpoints(self) -> tuple[float, ...]:
         """Times t > 0 where the expression jumps or kinks, when the location is affine in t.
@@ -394,6 +395,43 @@ def _eval(node: tuple, t: Any, be: _Backend, lits: Any = None) -> Any:
         return a**b
     args = [_eval(a, t, be, lits) for a in node[2]]
     return getattr(be, node[1])(*args)
+
+
+@lru_cache(maxsize=1024)
+def _numpy_function(node: tuple) -> Callable[[Any], Any]:
+    """``node`` as nested numpy closures: the operations of :func:`_eval` with its numpy
+    backend, in the same order (identical values), without walking the tree per call."""
+    return _closure(node)
+
+
+def _closure(node: tuple) -> Callable[[Any], Any]:
+    kind = node[0]
+    if kind == "num":
+        v = node[1]
+        return lambda t: v + 0 * t
+    if kind == "t":
+        return lambda t: t
+    if kind == "neg":
+        f = _closure(node[1])
+        return lambda t: -f(t)
+    if kind == "bin":
+        fa = _closure(node[2])
+        if _is_exponent_literal(node):
+            e = node[3][1]
+            return lambda t: fa(t) ** e
+        return _BIN_CLOSURES[node[1]](fa, _closure(node[3]))
+    fn = getattr(_NUMPY, node[1])
+    args = tuple(_closure(a) for a in node[2])
+    return lambda t: fn(*[g(t) for g in args])
+
+
+_BIN_CLOSURES = {
+    "+": lambda fa, fb: lambda t: fa(t) + fb(t),
+    "-": lambda fa, fb: lambda t: fa(t) - fb(t),
+    "*": lambda fa, fb: lambda t: fa(t) * fb(t),
+    "/": lambda fa, fb: lambda t: fa(t) / fb(t),
+    "**": lambda fa, fb: lambda t: fa(t) ** fb(t),
+}
 
 
 def _collect_breaks(node: tuple, out: list[float]) -> None:
