@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import NamedTuple, Protocol
 
 import numpy as np
@@ -237,7 +238,31 @@ def pinned_laplacian(adjacency: np.ndarray | sp.spmatrix, pinning: np.ndarray) -
     scipy.sparse.csr_matrix
         N×N, ``L + B`` (not gauge-transformed; L̄ = H(L + B)H).
     """
-    A = sp.csr_matrix(adjacency, dtype=float)
+    # every stage asks for the same few graphs many times per run: their L + B are kept by value
+    if sp.issparse(adjacency):
+        A = sp.csr_matrix(adjacency, dtype=float)
+        akey = (
+            "csr",
+            A.shape,
+            *((x.dtype.str, x.tobytes()) for x in (A.data, A.indices, A.indptr)),
+        )
+    else:
+        A = np.asarray(adjacency, dtype=float)
+        akey = ("dense", A.shape, A.dtype.str, A.tobytes())
+    b = np.asarray(pinning, dtype=float)
+    return _pinned_laplacian(akey, (b.shape, b.dtype.str, b.tobytes())).copy()
+
+
+@lru_cache(maxsize=32)
+def _pinned_laplacian(akey: tuple, bkey: tuple) -> sp.csr_matrix:
+    """``L + B`` from the byte keys of :func:`pinned_laplacian` (callers receive copies)."""
+    if akey[0] == "csr":
+        shape, *arrays = akey[1:]
+        data, indices, indptr = (np.frombuffer(raw, dtype=dt) for dt, raw in arrays)
+        A = sp.csr_matrix((data, indices, indptr), shape=shape)
+    else:
+        A = sp.csr_matrix(np.frombuffer(akey[3], dtype=akey[2]).reshape(akey[1]), dtype=float)
+    pinning = np.frombuffer(bkey[2], dtype=bkey[1]).reshape(bkey[0])
     D = sp.diags(np.asarray(abs(A).sum(axis=1)).ravel())
     return sp.csr_matrix(D - A + sp.diags(np.asarray(pinning, dtype=float)))
 

@@ -263,12 +263,14 @@ def tail_max_et(frame: pd.DataFrame, tail_fraction: float) -> float:
     """
     from verify import signals as S
 
-    t = frame["t"].to_numpy(float)
+    frame = S.Columns.of(frame)  # one conversion, then columns by position
+    t = S.column(frame, "t")
     tail = S.tail_mask(t, tail_fraction)
     best = -math.inf
     for i in range(1, S.dims(frame).N + 1):
-        cols = [c for c in frame.columns if re.fullmatch(rf"et{i}_\d+", c)]
-        e = np.linalg.norm(frame.loc[tail, cols].to_numpy(float), axis=1)
+        pattern = re.compile(rf"et{i}_\d+")
+        cols = [c for c in frame.names if pattern.fullmatch(c)]
+        e = np.linalg.norm(np.asfortranarray(S.take(frame, cols)[tail]), axis=1)
         best = max(best, float(e.max()))
     return best
 
@@ -286,19 +288,33 @@ def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
     dict
         Formation and observer tails, peak |u_i|, Theorem 2 entry times and the verdicts.
     """
-    guaranteed = table[table["kind"] == "guaranteed"]
-    consistency = table[table["kind"] == "consistency"]
+    from types import SimpleNamespace
+
+    # plain lists: a few string tests per row cost less than pandas' string methods
+    claims, kinds = table["claim"].tolist(), table["kind"].tolist()
+    holds, agents = table["holds"].tolist(), table["agent"].tolist()
+    observed = table["observed"].to_numpy(float)
+
+    def max_observed(claim: str, exact: bool = False) -> float:
+        hit = [c == claim if exact else c.startswith(claim) for c in claims]
+        vals = observed[np.asarray(hit, dtype=bool)]
+        vals = vals[~np.isnan(vals)]  # NaN skipped, as pandas' max does
+        return float(vals.max()) if vals.size else math.nan
+
+    g = [k for k, kind in enumerate(kinds) if kind == "guaranteed"]
+    c = [k for k, kind in enumerate(kinds) if kind == "consistency"]
+    failed = [k for k in g if not bool(holds[k])]
     out: dict[str, Any] = {
-        "formation_tail_max": _max_observed(table, "Formation |p_i"),
-        "observer_tail_max": _max_observed(table, "T1 |ebar_eta_i| -> 0 (tail sup)"),
-        "peak_u_max": _max_observed(table, "peak |u_i|", exact=True),
-        "guaranteed_held": bool(guaranteed["holds"].all()),
+        "formation_tail_max": max_observed("Formation |p_i"),
+        "observer_tail_max": max_observed("T1 |ebar_eta_i| -> 0 (tail sup)"),
+        "peak_u_max": max_observed("peak |u_i|", exact=True),
+        "guaranteed_held": all(holds[k] for k in g),
         "guaranteed_failed": "; ".join(
-            _label(r) for r in guaranteed[~guaranteed["holds"].astype(bool)].itertuples()
+            _label(SimpleNamespace(claim=claims[k], agent=agents[k])) for k in failed
         ),
-        "consistency_held": bool(consistency["holds"].all()),
-        "n_guaranteed": len(guaranteed),
-        "n_consistency": len(consistency),
+        "consistency_held": all(holds[k] for k in c),
+        "n_guaranteed": len(g),
+        "n_consistency": len(c),
     }
     return out
 
@@ -345,13 +361,15 @@ def theorem2_entry(
 
     out: dict[str, Any] = {}
     sources: set[str] = set()
-    lem = table[table["claim"].str.startswith("Lemma 1 reaching time t_f")]
+    lem = None
     for i in range(scenario.N):
         c = theorem2_constants(scenario, i, config)
         if c.provable:
             out[f"t2_entry:{i + 1}"] = provable_entry_time(c, frame, i, config.lemma1_delta)
             sources.add("comparison lemma")
         else:
+            if lem is None:  # the table is searched only when some follower needs it
+                lem = table[table["claim"].str.startswith("Lemma 1 reaching time t_f")]
             obs = lem.loc[lem["agent"] == i + 1, "observed"].astype(float)
             out[f"t2_entry:{i + 1}"] = float(obs.iloc[0]) if len(obs) else math.nan
             sources.add("Lemma 1 observed")

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import pandas as pd
@@ -121,6 +122,7 @@ class Theorem2Constants:
     why_not: str = ""
 
 
+@lru_cache(maxsize=8)
 def layer_constant(sign: str) -> float:
     """c_s = sup_x (|x| − x sgn_1(x)): then |χ| − χ sgn_ε(χ) ≤ c_s ε for every χ.
 
@@ -228,7 +230,9 @@ def comparison_reaching_time(Omega: float, chi_v: float, V0: float, delta: float
     return 0.0 if x <= 1.0 else math.log(x) / Omega
 
 
-def provable_entry_time(c: Theorem2Constants, df: pd.DataFrame, agent: int, delta: float) -> float:
+def provable_entry_time(
+    c: Theorem2Constants, df: pd.DataFrame, agent: int, delta: float, row: int = 0
+) -> float:
     """The comparison-lemma time t_c after which follower ``agent``'s provable bound holds.
 
     From V2(0) in the trajectory (NaN without a ``V2_<i>`` column) and the provable
@@ -238,15 +242,19 @@ def provable_entry_time(c: Theorem2Constants, df: pd.DataFrame, agent: int, delt
     ----------
     c : Theorem2Constants
         Of follower ``agent`` (:func:`theorem2_constants`).
-    df : DataFrame
+    df : DataFrame or verify.signals.Columns
         The trajectory.
     agent : int
         0-based follower.
     delta : float
         Lemma 1's δ (``VerifyConfig.lemma1_delta``).
+    row : int
+        The sample the comparison lemma starts from (time measured from it).
     """
+    from verify import signals as S
+
     col = f"V2_{agent + 1}"
-    V2_0 = float(df[col].iloc[0]) if col in df.columns else math.nan
+    V2_0 = float(S.column(df, col)[row]) if S.has(df, col) else math.nan
     return comparison_reaching_time(c.Omega_var, c.chi_v_var, V2_0, delta)
 
 

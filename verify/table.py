@@ -174,7 +174,7 @@ class Span:
     tail: np.ndarray
 
     @classmethod
-    def of(cls, df: pd.DataFrame, cfg: VerifyConfig) -> Span:
+    def of(cls, df: S.Frame, cfg: VerifyConfig) -> Span:
         """The span of a trajectory.
 
         Parameters
@@ -184,7 +184,7 @@ class Span:
         cfg : VerifyConfig
             Its tail fraction sets the tail.
         """
-        t = df["t"].to_numpy(float)
+        t = S.column(df, "t")
         return cls(t, S.tail_mask(t, cfg.tail_fraction))
 
     @property
@@ -246,6 +246,7 @@ def bounds_table(
         Columns :data:`COLUMNS`.
     """
     cfg = config or VerifyConfig()
+    df = S.Columns.of(df)  # converted once: every row below reads columns of this array
     dm = S.dims(df)
     _check_dims(scenario, dm)
     span = Span.of(df, cfg)
@@ -256,6 +257,7 @@ def bounds_table(
     definition1_rows(R, scenario, df, gains=gains, config=cfg)
     effort_rows(R, df, dm.N, dm.n)
     if ablation is not None:
+        ablation = S.Columns.of(ablation)
         for i in range(dm.N):
             ablation_rows(R, df, ablation, i, dm.n, cfg)
     table = mark_saturation(R.frame(), saturation_window(scenario, df))
@@ -314,7 +316,7 @@ def _windows(table: pd.DataFrame) -> list[tuple[float, float]]:
 
 
 def theorem2_start(
-    scenario: Scenario, c: Theorem2Constants, df: pd.DataFrame, agent: int, delta: float
+    scenario: Scenario, c: Theorem2Constants, df: S.Frame, agent: int, delta: float
 ) -> float:
     """Comparison-lemma time t_c of Theorem 2's provable rows, restarted after the last switch.
 
@@ -339,15 +341,15 @@ def theorem2_start(
     times = switch_times(scenario.graph.switches)
     if not times:
         return provable_entry_time(c, df, agent, delta)
-    t = df["t"].to_numpy(float)
+    t = S.column(df, "t")
     after = np.flatnonzero(t > times[-1])
     if not after.size:
         return math.inf
     k = int(after[0])
-    return float(t[k]) + provable_entry_time(c, df.iloc[k:], agent, delta)
+    return float(t[k]) + provable_entry_time(c, df, agent, delta, row=k)
 
 
-def saturation_window(scenario: Scenario, df: pd.DataFrame) -> tuple[float, float] | None:
+def saturation_window(scenario: Scenario, df: S.Frame) -> tuple[float, float] | None:
     """First and last output time at which some logged |u_ir| is at its limit u_max_i.
 
     The logged ``u`` columns hold the applied, clipped torque, so the limit is met
@@ -368,6 +370,7 @@ def saturation_window(scenario: Scenario, df: pd.DataFrame) -> tuple[float, floa
     u_max = scenario.controller.u_max
     if u_max is None:
         return None
+    df = S.Columns.of(df)
     dm = S.dims(df)
     hit = np.zeros(len(df), dtype=bool)
     for i in range(dm.N):
@@ -375,7 +378,7 @@ def saturation_window(scenario: Scenario, df: pd.DataFrame) -> tuple[float, floa
         hit |= np.any(u >= u_max[i] * (1.0 - SATURATION_RTOL), axis=1)
     if not hit.any():
         return None
-    t = df["t"].to_numpy(float)[hit]
+    t = S.column(df, "t")[hit]
     return float(t[0]), float(t[-1])
 
 
@@ -415,7 +418,7 @@ def _check_dims(scenario: Scenario, dm: S.Dims) -> None:
 def theorem1_rows(
     R: Rows,
     scenario: Scenario,
-    df: pd.DataFrame,
+    df: S.Frame,
     span: Span,
     *,
     gains: Gains | None = None,
@@ -437,6 +440,7 @@ def theorem1_rows(
     config : VerifyConfig, optional
     """
     cfg = config or VerifyConfig()
+    df = S.Columns.of(df)
     dm = S.dims(df)
     t, tail = span.t, span.tail
     floor = scenario.observer.phi_min > 0
@@ -548,7 +552,7 @@ def theorem1_lyapunov_rows(
 def theorem2_rows(
     R: Rows,
     scenario: Scenario,
-    df: pd.DataFrame,
+    df: S.Frame,
     span: Span,
     checks: list[InequalityCheck],
     *,
@@ -572,6 +576,7 @@ def theorem2_rows(
     cfg = config or VerifyConfig()
     guaranteed, why = theorem2_guaranteed(scenario)
     _consistency_rows(R, checks, guaranteed, why, span.full)
+    df = S.Columns.of(df)
     dm = S.dims(df)
     for i in range(dm.N):
         _theorem2_agent_rows(R, scenario, df, span, i, dm.n, guaranteed, cfg)
@@ -580,7 +585,7 @@ def theorem2_rows(
 def _theorem2_agent_rows(
     R: Rows,
     scenario: Scenario,
-    df: pd.DataFrame,
+    df: S.Frame,
     span: Span,
     i: int,
     n: int,
@@ -630,7 +635,7 @@ def _theorem2_agent_rows(
         tc = theorem2_start(scenario, c, df, i, cfg.lemma1_delta)
         _provable_rows(R, c, span.t, span.tail_start, chin, et, tc, i, guaranteed, cfg)
     if has_v2:
-        _lemma1_row(R, c, span, df[f"V2_{i + 1}"].to_numpy(float), i, cfg)
+        _lemma1_row(R, c, span, S.column(df, f"V2_{i + 1}"), i, cfg)
 
 
 def _lemma1_row(
@@ -735,7 +740,7 @@ def _provable_rows(
         )
 
 
-def effort_rows(R: Rows, df: pd.DataFrame, N: int, n: int) -> None:
+def effort_rows(R: Rows, df: S.Frame, N: int, n: int) -> None:
     """Peak ‖u_i‖ (Euclidean, logged torques) over the run and after :data:`STARTUP` (info).
 
     Parameters
@@ -747,7 +752,8 @@ def effort_rows(R: Rows, df: pd.DataFrame, N: int, n: int) -> None:
     N, n : int
         Number of followers and of outputs.
     """
-    t = df["t"].to_numpy(float)
+    df = S.Columns.of(df)
+    t = S.column(df, "t")
     for i in range(N):
         if not S.has(df, f"u{i + 1}_1"):
             return
@@ -772,7 +778,7 @@ def effort_rows(R: Rows, df: pd.DataFrame, N: int, n: int) -> None:
 
 
 def ablation_rows(
-    R: Rows, df: pd.DataFrame, ablation: pd.DataFrame, i: int, n: int, cfg: VerifyConfig
+    R: Rows, df: S.Frame, ablation: S.Frame, i: int, n: int, cfg: VerifyConfig
 ) -> None:
     """Fig. 13 (the ablation (42) converges more slowly) for follower ``i``.
 
@@ -794,7 +800,7 @@ def ablation_rows(
     cfg : VerifyConfig
         Its tail fraction sets the tail suprema.
     """
-    t, ta = df["t"].to_numpy(float), ablation["t"].to_numpy(float)
+    t, ta = S.column(df, "t"), S.column(ablation, "t")
     ft, ab = S.agent_norm(df, "et", i + 1, n), S.agent_norm(ablation, "et", i + 1, n)
     tail, abt = S.tail_mask(t, cfg.tail_fraction), S.tail_mask(ta, cfg.tail_fraction)
     sup_ft, sup_ab = float(ft[tail].max()), float(ab[abt].max())
@@ -866,7 +872,7 @@ def gauge(scenario: Scenario, gains: Gains | None = None) -> np.ndarray:
     return np.asarray(find_gauge(A, np.asarray(scenario.graph.pinning, float)), float)
 
 
-def leader_formation(scenario: Scenario, df: pd.DataFrame, h: np.ndarray) -> np.ndarray:
+def leader_formation(scenario: Scenario, df: S.Frame, h: np.ndarray) -> np.ndarray:
     """R(τ_i⁰) b_i0 with τ_i⁰ the angle of h_i η̇0, η̇0 = A0 η0 + B0 u0(t) (eq. (3)): (K, N, n).
 
     The formation the paper defines (section 7), referenced to the leader's own state
@@ -883,12 +889,12 @@ def leader_formation(scenario: Scenario, df: pd.DataFrame, h: np.ndarray) -> np.
     h : ndarray
         The gauge.
     """
-    t = df["t"].to_numpy(float)
+    t = S.column(df, "t")
     L = scenario.leader
     b0 = np.array([fo.b0 for fo in scenario.followers], float)  # (N, n)
     if scenario.n != 2 or L.m < 2:
         return np.broadcast_to(b0, (len(t), *b0.shape)).copy()
-    eta0 = df[[f"eta0_{k}" for k in range(1, L.m + 1)]].to_numpy(float)
+    eta0 = S.take(df, [f"eta0_{k}" for k in range(1, L.m + 1)])
     d = eta0 @ np.asarray(L.A0, float).T + (np.asarray(L.B0, float) @ L.u0_numpy(t)).T  # eq. (3)
     d = d[:, :2]
     c, s = d[:, 0], d[:, 1]
@@ -908,7 +914,7 @@ def leader_formation(scenario: Scenario, df: pd.DataFrame, h: np.ndarray) -> np.
 def definition1_rows(
     R: Rows,
     scenario: Scenario,
-    df: pd.DataFrame,
+    df: S.Frame,
     *,
     gains: Gains | None = None,
     config: VerifyConfig | None = None,
@@ -934,8 +940,9 @@ def definition1_rows(
     from verify.bounds import theorem1_floor
 
     cfg = config or VerifyConfig()
+    df = S.Columns.of(df)
     dm = S.dims(df)
-    t = df["t"].to_numpy(float)
+    t = S.column(df, "t")
     tail = S.tail_mask(t, cfg.tail_fraction)
     k0 = int(np.argmax(tail))
     ts, tend = float(t[k0]), float(t[-1])
@@ -981,7 +988,7 @@ def definition1_rows(
 
 def _definition1_derived(
     R: Rows,
-    df: pd.DataFrame,
+    df: S.Frame,
     fl,  # noqa: ANN001 (verify.bounds.Theorem1Floor)
     c: Theorem2Constants,
     t: np.ndarray,
@@ -1002,8 +1009,8 @@ def _definition1_derived(
     # Theorem 2 provable variant from t_s: |e_r| ≤ max(χ̄/λ_r, |e_r(t_s)|) (as _provable_rows)
     Be = float(np.linalg.norm(np.maximum(c.e_bar_var, np.abs(et[ks]))))
     # Theorem 1 with the floor: comparison lemma for V1 from the tail start t[k0]
-    V1b = fl.v1_bound(float(df["V1"].iloc[k0]), t[win] - t[k0])
-    phi = df.loc[win, [f"phi{j + 1}" for j in range(fl.h.size)]].to_numpy(float)
+    V1b = fl.v1_bound(float(S.column(df, "V1")[k0]), t[win] - t[k0])
+    phi = np.asfortranarray(S.take(df, [f"phi{j + 1}" for j in range(fl.h.size)])[win])
     Bn = fl.c0_error_bound(V1b, phi)[:, i]
     bound = Be + Bn
     ok = ok and math.isfinite(tc)
