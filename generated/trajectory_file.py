@@ -9,9 +9,11 @@ stopped early is written all the same, led by ``# incomplete: t = <t>: <reason>`
 from __future__ import annotations
 
 import io
+import math
+import threading
 from collections import OrderedDict
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import casadi as ca
 import numpy as np
@@ -67,28 +69,31 @@ _OUTPUT_ALIASES = {
 }
 
 
-#: mapped outputs Functions by (id of the Function, K): (the Function, its map)
-_MAPS: OrderedDict[tuple[int, int], tuple[ca.Function, ca.Function]] = OrderedDict()
+#: mapped outputs Functions by (id of the Function, K): the Function, its map and an
+#: evaluation buffer of the map
+_MAPS: OrderedDict[tuple[int, int], tuple[ca.Function, ca.Function, Any, Any]] = OrderedDict()
 #: how many mapped Functions are kept (one per structure and horizon in use)
 _MAPS_KEPT = 4
+#: one evaluation at a time uses a kept buffer
+_MAPS_LOCK = threading.Lock()
 
 
-def _mapped(f: ca.Function, K: int) -> ca.Function:
-    """``f`` evaluated at K times in one call; an input ``p`` is shared by all of them.
+def _mapped(f: ca.Function, K: int) -> tuple[ca.Function, Any, Any]:
+    """``f`` evaluated at K times in one call (an input ``p`` shared by all), with a buffer.
 
     Kept for the next run of the same Function and K (the entry holds ``f``, so its id
-    is not reused while the entry lives).
+    is not reused while the entry lives). Call with :data:`_MAPS_LOCK` held.
     """
     key = (id(f), K)
     if key in _MAPS:
         _MAPS.move_to_end(key)
-        return _MAPS[key][1]
+        return _MAPS[key][1:]
     shared = [nm == "p" for nm in f.name_in()]
     F = f.map(K, shared, [False] * f.n_out())
-    _MAPS[key] = (f, F)
+    _MAPS[key] = (f, F, *F.buffer())
     while len(_MAPS) > _MAPS_KEPT:
         _MAPS.popitem(last=False)
-    return F
+    return _MAPS[key][1:]
 
 
 def evaluate_outputs(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:
@@ -105,14 +110,26 @@ def evaluate_outputs(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:
     traj : Trajectory
         The output times and states.
     """
+    return {nm: a.transpose(0, 2, 1) for nm, a in _evaluate(built, traj).items()}
+
+
+def _evaluate(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:
+    """:func:`evaluate_outputs` as ``name -> array (K, cols, rows)``, C-contiguous."""
     K = len(traj.t)
     f = getattr(built, "outputs_p", None)
     f = built.outputs if f is None else f
     if K == 0:
-        return {nm: np.zeros((0, *f.size_out(j))) for j, nm in enumerate(f.name_out())}
-    F = _mapped(f, K)
+        return {nm: np.zeros((0, *f.size_out(j)[::-1])) for j, nm in enumerate(f.name_out())}
+    with _MAPS_LOCK:
+        return _evaluate_mapped(f, K, built, traj)
+
+
+def _evaluate_mapped(
+    f: ca.Function, K: int, built: Built, traj: Trajectory
+) -> dict[str, np.ndarray]:
+    """:func:`_evaluate` through the kept map of ``f`` (:data:`_MAPS_LOCK` held)."""
+    F, buf, call = _mapped(f, K)
     given = {"t": traj.t, "x": traj.x, "p": getattr(built, "p", None)}  # x: K x nx = nx x K
-    buf, call = F.buffer()
     args = []  # alive until the call
     for i, nm in enumerate(f.name_in()):
         a = np.ascontiguousarray(
@@ -135,18 +152,8 @@ def evaluate_outputs(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:
         sp = F.sparsity_out(j)
         # r x (c*K) by columns, time blocks side by side
         a = res[j] if sp.is_dense() else ca.DM(sp, res[j]).full().ravel(order="F")
-        out[nm] = a.reshape(K, c, r).transpose(0, 2, 1)
+        out[nm] = a.reshape(K, c, r)
     return out
-
-
-def _agent_rows(arr: np.ndarray, N: int, width: int, name: str) -> np.ndarray:
-    """A per-agent output (K, N, width): row i = agent i (the closed loop's convention)."""
-    if arr.shape[1:] != (N, width):
-        raise BuildError(
-            f"closed loop output {name!r} is {arr.shape[1]}x{arr.shape[2]} per time, "
-            f"expected {N}x{width} (one row per agent)"
-        )
-    return arr
 
 
 def trajectory_frame(built: Built, sc: Scenario, traj: Trajectory) -> pd.DataFrame:
@@ -166,43 +173,78 @@ def trajectory_frame(built: Built, sc: Scenario, traj: Trajectory) -> pd.DataFra
     BuildError
         If the closed loop's outputs or state layout do not give these columns.
     """
-    cl = built.closed_loop
-    sl = cl.layout.slices
-    outs = evaluate_outputs(built, traj)
-
-    def out(prefix: str) -> tuple[str, np.ndarray]:
-        for nm in _OUTPUT_ALIASES[prefix]:
-            if nm in outs:
-                return nm, outs[nm]
-        raise BuildError(
-            f"closed loop outputs lack {prefix!r} (looked for {', '.join(_OUTPUT_ALIASES[prefix])}; "
-            f"it has {', '.join(outs)})"
-        )
-
-    N, n, m = sc.N, sc.n, sc.m
-    X = traj.x
-    K = len(traj.t)
-    blocks: list[np.ndarray] = [traj.t.reshape(-1, 1), X[:, sl["eta0"]]]
-    named = {}
-    for key, width in (("u", n), ("b", n), ("et", n), ("eeta", m), ("chi", n), ("V2", 1)):
-        nm, arr = out(key)
-        named[key] = _agent_rows(arr, N, width, nm)
-    for i in range(N):
-        for key in ("p", "q", "eta", "mu", "phi", "thetahat", "ghat"):
-            blocks.append(X[:, sl[(key, i)]])
-        for key in ("u", "b", "et", "eeta", "chi", "V2"):
-            blocks.append(named[key][:, i, :])
-    nm, v1 = out("V1")
-    if v1.shape[1:] != (1, 1):
-        raise BuildError(f"closed loop output {nm!r} is not a scalar")
-    blocks.append(v1.reshape(K, 1))
-    data = np.hstack(blocks)
+    raw = _evaluate(built, traj)  # (K, cols, rows)
+    named = _frame_outputs({nm: a.shape[:0:-1] for nm, a in raw.items()}, sc)
+    X = np.asarray(traj.x, dtype=float)
+    K, nx = len(traj.t), X.shape[1]
+    # one table [t | x | each output by time, column-major], then every frame column picked
+    parts = [np.asarray(traj.t, dtype=float).reshape(K, 1), X]
+    start, at = {}, 1 + nx
+    for nm in dict.fromkeys(nm for nm, _ in named.values()):
+        start[nm] = at
+        parts.append(raw[nm].reshape(K, math.prod(raw[nm].shape[1:])))
+        at += parts[-1].shape[1]
+    idx = _frame_index(built.closed_loop.layout.slices, nx, sc.N, named, start)
+    data = np.concatenate(parts, axis=1)[:, idx]
     cols = column_names(sc)
     if data.shape[1] != len(cols):
         raise BuildError(
             f"trajectory has {data.shape[1]} columns, expected {len(cols)} (check the state layout)"
         )
     return pd.DataFrame(data, columns=cols)
+
+
+def _frame_outputs(shapes: dict[str, tuple[int, ...]], sc: Scenario) -> dict[str, tuple[str, int]]:
+    """The outputs the frame shows: CSV prefix -> (output name, width); shapes checked.
+
+    ``shapes``: output name -> (rows, cols) per time.
+    """
+
+    def find(prefix: str) -> str:
+        for nm in _OUTPUT_ALIASES[prefix]:
+            if nm in shapes:
+                return nm
+        raise BuildError(
+            f"closed loop outputs lack {prefix!r} (looked for {', '.join(_OUTPUT_ALIASES[prefix])}; "
+            f"it has {', '.join(shapes)})"
+        )
+
+    N, n, m = sc.N, sc.n, sc.m
+    named = {}
+    for key, width in (("u", n), ("b", n), ("et", n), ("eeta", m), ("chi", n), ("V2", 1)):
+        nm = find(key)
+        if tuple(shapes[nm]) != (N, width):
+            r, c = shapes[nm]
+            raise BuildError(
+                f"closed loop output {nm!r} is {r}x{c} per time, "
+                f"expected {N}x{width} (one row per agent)"
+            )
+        named[key] = (nm, width)
+    nm = find("V1")
+    if tuple(shapes[nm]) != (1, 1):
+        raise BuildError(f"closed loop output {nm!r} is not a scalar")
+    named["V1"] = (nm, 1)
+    return named
+
+
+def _frame_index(
+    sl: dict, nx: int, N: int, named: dict[str, tuple[str, int]], start: dict[str, int]
+) -> list[int]:
+    """Columns of ``[t | x | outputs]`` in the order of :func:`column_names`.
+
+    Output ``nm`` (N x width per time, stored by columns) starts at ``start[nm]``: its
+    entry (i, k) is ``k N + i`` further.
+    """
+    x_col = 1 + np.arange(nx)
+    idx = [0, *np.atleast_1d(x_col[sl["eta0"]])]
+    for i in range(N):
+        for key in ("p", "q", "eta", "mu", "phi", "thetahat", "ghat"):
+            idx += list(np.atleast_1d(x_col[sl[(key, i)]]))
+        for key in ("u", "b", "et", "eeta", "chi", "V2"):
+            nm, width = named[key]
+            idx += [start[nm] + k * N + i for k in range(width)]
+    idx.append(start[named["V1"][0]])
+    return idx
 
 
 def csv_text(df: pd.DataFrame) -> str:
