@@ -406,11 +406,13 @@ def _call_buffers(fmap: ca.Function, t: np.ndarray, X: np.ndarray, p: np.ndarray
     for j, nz in enumerate(outs):
         sp = fmap.sparsity_out(j)
         if sp.is_dense():
-            res.append(nz.reshape(sp.size2(), sp.size1()).T)
-            continue
-        dense = np.zeros(sp.numel())  # structural zeros are 0.0, as DM.full() gives
-        dense[np.asarray(sp.find(), dtype=np.intp)] = nz
-        res.append(dense.reshape(sp.size2(), sp.size1()).T)  # column-major rows × cols·K
+            dense = nz
+        else:
+            dense = np.zeros(sp.numel())  # structural zeros are 0.0, as DM.full() gives
+            dense[np.asarray(sp.find(), dtype=np.intp)] = nz
+        # column-major rows × cols·K, stored row-major as DM.full() returns it (the same
+        # memory order downstream, so every later reduction adds in the same order)
+        res.append(np.ascontiguousarray(dense.reshape(sp.size2(), sp.size1()).T))
     return res
 
 
