@@ -328,12 +328,6 @@ def _label(row: Any) -> str:
         return str(row.claim)
 
 
-def _max_observed(table: pd.DataFrame, claim: str, exact: bool = False) -> float:
-    hit = table["claim"] == claim if exact else table["claim"].str.startswith(claim)
-    vals = table.loc[hit, "observed"].astype(float)
-    return float(vals.max()) if len(vals) else math.nan
-
-
 def theorem2_entry(
     table: pd.DataFrame, scenario: Any, frame: pd.DataFrame, config: Any
 ) -> dict[str, Any]:
@@ -370,7 +364,7 @@ def theorem2_entry(
         else:
             if lem is None:  # the table is searched only when some follower needs it
                 lem = table[table["claim"].str.startswith("Lemma 1 reaching time t_f")]
-            obs = lem.loc[lem["agent"] == i + 1, "observed"].astype(float)
+            obs = lem.loc[lem["agent"].astype(str) == str(i + 1), "observed"].astype(float)
             out[f"t2_entry:{i + 1}"] = float(obs.iloc[0]) if len(obs) else math.nan
             sources.add("Lemma 1 observed")
     out["t2_entry_source"] = ",".join(sorted(sources))

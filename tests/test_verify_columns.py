@@ -200,3 +200,29 @@ def test_provable_entry_time_from_a_restart_row(frame, paper_scenario):
         assert provable_entry_time(c, frame.iloc[k:], 2, 0.5) == provable_entry_time(
             c, frame, 2, 0.5, row=k
         )
+
+
+def test_theorem2_entry_of_unprovable_followers_is_lemma1_observed_time(monkeypatch):
+    # the bounds table names agents as text ("2"); an unprovable follower's entry time is
+    # its own row's observed Lemma 1 reaching time, worked out here by hand
+    import types
+
+    import verify.bounds as B
+    from sweep.run import theorem2_entry
+
+    monkeypatch.setattr(
+        B, "theorem2_constants", lambda sc, i, cfg: types.SimpleNamespace(provable=False)
+    )
+    rows = [
+        ("Lemma 1 reaching time t_f (s)", str(a), "info", t, True) for a, t in ((1, 0.4), (2, 2.5))
+    ]
+    table = pd.DataFrame(
+        [
+            dict(zip(COLUMNS, (c, a, "", k, 1.0, o, o, h, "[0, 1] s", ""), strict=True))
+            for c, a, k, o, h in rows
+        ]
+    )
+    sc = types.SimpleNamespace(N=3)
+    got = theorem2_entry(table, sc, None, types.SimpleNamespace(lemma1_delta=0.1))
+    assert got["t2_entry:1"] == 0.4 and got["t2_entry:2"] == 2.5
+    assert math.isnan(got["t2_entry:3"]) and got["t2_entry_source"] == "Lemma 1 observed"
