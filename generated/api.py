@@ -334,12 +334,12 @@ def _current(c: _Compiled) -> _Compiled | None:
         return None
 
 
-def _reuse(c: _Compiled, sc: Scenario, gains: Gains) -> Built:
-    """``c``'s loaded library bound to ``sc``."""
+def _reuse(c: _Compiled, sc: Scenario, gains: Gains, key: str) -> Built:
+    """``c``'s loaded library bound to ``sc`` (whose structure key is ``key``)."""
     from symbolic.closed_loop import bind
 
     cl = c.closed_loop
-    cl = bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks)
+    cl = bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks, key=key)
     lib = dataclasses.replace(c.library, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0)
     timings = {"symbolic_build": 0.0, "codegen": 0.0, "compile": 0.0}
     return _bound(cl, lib, c.image, c.form, timings)
@@ -384,7 +384,7 @@ def build(
         c = _current(_BUILDS[key])
         if c is not None:
             _BUILDS[key] = c
-            return _reuse(c, sc, gains)
+            return _reuse(c, sc, gains, key[0])
         del _BUILDS[key]  # its entry no longer checks out: build again (the cache says why)
     if closed_loop is None:
         from symbolic.closed_loop import build_closed_loop

@@ -191,7 +191,7 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[
     else:
         with tempfile.TemporaryDirectory(prefix="hitl-sample-") as tmp:
             run = _run_in_memory(sample, Path(tmp))
-            v = P.verify_run(run, out_root=Path(tmp))  # reads the gains written there
+            v = P.verify_run(run, out_root=Path(tmp))  # with the gains the run used
     return {
         "steps": run.meta.get("steps"),
         "library": library_key(run.meta),
@@ -225,7 +225,7 @@ def _run_in_memory(sample: Sample, root: Path) -> Any:
     traj.raise_if_incomplete()
     frame = api.trajectory_frame(built, sc, traj)
     meta = {"steps": traj.stats.get("steps"), "library": {"key": built.library.key}}
-    return P.Run(sc, frame, traj.x, meta, root / sc.name)
+    return P.Run(sc, frame, traj.x, meta, root / sc.name, gains=gains)
 
 
 def library_key(meta: dict[str, Any]) -> str:
@@ -493,9 +493,18 @@ def chunk_size(n_samples: int, n_threads: int) -> int:
     return max(1, min(MAX_CHUNK, n_samples // max(1, 4 * n_threads)))
 
 
+#: Dask settings of the local cluster: no statistical profiler sampling each task's stack
+#: every 10 ms (it competes with the task for the interpreter), memory polled every second
+LOCAL_CLUSTER_CONFIG = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.worker.memory.monitor-interval": "1s",
+}
+
+
 def _client(scheduler: str | None, workers: int | None = None) -> Any:
     """A client of ``scheduler`` (or ``$DASK_SCHEDULER``), else of a new local cluster
     with ``workers`` single-threaded worker processes (default one per core)."""
+    import dask
     from distributed import Client, LocalCluster
 
     address = scheduler or os.environ.get("DASK_SCHEDULER")
@@ -507,12 +516,13 @@ def _client(scheduler: str | None, workers: int | None = None) -> Any:
                 f"Dask scheduler {address}: cannot connect ({' '.join(str(exc).split())[:200]}); "
                 "start `dask scheduler` and `dask worker` there, or unset DASK_SCHEDULER"
             ) from exc
-    cluster = LocalCluster(
-        n_workers=workers or os.cpu_count() or 1,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-    )
+    with dask.config.set(LOCAL_CLUSTER_CONFIG):  # the nannies hand it to their workers
+        cluster = LocalCluster(
+            n_workers=workers or os.cpu_count() or 1,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+        )
     return Client(cluster)
 
 

@@ -764,6 +764,7 @@ def bind(
     lay: StateLayout | None = None,
     assembly: str = "map",
     blocks: dict[str, ca.Function] | None = None,
+    key: str | None = None,
 ) -> ClosedLoop:
     """The closed loop of ``sc``: the parametric Functions with ``sc``'s numbers.
 
@@ -783,13 +784,16 @@ def bind(
         Recorded on the result.
     blocks : dict, optional
         Recorded on the result.
+    key : str, optional
+        ``structure_key(sc, gains)`` when the caller has just computed it (a study's
+        sample asks for it to find the build); default: computed here.
 
     Raises
     ------
     ScenarioError
         If ``sc`` has another structure.
     """
-    key = structure_key(sc, gains)
+    key = key or structure_key(sc, gains)
     if key != par.structure_key:
         raise ScenarioError(
             sc.path,

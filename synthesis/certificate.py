@@ -13,9 +13,10 @@ stores under ``certificate``.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -578,13 +579,46 @@ def certify(g: Gains, *, tol: float | None = None, given: tuple[str, ...] = ()) 
     -------
     Certificate
         Every check; ``warnings()`` names failed checks that involve only given gains,
-        ``failures()`` the rest; ``to_json()`` is what ``gains.json`` stores.
+        ``failures()`` the rest; ``to_json()`` is what ``gains.json`` stores. Equal numbers
+        (:func:`numbers_digest`), tolerance and given gains give the certificate computed
+        for them before in this process.
     """
     if tol is None:
         tol = float(g.info.get("solver_tol", DEFAULT_TOL) or DEFAULT_TOL)
     tol = max(tol, 1e-12)
     if not given:
         given = tuple(g.info.get("given", ()))
+    key = (numbers_digest(g), tol, tuple(given))
+    if key not in _CERTIFIED:
+        if len(_CERTIFIED) >= 64:
+            _CERTIFIED.pop(next(iter(_CERTIFIED)))
+        _CERTIFIED[key] = _certify(g, tol, tuple(given))
+    return _CERTIFIED[key]
+
+
+#: certificates of this process by (numbers, tolerance, given): a study re-certifies the
+#: same gains for every sample, and a certificate depends on nothing else
+_CERTIFIED: dict[tuple[str, float, tuple[str, ...]], Certificate] = {}
+
+
+def numbers_digest(g: Gains) -> str:
+    """SHA-256 of every field of ``g`` but its certificate and info (names, shapes, bytes).
+
+    Parameters
+    ----------
+    g : Gains
+    """
+    h = hashlib.sha256()
+    for f in fields(g):
+        if f.name in ("certificate", "info"):
+            continue
+        a = np.asarray(getattr(g, f.name))
+        h.update(f"{f.name}:{a.dtype.str}:{a.shape}:".encode())
+        h.update(np.ascontiguousarray(a).tobytes() if a.dtype != object else repr(a).encode())
+    return h.hexdigest()
+
+
+def _certify(g: Gains, tol: float, given: tuple[str, ...]) -> Certificate:
     shapes = check_shapes_finite(g)
     if not shapes.passed:
         return Certificate((shapes,), given, tol)

@@ -97,6 +97,18 @@ def test_each_violation_fails_its_own_check(g, edit, expected):
     assert not cert.passed and len(cert.failures()) == len(expected)
 
 
+def test_a_remembered_certificate_is_served_only_for_equal_numbers(g):
+    # the same numbers (another object, other info) get the first certificate; one number
+    # changed in place after certifying gets its own, failing, certificate
+    first = certify(g)
+    again = certify(replace(g, info={**g.info, "scenario_sha256": "another"}))
+    assert again is first and first.passed
+    bad = replace(g, Q=g.Q.copy())
+    assert certify(bad) is first  # equal numbers, equal certificate
+    bad.Q[0, 0] *= 1.01
+    assert _failed(certify(bad)) == {"Q_B0T"}
+
+
 def test_a_non_finite_number_stops_at_the_first_check(g):
     T = g.T.copy()
     T[0, 0] = np.nan

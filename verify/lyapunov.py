@@ -459,13 +459,14 @@ def closed_loop(sc: Scenario, gains: Any) -> Any:
     from symbolic.closed_loop import bind, build_closed_loop
     from symbolic.parameters import structure_key
 
-    par = _PARAMETRIC.get(structure_key(sc, gains))
+    key = structure_key(sc, gains)
+    par = _PARAMETRIC.get(key)
     if par is None:
         cl = build_closed_loop(sc, gains)
         if cl.parametric is not None:
             _remember(_PARAMETRIC, cl.parametric.structure_key, cl.parametric)
         return cl
-    return bind(par, sc, gains)
+    return bind(par, sc, gains, key=key)
 
 
 def outputs_at(cl: Any, t: np.ndarray, X: np.ndarray) -> dict[str, np.ndarray]:

@@ -30,7 +30,12 @@ ABLATION = {"options.ablation": True}
 
 @dataclass
 class Run:
-    """One simulated scenario: its frame, states (if known), metadata and folder."""
+    """One simulated scenario: its frame, states (if known), metadata and folder.
+
+    ``gains`` are the gains the run used when the caller holds them (certified for this
+    scenario by :func:`generated.api.ensure_gains` in this process); None: the checks
+    read ``<out_root>/<name>/gains.json`` and re-certify it.
+    """
 
     scenario: Scenario
     frame: pd.DataFrame
@@ -39,6 +44,7 @@ class Run:
     folder: Path
     simulated: bool = False
     notes: list[str] = field(default_factory=list)
+    gains: Any = None
 
 
 def states_from_frame(cl: Any, sc: Scenario, df: pd.DataFrame) -> np.ndarray:
@@ -177,7 +183,7 @@ def verify_run(
     cfg = config or VerifyConfig()
     sc = run.scenario
     root = Path(out_root or OUT_ROOT)
-    gains, _ = api.ensure_gains(sc, root)
+    gains = run.gains if run.gains is not None else api.ensure_gains(sc, root)[0]
     notes = list(run.notes)
     t1, t2 = [], []
     if lyapunov:
