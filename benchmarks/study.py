@@ -12,8 +12,9 @@ lone
     ``--lone`` sample scenarios (written by ``python -m sweep samples --write-scenarios``)
     run one after another in this process after a warm-up run: the integration and its
     outputs (:func:`generated.api.run`'s ``integration`` + ``outputs`` seconds) plus the
-    checks (:func:`verify.pipeline.verify_run`, the study's verification). The median is
-    the cost a study sample is compared with.
+    checks (:func:`verify.pipeline.verify_run`, the study's verification), medians. They
+    run again after the whole study: this machine's speed drifts by tens of percent over
+    minutes, so the cost a study sample is compared with is the mean of the two.
 shared against recompiled
     ``python -m sweep run`` on ids ``0 .. --compare - 1`` with one worker and a warm build
     cache, against ``--recompile`` samples each run by a fresh ``python -m sweep run --ids
@@ -25,7 +26,10 @@ shared against recompiled
     time of each command (cluster start-up included).
 the whole study
     ``--samples`` samples (the study with its count replaced) with ``--workers 2``, timed;
-    the per-sample cost is wall x workers / samples.
+    the per-sample cost is wall x workers / samples (start-up, the first sample of each
+    worker and the report included). From the same run's rows: the median task
+    (``wall_s``) against the lone cost, and the part of a task that is neither simulating
+    nor checking (``wall_s - simulate_s - checks_s``: drawing, validating, summarizing).
 
 ``sweep`` is the layer above ``benchmarks``, so the study runner is used through its
 command line only. Results: ``<out>/study.json`` and ``<out>/study.md`` with the date and
@@ -65,6 +69,7 @@ class StudyBench:
     lone_integration_s: float
     lone_checks_s: float
     lone_s: float
+    lone_after_s: float
     shared_task_s: float
     recompile_task_s: float
     shared_vs_recompile: float
@@ -77,6 +82,8 @@ class StudyBench:
     per_sample_cost_s: float
     per_sample_vs_lone: float
     samples_task_median_s: float
+    samples_task_vs_lone: float
+    samples_task_overhead_s: float
     samples_ok: int
 
 
@@ -187,13 +194,18 @@ def measure(study: Path, a: argparse.Namespace, work: Path) -> StudyBench:
     big = _study_copy(study, a.samples, work / "big")
     wall = _sweep(["run", str(big), "--workers", "2", "--out", str(work / "big-out")], env)
     res = _results(work / "big-out")
+    shutil.rmtree(work / "lone-out")  # the same samples alone again: the machine's drift
+    li2, lc2 = lone(study, a.lone, work)
+    lone_s = (li + lc + li2 + lc2) / 2
     shared, recompiled = task_median(work / "w1"), statistics.median(rc)
     cost = wall * 2 / a.samples
+    task = float(res["wall_s"].median())
     return StudyBench(
         study=str(study),
         lone_integration_s=li,
         lone_checks_s=lc,
         lone_s=li + lc,
+        lone_after_s=li2 + lc2,
         shared_task_s=shared,
         recompile_task_s=recompiled,
         shared_vs_recompile=recompiled / shared,
@@ -204,8 +216,12 @@ def measure(study: Path, a: argparse.Namespace, work: Path) -> StudyBench:
         samples_wall_s=wall,
         samples_per_s=a.samples / wall,
         per_sample_cost_s=cost,
-        per_sample_vs_lone=cost / (li + lc),
-        samples_task_median_s=float(res["wall_s"].median()),
+        per_sample_vs_lone=cost / lone_s,
+        samples_task_median_s=task,
+        samples_task_vs_lone=task / lone_s,
+        samples_task_overhead_s=float(
+            (res["wall_s"] - res["simulate_s"] - res["checks_s"]).median()
+        ),
         samples_ok=int((res["status"] == "ok").sum()),
     )
 
@@ -222,6 +238,10 @@ def markdown(b: StudyBench, date: str, command: str) -> str:
     rows = [
         ("lone sample: integration + outputs [s] (median)", f"{b.lone_integration_s:.3g}"),
         ("lone sample: checks (verify_run) [s] (median)", f"{b.lone_checks_s:.3g}"),
+        (
+            "lone sample: integration + outputs + checks, again after the study [s]",
+            f"{b.lone_after_s:.3g}",
+        ),
         ("study task, shared library [s] (median wall_s, 1 worker)", f"{b.shared_task_s:.3g}"),
         ("study task, recompiled per sample [s] (median wall_s)", f"{b.recompile_task_s:.3g}"),
         ("shared library: samples/s ratio against recompiling", f"{b.shared_vs_recompile:.3g}"),
@@ -231,8 +251,16 @@ def markdown(b: StudyBench, date: str, command: str) -> str:
         (f"{b.samples} samples, 2 workers: wall [s]", f"{b.samples_wall_s:.4g}"),
         (f"{b.samples} samples: ok", f"{b.samples_ok}"),
         ("per-sample cost = wall x 2 / samples [s]", f"{b.per_sample_cost_s:.3g}"),
-        ("per-sample cost / lone (integration + checks)", f"{b.per_sample_vs_lone:.3g}"),
+        (
+            "per-sample cost / lone (integration + checks; mean of before and after)",
+            f"{b.per_sample_vs_lone:.3g}",
+        ),
         ("median task wall_s in that run [s]", f"{b.samples_task_median_s:.3g}"),
+        ("median task wall_s / lone", f"{b.samples_task_vs_lone:.3g}"),
+        (
+            "median task wall_s - simulate_s - checks_s (draw, summary) [s]",
+            f"{b.samples_task_overhead_s:.3g}",
+        ),
     ]
     lines = [
         "# Study benchmark",
@@ -250,9 +278,9 @@ def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.study", description=__doc__)
     ap.add_argument("--study", default=str(DEFAULT_STUDY), help="the study file")
     ap.add_argument("--samples", type=int, default=1000, help="samples timed with 2 workers")
-    ap.add_argument("--compare", type=int, default=20, help="samples of the 1/2-worker runs")
+    ap.add_argument("--compare", type=int, default=100, help="samples of the 1/2-worker runs")
     ap.add_argument("--recompile", type=int, default=3, help="samples compiled each")
-    ap.add_argument("--lone", type=int, default=5, help="samples run alone in this process")
+    ap.add_argument("--lone", type=int, default=20, help="samples run alone in this process")
     ap.add_argument("--out", default=None, help="output folder (default out/bench)")
     return ap
 

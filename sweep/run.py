@@ -42,6 +42,8 @@ BASE_COLUMNS = [
     "status",
     "steps",
     "wall_s",
+    "simulate_s",
+    "checks_s",
     "library",
     "tail_max_et",
     "formation_tail_max",
@@ -185,14 +187,19 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[
     """Run the sample (written to disk or in memory) and summarize its bounds table."""
     from verify import pipeline as P
 
+    t0 = time.perf_counter()
     if keep:
         run = _run_written(sample, paths)
+        t1 = time.perf_counter()
         v = P.verify_run(run, out_root=paths.runs)
     else:
         with tempfile.TemporaryDirectory(prefix="hitl-sample-") as tmp:
             run = _run_in_memory(sample, Path(tmp))
+            t1 = time.perf_counter()
             v = P.verify_run(run, out_root=Path(tmp))  # with the gains the run used
     return {
+        "simulate_s": t1 - t0,
+        "checks_s": time.perf_counter() - t1,
         "steps": run.meta.get("steps"),
         "library": library_key(run.meta),
         **summarize_table(v.table),

@@ -28,7 +28,7 @@ seed = 7
 """
 
 #: columns that differ between two runs of the same sample (timing, not results)
-TIMING = ["wall_s", "finished_utc"]
+TIMING = ["wall_s", "simulate_s", "checks_s", "finished_utc"]
 
 
 @pytest.fixture(scope="module")
