@@ -72,8 +72,10 @@ class ELModel:
     checks : Mapping[str, str]
         How Property 1 and Property 2 were established (``"exact"`` or
         ``"sampled"`` with the reason), for summaries and reports.
-    sympy_M, sympy_C, sympy_G, sympy_p, sympy_q :
-        The sympy expressions and symbols they came from.
+    symbolic : callable, optional
+        ``() -> (M, C, G, p, q)``: the sympy expressions and symbols the Functions
+        came from, derived on first use (a model read from the derivation cache
+        never needs sympy unless asked); also as ``sympy_M`` ... ``sympy_q``.
     """
 
     name: str
@@ -84,11 +86,37 @@ class ELModel:
     G: ca.Function
     M_bounds: tuple[float, float]
     checks: Mapping[str, str] = field(default_factory=dict)
-    sympy_M: Any = field(repr=False, default=None)
-    sympy_C: Any = field(repr=False, default=None)
-    sympy_G: Any = field(repr=False, default=None)
-    sympy_p: Any = field(repr=False, default=None)
-    sympy_q: Any = field(repr=False, default=None)
+    symbolic: Callable[[], tuple[Any, Any, Any, Any, Any]] | None = field(
+        repr=False, default=None, compare=False
+    )
+
+    def _sym(self, i: int) -> Any:
+        return self.symbolic()[i] if self.symbolic is not None else None
+
+    @property
+    def sympy_M(self) -> Any:
+        """sympy M(p)."""
+        return self._sym(0)
+
+    @property
+    def sympy_C(self) -> Any:
+        """sympy C(p, q)."""
+        return self._sym(1)
+
+    @property
+    def sympy_G(self) -> Any:
+        """sympy G(p)."""
+        return self._sym(2)
+
+    @property
+    def sympy_p(self) -> Any:
+        """The coordinate symbols."""
+        return self._sym(3)
+
+    @property
+    def sympy_q(self) -> Any:
+        """The velocity symbols."""
+        return self._sym(4)
 
 
 def register(spec: ModelSpec) -> ModelSpec:

@@ -1,17 +1,36 @@
-"""Derive M, C, G from a Lagrangian with sympy, check Properties 1–2, wrap in CasADi."""
+"""Derive M, C, G from a Lagrangian with sympy, check Properties 1–2, wrap in CasADi.
+
+The derivation is a pure function of the model's definition (its module's source, this
+module's source, the parameters, the sympy and CasADi versions); its results (the
+CasADi Functions, ``M_bounds``, how Properties 1–2 were established) are kept in the
+build cache as JSON (:func:`model_key`, docs/simulation.md), so a fresh process that
+finds them needs neither sympy nor the property checks.
+"""
 
 from __future__ import annotations
 
+import hashlib
+import inspect
+import json
 from collections.abc import Mapping
-from functools import lru_cache
+from functools import lru_cache, partial
+from importlib.metadata import version
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import casadi as ca
 import numpy as np
-import sympy as sp
-from scipy.optimize import minimize
 
 from core.errors import ScenarioError
+from core.models import cache
 from core.models.base import REGISTRY, ELModel, ModelSpec
+
+if TYPE_CHECKING:
+    import sympy as sp
+
+#: cache sub-folder and the format of its entries' bodies
+CACHE_KIND = "models"
+CACHE_FORMAT = 1
 
 
 def euler_lagrange_matrices(T: sp.Expr, V: sp.Expr, p: list[sp.Symbol], q: list[sp.Symbol]):
@@ -30,6 +49,8 @@ def euler_lagrange_matrices(T: sp.Expr, V: sp.Expr, p: list[sp.Symbol], q: list[
     p, q : list of sympy.Symbol
         Generalised coordinates and velocities.
     """
+    import sympy as sp
+
     n = len(p)
     M = sp.Matrix(n, n, lambda k, j: sp.simplify(sp.diff(T, q[k], q[j])))  # eq. (2): M
     C = sp.zeros(n, n)
@@ -77,6 +98,8 @@ def check_properties(
     ScenarioError
         Naming the model and the failed property.
     """
+    import sympy as sp
+
     if sp.simplify(M - M.T) != sp.zeros(*M.shape):
         raise ScenarioError(
             "model", name, "Property 1 fails: M is not symmetric", "a symmetric inertia matrix"
@@ -113,6 +136,8 @@ def check_properties(
 
 def _minimum(expr: sp.Expr, p: list[sp.Symbol]) -> tuple[float, bool]:
     """Infimum of ``expr`` over the coordinates and whether it is exact."""
+    import sympy as sp
+
     deps = [s for s in p if s in expr.free_symbols]
     if not deps:
         return float(expr), True
@@ -131,6 +156,8 @@ def _minimum(expr: sp.Expr, p: list[sp.Symbol]) -> tuple[float, bool]:
 
 def _periodic_in(expr: sp.Expr, syms: list[sp.Symbol]) -> bool:
     """True when every symbol in ``syms`` enters ``expr`` only through sin/cos (2π-periodic)."""
+    import sympy as sp
+
     probe = expr.replace(
         lambda e: isinstance(e, sp.sin | sp.cos) and e.free_symbols & set(syms),
         lambda e: sp.Dummy(),
@@ -141,6 +168,8 @@ def _periodic_in(expr: sp.Expr, syms: list[sp.Symbol]) -> bool:
 def _to_casadi(
     exprs: sp.Matrix, syms: list[list[sp.Symbol]], names: list[str], fname: str
 ) -> ca.Function:
+    import sympy as sp
+
     cs_syms = [ca.SX.sym(nm, len(s)) for nm, s in zip(names, syms, strict=True)]
     flat = [s for group in syms for s in group]
     flat_cs = [cs_syms[g][k] for g, group in enumerate(syms) for k in range(len(group))]
@@ -182,6 +211,9 @@ def _mass_bounds(M: sp.Matrix, p: list[sp.Symbol], name: str) -> tuple[float, fl
     grid point. Any other dependence has no finite configuration box to search,
     so it is refused.
     """
+    import sympy as sp
+    from scipy.optimize import minimize
+
     deps = [s for s in p if s in M.free_symbols]
     if not deps:
         ev = np.linalg.eigvalsh(np.array(M.evalf(), dtype=float))
@@ -209,31 +241,141 @@ def _mass_bounds(M: sp.Matrix, p: list[sp.Symbol], name: str) -> tuple[float, fl
     return lo, hi
 
 
-@lru_cache(maxsize=64)
-def _build_cached(name: str, items: tuple[tuple[str, float], ...]) -> ELModel:
+def model_key(name: str, items: tuple[tuple[str, float], ...]) -> str:
+    """SHA-256 of what defines the derived model (the derivation cache's key).
+
+    The model module's source (its Lagrangian), this module's source (the derivation
+    and the checks), the parameters (exact: JSON keeps every float's digits) and the
+    sympy and CasADi versions (their simplification and serialization).
+
+    Parameters
+    ----------
+    name : str
+        Registered model name.
+    items : tuple of (str, float)
+        Every parameter, sorted by name.
+    """
     spec: ModelSpec = REGISTRY[name]
-    params = dict(items)
-    T, V, p, q = spec.lagrangian(params)
+    text = json.dumps(
+        {
+            "format": CACHE_FORMAT,
+            "name": name,
+            "n": spec.n,
+            "params": [[k, float(v)] for k, v in items],
+            "model_source": _file_sha256(inspect.getsourcefile(spec.lagrangian)),
+            "derive_source": _file_sha256(__file__),
+            "sympy": version("sympy"),
+            "casadi": ca.__version__,
+        },
+        sort_keys=True,
+    )
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _file_sha256(path: str | None) -> str | None:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest() if path else None
+
+
+@lru_cache(maxsize=64)
+def _symbolic(name: str, items: tuple[tuple[str, float], ...]) -> tuple[Any, ...]:
+    """(M, C, G, p, q) in sympy, eq. (2), derived from the model's Lagrangian."""
+    T, V, p, q = REGISTRY[name].lagrangian(dict(items))
     M, C, G = euler_lagrange_matrices(T, V, p, q)
+    return M, C, G, p, q
+
+
+def _derive(name: str, items: tuple[tuple[str, float], ...]) -> dict[str, Any]:
+    """The derivation's results as a JSON body: Functions serialized by CasADi, numbers."""
+    M, C, G, p, q = _symbolic(name, items)
     checks = check_properties(M, C, p, q, name)
-    Mf = _to_casadi(M, [p], ["p"], "M")
-    Cf = _to_casadi(C, [p, q], ["p", "q"], "C")
-    Gf = _to_casadi(G, [p], ["p"], "G")
+    funcs = {
+        "M": _to_casadi(M, [p], ["p"], "M"),
+        "C": _to_casadi(C, [p, q], ["p", "q"], "C"),
+        "G": _to_casadi(G, [p], ["p"], "G"),
+    }
+    return {
+        "name": name,
+        "params": [[k, v] for k, v in items],
+        "checks": dict(checks),
+        "M_bounds": list(_mass_bounds(M, p, name)),
+        "functions": {k: f.serialize() for k, f in funcs.items()},
+    }
+
+
+#: each Function's inputs as (name, rows, columns) for n coordinates, and its output shape
+_SIGNATURES = {
+    "M": (lambda n: [("p", n, 1)], lambda n: (n, n)),
+    "C": (lambda n: [("p", n, 1), ("q", n, 1)], lambda n: (n, n)),
+    "G": (lambda n: [("p", n, 1)], lambda n: (n, 1)),
+}
+
+
+def _model_from(
+    body: dict[str, Any], name: str, items: tuple[tuple[str, float], ...]
+) -> ELModel | None:
+    """The ELModel a cache body describes, or None when any part is not what it must be."""
+    spec: ModelSpec = REGISTRY[name]
+    checks, bounds, fs = body.get("checks"), cache.finite_pair(body.get("M_bounds")), {}
+    if body.get("name") != name or body.get("params") != [[k, v] for k, v in items]:
+        return None
+    if not isinstance(checks, dict) or set(checks) != {"property1", "property2"}:
+        return None
+    if not all(isinstance(v, str) for v in checks.values()) or bounds is None:
+        return None
+    stored = body.get("functions")
+    if not isinstance(stored, dict) or set(stored) != set(_SIGNATURES):
+        return None
+    for k, (ins, out) in _SIGNATURES.items():
+        if not isinstance(stored[k], str):
+            return None
+        try:  # CasADi's own format (no eval); the body's checksum already matched
+            f = ca.Function.deserialize(stored[k])
+        except Exception:  # noqa: BLE001 - any failure to read means: recompute
+            return None
+        got = [(f.name_in(i), f.size1_in(i), f.size2_in(i)) for i in range(f.n_in())]
+        if f.name() != k or got != ins(spec.n) or f.n_out() != 1 or f.size_out(0) != out(spec.n):
+            return None
+        fs[k] = f
+    return _model(name, items, fs, bounds, checks)
+
+
+def _model(
+    name: str,
+    items: tuple[tuple[str, float], ...],
+    fs: dict[str, ca.Function],
+    bounds: tuple[float, float],
+    checks: dict[str, str],
+) -> ELModel:
     return ELModel(
         name=name,
-        n=spec.n,
-        params=params,
-        M=Mf,
-        C=Cf,
-        G=Gf,
-        M_bounds=_mass_bounds(M, p, name),
+        n=REGISTRY[name].n,
+        params=dict(items),
+        M=fs["M"],
+        C=fs["C"],
+        G=fs["G"],
+        M_bounds=bounds,
         checks=checks,
-        sympy_M=M,
-        sympy_C=C,
-        sympy_G=G,
-        sympy_p=p,
-        sympy_q=q,
+        symbolic=partial(_symbolic, name, items),
     )
+
+
+@lru_cache(maxsize=64)
+def _build_cached(name: str, items: tuple[tuple[str, float], ...]) -> ELModel:
+    key = model_key(name, items)
+    body = cache.read_entry(CACHE_KIND, key)
+    model = _model_from(body, name, items) if body is not None else None
+    if model is not None:
+        return model
+    body = _derive(name, items)
+    try:
+        cache.write_entry(CACHE_KIND, key, body)
+    except OSError:  # an unwritable cache costs the next process the derivation, no more
+        pass
+    # the Functions as read back: a fresh derivation and a cache hit give the same graphs
+    model = _model_from(body, name, items)
+    if model is None:
+        raise RuntimeError(f"model {name}: its CasADi Functions do not read back")
+    return model
 
 
 def build_model(name: str, params: Mapping[str, float] | None = None) -> ELModel:

@@ -6,12 +6,12 @@ satisfies eq. (2), with the paper's faults g_i, f_i acting on the two force chan
 
 from __future__ import annotations
 
-import sympy as sp
-
 from core.models.base import ModelSpec, register
 
 
 def _lagrangian(prm):
+    import sympy as sp  # on first derivation only: a cached model needs no sympy
+
     p = list(sp.symbols("x y", real=True))
     q = list(sp.symbols("vx vy", real=True))
     m = sp.nsimplify(prm["m"])

@@ -6,12 +6,12 @@ carry the weight, so a loss of effectiveness g_i < 1 biases the vertical channel
 
 from __future__ import annotations
 
-import sympy as sp
-
 from core.models.base import ModelSpec, register
 
 
 def _lagrangian(prm):
+    import sympy as sp  # on first derivation only: a cached model needs no sympy
+
     p = list(sp.symbols("x y z", real=True))
     q = list(sp.symbols("vx vy vz", real=True))
     m, g0 = (sp.nsimplify(prm[k]) for k in ("m", "g0"))

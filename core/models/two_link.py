@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import sympy as sp
-
 from core.models.base import ModelSpec, register
 
 
 def _lagrangian(prm):
+    import sympy as sp  # on first derivation only: a cached model needs no sympy
+
     p1, p2 = sp.symbols("p1 p2", real=True)
     q1, q2 = sp.symbols("q1 q2", real=True)
     m1, m2, r1, r2, J1, J2, g0 = (
