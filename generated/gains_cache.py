@@ -7,6 +7,8 @@ import hashlib
 import json
 import time
 from dataclasses import dataclass
+from functools import lru_cache
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -14,6 +16,7 @@ import numpy as np
 
 from core.artifacts import OUT_ROOT, sha256_file
 from core.errors import SynthesisError
+from core.models import cache
 from core.scenario import Scenario
 
 if TYPE_CHECKING:
@@ -34,6 +37,10 @@ class GainsInfo:
 _SYNTHESIZED: dict[str, Gains] = {}
 #: observer settings synthesis does not read (the observer's runtime numbers)
 _NOT_SYNTHESIS = ("alpha1", "alpha1_bar", "phi0", "phi_min")
+#: build-cache sub-folder of synthesized gains, ``<cache root>/gains/<synthesis_inputs>.json``
+CACHE_KIND = "gains"
+#: packages whose numbers the synthesized gains depend on (solver, linear algebra)
+_SYNTHESIS_PACKAGES = ("numpy", "scipy", "cvxpy", "clarabel")
 
 
 def synthesis_inputs(sc: Scenario) -> str:
@@ -65,6 +72,73 @@ def synthesis_inputs(sc: Scenario) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+@lru_cache(maxsize=1)
+def synthesis_code() -> str:
+    """SHA-256 of the code synthesis runs: ``synthesis/*.py``, ``core/graph.py`` and versions.
+
+    A disk entry made by other code (or another solver version) is not this code's
+    result, so it is recomputed rather than reused.
+    """
+    import core.graph
+    import synthesis
+
+    files = sorted(Path(synthesis.__file__).parent.glob("*.py")) + [Path(core.graph.__file__)]
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.name.encode() + b"\0" + hashlib.sha256(f.read_bytes()).digest())
+    for pkg in _SYNTHESIS_PACKAGES:
+        try:
+            h.update(f"{pkg}={version(pkg)}\0".encode())
+        except PackageNotFoundError:
+            h.update(f"{pkg}=none\0".encode())
+    return h.hexdigest()
+
+
+def cached_gains(sc: Scenario, key: str, root: Path | None = None) -> Gains | None:
+    """Gains synthesized earlier for inputs ``key``, re-certified for ``sc``; else None.
+
+    The entry is refused (None) when it is missing, not this key's or this code's
+    (:func:`synthesis_code`), malformed, or when :func:`synthesis.gains.recertified`
+    finds a mismatch with ``sc`` or a failed certificate check.
+
+    Parameters
+    ----------
+    sc : Scenario
+    key : str
+        ``synthesis_inputs(sc)``.
+    root : Path, optional
+        Build cache root; default ``$HITL_BUILD_DIR`` or the user cache folder.
+    """
+    from synthesis.gains import gains_from_dict, recertified
+
+    body = cache.read_entry(CACHE_KIND, key, root)
+    if body is None or body.get("code") != synthesis_code():
+        return None
+    source = str(cache.entry_path(CACHE_KIND, key, root))
+    try:
+        return recertified(gains_from_dict(body.get("gains"), source=source), source, sc)
+    except SynthesisError:
+        return None
+
+
+def store_gains(gains: Gains, key: str, root: Path | None = None) -> Path | None:
+    """Keep synthesized ``gains`` under ``key`` in the build cache (None if unwritable).
+
+    Parameters
+    ----------
+    gains : Gains
+    key : str
+        ``synthesis_inputs`` of the scenario they were synthesized for.
+    root : Path, optional
+        Build cache root; default ``$HITL_BUILD_DIR`` or the user cache folder.
+    """
+    body = {"code": synthesis_code(), "gains": gains.to_json_dict()}
+    try:
+        return cache.write_entry(CACHE_KIND, key, body, root)
+    except OSError:  # an unwritable cache costs the next process a synthesis, no more
+        return None
+
+
 def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gains, GainsInfo]:
     """Read ``out/<name>/gains.json`` if it belongs to this scenario, else synthesize and write it.
 
@@ -73,7 +147,8 @@ def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gain
     scenario and pass every certificate check not confined to scenario-given gains).
     A malformed or failing file is refused in one line, whatever ``STRICT`` says.
     Gains this process synthesized for equal :func:`synthesis_inputs` are re-certified
-    for ``sc`` and reused instead of solving the LMIs again.
+    for ``sc`` and reused instead of solving the LMIs again; so are gains another
+    process synthesized, kept in the build cache (:func:`cached_gains`).
 
     Parameters
     ----------
@@ -105,8 +180,11 @@ def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gain
     key = synthesis_inputs(sc)
     if key in _SYNTHESIZED:  # same synthesis inputs: re-certified for this scenario
         gains = recertified(_SYNTHESIZED[key], f"{path} (synthesized in this process)", sc)
+    elif (gains := cached_gains(sc, key)) is not None:  # another process synthesized them
+        _SYNTHESIZED[key] = gains
     else:
         gains = _SYNTHESIZED[key] = synthesize(sc)
+        store_gains(gains, key)
     if gains.info.get("scenario_sha256") != sc.sha256:  # variants carry their own hash
         gains = dataclasses.replace(gains, info={**gains.info, "scenario_sha256": sc.sha256})
     save_gains(gains, path)
