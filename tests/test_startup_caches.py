@@ -309,3 +309,31 @@ def test_gains_cache_round_trip_is_exact(reference_gains):
         x = getattr(reference_gains, f.name)
         if isinstance(x, np.ndarray):
             assert np.array_equal(x, getattr(back, f.name)), f.name
+
+
+def test_a_lagrangian_with_captured_values_is_not_cached(build_root):
+    """Its source does not define it: two such models must never share an entry."""
+    from core.models import REGISTRY, ModelSpec, register
+
+    def make(scale):
+        def lag(prm):
+            import sympy as sp
+
+            x, v = sp.symbols("x v", real=True)
+            return sp.nsimplify(scale) * sp.nsimplify(prm["m"]) * v**2 / 2, 0, [x], [v]
+
+        return lag
+
+    try:
+        for scale in (1, 3):
+            register(
+                ModelSpec(name="_test_scaled", n=1, defaults={"m": 2.0}, lagrangian=make(scale))
+            )
+            derive._build_cached.cache_clear()  # the in-process memos are keyed by name
+            derive._symbolic.cache_clear()
+            assert derive.model_key("_test_scaled", (("m", 2.0),)) is None
+            assert build_model("_test_scaled").M_bounds == (2.0 * scale, 2.0 * scale)
+    finally:
+        REGISTRY.pop("_test_scaled", None)
+        derive._build_cached.cache_clear()
+    assert not (build_root / "models").exists()

@@ -241,12 +241,14 @@ def _mass_bounds(M: sp.Matrix, p: list[sp.Symbol], name: str) -> tuple[float, fl
     return lo, hi
 
 
-def model_key(name: str, items: tuple[tuple[str, float], ...]) -> str:
-    """SHA-256 of what defines the derived model (the derivation cache's key).
+def model_key(name: str, items: tuple[tuple[str, float], ...]) -> str | None:
+    """SHA-256 of what defines the derived model (the derivation cache's key), or None.
 
-    The model module's source (its Lagrangian), this module's source (the derivation
-    and the checks), the parameters (exact: JSON keeps every float's digits) and the
-    sympy and CasADi versions (their simplification and serialization).
+    The model module's source and the Lagrangian's qualified name, this module's source
+    (the derivation and the checks), the parameters (exact: JSON keeps every float's
+    digits) and the sympy and CasADi versions (their simplification and serialization).
+    None (not cached) when the Lagrangian is not a plain function of a source file or
+    captures variables: its source would not define it.
 
     Parameters
     ----------
@@ -256,13 +258,23 @@ def model_key(name: str, items: tuple[tuple[str, float], ...]) -> str:
         Every parameter, sorted by name.
     """
     spec: ModelSpec = REGISTRY[name]
+    lag = spec.lagrangian
+    if not inspect.isfunction(lag) or lag.__closure__ or lag.__defaults__ or lag.__kwdefaults__:
+        return None
+    try:
+        source = inspect.getsourcefile(lag)
+    except TypeError:
+        return None
+    if source is None or not Path(source).is_file():
+        return None
     text = json.dumps(
         {
             "format": CACHE_FORMAT,
             "name": name,
             "n": spec.n,
             "params": [[k, float(v)] for k, v in items],
-            "model_source": _file_sha256(inspect.getsourcefile(spec.lagrangian)),
+            "lagrangian": lag.__qualname__,
+            "model_source": _file_sha256(source),
             "derive_source": _file_sha256(__file__),
             "sympy": version("sympy"),
             "casadi": ca.__version__,
@@ -272,8 +284,8 @@ def model_key(name: str, items: tuple[tuple[str, float], ...]) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _file_sha256(path: str | None) -> str | None:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest() if path else None
+def _file_sha256(path: str) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 @lru_cache(maxsize=64)
@@ -362,13 +374,14 @@ def _model(
 @lru_cache(maxsize=64)
 def _build_cached(name: str, items: tuple[tuple[str, float], ...]) -> ELModel:
     key = model_key(name, items)
-    body = cache.read_entry(CACHE_KIND, key)
+    body = cache.read_entry(CACHE_KIND, key) if key is not None else None
     model = _model_from(body, name, items) if body is not None else None
     if model is not None:
         return model
     body = _derive(name, items)
     try:
-        cache.write_entry(CACHE_KIND, key, body)
+        if key is not None:
+            cache.write_entry(CACHE_KIND, key, body)
     except OSError:  # an unwritable cache costs the next process the derivation, no more
         pass
     # the Functions as read back: a fresh derivation and a cache hit give the same graphs
