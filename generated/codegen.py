@@ -46,8 +46,9 @@ from core.errors import BuildError
 #: Linux), outside the package, so an installed package never writes into site-packages;
 #: ``HITL_BUILD_DIR`` overrides it
 DEFAULT_BUILD_ROOT = Path(user_cache_dir("hitl-formation")) / "build"
-#: names of what a cache root holds: entries (64 hex digits), failed sources, temp folders
-ENTRY_PATTERN = re.compile(r"[0-9a-f]{64}|failed|\.tmp-.*")
+#: names of what a cache root holds: entries (64 hex digits), failed sources, the start-up
+#: caches of core/models/cache.py (gains, models), temp folders
+ENTRY_PATTERN = re.compile(r"[0-9a-f]{64}|failed|gains|models|\.tmp-.*")
 JACOBIAN_STRATEGIES = ("sparse", "gmres", "jvp")
 #: ``auto`` is resolved from the number of agents by :func:`generated.largescale.choose_plan`
 #: before anything is generated

@@ -293,10 +293,14 @@ def test_clear_cache_removes_only_what_the_cache_made(settings, tmp_path, capsys
     lib = build_library([dyn("toy")], settings, ["toy"])
     (root / "failed" / ("0" * 64)).mkdir(parents=True)
     (root / ".tmp-abc-1-x").mkdir()
+    for kind in ("gains", "models"):  # the start-up caches (core/models/cache.py)
+        (root / kind).mkdir()
+        (root / kind / f"{'1' * 64}.json").write_text("{}")
     (root / "notes").mkdir()  # not the cache's: kept
     (root / "notes" / "keep.txt").write_text("mine")
     removed = codegen.clear_cache(root)
-    assert sorted(p.name for p in removed) == sorted([".tmp-abc-1-x", "failed", lib.key])
+    made = [".tmp-abc-1-x", "failed", "gains", "models", lib.key]
+    assert sorted(p.name for p in removed) == sorted(made)
     assert [p.name for p in root.iterdir()] == ["notes"]
     (root / "notes" / "keep.txt").unlink()
     (root / "notes").rmdir()
