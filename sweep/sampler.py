@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.stats import truncnorm
 
 from core.errors import ExpressionError, ScenarioError
 from core.faults import FAULT_TYPES
@@ -91,6 +90,8 @@ def draw(d: Distribution, rng: np.random.Generator) -> Any:
     elif d.truncate is None:
         vals = rng.normal(d.args[0], d.args[1], n).tolist()
     else:
+        from scipy.stats import truncnorm  # 1 s to import: only for truncated normals
+
         mean, std = d.args
         a, b = ((x - mean) / std for x in d.truncate)
         vals = truncnorm.rvs(a, b, loc=mean, scale=std, size=n, random_state=rng).tolist()
