@@ -24,6 +24,10 @@ shared against recompiled
 2 workers against 1
     The same ``--compare`` ids with ``--workers 2``: samples per second from the wall
     time of each command (cluster start-up included).
+the study's own cost
+    The 1-worker run follows the lone samples within a minute: its median task against
+    them is the study's own cost per sample (drawing, validating, gains, binding,
+    summarizing, Dask) with the machine's drift kept small.
 the whole study
     ``--samples`` samples (the study with its count replaced) with ``--workers 2``, timed;
     the per-sample cost is wall x workers / samples (start-up, the first sample of each
@@ -71,6 +75,7 @@ class StudyBench:
     lone_s: float
     lone_after_s: float
     shared_task_s: float
+    shared_task_vs_lone: float
     recompile_task_s: float
     shared_vs_recompile: float
     one_worker_samples_per_s: float
@@ -207,6 +212,7 @@ def measure(study: Path, a: argparse.Namespace, work: Path) -> StudyBench:
         lone_s=li + lc,
         lone_after_s=li2 + lc2,
         shared_task_s=shared,
+        shared_task_vs_lone=shared / (li + lc),
         recompile_task_s=recompiled,
         shared_vs_recompile=recompiled / shared,
         one_worker_samples_per_s=a.compare / w1,
@@ -243,6 +249,10 @@ def markdown(b: StudyBench, date: str, command: str) -> str:
             f"{b.lone_after_s:.3g}",
         ),
         ("study task, shared library [s] (median wall_s, 1 worker)", f"{b.shared_task_s:.3g}"),
+        (
+            "study task (1 worker) / lone before it (run a minute apart)",
+            f"{b.shared_task_vs_lone:.3g}",
+        ),
         ("study task, recompiled per sample [s] (median wall_s)", f"{b.recompile_task_s:.3g}"),
         ("shared library: samples/s ratio against recompiling", f"{b.shared_vs_recompile:.3g}"),
         ("1 worker: samples/s", f"{b.one_worker_samples_per_s:.3g}"),
