@@ -82,13 +82,11 @@ class Expr:
         These are the expression's runtime parameters; what remains (:meth:`template`)
         is its structure. Exponents stay structure so ``t**2`` keeps CasADi's integer power.
         """
-        out: list[float] = []
-        _collect_literals(self.node, out)
-        return tuple(out)
+        return _literals_of(self)
 
     def template(self) -> str:
         """The expression's structure: its tree with every literal written ``#``."""
-        return _template(self.node)
+        return _template_of(self)
 
     def numpy(self, t: Any) -> Any:
         """Evaluate with numpy on a float or array ``t`` (overflow gives inf/nan, no warning).
@@ -99,7 +97,7 @@ class Expr:
             Time(s).
         """
         with np.errstate(all="ignore"):
-            return _numpy_function(self.node)(np.asarray(t, dtype=float))
+            return _numpy_function(self)(np.asarray(t, dtype=float))
 
     def breakpoints(self) -> tuple[float, ...]:
         """Times t > 0 where the expression jumps or kinks, when the location is affine in t.
@@ -108,7 +106,7 @@ class Expr:
         where the arguments cross. Used to split an integration at known
         discontinuities; a non-affine argument contributes nothing.
         """
-        return _breakpoints_of(self.node)
+        return _breakpoints_of(self)
 
     def is_constant(self) -> bool:
         """True when the expression does not mention ``t``."""
@@ -116,11 +114,27 @@ class Expr:
 
 
 @lru_cache(maxsize=1024)
-def _breakpoints_of(node: tuple) -> tuple[float, ...]:
-    """:meth:`Expr.breakpoints` of a tree, remembered: a scenario asks for the same
-    expressions' breakpoints several times, and a study's samples share most trees."""
+def _literals_of(e: Expr) -> tuple[float, ...]:
+    """:meth:`Expr.literals`, remembered (asked for at every binding of a study's sample to
+    its compiled library). These caches are keyed by the whole :class:`Expr`, its text
+    too: a tree alone would not tell 0.0 from -0.0, which Python's equality identifies."""
     out: list[float] = []
-    _collect_breaks(node, out)
+    _collect_literals(e.node, out)
+    return tuple(out)
+
+
+@lru_cache(maxsize=1024)
+def _template_of(e: Expr) -> str:
+    """:meth:`Expr.template`, remembered (part of every structure key)."""
+    return _template(e.node)
+
+
+@lru_cache(maxsize=1024)
+def _breakpoints_of(e: Expr) -> tuple[float, ...]:
+    """:meth:`Expr.breakpoints`, remembered: a scenario asks for the same expressions'
+    breakpoints several times, and a study's samples share most trees."""
+    out: list[float] = []
+    _collect_breaks(e.node, out)
     return tuple(sorted(set(out)))
 
 
@@ -398,10 +412,10 @@ def _eval(node: tuple, t: Any, be: _Backend, lits: Any = None) -> Any:
 
 
 @lru_cache(maxsize=1024)
-def _numpy_function(node: tuple) -> Callable[[Any], Any]:
-    """``node`` as nested numpy closures: the operations of :func:`_eval` with its numpy
+def _numpy_function(e: Expr) -> Callable[[Any], Any]:
+    """``e`` as nested numpy closures: the operations of :func:`_eval` with its numpy
     backend, in the same order (identical values), without walking the tree per call."""
-    return _closure(node)
+    return _closure(e.node)
 
 
 def _closure(node: tuple) -> Callable[[Any], Any]:

@@ -199,3 +199,18 @@ def test_compiled_numpy_evaluation_is_the_tree_walk_to_the_bit(text):
     for t in TIMES:
         with np.errstate(all="ignore"):
             np.testing.assert_array_equal(e.numpy(t), _eval(e.node, np.asarray(t), _NUMPY))
+
+
+def test_remembered_literals_keep_the_sign_of_zero():
+    # the literal, template and breakpoint memories are keyed by the whole expression:
+    # trees equal under Python's 0.0 == -0.0 but written differently stay apart
+    from core.expressions import Expr
+
+    pos = Expr("0.0 + t", ("bin", "+", ("num", 0.0), ("t",)))
+    neg = Expr("-0.0 + t", ("bin", "+", ("num", -0.0), ("t",)))
+    assert math.copysign(1.0, pos.literals()[0]) == 1.0
+    assert math.copysign(1.0, neg.literals()[0]) == -1.0
+    assert math.copysign(1.0, pos.literals()[0]) == 1.0  # asked again, after neg
+    e = parse_expression("3*step(t - 2) + 0.5", where=WHERE)
+    assert e.literals() == (3.0, 2.0, 0.5) and e.template() == "((#*step((t-#)))+#)"
+    assert e.breakpoints() == (2.0,)
