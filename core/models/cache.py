@@ -86,7 +86,13 @@ def write_entry(kind: str, key: str, body: dict[str, Any], root: Path | None = N
 
 
 def finite_pair(v: Any) -> tuple[float, float] | None:
-    """``v`` as two finite floats, or None (a cache body's numbers are checked before use)."""
+    """``v`` as two finite floats, or None (a cache body's numbers are checked before use).
+
+    Parameters
+    ----------
+    v : Any
+        A value read from a cache entry's JSON.
+    """
     if not isinstance(v, list) or len(v) != 2:
         return None
     if not all(isinstance(x, float | int) and not isinstance(x, bool) for x in v):
