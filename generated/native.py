@@ -265,9 +265,13 @@ def build(ode_dyn: ca.Function, settings: CodegenSettings | None = None) -> Libr
 
 @functools.lru_cache(maxsize=16)
 def load(path: Path) -> ctypes.CDLL:
-    """Load a native (whole-loop or graph-ordered) library once per process and check it.
+    """Load a native (whole-loop or graph-ordered) library once per path and check it.
 
-    The path names a content-hashed cache entry, so what is loaded there never changes.
+    Used by the graph-ordered driver (:mod:`generated.dag`). The path names a
+    content-hashed cache entry: the cache builds an entry in a temporary folder and
+    renames it into place, so a handle loaded before keeps the code of that key. A file
+    rewritten in place behind the cache's back is not detected here; ``api.build``
+    loads its libraries from checked private copies instead (docs/simulation.md).
 
     Parameters
     ----------
