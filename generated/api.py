@@ -52,7 +52,7 @@ from generated.codegen import (
     entry_problem,
     renamed,
 )
-from generated.gains_cache import GainsInfo, ensure_gains
+from generated.gains_cache import GainsInfo, ensure_gains, scenario_gains
 from generated.integrate import IntegratorSettings, Trajectory, output_grid
 from generated.meta import LibraryRecord, RunMeta, WallSeconds
 from generated.overrides import (
@@ -95,6 +95,7 @@ __all__ = [
     "column_names",
     "csv_text",
     "ensure_gains",
+    "scenario_gains",
     "evaluate_outputs",
     "integrate_built",
     "integrator_settings",

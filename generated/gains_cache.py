@@ -171,15 +171,37 @@ def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gain
             gains = recertified(gf.gains, str(path), sc)
             _SYNTHESIZED.setdefault(synthesis_inputs(sc), gains)
             return gains, GainsInfo(path, gf.sha256, True, time.perf_counter() - t0)
+    gains = scenario_gains(sc, str(path))
+    save_gains(gains, path)
+    return gains, GainsInfo(path, sha256_file(path), False, time.perf_counter() - t0)
+
+
+def scenario_gains(sc: Scenario, where: str = "gains") -> Gains:
+    """Gains certified for ``sc`` without a gains.json of its own (what :func:`ensure_gains`
+    writes when the scenario's file is absent or stale).
+
+    Gains this process synthesized for equal :func:`synthesis_inputs` are re-certified
+    for ``sc``; else those another process kept in the build cache (:func:`cached_gains`,
+    certified on reading); else the LMIs are solved. A study's in-memory sample takes
+    its gains from here: nothing reads a file of them.
+
+    Parameters
+    ----------
+    sc : Scenario
+    where : str
+        Names the gains in messages (the file they are for).
+    """
+    from synthesis.gains import recertified
+
     try:
         from synthesis import synthesize
     except ImportError:
         raise SynthesisError(
-            f"{path}: missing or stale and synthesis.synthesize is not available (run make synth)"
+            f"{where}: missing or stale and synthesis.synthesize is not available (run make synth)"
         ) from None
     key = synthesis_inputs(sc)
     if key in _SYNTHESIZED:  # same synthesis inputs: re-certified for this scenario
-        gains = recertified(_SYNTHESIZED[key], f"{path} (synthesized in this process)", sc)
+        gains = recertified(_SYNTHESIZED[key], f"{where} (synthesized in this process)", sc)
     elif (gains := cached_gains(sc, key)) is not None:  # another process synthesized them
         _SYNTHESIZED[key] = gains
     else:
@@ -187,5 +209,4 @@ def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gain
         store_gains(gains, key)
     if gains.info.get("scenario_sha256") != sc.sha256:  # variants carry their own hash
         gains = dataclasses.replace(gains, info={**gains.info, "scenario_sha256": sc.sha256})
-    save_gains(gains, path)
-    return gains, GainsInfo(path, sha256_file(path), False, time.perf_counter() - t0)
+    return gains

@@ -1,7 +1,8 @@
 """Run a study's samples on Dask and stream one result row per sample to Parquet.
 
-Each task draws one sample, writes its scenario file, simulates it
-(:func:`generated.api.run`), verifies it (the bound-vs-actual table of
+Each task runs a chunk of samples; for each it draws the sample, simulates it (the steps
+of :func:`generated.api.run` in memory, or that function on the written scenario file
+with ``--keep-runs``), verifies it (the bound-vs-actual table of
 :func:`verify.pipeline.verify_run`, no figures) and returns one flat row. Rows are
 committed to ``out/<study>/results.parquet`` in batches by an atomic replace of the
 whole table, so an interrupted study resumes with only the missing sample ids.
@@ -15,7 +16,6 @@ import math
 import os
 import re
 import sys
-import tempfile
 import time
 import traceback
 import uuid
@@ -193,10 +193,9 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[
         t1 = time.perf_counter()
         v = P.verify_run(run, out_root=paths.runs)
     else:
-        with tempfile.TemporaryDirectory(prefix="hitl-sample-") as tmp:
-            run = _run_in_memory(sample, Path(tmp))
-            t1 = time.perf_counter()
-            v = P.verify_run(run, out_root=Path(tmp))  # with the gains the run used
+        run = _run_in_memory(sample, paths)
+        t1 = time.perf_counter()
+        v = P.verify_run(run)  # with the gains the run used (Run.gains): no file is read
     return {
         "simulate_s": t1 - t0,
         "checks_s": time.perf_counter() - t1,
@@ -218,21 +217,21 @@ def _run_written(sample: Sample, paths: StudyPaths) -> Any:
     return P.Run(sample.scenario, res.frame, res.trajectory.x, res.meta, res.csv_path.parent)
 
 
-def _run_in_memory(sample: Sample, root: Path) -> Any:
+def _run_in_memory(sample: Sample, paths: StudyPaths) -> Any:
     """The same steps as :func:`generated.api.run` (gains, build, integrate, outputs)
-    without writing the trajectory; only gains.json goes to ``root``."""
+    writing nothing; the run's folder is where ``--keep-runs`` would write it."""
     from generated import api
     from verify import pipeline as P
 
     sc = sample.scenario
-    gains, _ = api.ensure_gains(sc, root)
+    gains = api.scenario_gains(sc, f"gains of sample {sample.id}")
     codegen = api.resolve_codegen(sc.N)
     built = api.build(sc, gains, sc.integration.method, codegen)
     traj = api.simulate(built, sc, api.integrator_settings(sc, sc.integration.method, codegen))
     traj.raise_if_incomplete()
     frame = api.trajectory_frame(built, sc, traj)
     meta = {"steps": traj.stats.get("steps"), "library": {"key": built.library.key}}
-    return P.Run(sc, frame, traj.x, meta, root / sc.name, gains=gains)
+    return P.Run(sc, frame, traj.x, meta, paths.runs / sc.name, gains=gains)
 
 
 def library_key(meta: dict[str, Any]) -> str:
