@@ -20,6 +20,17 @@ from core.models import build_model
 from core.scenario import Scenario
 
 ROOT = Path(__file__).resolve().parents[1]
+#: the project's packages, in layer order (the style and docstring checks cover each)
+PACKAGES = (
+    "core",
+    "synthesis",
+    "symbolic",
+    "generated",
+    "verify",
+    "benchmarks",
+    "sweep",
+    "console",
+)
 SCENARIOS = ROOT / "scenarios"
 PAPER = SCENARIOS / "paper.toml"
 

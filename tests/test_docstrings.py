@@ -20,17 +20,8 @@ import re
 from types import ModuleType
 
 import pytest
+from helpers import PACKAGES
 
-PACKAGES = [
-    "core",
-    "synthesis",
-    "symbolic",
-    "generated",
-    "verify",
-    "benchmarks",
-    "sweep",
-    "console",
-]
 # modules neither imported nor checked
 EXCLUDED_MODULES: set[str] = set()
 

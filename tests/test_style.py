@@ -13,18 +13,8 @@ import ast
 import subprocess
 
 import pytest
-from helpers import ROOT
+from helpers import PACKAGES, ROOT
 
-PACKAGES = (
-    "core",
-    "synthesis",
-    "symbolic",
-    "generated",
-    "verify",
-    "benchmarks",
-    "sweep",
-    "console",
-)
 MAX_LINES = 80
 MARKER = "# fmt" + ": " + "skip"
 
