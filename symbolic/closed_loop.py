@@ -19,6 +19,7 @@ slices and back.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -732,7 +733,45 @@ def build_closed_loop(scenario: Scenario, gains: Gains, *, assembly: str = "map"
     blocks = dict(net["funs"])
     blocks["leader"] = net["lead"]
     parametric = Parametric(play, ode_p, ode_dyn_p, dae_dyn_p, outputs_p, structure_key(sc, gains))
+    _remember_parametric((parametric.structure_key, assembly), parametric)
     return bind(parametric, sc, gains, lay, assembly, blocks)
+
+
+#: parametric loops built in this process, by (structure key, assembly), newest last
+_PARAMETRIC: OrderedDict[tuple[str, str], Parametric] = OrderedDict()
+#: how many structures' parametric loops a process keeps
+PARAMETRIC_KEPT = 4
+
+
+def _remember_parametric(key: tuple[str, str], par: Parametric) -> None:
+    _PARAMETRIC[key] = par
+    _PARAMETRIC.move_to_end(key)
+    while len(_PARAMETRIC) > PARAMETRIC_KEPT:
+        _PARAMETRIC.popitem(last=False)
+
+
+def forget_parametric() -> None:
+    """Forget the parametric loops :func:`closed_loop_for` would reuse."""
+    _PARAMETRIC.clear()
+
+
+def closed_loop_for(sc: Scenario, gains: Gains, assembly: str = "map") -> ClosedLoop:
+    """The closed loop of ``sc``: a parametric loop this process built for the same
+    structure (:func:`build_closed_loop` keeps the newest few) bound to ``sc``'s numbers,
+    else a new :func:`build_closed_loop`.
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+    assembly : {"map", "flat"}
+        As for :func:`build_closed_loop`.
+    """
+    key = structure_key(sc, gains)
+    par = _PARAMETRIC.get((key, assembly))
+    if par is None:
+        return build_closed_loop(sc, gains, assembly=assembly)
+    return bind(par, sc, gains, assembly=assembly, key=key)
 
 
 def fix_parameters(f: ca.Function, p: np.ndarray) -> ca.Function:

@@ -233,13 +233,14 @@ class FastFunctions:
 
 
 _FAST: OrderedDict[str, FastFunctions] = OrderedDict()
-_PARAMETRIC: OrderedDict[str, Any] = OrderedDict()
 
 
 def clear_cache() -> None:
     """Forget every structure's verify Functions and closed loop kept in this process."""
+    from symbolic.closed_loop import forget_parametric
+
     _FAST.clear()
-    _PARAMETRIC.clear()
+    forget_parametric()
     _LAST_EVALUATION.clear()
 
 
@@ -453,20 +454,13 @@ def closed_loop(sc: Scenario, gains: Any) -> Any:
     Returns
     -------
     ClosedLoop
-        :func:`symbolic.closed_loop.bind` of the cached parametric loop with ``sc``'s
-        numbers, or a new :func:`symbolic.closed_loop.build_closed_loop` for a new structure.
+        :func:`symbolic.closed_loop.closed_loop_for`: the parametric loop this process
+        built for the structure (also by ``generated.api.build``) bound to ``sc``'s
+        numbers, or a new build for a new structure.
     """
-    from symbolic.closed_loop import bind, build_closed_loop
-    from symbolic.parameters import structure_key
+    from symbolic.closed_loop import closed_loop_for
 
-    key = structure_key(sc, gains)
-    par = _PARAMETRIC.get(key)
-    if par is None:
-        cl = build_closed_loop(sc, gains)
-        if cl.parametric is not None:
-            _remember(_PARAMETRIC, cl.parametric.structure_key, cl.parametric)
-        return cl
-    return bind(par, sc, gains, key=key)
+    return closed_loop_for(sc, gains)
 
 
 def outputs_at(cl: Any, t: np.ndarray, X: np.ndarray) -> dict[str, np.ndarray]:
