@@ -257,6 +257,8 @@ def test_closed_loop_of_a_second_sample_reuses_the_first_structure(fault_runs):
     want = fresh.outputs(t[k], X[k])
     for a, b in zip(got, want, strict=True):
         _assert_same(np.asarray(a), np.asarray(b))
+    # a build made elsewhere in the process (here: the fresh one) is what verify binds next
+    assert L.closed_loop(sc1, g1).parametric is fresh.parametric
 
 
 def test_another_runs_p_gives_other_values(fault_runs, monkeypatch):
