@@ -499,11 +499,16 @@ def chunk_size(n_samples: int, n_threads: int) -> int:
     return max(1, min(MAX_CHUNK, n_samples // max(1, 4 * n_threads)))
 
 
-#: Dask settings of the local cluster: no statistical profiler sampling each task's stack
-#: every 10 ms (it competes with the task for the interpreter), memory polled every second
+#: Dask settings of the local cluster. Each process's event loop wakes up for these
+#: timers, and on two cores a wake-up takes the core from a sample: no statistical
+#: profiler sampling each task's stack every 10 ms, memory polled every second, the
+#: loop's responsiveness tick every second (default 20 ms), the system monitor (CPU and
+#: network counters for the dashboard, which a study does not start) every 5 s
 LOCAL_CLUSTER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
 }
 
 

@@ -178,6 +178,29 @@ def test_unreachable_scheduler_is_one_error_naming_it(setup):
     assert not (root / "nowhere/tiny/results.parquet").exists()
 
 
+def test_local_cluster_workers_and_scheduler_get_the_quiet_timers():
+    """LOCAL_CLUSTER_CONFIG reaches the worker processes (through their nannies) and the
+    scheduler's own timers: a setting that stayed in the client would change nothing."""
+    import dask
+    import distributed  # noqa: F401 - loads the distributed.* defaults
+
+    from sweep.run import LOCAL_CLUSTER_CONFIG, _client, _close
+
+    keys = list(LOCAL_CLUSTER_CONFIG)
+    assert (
+        dask.config.get("distributed.admin.tick.interval")
+        != LOCAL_CLUSTER_CONFIG["distributed.admin.tick.interval"]
+    )  # else this test could not tell
+    client = _client(None, 1)
+    try:
+        seen = client.run(lambda: [dask.config.get(k) for k in keys])
+        tick = client.cluster.scheduler.periodic_callbacks["tick"].callback_time
+    finally:
+        _close(client, True)
+    assert list(seen.values()) == [[LOCAL_CLUSTER_CONFIG[k] for k in keys]]
+    assert tick == 1000  # ms: "1s", not the default 20 ms
+
+
 def test_killed_run_resumes_with_only_the_missing_samples(setup):
     """SIGKILL `python -m sweep run` after some rows are committed, rerun: the committed rows
     stay as they were (timing included), the others run once, none is lost or duplicated,
