@@ -1301,11 +1301,20 @@ def _rows(
 
 
 def _times(e: Expr, tgrid: np.ndarray) -> np.ndarray:
-    """``tgrid`` plus both sides of the known breakpoints of ``e`` (so a step is not missed)."""
+    """``tgrid`` plus both sides of the known breakpoints of ``e`` (so a step is not missed);
+    remembered for equal expressions and grids (read-only: a study asks again per sample)."""
+    return _times_of(e, np.ascontiguousarray(tgrid, dtype=float).tobytes())
+
+
+@lru_cache(maxsize=512)
+def _times_of(e: Expr, tgrid_bytes: bytes) -> np.ndarray:
+    tgrid = np.frombuffer(tgrid_bytes, dtype=float)
     H = tgrid[-1]
     extra = [x for b in e.breakpoints() if 0.0 <= b <= H for x in (b, b - 1e-9, b + 1e-9)]
     ts = np.concatenate([tgrid, np.array(extra, dtype=float)])
-    return np.unique(ts[(ts >= 0.0) & (ts <= H)])
+    out = np.unique(ts[(ts >= 0.0) & (ts <= H)])
+    out.setflags(write=False)
+    return out
 
 
 def _sample(e: Expr, ts: np.ndarray) -> np.ndarray:

@@ -231,7 +231,8 @@ def _run_in_memory(sample: Sample, paths: StudyPaths) -> Any:
     traj.raise_if_incomplete()
     frame = api.trajectory_frame(built, sc, traj)
     meta = {"steps": traj.stats.get("steps"), "library": {"key": built.library.key}}
-    return P.Run(sc, frame, traj.x, meta, paths.runs / sc.name, gains=gains)
+    folder = paths.runs / sc.name
+    return P.Run(sc, frame, traj.x, meta, folder, gains=gains, closed_loop=built.closed_loop)
 
 
 def library_key(meta: dict[str, Any]) -> str:

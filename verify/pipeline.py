@@ -34,7 +34,9 @@ class Run:
 
     ``gains`` are the gains the run used when the caller holds them (certified for this
     scenario by :func:`generated.api.ensure_gains` in this process); None: the checks
-    read ``<out_root>/<name>/gains.json`` and re-certify it.
+    read ``<out_root>/<name>/gains.json`` and re-certify it. ``closed_loop`` is the loop
+    the run integrated (bound to this scenario and ``gains``), when the caller holds it;
+    the checks use it with those gains instead of binding the numbers again.
     """
 
     scenario: Scenario
@@ -45,6 +47,7 @@ class Run:
     simulated: bool = False
     notes: list[str] = field(default_factory=list)
     gains: Any = None
+    closed_loop: Any = None
 
 
 def states_from_frame(cl: Any, sc: Scenario, df: pd.DataFrame) -> np.ndarray:
@@ -187,7 +190,8 @@ def verify_run(
     notes = list(run.notes)
     t1, t2 = [], []
     if lyapunov:
-        cl = closed_loop(sc, gains)  # the symbolic loop is built once per structure
+        cl = run.closed_loop if run.gains is not None else None
+        cl = cl or closed_loop(sc, gains)  # the symbolic loop is built once per structure
         X = run.X if run.X is not None else states_from_frame(cl, sc, run.frame)
         t = run.frame["t"].to_numpy(float)
         rates = theorem1_rates(sc, gains)
