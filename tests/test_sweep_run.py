@@ -346,3 +346,20 @@ def test_a_crashing_chunk_is_rerun_sample_by_sample(tmp_path):
     assert max(len(t) for t in client.tasks) == 4
     # chunks: at least 4 tasks per worker thread, never more than MAX_CHUNK samples
     assert chunk_size(1000, 2) == 8 and chunk_size(20, 2) == 2 and chunk_size(3, 2) == 1
+
+
+def test_checks_with_the_integrated_loop_equal_checks_that_bind_their_own(setup):
+    """An in-memory sample hands the checks the closed loop it integrated (Run.closed_loop);
+    the table equals, bit for bit, the one the checks get by binding the numbers themselves."""
+    import dataclasses
+
+    from sweep.run import StudyPaths, _run_in_memory
+    from sweep.sampler import make_sample
+    from verify.pipeline import verify_run
+
+    root = setup["root"]
+    sample = make_sample(load_study(root / "study.toml"), 1)
+    run = _run_in_memory(sample, StudyPaths(root / "bound"))
+    assert run.closed_loop is not None and run.gains is not None
+    own = verify_run(dataclasses.replace(run, closed_loop=None)).table
+    pd.testing.assert_frame_equal(verify_run(run).table, own, check_exact=True)
