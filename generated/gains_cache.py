@@ -176,6 +176,17 @@ def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gain
     return gains, GainsInfo(path, sha256_file(path), False, time.perf_counter() - t0)
 
 
+def _synthesize(sc: Scenario, where: str) -> Gains:
+    """Solve the LMIs for ``sc``; cvxpy is imported only here, when no gains can be reused."""
+    try:
+        from synthesis import synthesize
+    except ImportError:
+        raise SynthesisError(
+            f"{where}: missing or stale and synthesis.synthesize is not available (run make synth)"
+        ) from None
+    return synthesize(sc)
+
+
 def scenario_gains(sc: Scenario, where: str = "gains") -> Gains:
     """Gains certified for ``sc`` without a gains.json of its own (what :func:`ensure_gains`
     writes when the scenario's file is absent or stale).
@@ -193,19 +204,13 @@ def scenario_gains(sc: Scenario, where: str = "gains") -> Gains:
     """
     from synthesis.gains import recertified
 
-    try:
-        from synthesis import synthesize
-    except ImportError:
-        raise SynthesisError(
-            f"{where}: missing or stale and synthesis.synthesize is not available (run make synth)"
-        ) from None
     key = synthesis_inputs(sc)
     if key in _SYNTHESIZED:  # same synthesis inputs: re-certified for this scenario
         gains = recertified(_SYNTHESIZED[key], f"{where} (synthesized in this process)", sc)
     elif (gains := cached_gains(sc, key)) is not None:  # another process synthesized them
         _SYNTHESIZED[key] = gains
     else:
-        gains = _SYNTHESIZED[key] = synthesize(sc)
+        gains = _SYNTHESIZED[key] = _synthesize(sc, where)
         store_gains(gains, key)
     if gains.info.get("scenario_sha256") != sc.sha256:  # variants carry their own hash
         gains = dataclasses.replace(gains, info={**gains.info, "scenario_sha256": sc.sha256})

@@ -33,7 +33,7 @@ from synthesis.assumptions import (
 )
 from synthesis.gains import MATRIX_FIELDS, Gains
 from synthesis.lemma3 import DENSE_EIG_MAX_N, w_of
-from synthesis.lmi import lmi15_matrix, lmi16_matrix
+from synthesis.lmi_matrices import lmi15_matrix, lmi16_matrix
 
 DEFAULT_TOL = 1e-8  # when the gains file records no solver tolerance
 SYM_RTOL = 1e-9  # relative asymmetry accepted in T, Ω, Z, L̄ᵀZ + ZL̄

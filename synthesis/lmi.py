@@ -25,6 +25,7 @@ import cvxpy as cp
 import numpy as np
 
 from core.errors import SynthesisError
+from synthesis.lmi_matrices import lmi15_matrix, lmi15_matrix_P, lmi16_matrix
 
 # Solver tolerances set explicitly, and the strictness margin ε >= 10 × each of them.
 SOLVER_TOL = {"CLARABEL": 1e-8, "SCS": 1e-7}
@@ -162,48 +163,6 @@ def _centre_polish(
 
 
 # --------------------------------------------------------------------------- LMI (15)
-def lmi15_matrix(
-    A0: np.ndarray, B0: np.ndarray, T: np.ndarray, lb1: float, d1: float
-) -> np.ndarray:
-    """A0T + TA0ᵀ − λ̄1B0B0ᵀ + δ1T (eq. (15), transposes as the proof needs them).
-
-    Parameters
-    ----------
-    A0 : ndarray
-        m×m leader state matrix.
-    B0 : ndarray
-        m×p leader input matrix.
-    T : ndarray or cvxpy expression
-        m×m symmetric matrix.
-    lb1 : float
-        λ̄1.
-    d1 : float
-        δ1.
-    """
-    return A0 @ T + T @ A0.T - lb1 * (B0 @ B0.T) + d1 * T  # eq. (15)
-
-
-def lmi15_matrix_P(
-    A0: np.ndarray, Q: np.ndarray, P: np.ndarray, lb1: float, d1: float
-) -> np.ndarray:
-    """PA0 + A0ᵀP − λ̄1QᵀQ + δ1P = T⁻¹(eq. (15))T⁻¹ with P = T⁻¹ and Q = B0ᵀP.
-
-    Parameters
-    ----------
-    A0 : ndarray
-        m×m leader state matrix.
-    Q : ndarray
-        p×m, Q = B0ᵀP.
-    P : ndarray or cvxpy expression
-        m×m symmetric, P = T⁻¹.
-    lb1 : float or cvxpy expression
-        λ̄1.
-    d1 : float
-        δ1.
-    """
-    return P @ A0 + A0.T @ P - lb1 * (Q.T @ Q) + d1 * P  # eq. (15), congruent form
-
-
 @dataclass(frozen=True)
 class TResult:
     """Result of LMI (15): T, Q = B0ᵀT⁻¹ and the solver's report.
@@ -407,30 +366,6 @@ def min_lambda_bar1_for_Q(A0: np.ndarray, B0: np.ndarray, Q: np.ndarray, d1: flo
 
 
 # --------------------------------------------------------------------------- LMI (16)
-def lmi16_matrix(
-    Phi: np.ndarray, A0: np.ndarray, C0: np.ndarray, Theta: np.ndarray, Omega: np.ndarray, d2: float
-) -> np.ndarray:
-    """(ΦA0 − ΘC0)ᵀΩ + Ω(ΦA0 − ΘC0) + δ2Ω (eq. (16)).
-
-    Parameters
-    ----------
-    Phi : ndarray
-        m×m, Φ = I − ΓC0.
-    A0 : ndarray
-        m×m leader state matrix.
-    C0 : ndarray
-        n×m leader output matrix.
-    Theta : ndarray
-        m×n observer gain Θ.
-    Omega : ndarray or cvxpy expression
-        m×m symmetric Ω.
-    d2 : float
-        δ2.
-    """
-    Ac = Phi @ A0 - Theta @ C0
-    return Ac.T @ Omega + Omega @ Ac + d2 * Omega  # eq. (16)
-
-
 @dataclass(frozen=True)
 class OmegaResult:
     """Result of LMI (16): Ω, Θ, the solver's report and whether (16) holds (``feasible``)."""

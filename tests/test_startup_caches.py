@@ -163,16 +163,20 @@ def test_an_entry_of_other_synthesis_code_is_refused(build_root, tmp_path, synth
     assert gains_cache.cached_gains(synth_scenario, key) is None
 
 
-def test_reading_cached_gains_imports_neither_control_nor_matplotlib(
+def test_reusing_cached_gains_imports_no_solver_control_or_matplotlib(
     build_root, tmp_path, synth_scenario
 ):
+    """A fresh process that reuses cached gains, certificate included (what a study's
+    worker does for its first sample), imports neither cvxpy nor the plotting stack."""
     fresh_gains(synth_scenario, tmp_path / "out1")
     code = (
         "import sys; from pathlib import Path; from core.scenario import load_scenario\n"
         "from generated import gains_cache as g\n"
         f"sc = load_scenario({str(SYNTH)!r})\n"
         "k = g.synthesis_inputs(sc); assert g.cached_gains(sc, k) is not None\n"
-        "print(sorted(m for m in ('control', 'matplotlib', 'sympy') if m in sys.modules))\n"
+        "g.scenario_gains(sc)  # certified on reuse, or it raises\n"
+        "heavy = ('cvxpy', 'clarabel', 'scipy.stats', 'control', 'matplotlib', 'sympy')\n"
+        "print(sorted(m for m in heavy if m in sys.modules))\n"
     )
     out = subprocess.run(
         [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
