@@ -547,8 +547,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--compare", type=int, default=100, help="samples of the 1/2-worker runs")
     ap.add_argument("--recompile", type=int, default=3, help="samples compiled each")
     ap.add_argument("--lone", type=int, default=20, help="samples run alone in this process")
-    ap.add_argument("--rounds", type=int, default=4, help="rounds of interleaved blocks")
-    ap.add_argument("--block", type=int, default=15, help="samples per interleaved block")
+    ap.add_argument("--rounds", type=int, default=6, help="rounds of interleaved blocks")
+    ap.add_argument("--block", type=int, default=20, help="samples per interleaved block")
     ap.add_argument("--out", default=None, help="output folder (default out/bench)")
     return ap
 
