@@ -46,6 +46,8 @@ BASE_COLUMNS = [
     "checks_s",
     "library",
     "tail_max_et",
+    "tail_switches",
+    "last_switch_t",
     "formation_tail_max",
     "observer_tail_max",
     "t2_entry_source",
@@ -204,6 +206,7 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[
         **summarize_table(v.table),
         **theorem2_entry(v.table, sample.scenario, run.frame, v.config),
         "tail_max_et": tail_max_et(run.frame, v.config.tail_fraction),
+        **topology_in_tail(sample.scenario, run.frame, v.config.tail_fraction),
     }
 
 
@@ -280,6 +283,37 @@ def tail_max_et(frame: pd.DataFrame, tail_fraction: float) -> float:
         e = np.linalg.norm(np.asfortranarray(S.take(frame, cols)[tail]), axis=1)
         best = max(best, float(e.max()))
     return best
+
+
+def topology_in_tail(sc: Any, frame: pd.DataFrame, tail_fraction: float) -> dict[str, Any]:
+    """Whether the tail window saw one fixed graph: ``tail_max_et`` is an asymptotic
+    error only then; a link lost or recovered in the window puts its transient in it.
+
+    Parameters
+    ----------
+    sc : Scenario
+        Its ``graph.switches`` (link losses and recoveries).
+    frame : DataFrame
+        The trajectory (column ``t``).
+    tail_fraction : float
+        The tail window: the last fraction of the horizon (:func:`verify.signals.tail_mask`).
+
+    Returns
+    -------
+    dict
+        ``tail_switches``: distinct topology switch times inside the tail window;
+        ``last_switch_t``: the last switch time (NaN for a fixed graph).
+    """
+    from core.graph import switch_times
+
+    t = frame["t"].to_numpy(float)
+    t0, t1 = float(t[0]), float(t[-1])
+    start = t1 - tail_fraction * (t1 - t0)  # the window of verify.signals.tail_mask
+    times = switch_times(sc.graph.switches)
+    return {
+        "tail_switches": sum(1 for s in times if start - 1e-12 <= s <= t1),
+        "last_switch_t": float(times[-1]) if times else math.nan,
+    }
 
 
 def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
@@ -504,12 +538,21 @@ def chunk_size(n_samples: int, n_threads: int) -> int:
 #: timers, and on two cores a wake-up takes the core from a sample: no statistical
 #: profiler sampling each task's stack every 10 ms, memory polled every second, the
 #: loop's responsiveness tick every second (default 20 ms), the system monitor (CPU and
-#: network counters for the dashboard, which a study does not start) every 5 s
+#: network counters for the dashboard, which a study does not start) every 5 s. The
+#: workers' environment keeps Dask's one-thread caps but not its MALLOC_TRIM_THRESHOLD_:
+#: with it glibc maps and unmaps every array above 128 KiB, about 5,000 page faults and
+#: 11 ms of kernel time per sample of studies/faults.toml against 10 faults without
+#: (docs/studies.md, 'Cost of a sample')
 LOCAL_CLUSTER_CONFIG = {
     "distributed.worker.profile.enabled": False,
     "distributed.worker.memory.monitor-interval": "1s",
     "distributed.admin.tick.interval": "1s",
     "distributed.admin.system-monitor.interval": "5s",
+    "distributed.nanny.pre-spawn-environ": {
+        "OMP_NUM_THREADS": 1,
+        "MKL_NUM_THREADS": 1,
+        "OPENBLAS_NUM_THREADS": 1,
+    },
 }
 
 

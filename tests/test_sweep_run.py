@@ -6,6 +6,7 @@ initial positions p0 only: runtime values, so every sample runs the same compile
 
 from __future__ import annotations
 
+import os
 import tomllib
 
 import pandas as pd
@@ -178,7 +179,7 @@ def test_unreachable_scheduler_is_one_error_naming_it(setup):
     assert not (root / "nowhere/tiny/results.parquet").exists()
 
 
-def test_local_cluster_workers_and_scheduler_get_the_quiet_timers():
+def test_local_cluster_settings_reach_the_workers_and_the_scheduler():
     """LOCAL_CLUSTER_CONFIG reaches the worker processes (through their nannies) and the
     scheduler's own timers: a setting that stayed in the client would change nothing."""
     import dask
@@ -194,11 +195,16 @@ def test_local_cluster_workers_and_scheduler_get_the_quiet_timers():
     client = _client(None, 1)
     try:
         seen = client.run(lambda: [dask.config.get(k) for k in keys])
+        env = client.run(
+            lambda: {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS")}
+        )
         tick = client.cluster.scheduler.periodic_callbacks["tick"].callback_time
     finally:
         _close(client, True)
     assert list(seen.values()) == [[LOCAL_CLUSTER_CONFIG[k] for k in keys]]
     assert tick == 1000  # ms: "1s", not the default 20 ms
+    # glibc's dynamic mmap threshold stays on (no trim threshold); one BLAS thread each
+    assert list(env.values()) == [{"MALLOC_TRIM_THRESHOLD_": None, "OMP_NUM_THREADS": "1"}]
 
 
 def test_killed_run_resumes_with_only_the_missing_samples(setup):
