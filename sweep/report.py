@@ -154,7 +154,8 @@ def fault_figures(points: pd.DataFrame, figs: Path) -> list[Path]:
 
 def graph_figure(table: pd.DataFrame, figs: Path) -> Path | None:
     """``error_vs_N.png``: tail error against the number of followers, coloured by the
-    number of links lost (``param:graph.loss[k].*``); None without random graphs.
+    number of links lost (``param:graph.loss[k].*``), crosses where the tail window holds a
+    topology switch (``tail_switches``); None without random graphs.
 
     Parameters
     ----------
@@ -170,8 +171,27 @@ def graph_figure(table: pd.DataFrame, figs: Path) -> Path | None:
         return None
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5, 3.4))
-    pts = ax.scatter(N[good], err[good], s=14, c=links_lost(ok)[good], cmap="viridis")
+    lost = links_lost(ok)
+    switched = _num(ok, "tail_switches") > 0 if "tail_switches" in ok else np.zeros(len(ok), bool)
+    norm = plt.Normalize(0.0, max(1.0, float(lost[good].max())))
+    for mask, marker, label in [
+        (good & ~switched, "o", "tail window: one graph"),
+        (good & switched, "x", "tail window: a link lost or back"),
+    ]:
+        if mask.any():
+            pts = ax.scatter(
+                N[mask],
+                err[mask],
+                s=18,
+                c=lost[mask],
+                cmap="viridis",
+                norm=norm,
+                marker=marker,
+                label=label,
+            )
     fig.colorbar(pts, ax=ax, label="links lost")
+    if switched[good].any():
+        ax.legend(fontsize=7)
     if np.all(err[good] > 0):
         ax.set_yscale("log")
     ax.set_xlabel("followers N")
@@ -231,6 +251,7 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
             if len(vals)
             else f"| median {label} | - |"
         )
+    lines += tail_split_lines(ok)
     t2 = entry_times(table)
     lines.append(
         f"| median Theorem 2 entry time [s] | {np.median(t2):.4g} |"
@@ -245,6 +266,32 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
         f"| ok samples whose consistency rows all hold | {int(cons.sum())} of {len(ok)} "
         f"({n_cons} consistency rows in all) |"
     )
+    return lines
+
+
+def tail_split_lines(ok: pd.DataFrame) -> list[str]:
+    """The median tail error of the samples whose tail window saw one fixed graph, and of
+    those with a link lost or recovered inside it (no lines when no sample switches there).
+
+    Parameters
+    ----------
+    ok : DataFrame
+        The ``ok`` rows.
+    """
+    if "tail_switches" not in ok.columns:  # rows written before the column existed
+        return []
+    switched = pd.to_numeric(ok["tail_switches"], errors="coerce").fillna(0).to_numpy() > 0
+    if not switched.any():
+        return []
+    err = _num(ok, "tail_max_et")
+    lines = []
+    for mask, what in [(~switched, "one fixed graph"), (switched, "a topology switch")]:
+        vals = err[mask & np.isfinite(err)]
+        med = f"{np.median(vals):.4g}" if len(vals) else "-"
+        lines.append(
+            f"| median tail max \\|e_ti\\|, tail window with {what} ({int(mask.sum())} samples)"
+            f" | {med} |"
+        )
     return lines
 
 

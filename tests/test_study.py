@@ -481,3 +481,32 @@ def test_link_losses_are_links_of_the_graph_restored_with_their_weight(tmp_path)
         else:
             accepted += 1
     assert refused and accepted  # both kinds occur with these settings
+
+
+def test_tail_switch_count_and_last_switch_follow_the_drawn_losses(tmp_path):
+    """The row's ``tail_switches`` and ``last_switch_t`` from the drawn loss and recovery
+    times (the sampler's parameters, not the scenario's switch list the function reads):
+    tail window [10, 20] s of the 20-s horizon."""
+    import pandas as pd
+
+    from sweep.run import topology_in_tail
+
+    head = f'base = "{PAPER}"\ncount = 30\nseed = 11\n'
+    frame = pd.DataFrame({"t": np.linspace(0.0, 20.0, 201)})
+    seen = set()
+    for s in samples(load_study(_study(tmp_path, LOSSES, head=head))):
+        if s.scenario is None:
+            continue
+        times, k = set(), 1
+        while f"graph.loss[{k}].time" in s.params:
+            times.add(s.params[f"graph.loss[{k}].time"])
+            back = s.params[f"graph.loss[{k}].recovery"]
+            times |= {back} if back < 20.0 else set()
+            k += 1
+        got = topology_in_tail(s.scenario, frame, 0.5)
+        assert got["tail_switches"] == sum(10.0 <= t <= 20.0 for t in times)
+        assert got["last_switch_t"] == max(times)
+        seen.add(got["tail_switches"] > 0)
+    assert seen == {True, False}  # both kinds occur
+    fixed = topology_in_tail(load_scenario(PAPER), frame, 0.5)
+    assert fixed["tail_switches"] == 0 and math.isnan(fixed["last_switch_t"])

@@ -84,3 +84,19 @@ def test_report_has_the_figures_the_type_table_and_a_working_rerun_command(tmp_p
     written = tomllib.loads(Path(scenario).read_text())
     assert written["name"] == "faults-0005"
     assert "- id 7: failed: IntegrationError" in text
+
+
+def test_tail_error_is_split_by_a_topology_switch_in_the_tail_window():
+    """Medians of the two groups recomputed here; no split when no tail saw a switch, and
+    none for rows written without the column."""
+    from sweep.report import tail_split_lines
+
+    ok = pd.DataFrame(
+        {"tail_max_et": [1.0, 2.0, 4.0, 100.0, 300.0], "tail_switches": [0, 0, 0, 1, 2]}
+    )
+    lines = tail_split_lines(ok)
+    assert len(lines) == 2
+    assert "one fixed graph (3 samples) | 2 |" in lines[0]
+    assert "a topology switch (2 samples) | 200 |" in lines[1]
+    assert tail_split_lines(ok.assign(tail_switches=0)) == []
+    assert tail_split_lines(ok.drop(columns="tail_switches")) == []
