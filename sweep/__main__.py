@@ -1,6 +1,8 @@
 """``python -m sweep samples STUDY [--write-scenarios DIR]``: list a study's samples;
 ``python -m sweep run STUDY [--ids ...]``: run them (docs/studies.md, "Running a study").
 ``samples STUDY --ids 17 --write-scenarios DIR`` writes one sample's scenario file (to rerun it).
+``python -m sweep cost STUDY [--ids ...]``: a study sample's cost against a lone run of the
+same sample, sample by sample in one process (:mod:`sweep.cost`).
 
 One line per sample: id, seed, ``ok`` or ``refused``, the drawn values as JSON (and the
 loader's reason for a refused sample). ``--write-scenarios DIR`` also writes each valid
@@ -50,9 +52,16 @@ def main(argv: list[str]) -> int:
     rp.add_argument(
         "--keep-runs", action="store_true", help="also write each sample's scenario and run files"
     )
+    cp = sub.add_parser("cost", help="a study sample's cost against a lone run of it")
+    cp.add_argument("study", help="the study TOML file")
+    cp.add_argument(
+        "--ids", type=int, nargs="+", help="sample ids, the first one untimed (default 0..40)"
+    )
     args = ap.parse_args(argv)
     if args.cmd == "run":
         return _run(args, argv)
+    if args.cmd == "cost":
+        return _cost(args)
     study = load_study(args.study)
     _check_ids(args.ids, study.count)
     refused = 0
@@ -75,6 +84,17 @@ def _check_ids(ids: list[int] | None, count: int) -> None:
     for k in ids or ():
         if not 0 <= k < count:
             raise UsageError(f"--ids: sample id {k} outside 0..{count - 1}: give ids of the study")
+
+
+def _cost(args: argparse.Namespace) -> int:
+    """``cost``: time lone runs and study tasks of the same samples; print the table."""
+    from sweep.cost import run
+
+    study = load_study(args.study)
+    ids = args.ids if args.ids is not None else list(range(min(41, study.count)))
+    _check_ids(ids, study.count)
+    print(run(args.study, ids))
+    return 0
 
 
 def _run(args: argparse.Namespace, argv: list[str]) -> int:

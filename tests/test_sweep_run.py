@@ -369,3 +369,24 @@ def test_checks_with_the_integrated_loop_equal_checks_that_bind_their_own(setup)
     assert run.closed_loop is not None and run.gains is not None
     own = verify_run(dataclasses.replace(run, closed_loop=None)).table
     pd.testing.assert_frame_equal(verify_run(run).table, own, check_exact=True)
+
+
+def test_cost_times_lone_runs_and_study_tasks_of_the_same_samples(setup, tmp_path, capsys):
+    """`python -m sweep cost`: one row per timed sample (the first id warms up), each task at
+    least its simulating plus checking time; fewer than two valid ids is one line, exit 2."""
+    import math
+
+    from core.errors import run_cli
+    from sweep.__main__ import main
+    from sweep.cost import markdown, measure
+
+    study = setup["root"] / "study.toml"
+    costs = measure(study, [0, 1, 2], tmp_path)
+    assert [c.id for c in costs] == [1, 2]
+    for c in costs:
+        assert all(math.isfinite(v) and v > 0 for v in (c.lone_s, c.task_s, c.simulate_s))
+        assert c.task_s >= c.simulate_s + c.checks_s
+    assert "| samples timed | 2 |" in markdown(costs)
+    assert run_cli(main, ["cost", str(study), "--ids", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--ids" in err[0]
