@@ -172,7 +172,7 @@ def graph_figure(table: pd.DataFrame, figs: Path) -> Path | None:
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5, 3.4))
     lost = links_lost(ok)
-    switched = _num(ok, "tail_switches") > 0 if "tail_switches" in ok else np.zeros(len(ok), bool)
+    switched = tail_switched(ok)
     norm = plt.Normalize(0.0, max(1.0, float(lost[good].max())))
     for mask, marker, label in [
         (good & ~switched, "o", "tail window: one graph"),
@@ -269,6 +269,18 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
     return lines
 
 
+def tail_switched(table: pd.DataFrame) -> np.ndarray:
+    """Rows whose tail window holds a topology switch (``tail_switches`` > 0); none for
+    rows written before the column existed.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The results.
+    """
+    return _num(table, "tail_switches") > 0  # NaN (missing) compares False
+
+
 def tail_split_lines(ok: pd.DataFrame) -> list[str]:
     """The median tail error of the samples whose tail window saw one fixed graph, and of
     those with a link lost or recovered inside it (no lines when no sample switches there).
@@ -278,9 +290,7 @@ def tail_split_lines(ok: pd.DataFrame) -> list[str]:
     ok : DataFrame
         The ``ok`` rows.
     """
-    if "tail_switches" not in ok.columns:  # rows written before the column existed
-        return []
-    switched = pd.to_numeric(ok["tail_switches"], errors="coerce").fillna(0).to_numpy() > 0
+    switched = tail_switched(ok)
     if not switched.any():
         return []
     err = _num(ok, "tail_max_et")

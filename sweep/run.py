@@ -296,7 +296,7 @@ def topology_in_tail(sc: Any, frame: pd.DataFrame, tail_fraction: float) -> dict
     frame : DataFrame
         The trajectory (column ``t``).
     tail_fraction : float
-        The tail window: the last fraction of the horizon (:func:`verify.signals.tail_mask`).
+        The tail window: the last fraction of the horizon (:func:`verify.signals.tail_start`).
 
     Returns
     -------
@@ -305,13 +305,13 @@ def topology_in_tail(sc: Any, frame: pd.DataFrame, tail_fraction: float) -> dict
         ``last_switch_t``: the last switch time (NaN for a fixed graph).
     """
     from core.graph import switch_times
+    from verify.signals import tail_start
 
     t = frame["t"].to_numpy(float)
-    t0, t1 = float(t[0]), float(t[-1])
-    start = t1 - tail_fraction * (t1 - t0)  # the window of verify.signals.tail_mask
+    start, end = tail_start(t, tail_fraction), float(t[-1])
     times = switch_times(sc.graph.switches)
     return {
-        "tail_switches": sum(1 for s in times if start - 1e-12 <= s <= t1),
+        "tail_switches": sum(1 for s in times if start <= s <= end),
         "last_switch_t": float(times[-1]) if times else math.nan,
     }
 

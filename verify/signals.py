@@ -229,8 +229,9 @@ def leader_output(df: Frame, C0: np.ndarray) -> np.ndarray:
     return eta0 @ np.asarray(C0, dtype=float).T
 
 
-def tail_mask(t: np.ndarray, fraction: float) -> np.ndarray:
-    """Samples in the last ``fraction`` of [t0, t_end] (the "asymptotic" window).
+def tail_start(t: np.ndarray, fraction: float) -> float:
+    """Where the last ``fraction`` of [t0, t_end] (the "asymptotic" window) begins, less
+    a 1e-12 s allowance so that a sample at the boundary belongs to the window.
 
     Parameters
     ----------
@@ -240,7 +241,20 @@ def tail_mask(t: np.ndarray, fraction: float) -> np.ndarray:
         Fraction of the time span counted as the tail.
     """
     t0, t1 = float(t[0]), float(t[-1])
-    return t >= t1 - fraction * (t1 - t0) - 1e-12
+    return t1 - fraction * (t1 - t0) - 1e-12
+
+
+def tail_mask(t: np.ndarray, fraction: float) -> np.ndarray:
+    """Samples in the last ``fraction`` of [t0, t_end] (from :func:`tail_start` on).
+
+    Parameters
+    ----------
+    t : ndarray
+        Sample times, increasing.
+    fraction : float
+        Fraction of the time span counted as the tail.
+    """
+    return t >= tail_start(t, fraction)
 
 
 def enter_time(t: np.ndarray, y: np.ndarray, level: float) -> float:
