@@ -50,6 +50,7 @@ from generated.codegen import (
     build_library,
     check_dyn_signature,
     entry_problem,
+    preload,
     renamed,
 )
 from generated.gains_cache import GainsInfo, ensure_gains, scenario_gains
@@ -299,7 +300,14 @@ def _open_image(lib: Library, form: str) -> _Image:
                 raise BuildError(
                     f"library {lib.path}: no function {name!r} (it has {', '.join(lib.names)})"
                 )
-        dyn_p, outputs_p = (ca.external(name, str(copy)) for name in names)
+        try:
+            preload(lib.preload)  # the libraries it names by soname (native: SUNDIALS)
+            dyn_p, outputs_p = (ca.external(name, str(copy)) for name in names)
+        except (OSError, RuntimeError) as exc:
+            first = str(exc).strip().splitlines()
+            raise BuildError(
+                f"build cache {lib.folder}: cannot be loaded ({first[0] if first else exc})"
+            ) from None
         driver = native.open_library(copy) if native.RHS_NAME in lib.names else None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -20,6 +20,7 @@ nx×nx matrix (N = 500: 2.8 GB, ≈ 400 s; see docs/performance.md).
 
 from __future__ import annotations
 
+import ctypes
 import functools
 import hashlib
 import json
@@ -173,7 +174,10 @@ class Toolchain:
     include_dirs : tuple of Path
         ``-I`` folders.
     libraries : tuple of Path
-        Shared libraries linked after the source, found at run time through an rpath.
+        Shared libraries linked after the source, in dependency order. The library
+        records only their sonames (no rpath): they are loaded by absolute path from the
+        running environment before it (:func:`preload`), so a cache entry does not
+        depend on the checkout or environment that built it.
     key : mapping
         What else identifies the build (hashes of headers and libraries): part of the
         cache key, so that a changed header or library is never served from the cache.
@@ -203,6 +207,8 @@ class Library:
         Wall time of C generation and of compilation (0 on a cache hit).
     source_bytes : int
         Size of the generated C.
+    preload : tuple of Path
+        Shared libraries it needs loaded first (:attr:`Toolchain.libraries`).
     """
 
     key: str
@@ -214,6 +220,7 @@ class Library:
     codegen_seconds: float
     compile_seconds: float
     source_bytes: int
+    preload: tuple[Path, ...] = ()
 
     def function(self, name: str) -> ca.Function:
         """Load ``name`` from the library with :func:`casadi.external`.
@@ -232,6 +239,7 @@ class Library:
             raise BuildError(
                 f"library {self.path}: no function {name!r} (it has {', '.join(self.names)})"
             )
+        preload(self.preload)
         return ca.external(name, str(self.path))
 
 
@@ -448,7 +456,8 @@ def compile_source(
     folder : Path
         Output folder, created if missing.
     toolchain : Toolchain, optional
-        Include folders and shared libraries to link (after the source, with an rpath).
+        Include folders and shared libraries to link (after the source, by soname and
+        without an rpath: :attr:`Toolchain.libraries`).
 
     Returns
     -------
@@ -471,8 +480,7 @@ def compile_source(
         str(src),
         "-o",
         str(folder / LIBRARY_NAME),
-        *(str(lib) for lib in tc.libraries),
-        *(f"-Wl,-rpath,{d}" for d in sorted({str(Path(lib).parent) for lib in tc.libraries})),
+        *(str(lib) for lib in tc.libraries),  # DT_NEEDED = their sonames; no rpath
         "-lm",
     ]
     t0 = time.perf_counter()
@@ -527,6 +535,54 @@ def entry_problem(folder: Path, key: str) -> str | None:
         return f"{LIBRARY_NAME} missing or unreadable"
     if digest != info["library_sha256"]:
         return f"{LIBRARY_NAME} does not have the SHA-256 its manifest records (truncated, corrupt or replaced)"
+    return None
+
+
+@functools.lru_cache(maxsize=8)
+def preload(libraries: tuple[Path, ...]) -> None:
+    """Load shared libraries by absolute path, globally, once per process.
+
+    A library linked against them names them only by soname (no rpath); the dynamic
+    loader matches a NEEDED soname against the libraries already loaded, so loading
+    these first lets it load from any checkout or environment.
+
+    Parameters
+    ----------
+    libraries : tuple of Path
+        In dependency order (a library before those that need it).
+
+    Raises
+    ------
+    OSError
+        If one cannot be loaded.
+    """
+    for lib in libraries:
+        ctypes.CDLL(str(lib), mode=ctypes.RTLD_GLOBAL)
+
+
+def load_problem(path: Path, libraries: Sequence[Path] = ()) -> str | None:
+    """Why the shared library ``path`` cannot be loaded in this process (None: it can).
+
+    ``libraries`` are preloaded (:func:`preload`), then ``path`` is opened with every
+    symbol bound at once (ctypes' ``RTLD_NOW``) and closed again: a NEEDED library that
+    is not found, an unresolved symbol or bytes that are no shared library are reported
+    here instead of as a traceback of the first load.
+
+    Parameters
+    ----------
+    path : Path
+        The library.
+    libraries : sequence of Path
+        What it needs loaded first (:attr:`Toolchain.libraries`).
+    """
+    try:
+        preload(tuple(libraries))
+        handle = ctypes.CDLL(str(path))._handle
+    except OSError as exc:
+        return str(exc).replace(f"{path}: ", "")
+    import _ctypes  # dlclose: the check keeps no mapping of the cache file
+
+    _ctypes.dlclose(handle)
     return None
 
 
@@ -612,7 +668,7 @@ def build_library(
     folder = root / key
     if root.is_dir():
         remove_stale_builds(root)
-    hit = _usable_entry(folder, key)
+    hit = _usable_entry(folder, key, tc)
     t_compile = 0.0 if hit else _compile_entry(root, key, source, names, settings, tc)
     return Library(
         key,
@@ -624,21 +680,41 @@ def build_library(
         t_codegen,
         t_compile,
         len(source),
+        tuple(tc.libraries),
     )
 
 
-def _usable_entry(folder: Path, key: str) -> bool:
+def _usable_entry(folder: Path, key: str, tc: Toolchain) -> bool:
     """Whether the cache entry ``folder`` exists and may be loaded for ``key``.
 
     A bad entry is reported on stderr and never dlopen'ed: it would crash (truncated)
-    or silently compute another model.
+    or silently compute another model. An entry that checks out but cannot be loaded
+    in this process (:func:`load_problem`) is reported in one line and moved aside, so
+    that the rebuild replaces it.
     """
     if not folder.exists():
         return False
     why = entry_problem(folder, key)
     if why is not None:
         print(f"build cache {folder}: {why}; rebuilding", file=sys.stderr)
-    return why is None
+        return False
+    why = load_problem(folder / LIBRARY_NAME, tc.libraries)
+    if why is None:
+        return True
+    print(f"cache entry {key[:12]}: cannot be loaded here ({why}); rebuilding", file=sys.stderr)
+    _discard(folder)
+    return False
+
+
+def _discard(folder: Path) -> None:
+    """Remove a cache entry: renamed to a temporary name first, so it vanishes at once."""
+    prefix = f"{TMP_PREFIX}{folder.name[:12]}-{os.getpid()}-"
+    try:
+        aside = Path(tempfile.mkdtemp(dir=folder.parent, prefix=prefix))
+        os.rename(folder, aside)  # onto the empty folder just made
+    except OSError:  # another process moved or replaced it
+        return
+    shutil.rmtree(aside, ignore_errors=True)
 
 
 def _compile_entry(

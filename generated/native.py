@@ -44,7 +44,7 @@ import casadi as ca
 import numpy as np
 
 from core.errors import BuildError, IntegrationError
-from generated.codegen import CodegenSettings, Library, Toolchain, build_library
+from generated.codegen import CodegenSettings, Library, Toolchain, build_library, preload
 from generated.integrate import IntegratorSettings, Schedule, Trajectory, flag_reason, schedule
 from generated.largescale import DIRECT_MAX_AGENTS
 from generated.solvers import Status, flag_status
@@ -159,7 +159,11 @@ def toolchain(driver: Path = DRIVER) -> Toolchain:
     -------
     Toolchain
         Its key holds the SHA-256 of every header and library, so a change to any of
-        them rebuilds the native library.
+        them rebuilds the native library. The libraries are those of the running
+        interpreter's scikit-sundae, in dependency order (``sundials_core`` first); a
+        built library names them by soname only and they are preloaded before it
+        (:func:`generated.codegen.preload`): the same key means the same files, so an
+        entry built from another checkout's environment loads here.
 
     Raises
     ------
@@ -297,10 +301,14 @@ def open_library(path: Path) -> ctypes.CDLL:
     Raises
     ------
     BuildError
-        If the SUNDIALS it runs against differs from the vendored headers, or its
-        structs differ in size from the ctypes mirror (:data:`STRUCTS`).
+        If it cannot be loaded, the SUNDIALS it runs against differs from the vendored
+        headers, or its structs differ in size from the ctypes mirror (:data:`STRUCTS`).
     """
-    lib = ctypes.CDLL(str(path))
+    try:
+        preload(toolchain().libraries)  # its NEEDED sonames, from this environment
+        lib = ctypes.CDLL(str(path))
+    except OSError as exc:
+        raise BuildError(f"native integrator: {path.name} cannot be loaded ({exc})") from None
     _declare(lib)
     for which, struct in enumerate(STRUCTS):
         size = lib.hitl_struct_size(which)

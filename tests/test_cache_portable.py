@@ -1,0 +1,179 @@
+"""A build cache entry does not depend on the checkout or environment that built it.
+
+- a freshly built native ``model.so`` records no RPATH/RUNPATH (its SUNDIALS libraries
+  are named by soname only; ``readelf -d``);
+- an entry built against SUNDIALS libraries in a fake checkout's ``.venv`` (copies of
+  scikit-sundae's), whose folder is then deleted, runs from another process with this
+  environment's libraries (preloaded before the entry is loaded);
+- an entry that checks out (key, SHA-256) but cannot be loaded here, a native library
+  whose NEEDED library is missing or bytes that are no shared library, is rebuilt with
+  one line on stderr, never a traceback; a rebuilt entry runs.
+
+The ODE is the two-state rotation x' = (x1, -x0) (x0 = (1, 0): x(t) = (cos t, -sin t)),
+compiled with -O0 into temporary build roots (about a second per build).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from generated import native
+from generated.codegen import (
+    LIBRARY_NAME,
+    MANIFEST_NAME,
+    CodegenSettings,
+    Toolchain,
+    build_library,
+)
+from generated.integrate import IntegratorSettings
+
+PY = sys.executable
+ROOT = Path(__file__).resolve().parent.parent
+LINE = re.compile(r"cache entry [0-9a-f]{12}: cannot be loaded here \(.+\); rebuilding")
+
+#: builds (argv[2] == "build", against the libraries in argv[3]) or runs (argv[2] ==
+#: "run", this environment's toolchain) the rotation ODE in the build root argv[1];
+#: prints the library's path, whether it was a cache hit and x(1)
+SCRIPT = """
+import dataclasses, json, sys
+from pathlib import Path
+import casadi as ca
+import numpy as np
+from generated import native
+from generated.codegen import CodegenSettings, build_library
+from generated.integrate import IntegratorSettings
+
+root, what = sys.argv[1:3]
+E = ca.SX(0, 1)
+t, x = ca.SX.sym("t"), ca.SX.sym("x", 2)
+f = ca.Function("rot", [t, x, E, E, E], [ca.vertcat(x[1], -x[0]), E, E, E],
+                ca.dyn_in(), ca.dyn_out())
+cg = CodegenSettings(optimization="-O0", build_root=root)
+if what == "build":
+    libs = tuple(sorted(Path(sys.argv[3]).iterdir()))
+    tc = native.toolchain()
+    tc = dataclasses.replace(tc, libraries=tuple(
+        next(p for p in libs if p.name == lib.name) for lib in tc.libraries))
+    lib = build_library(native.native_functions(f)[0], cg, toolchain=tc)
+    print(json.dumps({"path": str(lib.path), "hit": lib.cache_hit}))
+else:
+    lib = native.build(f, cg)
+    tr = native.run(lib.path, np.array([1.0, 0.0]), np.array([0.0, 1.0]), IntegratorSettings())
+    print(json.dumps({"path": str(lib.path), "hit": lib.cache_hit, "x1": tr.x[-1].tolist()}))
+"""
+
+E = ca.SX(0, 1)
+
+
+def rotation() -> ca.Function:
+    t, x = ca.SX.sym("t"), ca.SX.sym("x", 2)
+    return ca.Function(
+        "rot", [t, x, E, E, E], [ca.vertcat(x[1], -x[0]), E, E, E], ca.dyn_in(), ca.dyn_out()
+    )
+
+
+def script(*args: str) -> dict:
+    r = subprocess.run(
+        [PY, "-c", SCRIPT, *args], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    return json.loads(r.stdout.splitlines()[-1])
+
+
+def run_paths(library: Path) -> list[str]:
+    """The RPATH and RUNPATH entries of a shared library (``readelf -d``)."""
+    readelf = shutil.which("readelf")
+    if readelf is None:
+        pytest.skip("readelf (binutils) is not installed")
+    out = subprocess.run([readelf, "-d", str(library)], capture_output=True, text=True).stdout
+    return [
+        p
+        for m in re.finditer(r"\((?:RPATH|RUNPATH)\)\s+Library r(?:un)?path: \[(.*)\]", out)
+        for p in m.group(1).split(":")
+    ]
+
+
+def rewrite_library(folder: Path, data: bytes) -> None:
+    """``model.so`` replaced by ``data`` and the manifest's SHA-256 made to match."""
+    import hashlib
+
+    (folder / LIBRARY_NAME).write_bytes(data)
+    info = json.loads((folder / MANIFEST_NAME).read_text())
+    info["library_sha256"] = hashlib.sha256(data).hexdigest()
+    (folder / MANIFEST_NAME).write_text(json.dumps(info))
+
+
+def test_native_library_has_no_rpath_into_an_environment(tmp_path):
+    lib = native.build(rotation(), CodegenSettings(optimization="-O0", build_root=str(tmp_path)))
+    assert not lib.cache_hit
+    paths = run_paths(lib.path)
+    assert not [p for p in paths if p.startswith("/")], paths
+    libdir = str(native.toolchain().libraries[0].parent)
+    assert libdir not in lib.path.read_bytes().decode("latin-1")
+    manifest = (lib.folder / MANIFEST_NAME).read_text()
+    assert str(ROOT) not in manifest and sys.prefix not in manifest
+
+
+def test_entry_built_in_a_deleted_checkout_runs_from_another(tmp_path):
+    checkout = tmp_path / "old-checkout"
+    libdir = checkout / ".venv" / "lib" / "site-packages" / "scikit_sundae.libs"
+    libdir.mkdir(parents=True)
+    real = native.toolchain().libraries[0].parent
+    for p in real.iterdir():
+        shutil.copy2(p, libdir / p.name)
+    root = str(tmp_path / "build")
+    built = script(root, "build", str(libdir))
+    assert not built["hit"]
+    assert not [p for p in run_paths(Path(built["path"])) if p.startswith(str(checkout))]
+    shutil.rmtree(checkout)
+    ran = script(root, "run")
+    assert ran["hit"] and ran["path"] == built["path"]  # same key: the entry is used
+    np.testing.assert_allclose(ran["x1"], [np.cos(1.0), -np.sin(1.0)], rtol=1e-4, atol=1e-6)
+
+
+def test_native_entry_whose_needed_library_is_missing_is_rebuilt(tmp_path, capsys):
+    cg = CodegenSettings(optimization="-O0", build_root=str(tmp_path / "build"))
+    first = native.build(rotation(), cg)
+    # a library that needs libgone.so, which is removed once it is linked
+    (tmp_path / "gone.c").write_text("int gone(void) { return 1; }\n")
+    (tmp_path / "use.c").write_text("int gone(void);\nint use(void) { return gone(); }\n")
+    gcc = ["gcc", "-shared", "-fPIC"]
+    subprocess.run([*gcc, str(tmp_path / "gone.c"), "-o", str(tmp_path / "libgone.so")], check=True)
+    bad = tmp_path / "use.so"
+    subprocess.run(
+        [*gcc, str(tmp_path / "use.c"), "-o", str(bad), f"-L{tmp_path}", "-lgone"], check=True
+    )
+    (tmp_path / "libgone.so").unlink()
+    rewrite_library(first.folder, bad.read_bytes())
+    capsys.readouterr()
+    again = native.build(rotation(), cg)
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and LINE.fullmatch(err[0]) and "libgone.so" in err[0], err
+    assert err[0].startswith(f"cache entry {first.key[:12]}:")
+    assert not again.cache_hit and again.path == first.path
+    tr = native.run(again.path, np.array([1.0, 0.0]), np.array([0.0, 1.0]), IntegratorSettings())
+    np.testing.assert_allclose(tr.x[-1], [np.cos(1.0), -np.sin(1.0)], rtol=1e-4, atol=1e-6)
+    assert native.build(rotation(), cg).cache_hit  # the rebuilt entry loads
+
+
+def test_casadi_entry_that_is_no_shared_library_is_rebuilt(tmp_path, capsys):
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("sq", [x], [x * x])
+    cg = CodegenSettings(optimization="-O0", build_root=str(tmp_path))
+    first = build_library([f], cg)
+    rewrite_library(first.folder, b"\x7fELF but not a shared library" * 64)
+    capsys.readouterr()
+    again = build_library([f], cg, toolchain=Toolchain())
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and LINE.fullmatch(err[0]), err
+    assert not again.cache_hit
+    np.testing.assert_allclose(np.array(again.function("sq")([2.0, 3.0])).ravel(), [4.0, 9.0])
