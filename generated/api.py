@@ -27,6 +27,7 @@ import hashlib
 import json
 import os
 import shutil
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -54,7 +55,7 @@ from generated.codegen import (
     renamed,
 )
 from generated.gains_cache import GainsInfo, ensure_gains, scenario_gains
-from generated.integrate import IntegratorSettings, Trajectory, output_grid
+from generated.integrate import IntegratorSettings, Trajectory, output_grid, sundials_summary
 from generated.meta import LibraryRecord, RunMeta, WallSeconds
 from generated.overrides import (
     MAX_SET_DEPTH,
@@ -693,6 +694,20 @@ def _write_trajectory(folder: Path, df: pd.DataFrame, traj: Trajectory) -> tuple
     return path, hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
+def _write_sundials_log(folder: Path, traj: Trajectory) -> None:
+    """SUNDIALS' messages of the run to ``folder/sundials.log`` and one line on stderr.
+
+    Without messages a ``sundials.log`` of an earlier run in the folder is removed.
+    """
+    log = folder / "sundials.log"
+    line = sundials_summary(traj.sundials_log, log)
+    if line is None:
+        log.unlink(missing_ok=True)
+        return
+    atomic_write_text(log, traj.sundials_log)
+    print(line, file=sys.stderr)
+
+
 def run(
     path: str | Path,
     *,
@@ -764,6 +779,7 @@ def run(
         ),
         wall_seconds=WallSeconds(**wall, total=time.perf_counter() - t_all),
     )
+    _write_sundials_log(root / sc.name, traj)
     meta_path = atomic_write_text(root / sc.name / "meta.json", record.to_json())
     if raise_on_failure:
         traj.raise_if_incomplete()

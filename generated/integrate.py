@@ -39,10 +39,13 @@ The exact sign's chattering (a jump Δ in f gives an estimate hΔ/2) passes it.
 from __future__ import annotations
 
 import math
+import os
 import re
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import casadi as ca
@@ -180,6 +183,10 @@ class Trajectory:
         ``steps``, ``rhs_evals``, ``jac_evals``, ``lin_setups``, ``error_test_fails``,
         ``newton_fails``, ``newton_iters``, ``jtimes_evals``, ``restarts``, ``integrator_calls``,
         ``wall_seconds`` and, for CVODES/IDAS, ``last_step`` (the last step size taken).
+    sundials_log : str
+        SUNDIALS' warnings and errors of the run, one line each (``[WARNING][CVode]
+        text (cvode.c:line)``; the native drivers), empty when there were none; counted
+        by :func:`sundials_messages`.
     """
 
     t: np.ndarray
@@ -190,6 +197,7 @@ class Trajectory:
     t_reached: float
     message: str
     stats: dict[str, Any] = field(default_factory=dict)
+    sundials_log: str = ""
 
     @property
     def complete(self) -> bool:
@@ -200,6 +208,105 @@ class Trajectory:
         """Raise :class:`IntegrationError` (with ``t_reached``) when incomplete."""
         if not self.complete:
             raise IntegrationError(self.message, self.t_reached)
+
+
+#: one SUNDIALS message line: level, module, text, optional "(file:line)" at the end
+_SUNDIALS_LINE = re.compile(
+    r"^\[(?P<level>ERROR|WARNING)\](?:\[rank \d+\])?(?:\[(?P<scope>[^\]]*)\])?"
+    r"\[(?P<label>[^\]]*)\]\s*(?P<text>.*?)(?:\s+\([^()]*\.c:\d+\))?$"
+)
+
+
+def new_sundials_log() -> Path:
+    """A new empty temporary file for a native run's SUNDIALS messages.
+
+    Returns
+    -------
+    Path
+        Passed to the driver (``hitl_options.log_path``), read back and removed by
+        :func:`take_sundials_log`.
+    """
+    fd, name = tempfile.mkstemp(prefix="hitl-sundials-", suffix=".log")
+    os.close(fd)
+    return Path(name)
+
+
+def take_sundials_log(path: Path | None) -> str:
+    """The text a driver wrote to ``path`` (:func:`new_sundials_log`); the file removed.
+
+    Parameters
+    ----------
+    path : Path or None
+        None or a missing file: no messages.
+
+    Returns
+    -------
+    str
+    """
+    if path is None:
+        return ""
+    try:
+        text = path.read_text(errors="replace")
+    except OSError:
+        return ""
+    path.unlink(missing_ok=True)
+    return text
+
+
+def sundials_messages(log: str) -> dict[str, Any]:
+    """Count SUNDIALS' messages in a run's log and give the first without its source path.
+
+    Parameters
+    ----------
+    log : str
+        ``Trajectory.sundials_log``: lines as the native driver writes them
+        (``[WARNING][CVode] Warning: t + h = t ... (cvode.c:1234)``); SUNDIALS' own
+        format (``[WARNING][rank 0][/build/path/cvode.c:1234][CVode] ...``) is read too.
+
+    Returns
+    -------
+    dict
+        ``count`` (messages), ``warnings``, ``errors`` and ``first``: the first message
+        as ``"CVode: t + h = t on the next step ..."`` (no level word, no path), or None.
+    """
+    count, warnings, first = 0, 0, None
+    for line in log.splitlines():
+        m = _SUNDIALS_LINE.match(line.strip())
+        if not m:
+            continue
+        count += 1
+        warnings += m["level"] == "WARNING"
+        if first is None:
+            text = re.sub(r"^(Warning|Error):\s*", "", m["text"])
+            first = f"{m['label']}: {text}" if m["label"] else text
+    return {"count": count, "warnings": warnings, "errors": count - warnings, "first": first}
+
+
+def sundials_summary(log: str, where: str | os.PathLike[str]) -> str | None:
+    """One line for the terminal about a run's SUNDIALS messages, or None if none.
+
+    Parameters
+    ----------
+    log : str
+        ``Trajectory.sundials_log``.
+    where : str or PathLike
+        The file the messages were written to (``out/<run>/sundials.log``).
+
+    Returns
+    -------
+    str or None
+        e.g. ``SUNDIALS: 2 warnings (first: CVode: t + h = t on the next step ...);
+        see out/run/sundials.log``.
+    """
+    m = sundials_messages(log)
+    if not m["count"]:
+        return None
+    parts = [
+        f"{n} {word}{'s' if n != 1 else ''}"
+        for n, word in ((m["warnings"], "warning"), (m["errors"], "error"))
+        if n
+    ]
+    return f"SUNDIALS: {', '.join(parts)} (first: {m['first']}); see {where}"
 
 
 def output_grid(horizon: float, output_step: float) -> np.ndarray:

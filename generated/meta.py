@@ -24,6 +24,7 @@ from generated import solvers
 from generated.codegen import CodegenSettings, Library
 from generated.gains_cache import GainsInfo
 from generated.integrate import IntegratorSettings, Trajectory
+from generated.integrate import sundials_messages as count_sundials_messages
 
 
 class MetaFileError(ToolkitError):
@@ -192,6 +193,11 @@ class RunMeta:
     cache_hit : bool
         Same as ``library.cache_hit``.
     wall_seconds : WallSeconds
+    sundials_messages : dict
+        SUNDIALS' warnings and errors of the run (native method; kept out of the
+        terminal, written to ``sundials.log`` next to meta.json):
+        :func:`generated.integrate.sundials_messages` (``count``, ``warnings``,
+        ``errors``, ``first``). Absent from older records: read back as none.
     """
 
     scenario: str
@@ -228,6 +234,9 @@ class RunMeta:
     library: LibraryRecord
     cache_hit: bool
     wall_seconds: WallSeconds
+    sundials_messages: dict[str, Any] = dataclasses.field(
+        default_factory=lambda: count_sundials_messages("")
+    )
 
     @classmethod
     def of_run(
@@ -259,7 +268,8 @@ class RunMeta:
             Its ``method`` is the run's.
         breakpoints : list of float
         trajectory : Trajectory
-            Supplies ``complete``, ``t_reached``, ``message`` and ``stats``.
+            Supplies ``complete``, ``t_reached``, ``message``, ``stats`` and
+            ``sundials_messages`` (counted from ``sundials_log``).
         csv : (int, str)
             Data rows and SHA-256 of trajectory.csv.
         inputs, libraries, library, wall_seconds
@@ -303,6 +313,7 @@ class RunMeta:
             library=library,
             cache_hit=library.cache_hit,
             wall_seconds=wall_seconds,
+            sundials_messages=count_sundials_messages(trajectory.sundials_log),
         )
 
     def to_dict(self) -> dict[str, Any]:

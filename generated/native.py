@@ -37,7 +37,7 @@ import hashlib
 import importlib.util
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import casadi as ca
@@ -45,7 +45,15 @@ import numpy as np
 
 from core.errors import BuildError, IntegrationError
 from generated.codegen import CodegenSettings, Library, Toolchain, build_library, preload
-from generated.integrate import IntegratorSettings, Schedule, Trajectory, flag_reason, schedule
+from generated.integrate import (
+    IntegratorSettings,
+    Schedule,
+    Trajectory,
+    flag_reason,
+    new_sundials_log,
+    schedule,
+    take_sundials_log,
+)
 from generated.largescale import DIRECT_MAX_AGENTS
 from generated.solvers import Status, flag_status
 from generated.sparse_lu import SparseLU, sparse_lu
@@ -86,6 +94,7 @@ class Options(ctypes.Structure):
         ("breaks", _DP),
         ("np", ctypes.c_int),
         ("p", _DP),
+        ("log_path", ctypes.c_char_p),
     ]
 
 
@@ -369,6 +378,9 @@ class DriverCall:
         ``result.x_out`` points into :attr:`X`.
     X : ndarray, shape (len(t_out), nx)
         The output rows, NaN where not filled.
+    log : Path or None
+        The temporary file the driver appends SUNDIALS' messages to; read into
+        ``Trajectory.sundials_log`` and removed by :meth:`trajectory`.
     """
 
     sched: Schedule
@@ -376,6 +388,8 @@ class DriverCall:
     result: Result
     X: np.ndarray
     _keep: tuple[np.ndarray, ...]
+    #: the temporary file the driver appends SUNDIALS' messages to (``options.log_path``)
+    log: Path | None = None
 
     @classmethod
     def of(
@@ -417,7 +431,9 @@ class DriverCall:
             np=len(pv),
             p=dptr(pv),
         )
-        return cls(sched, options, Result(x_out=dptr(X)), X, (tq, bps, pv))
+        log = new_sundials_log()
+        options.log_path = str(log).encode()
+        return cls(sched, options, Result(x_out=dptr(X)), X, (tq, bps, pv), log)
 
     def trajectory(
         self, method: str, wall0: float, progress: Callable[[float], None] | None = None
@@ -429,7 +445,9 @@ class DriverCall:
         method, wall0, progress
             As :func:`driver_trajectory`.
         """
-        return driver_trajectory(method, self.sched.t_out, self.X, self.result, wall0, progress)
+        log = take_sundials_log(self.log)  # SUNDIALS' messages; the temporary file removed
+        tr = driver_trajectory(method, self.sched.t_out, self.X, self.result, wall0, progress)
+        return replace(tr, sundials_log=log)
 
 
 def run(

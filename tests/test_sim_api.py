@@ -487,6 +487,7 @@ META_KEYS = [
     "library",
     "cache_hit",
     "wall_seconds",
+    "sundials_messages",
 ]
 
 

@@ -84,7 +84,32 @@ typedef struct {
   SUNMatrix A;
   SUNLinearSolver LS;
   void *mem;
+  FILE *log; /* SUNDIALS' messages (hitl_log_msg), or NULL: dropped */
 } hitl_cvode;
+
+/* SUNDIALS' logger queue function: one line per message, "[WARNING][CVode] text
+   (cvode.c:1234)", appended to the run's log (content: its FILE *, or NULL) instead of
+   the terminal. The scope's directories (SUNDIALS' build paths) are left out. */
+static SUNErrCode hitl_log_msg(SUNLogger logger, SUNLogLevel lvl, const char *prefix, int rank,
+                               const char *scope, const char *label, const char *payload,
+                               void *content) {
+  static const char *level[] = {"NONE", "ERROR", "WARNING", "INFO", "DEBUG"};
+  FILE *f = (FILE *)content;
+  const char *base = scope ? scope : "", *slash;
+  (void)logger; (void)prefix; (void)rank;
+  if (!f) return SUN_SUCCESS;
+  if ((slash = strrchr(base, '/')) != NULL) base = slash + 1;
+  fprintf(f, "[%s][%s] ", lvl >= 1 && lvl <= 4 ? level[lvl] : "LOG", label ? label : "");
+  for (const char *q = payload ? payload : ""; *q; ++q) fputc(*q == '\n' ? ' ' : *q, f);
+  fprintf(f, " (%s)\n", base);
+  return SUN_SUCCESS;
+}
+
+static SUNErrCode hitl_log_flush(SUNLogger logger, SUNLogLevel lvl, void *content) {
+  (void)logger; (void)lvl;
+  if (content) fflush((FILE *)content);
+  return SUN_SUCCESS;
+}
 
 /* Allocate the context's work arrays for the generated functions (sz: the largest of
    their work sizes). Returns 0, or -1 with c->msg set. */
@@ -101,16 +126,23 @@ static int hitl_ctx_alloc(hitl_ctx *c, int nx, const casadi_int *sz) {
   return 0;
 }
 
-/* The SUNDIALS context (errors go to c->msg), the state vector, an empty linear solver
-   (the driver sets its content and operations) and CVODE (BDF) for nx states. The
-   driver creates the matrix s->A. Returns 0, or -1 with c->msg set. */
-static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx) {
+/* The SUNDIALS context, the state vector, an empty linear solver (the driver sets its
+   content and operations) and CVODE (BDF) for nx states. The driver creates the matrix
+   s->A. SUNDIALS' warnings and errors go to the file log_path (appended; NULL or "":
+   dropped), never to the terminal; the last error also to c->msg. Returns 0, or -1 with
+   c->msg set. */
+static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx, const char *log_path) {
+  SUNLogger logger = NULL;
   if (SUNContext_Create(SUN_COMM_NULL, &s->ctx) != SUN_SUCCESS) {
     s->ctx = NULL;
     hitl_msg(c, "SUNContext_Create failed");
     return -1;
   }
+  if (log_path && *log_path) s->log = fopen(log_path, "a");
+  if (SUNContext_GetLogger(s->ctx, &logger) == SUN_SUCCESS && logger)
+    SUNLogger_SetQueueAndFlushMsgFns(logger, hitl_log_msg, hitl_log_flush, s->log);
   SUNContext_ClearErrHandlers(s->ctx);
+  SUNContext_PushErrHandler(s->ctx, SUNLogErrHandlerFn, NULL); /* errors into the log */
   SUNContext_PushErrHandler(s->ctx, hitl_err_handler, c);
   s->y = N_VNew_Serial(nx, s->ctx);
   s->LS = SUNLinSolNewEmpty(s->ctx);
@@ -264,6 +296,7 @@ static void hitl_cvode_free(hitl_ctx *c, hitl_cvode *s) {
   if (s->A) SUNMatDestroy(s->A);
   if (s->y) N_VDestroy(s->y);
   if (s->ctx) SUNContext_Free(&s->ctx);
+  if (s->log) fclose(s->log), s->log = NULL;
   free(c->arg), free(c->res), free(c->iw), free(c->w), free(c->lu), free(c->piv);
   free(c->jcol), free(c->jrow);
 }

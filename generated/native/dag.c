@@ -258,9 +258,10 @@ static int hitl_dag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vect
 }
 
 /* Everything a run needs: sizes, problem arrays, work arrays, CVODE, the block
-   matrix and the linear solver. Returns 0, or -1 with d->base.msg set. */
+   matrix and the linear solver; SUNDIALS' messages to log_path (NULL: dropped).
+   Returns 0, or -1 with d->base.msg set. */
 static int hitl_dag_init(hitl_dag *d, hitl_cvode *s, const hitl_dag_problem *p, char *msg,
-                         int msglen) {
+                         int msglen, const char *log_path) {
   hitl_ctx *c = &d->base;
   casadi_int sz[4] = {0, 0, 0, 0};
   int N = p->N, m = p->m, na = p->na, n = p->n, npar = p->npar;
@@ -298,7 +299,7 @@ static int hitl_dag_init(hitl_dag *d, hitl_cvode *s, const hitl_dag_problem *p, 
     hitl_msg(c, "out of memory");
     return -1;
   }
-  if (hitl_sundials_create(c, s, nx)) return -1;
+  if (hitl_sundials_create(c, s, nx, log_path)) return -1;
   s->A = hitl_dagmat_new((long)N * d->k * d->k, s->ctx);
   if (!s->A) {
     hitl_msg(c, "out of memory");
@@ -326,7 +327,7 @@ CASADI_SYMBOL_EXPORT int hitl_dag_run(const hitl_dag_problem *p, const double *x
   hitl_cvode s;
   int ok, filled;
   hitl_result_start(r);
-  ok = hitl_dag_init(&d, &s, p, r->msg, HITL_MSG_LEN) == 0;
+  ok = hitl_dag_init(&d, &s, p, r->msg, HITL_MSG_LEN, o->log_path) == 0;
   filled = hitl_cvode_run(&d.base, &s, ok, &d, hitl_dag_rhs, hitl_dag_jac, x0, o, r);
   hitl_dag_free(&d, &s);
   return filled;
@@ -344,7 +345,7 @@ CASADI_SYMBOL_EXPORT int hitl_dag_probe(const hitl_dag_problem *p, double t, con
   hitl_cvode s;
   int nx = p->m + p->N * p->na, ret = -1;
   N_Vector bv = NULL, xv = NULL;
-  if (hitl_dag_init(&d, &s, p, msg, msglen)) goto done;
+  if (hitl_dag_init(&d, &s, p, msg, msglen, NULL)) goto done;
   bv = N_VNew_Serial(nx, s.ctx);
   xv = N_VNew_Serial(nx, s.ctx);
   if (!bv || !xv) goto done;

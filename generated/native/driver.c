@@ -72,7 +72,7 @@ static void hitl_jac_prepare(hitl_ctx *c, SUNMatrix J) {
 /* The whole-loop driver's CVODE: work arrays, the Jacobian's and the LU's patterns, a
    SUNSparseMatrix and the custom direct linear solver. Returns 0, or -1 with c->msg. */
 static int hitl_native_create(hitl_ctx *c, hitl_cvode *s, int nx, const casadi_int *sz,
-                              casadi_int **lucol, casadi_int **lurow) {
+                              casadi_int **lucol, casadi_int **lurow, const char *log_path) {
   const casadi_int *jac_sp = nat_jac_sparsity_out(0);
   casadi_int lunnz;
   memset(s, 0, sizeof *s);
@@ -89,7 +89,7 @@ static int hitl_native_create(hitl_ctx *c, hitl_cvode *s, int nx, const casadi_i
     hitl_msg(c, "nx does not match the generated Jacobian");
     return -1;
   }
-  if (hitl_sundials_create(c, s, nx)) return -1;
+  if (hitl_sundials_create(c, s, nx, log_path)) return -1;
   s->A = SUNSparseMatrix(nx, nx, c->jnnz, CSC_MAT, s->ctx);
   if (!s->A) {
     hitl_msg(c, "CVODE could not allocate its memory");
@@ -158,7 +158,7 @@ CASADI_SYMBOL_EXPORT int hitl_native_run(int nx, const double *x0, const hitl_op
   hitl_work_size(nat_jac_work, sz);
   hitl_work_size(nat_lu_factor_work, sz);
   hitl_work_size(nat_lu_solve_work, sz);
-  ok = hitl_native_create(&c, &s, nx, sz, &lucol, &lurow) == 0;
+  ok = hitl_native_create(&c, &s, nx, sz, &lucol, &lurow, o->log_path) == 0;
   filled = hitl_cvode_run(&c, &s, ok, &c, hitl_rhs, hitl_jac, x0, o, r);
   hitl_cvode_free(&c, &s);
   free(lucol), free(lurow);

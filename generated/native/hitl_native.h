@@ -26,6 +26,7 @@ typedef struct {
   const double *breaks; /* nb restart times, strictly inside (t_out[0], t_out[nt-1]) */
   int np;               /* length of p (the whole-loop driver's third input; 0 = none) */
   const double *p;      /* the closed loop's runtime parameters, held over the run */
+  const char *log_path; /* SUNDIALS' warnings and errors appended here (NULL: dropped) */
 } hitl_options;
 
 /* What a run returns: the output rows, CVODE's counters, its last flag and message. */
