@@ -38,6 +38,7 @@ FUNCTIONS: dict[str, tuple[int, ...]] = {
     "max": (2,),
     "step": (1,),  # Heaviside: 1 for x >= 0, else 0
     "sat": (1,),  # clip to [-1, 1]
+    "smoothstep": (1,),  # C¹ step: 0 for x <= 0, 3x² - 2x³ on (0, 1), 1 for x >= 1
     "mod": (2,),  # floating remainder with the sign of x (C fmod)
 }
 CONSTANTS = {"pi": math.pi}
@@ -311,6 +312,11 @@ def _mentions_t(node: tuple) -> bool:
     return any(_mentions_t(a) for a in node[2])
 
 
+def _hermite(s: Any) -> Any:
+    """3s² − 2s³: from 0 at s = 0 to 1 at s = 1 with zero slope at both ends."""
+    return s * s * (3.0 - 2.0 * s)
+
+
 class _Backend:
     def __init__(self, **ops: Any) -> None:
         self.__dict__.update(ops)
@@ -330,6 +336,7 @@ _CASADI = _Backend(
     max=ca.fmax,
     step=lambda x: ca.if_else(x >= 0, 1.0, 0.0),
     sat=lambda x: ca.fmin(ca.fmax(x, -1.0), 1.0),
+    smoothstep=lambda x: _hermite(ca.fmin(ca.fmax(x, 0.0), 1.0)),
     mod=ca.fmod,
 )
 _NUMPY = _Backend(
@@ -346,6 +353,7 @@ _NUMPY = _Backend(
     max=np.maximum,
     step=lambda x: np.where(np.asarray(x) >= 0, 1.0, 0.0),
     sat=lambda x: np.clip(x, -1.0, 1.0),
+    smoothstep=lambda x: _hermite(np.clip(x, 0.0, 1.0)),
     mod=np.fmod,
 )
 
@@ -464,6 +472,8 @@ def _collect_breaks(node: tuple, out: list[float]) -> None:
         _collect_breaks(a, out)
     if name in ("step", "abs"):  # jump / kink where the argument is 0
         cand = [args[0]]
+    elif name == "smoothstep":  # curvature jumps where the argument is 0 and 1
+        cand = [args[0], ("bin", "-", args[0], ("num", 1.0))]
     elif name == "sat":  # kinks where the argument is -1 and +1
         cand = [("bin", "-", args[0], ("num", 1.0)), ("bin", "+", args[0], ("num", 1.0))]
     elif name in ("min", "max"):  # kink where the arguments cross

@@ -74,6 +74,7 @@ from core.settings import (
     settings_of,
     zeros,
 )
+from core.shaping import shaped_steps
 
 SIGN_MODES = ("exact", "sat", "tanh")
 GHAT_LAWS = ("paper", "sigma", "projection", "sigma+projection")
@@ -562,6 +563,7 @@ LEADER: dict[str, Setting] = {
     "u0": declare(EITHER, "expressions", dims=("p", "")),
     "u0_csv": declare(EITHER, "string"),
     "u0_hold": declare(False, "boolean"),
+    "u0_rise": declare(0.0, "number", NONNEG),
     "alpha": declare(REQUIRED, "number", POSITIVE),
 }
 #: ``[graph]``; adjacency sets N
@@ -961,8 +963,12 @@ def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) 
             "u0 = [expressions of t] or u0_csv = 'file.csv'",
         )
     p = sizes["p"]
+    rise = _key(ctx, LEADER, L, "leader", "u0_rise", sizes)
+    if rise > 0 and "u0" not in L:
+        raise ctx.err("leader.u0_rise", "applies to u0 expressions only", "u0, or no u0_rise")
     if "u0" in L:
         u0, trace = _u0_expressions(ctx, L["u0"], p), None
+        u0 = tuple(shaped_steps(e, rise) for e in u0) if rise > 0 else u0
         u_peak = _u0_peak(ctx, u0, tgrid)
         where_u = "leader.u0"
     else:

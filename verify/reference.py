@@ -79,6 +79,9 @@ def _dual(node: tuple, t: float) -> tuple[float, float]:
         return (1.0 if a >= 0 else 0.0), 0.0
     if name == "sat":
         return min(max(a, -1.0), 1.0), (da if -1 < a < 1 else 0.0)
+    if name == "smoothstep":  # 3s² − 2s³ on [0, 1], flat outside
+        s = min(max(a, 0.0), 1.0)
+        return s * s * (3 - 2 * s), 6 * s * (1 - s) * da
     (b, db) = args[1]
     if name == "atan2":
         r2 = a * a + b * b
