@@ -1,5 +1,6 @@
 """``python -m sweep samples STUDY [--write-scenarios DIR]``: list a study's samples;
-``python -m sweep run STUDY [--ids ...]``: run them (docs/studies.md, "Running a study").
+``python -m sweep run STUDY [--ids ...]``: run them (docs/studies.md, "Running a study");
+exit status 1 and one line on stderr when some sample's status is ``failed``.
 ``samples STUDY --ids 17 --write-scenarios DIR`` writes one sample's scenario file (to rerun it).
 ``python -m sweep cost STUDY [--ids ...]``: a study sample's cost against a lone run of the
 same sample, sample by sample in one process (:mod:`sweep.cost`).
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 from core.errors import CliParser, UsageError, run_cli
 from sweep.run import MAX_CHUNK
@@ -121,7 +123,18 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
     )
     print(f"results: {path}")
     print(f"report: {path.parent / 'report.md'}")
-    return 0
+    return _faults_status(path, args.study)
+
+
+def _faults_status(results: Path, study: str) -> int:
+    """Exit status 1 with one line on stderr when some sample failed, else 0."""
+    from sweep.run import faults_line, read_results
+
+    line = faults_line(read_results(results), study)
+    if line is None:
+        return 0
+    print(line, file=sys.stderr)
+    return 1
 
 
 if __name__ == "__main__":

@@ -375,7 +375,7 @@ def failing_lines(table: pd.DataFrame, study: str, folder: Path) -> list[str]:
     return lines
 
 
-def write_report(results: Path) -> Path:
+def write_report(results: Path, retried: int | None = None) -> Path:
     """Write ``report.md`` and ``figures/`` next to ``results``.
 
     Parameters
@@ -383,6 +383,9 @@ def write_report(results: Path) -> Path:
     results : Path
         ``out/<study>/results.parquet``; its schema metadata gives the date, the
         command and the study file of the last run that wrote rows.
+    retried : int, optional
+        Samples recorded as ``failed`` that this run ran again (default: the number in
+        the schema metadata, that of the last run that wrote rows).
 
     Returns
     -------
@@ -403,6 +406,8 @@ def write_report(results: Path) -> Path:
         "",
         f"Results of `{command}` ({date}); {len(table)} rows in `{results.name}`.",
         "",
+        _retried_line(info.get("retried", "0") if retried is None else retried),
+        "",
         *summary_lines(table),
         "",
         "Theorem 2 entry time: the comparison-lemma time of the provable variant when the "
@@ -417,6 +422,11 @@ def write_report(results: Path) -> Path:
         *failing_lines(table, info.get("study", "STUDY"), folder),
     ]
     return atomic_write_text(folder / "report.md", "\n".join(lines) + "\n")
+
+
+def _retried_line(retried: int | str) -> str:
+    """How many samples recorded as ``failed`` this run ran again."""
+    return f"Retried in this run: {retried} samples that had failed (refused samples are final)."
 
 
 def _figure_lines(table: pd.DataFrame, points: pd.DataFrame, figs: Path) -> list[str]:

@@ -445,7 +445,8 @@ def commit_rows(
     Returns
     -------
     DataFrame
-        The table written, sorted by id, one row per id (the first kept).
+        The table written, sorted by id, one row per id (a new row replaces an old one
+        of the same id: a retried sample).
     """
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -453,7 +454,7 @@ def commit_rows(
     new = pd.DataFrame(rows)
     frames = [f for f in (old, new) if len(f)]
     table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=BASE_COLUMNS)
-    table = table.drop_duplicates("id", keep="first").sort_values("id", ignore_index=True)
+    table = table.drop_duplicates("id", keep="last").sort_values("id", ignore_index=True)
     table = _column_order(_uniform_types(table))
     arrow = pa.Table.from_pandas(table, preserve_index=False)
     meta = {**(arrow.schema.metadata or {}), **{k.encode(): v.encode() for k, v in info.items()}}
@@ -553,14 +554,16 @@ LOCAL_CLUSTER_CONFIG = {
         "MKL_NUM_THREADS": 1,
         "OPENBLAS_NUM_THREADS": 1,
     },
+    # no HTTP pages: every Dask node opens an HTTP server; with no routes it serves none
+    "distributed.scheduler.http.routes": [],
+    "distributed.worker.http.routes": [],
 }
 
 
 def _client(scheduler: str | None, workers: int | None = None) -> Any:
     """A client of ``scheduler`` (or ``$DASK_SCHEDULER``), else of a new local cluster
     with ``workers`` single-threaded worker processes (default one per core)."""
-    import dask
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     address = scheduler or os.environ.get("DASK_SCHEDULER")
     if address:
@@ -571,14 +574,41 @@ def _client(scheduler: str | None, workers: int | None = None) -> Any:
                 f"Dask scheduler {address}: cannot connect ({' '.join(str(exc).split())[:200]}); "
                 "start `dask scheduler` and `dask worker` there, or unset DASK_SCHEDULER"
             ) from exc
+    return _local_client(workers)
+
+
+def _local_client(workers: int | None) -> Any:
+    """A client of a new local cluster on 127.0.0.1 that serves no HTTP.
+
+    Dask's scheduler and workers each start an HTTP server whatever the dashboard
+    settings (the scheduler on port 8787 when ``dashboard_address`` is None): here the
+    scheduler's binds a free port of 127.0.0.1 instead, the servers have no routes
+    (:data:`LOCAL_CLUSTER_CONFIG`), and both stop listening before the first task.
+
+    Parameters
+    ----------
+    workers : int or None
+        Single-threaded worker processes (default one per core).
+    """
+    import dask
+    from distributed import Client, LocalCluster
+
     with dask.config.set(LOCAL_CLUSTER_CONFIG):  # the nannies hand it to their workers
         cluster = LocalCluster(
             n_workers=workers or os.cpu_count() or 1,
             threads_per_worker=1,
             processes=True,
-            dashboard_address=None,
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
+            worker_dashboard_address=None,
+            scheduler_kwargs={"dashboard": False},
         )
-    return Client(cluster)
+    from sweep.nohttp import NoHttp, stop_scheduler_http
+
+    client = Client(cluster)
+    client.run_on_scheduler(stop_scheduler_http)
+    client.register_plugin(NoHttp())
+    return client
 
 
 def _close(client: Any, own_cluster: bool) -> None:
@@ -599,7 +629,8 @@ def run_study(
     keep: bool = False,
     chunk: int | None = None,
 ) -> Path:
-    """Run the study's samples not yet in ``results.parquet``; return the results path.
+    """Run the study's samples not yet in ``results.parquet``, and again those recorded as
+    ``failed`` (``refused`` is final); return the results path.
 
     Parameters
     ----------
@@ -613,7 +644,8 @@ def run_study(
     batch : int
         Rows are committed (atomically) every ``batch`` finished samples, and at the end.
     ids : iterable of int, optional
-        Which samples (default all); those already in the results are skipped.
+        Which samples (default all); those already ``ok`` or ``refused`` in the results
+        are skipped.
     command : str, optional
         The command recorded with the results (default ``sys.argv``).
     workers : int, optional
@@ -640,20 +672,64 @@ def run_study(
             )
     paths.folder.mkdir(parents=True, exist_ok=True)
     done = read_results(paths.results)
-    have = set(int(x) for x in done["id"])
-    todo = [k for k in wanted if k not in have]
+    final = final_ids(done)
+    todo = [k for k in wanted if k not in final]
+    retried = len(set(todo) & set(int(x) for x in done["id"]))
     info = {
         "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         "command": command or " ".join(["python -m sweep", *sys.argv[1:]]),
         "study": str(Path(study_path)),
+        "retried": str(retried),
     }
     if todo or not paths.results.is_file():
         opts = RunOptions(scheduler, workers, batch, keep, chunk)
         _execute(str(Path(study_path).resolve()), todo, paths, done, info, opts)
     from sweep.report import write_report
 
-    write_report(paths.results)
+    write_report(paths.results, retried=retried)
     return paths.results
+
+
+def is_failed(status: Any) -> bool:
+    """Whether a row's ``status`` is ``failed: ...`` (a fault of the run, retried by a rerun).
+
+    Parameters
+    ----------
+    status : Any
+        The row's ``status`` (``ok``, ``refused: ...``, ``failed: ...``).
+    """
+    return str(status).startswith("failed")
+
+
+def final_ids(table: pd.DataFrame) -> set[int]:
+    """Ids whose row is final: ``ok`` or ``refused`` (a rerun retries the ``failed`` ones).
+
+    Parameters
+    ----------
+    table : DataFrame
+        The committed results.
+    """
+    return {int(k) for k, s in zip(table["id"], table["status"], strict=True) if not is_failed(s)}
+
+
+def faults_line(table: pd.DataFrame, study: str) -> str | None:
+    """One line naming how many samples failed and the first reason; None when none did.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The results.
+    study : str
+        The study file, for the rerun command.
+    """
+    failed = table[[is_failed(s) for s in table["status"]]].sort_values("id")
+    if not len(failed):
+        return None
+    first = str(failed["status"].iloc[0]).removeprefix("failed").lstrip(": ")
+    return (
+        f"study faults: {len(failed)} of {len(table)} samples failed; first (id "
+        f"{int(failed['id'].iloc[0])}): {first}; rerun `make sweep SWEEP={study}` retries them"
+    )
 
 
 def _execute(

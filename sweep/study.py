@@ -20,12 +20,24 @@ import numpy as np
 from core.errors import ExpressionError, ScenarioError
 from core.expressions import CONSTANTS, FUNCTIONS, parse_expression
 from core.faults import FAULT_TYPES
-from core.scenario import load_scenario, scenario_from_dict
+from core.scenario import (
+    MAX_SCENARIO_BYTES,
+    FileRefused,
+    _Ctx,
+    load_scenario,
+    read_regular_file,
+    scenario_from_dict,
+)
+from core.scenario import _name as scenario_name
 from generated.overrides import set_path
 from sweep.graphs import random_graph, resize_followers
 
 #: largest study file read (bytes)
 MAX_STUDY_BYTES = 1 << 20
+#: deepest nesting of tables and arrays in a study file (``[set.a.b]`` is depth 3)
+MAX_DEPTH = 32
+#: longest study name: sample names ``<name>-<id>`` stay within the scenario's 100
+MAX_NAME = 40
 #: most samples a study may ask for
 MAX_COUNT = 1_000_000
 #: largest random graph (the adjacency is written densely into each sample's file)
@@ -278,19 +290,39 @@ def load_study(path: str | Path) -> Study:
 
 
 def _read_toml(path: Path) -> dict:
+    """The study file's table: a regular file of at most :data:`MAX_STUDY_BYTES`, UTF-8
+    TOML nested at most :data:`MAX_DEPTH` deep."""
     f = str(path)
     try:
-        raw = path.read_bytes()
+        raw = read_regular_file(path, MAX_STUDY_BYTES)
     except OSError as exc:
         raise StudyError(
             f, "(file)", f"cannot be read: {exc.strerror}", "an existing TOML file"
         ) from None
-    if len(raw) > MAX_STUDY_BYTES:
-        raise StudyError(f, "(file)", f"has {len(raw)} bytes", "a study file of at most 1 MiB")
+    except FileRefused as exc:
+        raise StudyError(f, "(file)", str(exc), "a regular study file of at most 1 MiB") from None
     try:
-        return tomllib.loads(raw.decode("utf-8"))
+        data = tomllib.loads(raw.decode("utf-8"))
     except (UnicodeDecodeError, tomllib.TOMLDecodeError, ValueError, RecursionError) as exc:
         raise StudyError(f, "(file)", f"malformed TOML: {exc}", "a valid TOML file") from None
+    if _depth(data) > MAX_DEPTH:
+        raise StudyError(
+            f, "(file)", f"nests tables or arrays more than {MAX_DEPTH} deep", "a flatter file"
+        )
+    return data
+
+
+def _depth(table: dict) -> int:
+    """Nesting depth of the tables and arrays in ``table`` (``[set.a.b]`` is 3), without
+    recursion."""
+    deepest, stack = 0, [(v, 1) for v in table.values()]
+    while stack:
+        v, d = stack.pop()
+        items = v.values() if isinstance(v, dict) else v if isinstance(v, list) else None
+        if items is not None:
+            deepest = max(deepest, d)
+            stack.extend((x, d + 1) for x in items)
+    return deepest
 
 
 def _table(f: str, obj: Any, key: str, allowed: set[str], required: set[str] = frozenset()) -> dict:
@@ -335,9 +367,15 @@ def _number(f: str, v: Any, key: str) -> float:
 
 
 def _name(f: str, data: dict, path: Path) -> str:
-    name = _string(f, data.get("name", path.stem), "name")
-    if not re.fullmatch(r"[A-Za-z0-9_.-]{1,40}", name):
-        raise StudyError(f, "name", f"{name!r} is not a plain name", "[A-Za-z0-9_.-], 1-40 chars")
+    """``name`` (default the file's stem): the scenario loader's rule for names, since it
+    names the folder ``out/<name>/``, and at most :data:`MAX_NAME` characters."""
+    name = data.get("name", path.stem)
+    try:
+        scenario_name(_Ctx(f), {"name": name}, path)
+    except ScenarioError as exc:
+        raise StudyError(f, "name", exc.problem, exc.expected) from None
+    if len(name) > MAX_NAME:
+        raise StudyError(f, "name", f"has {len(name)} characters", f"at most {MAX_NAME}")
     return name
 
 
@@ -345,15 +383,22 @@ def _base(f: str, path: Path, v: Any) -> tuple[str, dict]:
     """The base scenario: must load; its relative trace path is made absolute."""
     rel = _string(f, v, "base")
     base = (path.parent / rel).resolve()
-    if not base.is_file():
+    if not base.exists():
         raise StudyError(
             f, "base", f"{rel} does not exist", "a scenario file relative to the study"
         )
     try:
+        raw = read_regular_file(base, MAX_SCENARIO_BYTES)
+    except (OSError, FileRefused) as exc:
+        why = exc.strerror if isinstance(exc, OSError) else str(exc)
+        raise StudyError(
+            f, "base", f"{rel} {why}", "a scenario file relative to the study"
+        ) from None
+    try:
         load_scenario(base)
     except (ScenarioError, ExpressionError) as exc:
         raise StudyError(f, "base", f"the scenario is refused: {exc}", "a valid scenario") from None
-    data = tomllib.loads(base.read_text(encoding="utf-8"))
+    data = tomllib.loads(raw.decode("utf-8"))
     leader = data.get("leader", {})
     if "u0_csv" in leader:
         leader["u0_csv"] = str((base.parent / leader["u0_csv"]).resolve())
@@ -432,6 +477,8 @@ def _two_args(f: str, kind: str, key: str, args: list, size: int | None) -> Dist
         raise StudyError(f, key, f"std = {hi:g} is negative", "std >= 0")
     if kind != "normal" and lo > hi:
         raise StudyError(f, key, f"lo = {lo:g} > hi = {hi:g}", "lo <= hi")
+    if kind == "uniform" and not math.isfinite(hi - lo):
+        raise StudyError(f, key, "hi - lo overflows to inf", "bounds whose difference is finite")
     return Distribution(kind, (lo, hi), size)
 
 
@@ -445,6 +492,11 @@ def _truncated(f: str, dist: Distribution, raw: Any, key: str) -> Distribution:
         raise StudyError(f, key, f"lo = {lo:g} >= hi = {hi:g}", "lo < hi")
     if dist.args[1] == 0:
         raise StudyError(f, key, "std = 0 cannot be truncated", "std > 0, or no truncate")
+    mean, std = dist.args
+    if not all(math.isfinite((x - mean) / std) for x in (lo, hi)):
+        raise StudyError(
+            f, key, "(bound - mean) / std overflows to inf", "bounds within a finite number of std"
+        )
     return Distribution(dist.kind, dist.args, dist.size, (lo, hi))
 
 

@@ -390,3 +390,85 @@ def test_cost_times_lone_runs_and_study_tasks_of_the_same_samples(setup, tmp_pat
     assert run_cli(main, ["cost", str(study), "--ids", "1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--ids" in err[0]
+
+
+def _sweep_cli(argv: list[str], capsys) -> tuple[int, list[str]]:
+    """``python -m sweep`` in-process: the exit status and stderr's lines without tqdm's."""
+    from core.errors import run_cli
+    from sweep.__main__ import main
+
+    status = run_cli(main, argv)
+    err = capsys.readouterr().err.replace("\r", "\n").splitlines()
+    return status, [e for e in err if e.strip() and not e.startswith("samples:")]
+
+
+def test_failed_samples_fail_the_command_and_a_rerun_retries_them(setup, capsys):
+    """Failed rows make `sweep run` exit 1 with one line; a rerun runs them again (and
+    only them), the report says how many; refused and ok rows are final."""
+    root = setup["root"]
+    good = STUDY.replace('name = "tiny"', 'name = "retry"').replace("count = 4", "count = 3")
+    study = root / "retry.toml"
+    argv = ["run", str(study), "--out", str(root / "out"), "--workers", "1"]
+    study.write_text(good)
+    assert _sweep_cli([*argv, "--ids", "0"], capsys) == (0, [])
+    first = pd.read_parquet(root / "out/retry/results.parquet")
+    # the same draws with a step budget CVODES cannot meet: ids 1 and 2 fail
+    study.write_text(good + '\n[set]\n"integration.max_steps" = 10\n')
+    status, err = _sweep_cli(argv, capsys)
+    assert status == 1 and len(err) == 1, err
+    assert err[0].startswith("study faults: 2 of 3 samples failed; first (id 1): IntegrationError")
+    assert err[0].endswith(f"rerun `make sweep SWEEP={study}` retries them")
+    failed = pd.read_parquet(root / "out/retry/results.parquet").set_index("id")
+    assert failed.loc[0, "finished_utc"] == first.loc[0, "finished_utc"]  # ok is final
+    report = root / "out/retry/report.md"
+    assert "Retried in this run: 0 samples" in report.read_text()
+    study.write_text(good)
+    assert _sweep_cli(argv, capsys) == (0, [])
+    again = pd.read_parquet(root / "out/retry/results.parquet").set_index("id")
+    assert (again["status"] == "ok").all() and again.index.is_unique and len(again) == 3
+    assert again.loc[0, "finished_utc"] == first.loc[0, "finished_utc"]
+    assert "Retried in this run: 2 samples" in report.read_text()
+    assert _sweep_cli(argv, capsys) == (0, [])  # nothing left to run: nothing retried
+    assert "Retried in this run: 0 samples" in report.read_text()
+
+
+def test_refused_samples_are_final_and_do_not_fail_the_command(setup, capsys):
+    root = setup["root"]
+    text = STUDY.replace('name = "tiny"', 'name = "allrefused"').replace("count = 4", "count = 2")
+    (root / "allrefused.toml").write_text(text + '"leader.alpha" = { choice = [0.5] }\n')
+    argv = ["run", str(root / "allrefused.toml"), "--out", str(root / "out"), "--workers", "1"]
+    assert _sweep_cli(argv, capsys) == (0, [])
+    rows = pd.read_parquet(root / "out/allrefused/results.parquet")
+    assert rows["status"].str.startswith("refused").all()
+    assert _sweep_cli(argv, capsys) == (0, [])
+    again = pd.read_parquet(root / "out/allrefused/results.parquet")
+    pd.testing.assert_frame_equal(again, rows)  # not run again
+
+
+def _listening_ports(pid: int) -> set[int]:
+    import psutil
+
+    conns = psutil.Process(pid).net_connections("inet")
+    return {c.laddr.port for c in conns if c.status == psutil.CONN_LISTEN}
+
+
+def test_local_cluster_serves_no_http():
+    """The study's local cluster listens only on Dask's own TCP ports (scheduler, nannies,
+    workers), all on 127.0.0.1: no HTTP server, none on 8787, in any of its processes."""
+    from sweep.run import _client, _close
+
+    client = _client(None, 2)
+    try:
+        info = client.scheduler_info()
+        workers = info["workers"]
+        dask_ports = {int(info["address"].rsplit(":", 1)[1])}
+        dask_ports |= {int(a.rsplit(":", 1)[1]) for a in workers}
+        dask_ports |= {int(w["nanny"].rsplit(":", 1)[1]) for w in workers.values()}
+        pids = [os.getpid(), *client.run(os.getpid).values()]
+        seen = set().union(*(_listening_ports(p) for p in pids))
+        assert client.submit(sum, [1, 2]).result() == 3
+    finally:
+        _close(client, True)
+    assert seen == dask_ports, seen - dask_ports
+    assert all(a.startswith("tcp://127.0.0.1:") for a in [info["address"], *workers])
+    assert 8787 not in seen and len(seen) == 1 + 2 * len(workers)
