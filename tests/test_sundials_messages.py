@@ -1,4 +1,4 @@
-"""SUNDIALS' warnings and errors go to the run's log, not the terminal (issue 23 item 5).
+"""SUNDIALS' warnings and errors go to the run's log, not the terminal.
 
 The native drivers (generated/native/common.c) route SUNDIALS' logger into a file the
 run reads back (``Trajectory.sundials_log``); ``generated.api.run`` writes it to
