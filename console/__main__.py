@@ -1,14 +1,17 @@
 """``python -m console serve SCENARIO`` (``make console``): the live operator console.
 
 Serves http://127.0.0.1:PORT/ (loopback only unless ``--allow-remote``); docs/console.md.
+A request must name a loopback host (127.0.0.1, localhost, [::1]) at PORT, the ``--host``
+bound with ``--allow-remote``, or a name given as ``--allow-remote HOST``.
 Exit status 2 with one line on stderr on any toolkit error.
 """
 
 from __future__ import annotations
 
+import ipaddress
 import sys
 
-from console.server import FPS_RANGE
+from console.server import FPS_RANGE, is_loopback
 from core.errors import CliParser, UsageError, run_cli
 
 
@@ -21,8 +24,12 @@ def _parser() -> CliParser:
     s.add_argument("--host", default="127.0.0.1", help="address to bind (default loopback)")
     s.add_argument(
         "--allow-remote",
-        action="store_true",
-        help="accept connections from non-loopback addresses (anyone who reaches the port drives)",
+        nargs="?",
+        const="",
+        action="append",
+        metavar="HOST",
+        help="accept connections from non-loopback addresses (anyone who reaches the port "
+        "drives) and requests naming HOST (repeatable; put it after SCENARIO)",
     )
     s.add_argument("--fps", type=float, default=30.0, help="frames per second to pages (20-60)")
     s.add_argument("--bias-max", type=float, default=5.0, help="largest bias component")
@@ -41,7 +48,8 @@ def main(argv: list[str]) -> int:
     from console.app import check_host, open_console, serve
 
     args = _parser().parse_args(argv)
-    check_host(args.host, args.allow_remote)  # before the (slow) build
+    allow_remote = args.allow_remote is not None
+    check_host(args.host, allow_remote)  # before the (slow) build
     if not FPS_RANGE[0] <= args.fps <= FPS_RANGE[1]:
         raise UsageError(f"--fps: {args.fps:g} (expected {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g})")
     con = open_console(
@@ -49,10 +57,27 @@ def main(argv: list[str]) -> int:
         out_root=args.out,
         bias_max=args.bias_max,
         fps=args.fps,
-        allow_remote=args.allow_remote,
+        allow_remote=allow_remote,
+        hosts=_hosts(args.host, args.allow_remote or []),
     )
     serve(con, host=args.host, port=args.port)
     return 0
+
+
+def _hosts(bound: str, named: list[str]) -> list[str]:
+    """Host names accepted besides the loopback ones: ``--allow-remote HOST`` values and,
+    with ``--allow-remote``, the ``--host`` bound unless it is a wildcard (0.0.0.0, ::)."""
+    hosts = [h for h in named if h]
+    if named and not is_loopback(bound) and not _wildcard(bound):
+        hosts.append(bound)
+    return hosts
+
+
+def _wildcard(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_unspecified
+    except ValueError:
+        return False
 
 
 if __name__ == "__main__":

@@ -7,15 +7,15 @@ on a port of their own.
 
 from __future__ import annotations
 
-import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from console.engine import LiveLoop
-from console.record import write_record
+from console.record import Recorder
 from console.scenario import BIAS_MAX, console_scenario, console_table
-from console.server import Hub, create_app, is_loopback
+from console.server import MAX_FRAME_BYTES, Hub, create_app, is_loopback
 from console.session import Session
 from core.artifacts import OUT_ROOT
 from core.errors import UsageError
@@ -39,6 +39,7 @@ def open_console(
     bias_max: float = BIAS_MAX,
     fps: float = 30.0,
     allow_remote: bool = False,
+    hosts: Sequence[str] = (),
 ) -> Console:
     """Build everything a console needs for the scenario file at ``path``.
 
@@ -54,6 +55,8 @@ def open_console(
         Frames per second streamed to the pages (20-60).
     allow_remote : bool
         Accept non-loopback peers.
+    hosts : sequence of str
+        Host names a request may name besides the loopback ones (``--allow-remote HOST``).
 
     Raises
     ------
@@ -69,29 +72,9 @@ def open_console(
     built = api.build(sc, gains)
     loop = LiveLoop(sc, gains, built, bias_max)
     out = root / sc.name
-    session = Session(loop, recorder=lambda s: _save(s, table, out))
-    hub = Hub(session, loop.limits, fps=fps, allow_remote=allow_remote, title=sc.name)
+    session = Session(loop, recorder=Recorder(out, table, loop))
+    hub = Hub(session, loop.limits, fps=fps, allow_remote=allow_remote, hosts=hosts, title=sc.name)
     return Console(table, loop, session, hub, out)
-
-
-def _save(session: Session, table: dict, out: Path) -> dict[str, Any]:
-    """Write the run so far under ``out/record-<time>/`` and say where."""
-    loop = session.loop
-    t, X = session.log_array()
-    folder = out / time.strftime("record-%Y%m%d-%H%M%S")
-    rec = write_record(
-        folder,
-        table,
-        loop.changes,
-        loop.nominal.u0.tolist(),
-        loop.nominal.health.tolist(),
-        t,
-        loop.state_table(X),
-        loop.state_columns(),
-        loop.quantum,
-        loop.restarts,
-    )
-    return rec.message()
 
 
 def check_host(host: str, allow_remote: bool) -> None:
@@ -127,6 +110,30 @@ def serve(console: Console, host: str = "127.0.0.1", port: int = 8765) -> None:
 
     check_host(host, console.hub.allow_remote)
     print(f"console: http://{host}:{port}/  (Ctrl-C stops it)", flush=True)
-    uvicorn.run(
-        create_app(console.hub), host=host, port=port, log_level="warning", ws="websockets-sansio"
+    uvicorn.Server(uvicorn_config(create_app(console.hub), host, port)).run()
+
+
+def uvicorn_config(app: Any, host: str, port: int) -> Any:
+    """The uvicorn configuration the console is served with.
+
+    WebSocket messages above :data:`~console.server.MAX_FRAME_BYTES` are refused by the
+    protocol layer (close 1009) from the frame's header, before their payload is read.
+
+    Parameters
+    ----------
+    app : ASGI application
+        From :func:`~console.server.create_app`.
+    host : str
+        Address to bind.
+    port : int
+    """
+    import uvicorn
+
+    return uvicorn.Config(
+        app,
+        host=host,
+        port=port,
+        log_level="warning",
+        ws="websockets-sansio",
+        ws_max_size=MAX_FRAME_BYTES,
     )

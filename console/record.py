@@ -1,6 +1,7 @@
 """A console run written as files that replay it: u0 trace, scenario, logged states.
 
-``<folder>/``
+``<folder>/`` (``record-<date>-<time>-<microseconds>``, created exclusively: a record
+never replaces another)
   ``u0.csv``          the operator's command, one row per change (t, u0_1..u0_p) and a last
                       row at the end time; held constant between rows (``leader.u0_hold``)
   ``<name>.toml``     the console's scenario with ``leader.u0_csv = "u0.csv"``, the health
@@ -14,22 +15,36 @@ and each link cut or restored as a ``[[graph.switches]]`` table. The scenario is
 back before the record is reported; one the loader refuses (a cut that leaves a
 follower unreachable from the leader, which a scenario may not have) is removed and the
 record says why, keeping ``u0.csv`` and ``console.csv``.
+
+:class:`Recorder` writes from the server's record worker thread, not the loop's: each
+logged row is formatted once into the run's :class:`LogSpool` (later saves append only
+the rows logged since) and copied to each record's ``console.csv``; every file appears
+complete or not at all (a temporary file and :func:`os.replace`).
 """
 
 from __future__ import annotations
 
 import copy
+import os
+import shutil
+import tempfile
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from console.engine import Change
+from console.engine import Change, LoopBase
 from core.artifacts import atomic_write_text
 from core.errors import ToolkitError
 from core.scenario import load_scenario
 from sweep.sampler import scenario_toml
+
+if TYPE_CHECKING:
+    from console.session import Snapshot
 
 TRACE_NAME, LOG_NAME = "u0.csv", "console.csv"
 
@@ -183,7 +198,7 @@ def write_record(
     Parameters
     ----------
     folder : Path
-        Created if missing.
+        Created if missing (:func:`new_folder` makes a fresh one).
     table : dict
         The console scenario as parsed TOML.
     changes : sequence of Change
@@ -202,18 +217,46 @@ def write_record(
         Times the console's integrator restarted (rows of the trace, see :func:`u0_rows`).
     """
     folder.mkdir(parents=True, exist_ok=True)
-    t_end = float(t_log[-1])
-    lines = ["t," + ",".join(columns)]
-    lines += [",".join(repr(float(v)) for v in (t, *x)) for t, x in zip(t_log, x_log, strict=True)]
-    atomic_write_text(folder / LOG_NAME, "\n".join(lines) + "\n")
-    rows = u0_rows(changes, u0_start, t_end, restarts) if t_end > 0 else []
-    p = len(u0_start)
-    head = "t," + ",".join(f"u0_{k}" for k in range(1, p + 1))
-    body = [",".join(repr(float(v)) for v in r) for r in rows]
+    text = _csv_header(columns) + _csv_rows(t_log, x_log)
+    atomic_write_text(folder / LOG_NAME, text)
+    run = (changes, u0_start, nominal_health, restarts)
+    return write_replay(folder, table, run, float(t_log[-1]), len(t_log), h)
+
+
+def write_replay(
+    folder: Path,
+    table: dict,
+    run: tuple[Sequence[Change], Sequence[float], Sequence[float], Sequence[float]],
+    t_end: float,
+    rows: int,
+    h: float,
+) -> Record:
+    """Write ``u0.csv`` and, when replayable, the scenario (``console.csv`` is written apart).
+
+    Parameters
+    ----------
+    folder : Path
+        An existing folder.
+    table : dict
+        The console scenario as parsed TOML.
+    run : tuple
+        The run's changes, u0 and healths at t = 0, and integrator restarts
+        (as :func:`write_record`'s parameters).
+    t_end : float
+        The last logged time.
+    rows : int
+        Rows of ``console.csv``.
+    h : float
+        The console's quantum.
+    """
+    changes, u0_start, nominal_health, restarts = run
+    trace = u0_rows(changes, u0_start, t_end, restarts) if t_end > 0 else []
+    head = "t," + ",".join(f"u0_{k}" for k in range(1, len(u0_start) + 1))
+    body = [",".join(repr(float(v)) for v in r) for r in trace]
     atomic_write_text(folder / TRACE_NAME, "\n".join([head, *body]) + "\n")
-    used = [c for c in changes if c.t < t_end]
     if t_end <= 0:
-        return Record(folder, None, len(t_log), t_end, "nothing to replay yet (t = 0)")
+        return Record(folder, None, rows, t_end, "nothing to replay yet (t = 0)")
+    used = [c for c in changes if c.t < t_end]
     data = replay_table(table, used, nominal_health, t_end, h)
     data["name"] = f"{table['name']}-{folder.name}"
     path = atomic_write_text(folder / f"{data['name']}.toml", scenario_toml(data))
@@ -221,5 +264,155 @@ def write_record(
         load_scenario(path)
     except ToolkitError as exc:
         path.unlink()
-        return Record(folder, None, len(t_log), t_end, f"the replay is not a valid scenario: {exc}")
-    return Record(folder, path, len(t_log), t_end)
+        return Record(folder, None, rows, t_end, f"the replay is not a valid scenario: {exc}")
+    return Record(folder, path, rows, t_end)
+
+
+def new_folder(root: Path) -> Path:
+    """Create a new record folder ``root/record-<date>-<time>-<microseconds>`` exclusively.
+
+    A name already taken gets ``-2``, ``-3``, ... appended: a record never replaces another.
+
+    Parameters
+    ----------
+    root : Path
+        Where records go (created if missing).
+
+    Raises
+    ------
+    ToolkitError
+        When no free name is found.
+    """
+    root.mkdir(parents=True, exist_ok=True)
+    stamp = datetime.now().strftime("record-%Y%m%d-%H%M%S-%f")
+    for k in range(1, 1000):
+        folder = root / (stamp if k == 1 else f"{stamp}-{k}")
+        try:
+            folder.mkdir()
+        except FileExistsError:
+            continue
+        return folder
+    raise ToolkitError(f"{root}: no free record folder named {stamp}-*")
+
+
+def _csv_header(columns: Sequence[str]) -> str:
+    return "t," + ",".join(columns) + "\n"
+
+
+def _csv_rows(t: Sequence[float], x: np.ndarray) -> str:
+    """``console.csv`` lines (shortest round-trip reprs), each ending in a newline."""
+    return "".join(
+        repr(float(tk)) + "," + ",".join(map(repr, row)) + "\n"
+        for tk, row in zip(t, np.asarray(x, dtype=float).tolist(), strict=True)
+    )
+
+
+class LogSpool:
+    """A run's ``console.csv`` text in one anonymous temporary file, appended to as saves
+    need more rows: each logged row is formatted once, however many records hold it.
+
+    Parameters
+    ----------
+    root : Path
+        Folder of the temporary file (the records' root, not a RAM-backed /tmp).
+    columns : sequence of str
+        Names of the state columns.
+    """
+
+    def __init__(self, root: Path, columns: Sequence[str]) -> None:
+        root.mkdir(parents=True, exist_ok=True)
+        self.file = tempfile.TemporaryFile(dir=root, prefix=".console-log-")
+        self.file.write(_csv_header(columns).encode("utf-8"))
+        self.rows = 0
+
+    def extend(self, t: Sequence[float], x: np.ndarray) -> None:
+        """Append rows.
+
+        Parameters
+        ----------
+        t : sequence of float
+            Their times.
+        x : ndarray, shape (len(t), len(columns))
+            Their values.
+        """
+        self.file.write(_csv_rows(t, x).encode("utf-8"))
+        self.rows += len(t)
+
+    def copy_to(self, path: Path) -> None:
+        """Write the rows so far to ``path`` via a temporary file and :func:`os.replace`.
+
+        Parameters
+        ----------
+        path : Path
+            Destination in an existing folder.
+        """
+        self.file.flush()
+        self.file.seek(0)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as out:
+                shutil.copyfileobj(self.file, out, 1 << 20)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        finally:
+            self.file.seek(0, os.SEEK_END)
+
+    def close(self) -> None:
+        """Remove the temporary file."""
+        self.file.close()
+
+
+class Recorder:
+    """Writes a console's records: a new folder per save, the log appended incrementally.
+
+    Called with a :class:`~console.session.Snapshot` (from any thread; one save at a
+    time): the rows logged since the last save of the same run are added to the run's
+    :class:`LogSpool`, which is copied to the new folder's ``console.csv``.
+
+    Parameters
+    ----------
+    out : Path
+        Where records go (``<out>/record-…/``).
+    table : dict
+        The console scenario as parsed TOML.
+    loop : LoopBase
+        The console's loop (its nominal settings, quantum and state columns; it is not
+        read while it runs).
+    """
+
+    def __init__(self, out: Path, table: dict, loop: LoopBase) -> None:
+        self.out, self.table, self.loop = Path(out), table, loop
+        self.lock = threading.Lock()
+        self.spool: LogSpool | None = None
+        self.run = 0
+
+    def __call__(self, snap: Snapshot) -> dict:
+        """Write the record of ``snap``; the reply a page gets.
+
+        Parameters
+        ----------
+        snap : Snapshot
+            From :meth:`console.session.Session.snapshot`.
+        """
+        loop = self.loop
+        with self.lock:
+            folder = new_folder(self.out)
+            self._spool(snap).copy_to(folder / LOG_NAME)
+            nominal = loop.nominal
+            run = (snap.changes, nominal.u0.tolist(), nominal.health.tolist(), snap.restarts)
+            rec = write_replay(folder, self.table, run, snap.t_end, snap.rows, loop.quantum)
+        return rec.message()
+
+    def _spool(self, snap: Snapshot) -> LogSpool:
+        """The run's spool holding the snapshot's rows (a new one for a new run)."""
+        if self.spool is None or self.run != snap.run or self.spool.rows > snap.rows:
+            if self.spool is not None:
+                self.spool.close()
+            self.spool, self.run = LogSpool(self.out, self.loop.state_columns()), snap.run
+        k = self.spool.rows
+        if snap.rows > k:
+            X = self.loop.state_table(np.asarray(snap.log_x[k : snap.rows]))
+            self.spool.extend(snap.log_t[k : snap.rows], X)
+        return self.spool

@@ -11,8 +11,11 @@ page and never dropped below :data:`MAX_REPLIES`.
 Roles: the first page to send ``drive`` drives; the others watch (their commands get
 an error) until the driver's page closes. Closing a page stops nothing else.
 Connections from addresses that are not loopback are refused unless the server was
-started with ``allow_remote``; a WebSocket whose ``Origin`` is not the page's own
-host is refused too (another site open in the same browser cannot drive).
+started with ``allow_remote``; a page or WebSocket whose ``Host`` header is not a loopback
+name at the serving port (or one of ``hosts``) is refused (DNS rebinding: another site's
+name resolved to 127.0.0.1 cannot drive); a WebSocket whose ``Origin`` is not the page's
+own host is refused too (another site open in the same browser cannot drive). Saves run
+on one record worker thread (:class:`~console.record.Recorder`), never on the loop's.
 """
 
 from __future__ import annotations
@@ -24,7 +27,8 @@ import json
 import math
 import time
 from collections import deque
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,7 +40,7 @@ from starlette.responses import FileResponse, PlainTextResponse, Response
 from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from console.protocol import DRIVER_ONLY, Limits, MessageError, parse_message
+from console.protocol import DRIVER_ONLY, MAX_MESSAGE_BYTES, Limits, MessageError, parse_message
 from console.session import Session
 
 STATIC = Path(__file__).parent / "static"
@@ -44,6 +48,11 @@ STATIC = Path(__file__).parent / "static"
 FPS_RANGE = (20.0, 60.0)
 #: replies kept per page before the oldest are dropped (a flood's errors all fit)
 MAX_REPLIES = 4096
+#: largest WebSocket message the protocol layer reads (uvicorn ``ws_max_size``): a text of
+#: MAX_MESSAGE_BYTES characters in UTF-8 (at most 4 bytes each); larger ones close with 1009
+MAX_FRAME_BYTES = 4 * MAX_MESSAGE_BYTES
+#: Host names every console accepts (with the serving port)
+LOOPBACK_NAMES = frozenset({"127.0.0.1", "localhost", "::1"})
 
 
 def is_loopback(host: str | None) -> bool:
@@ -60,6 +69,43 @@ def is_loopback(host: str | None) -> bool:
         return ipaddress.ip_address(host.split("%")[0]).is_loopback
     except ValueError:
         return host == "localhost"
+
+
+def host_name(host: str) -> str:
+    """A host name as a ``Host`` header's parsed name: lower case, IPv6 without brackets.
+
+    Parameters
+    ----------
+    host : str
+        ``example.org``, ``[::1]``, ``::1``...
+    """
+    return host.strip().lower().removeprefix("[").removesuffix("]")
+
+
+def host_refusal(header: str | None, port: int | None, names: frozenset[str]) -> str:
+    """Why a request's ``Host`` header is refused, or ``""`` when it is accepted.
+
+    Accepted: a loopback name (:data:`LOOPBACK_NAMES`) or one of ``names``, with the
+    serving port (80 when the header gives none).
+
+    Parameters
+    ----------
+    header : str or None
+        The request's ``Host`` header.
+    port : int or None
+        The port the server listens on (None: not checked).
+    names : frozenset of str
+        Further accepted names (:func:`host_name` form).
+    """
+    try:
+        parts = urlsplit("//" + (header or ""))
+        name, given = parts.hostname, parts.port or 80
+    except ValueError:
+        name, given = None, None
+    if name and (name in LOOPBACK_NAMES or name in names) and port in (None, given):
+        return ""
+    shown = header if header is None or len(header) <= 40 else header[:37] + "..."
+    return f"Host {shown!r} is not a loopback name; serve with --allow-remote <host> to accept it"
 
 
 @dataclass(eq=False)
@@ -106,6 +152,8 @@ class Hub:
         Frames per second streamed to the pages (20-60).
     allow_remote : bool
         Accept connections from non-loopback addresses.
+    hosts : iterable of str
+        ``Host`` names accepted besides the loopback ones (``--allow-remote HOST``).
     title : str
         Shown on the page (the scenario's name).
     """
@@ -117,11 +165,14 @@ class Hub:
         fps: float = 30.0,
         allow_remote: bool = False,
         title: str = "",
+        hosts: Iterable[str] = (),
     ) -> None:
         if not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:
             raise MessageError(f"--fps: {fps:g} (expected {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g})")
         self.session, self.limits, self.fps = session, limits, fps
         self.allow_remote, self.title = allow_remote, title
+        self.hosts = frozenset(host_name(h) for h in hosts)
+        self.records = ThreadPoolExecutor(max_workers=1, thread_name_prefix="console-record")
         self.pages: set[Page] = set()
         self.driver: Page | None = None
         self.frames = 0
@@ -165,16 +216,36 @@ class Hub:
         """
         return self.allow_remote or is_loopback(host)
 
+    def refusal(self, conn: Request | WebSocket) -> str:
+        """Why a page or socket is refused (its peer, ``Host`` or ``Origin``), or ``""``.
+
+        Parameters
+        ----------
+        conn : Request or WebSocket
+            The connection, before anything is served or accepted.
+        """
+        peer = conn.client.host if conn.client else None
+        if not self.allowed(peer):
+            return f"peer {peer} is not a loopback address; serve with --allow-remote to accept it"
+        server = conn.scope.get("server")
+        port = server[1] if server else None
+        why = host_refusal(conn.headers.get("host"), port, self.hosts)
+        if why or conn.scope["type"] != "websocket" or _same_origin(conn):
+            return why
+        origin = (conn.headers.get("origin") or "")[:40]
+        return f"Origin {origin!r} is not this page's host"
+
     async def serve_page(self, ws: WebSocket) -> None:
         """One page's socket: accept, read and answer its messages, clean up on close.
 
         Parameters
         ----------
         ws : WebSocket
-            The page's socket (closed with 1008 if the peer or its origin is refused).
+            The page's socket (refused, saying why, if its peer, Host or Origin is).
         """
-        if not self.allowed(ws.client.host if ws.client else None) or not _same_origin(ws):
-            await ws.close(code=1008)
+        why = self.refusal(ws)
+        if why:
+            await _refuse(ws, why)
             return
         await ws.accept()
         page = Page(ws)
@@ -222,6 +293,9 @@ class Hub:
                 raise MessageError(
                     f"{cmd.kind}: this page watches (send drive when no page drives)"
                 )
+            if cmd.kind == "save":
+                self._save(page)
+                return
             reply = self.session.handle(cmd)
             if reply is not None:
                 page.push_reply(reply)
@@ -229,6 +303,12 @@ class Hub:
             page.push_reply({"type": "error", "message": str(exc)})
         except Exception as exc:  # noqa: BLE001 - one page's message must not stop the server
             page.push_reply({"type": "error", "message": f"{type(exc).__name__}: {exc}"})
+
+    def _save(self, page: Page) -> None:
+        """Snapshot the log now; write the record on the record worker; reply when done."""
+        job = self.session.save_job()
+        done = asyncio.get_running_loop().run_in_executor(self.records, job)
+        done.add_done_callback(lambda f: page.push_reply(_saved(f)))
 
     async def _write(self, page: Page) -> None:
         """Send a page its replies (all, in order) and then its newest frame."""
@@ -261,6 +341,24 @@ class Hub:
             "fps": self.fps,
             "nominal_health": loop.nominal.health.tolist(),
         }
+
+
+def _saved(done: Future) -> dict[str, Any]:
+    """A finished save's reply: ``saved``, or the error that stopped it."""
+    exc = done.exception()
+    if exc is None:
+        return done.result()
+    text = str(exc) if isinstance(exc, MessageError) else f"{type(exc).__name__}: {exc}"
+    return {"type": "error", "message": f"save: {text}"}
+
+
+async def _refuse(ws: WebSocket, why: str) -> None:
+    """Refuse a socket before accepting it: HTTP 403 with ``why`` where the server can
+    send one (uvicorn's ``websocket.http.response``), else close 1008 with ``why``."""
+    if "websocket.http.response" in ws.scope.get("extensions", {}):
+        await ws.send_denial_response(PlainTextResponse(why + "\n", 403))
+    else:
+        await ws.close(code=1008, reason=why.encode("utf-8")[:123].decode("utf-8", "ignore"))
 
 
 def _same_origin(ws: WebSocket) -> bool:
@@ -303,8 +401,9 @@ def create_app(hub: Hub) -> Starlette:
 
     def guarded(name: str, media: str):
         async def endpoint(request: Request) -> Response:
-            if not hub.allowed(request.client.host if request.client else None):
-                return PlainTextResponse("loopback only (start with --allow-remote)", 403)
+            why = hub.refusal(request)
+            if why:
+                return PlainTextResponse(why + "\n", 403)
             return FileResponse(STATIC / name, media_type=media)
 
         return endpoint

@@ -6,6 +6,10 @@ falls between two integrator calls. Pacing: the simulated time owed grows by
 ``scale`` × the wall time since the last tick (at most :data:`MAX_LAG` seconds of
 wall time per tick, so a stall is not made up in a burst) and is paid in whole
 quanta; the states at every quantum are logged from t = 0.
+
+A save takes a :class:`Snapshot` of the log on the loop's thread (:meth:`Session.save_job`)
+and the recorder writes it from another thread (the server's record worker): the log
+only grows, and a reset starts a new one, so the rows a snapshot names never change.
 """
 
 from __future__ import annotations
@@ -13,12 +17,13 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from console.engine import LoopBase
+from console.engine import Change, LoopBase
 from console.protocol import Command, MessageError
 
 #: most wall-clock seconds one tick pays for (a longer stall slows the run down instead)
@@ -54,6 +59,39 @@ class Pace:
     window: deque = field(default_factory=deque)  # (wall, simulated advanced, busy)
 
 
+@dataclass(frozen=True)
+class Snapshot:
+    """The log and the changes of a run as they were when a save was asked for.
+
+    Attributes
+    ----------
+    run : int
+        Which run of the session (a reset starts the next).
+    log_t : list of float
+        The run's logged times (the session's own list: only rows below ``rows`` are read).
+    log_x : list of ndarray
+        The run's logged states, as ``log_t``.
+    rows : int
+        Rows of the log the record holds (>= 1).
+    changes : tuple of Change
+        The run's changes so far.
+    restarts : tuple of float
+        Times the integrator restarted so far.
+    """
+
+    run: int
+    log_t: list[float]
+    log_x: list[np.ndarray]
+    rows: int
+    changes: tuple[Change, ...]
+    restarts: tuple[float, ...]
+
+    @property
+    def t_end(self) -> float:
+        """The last logged time of the record."""
+        return self.log_t[self.rows - 1]
+
+
 class Session:
     """A live loop, its pacing and its log.
 
@@ -62,8 +100,8 @@ class Session:
     loop : LoopBase
         The engine (:class:`console.engine.LiveLoop`, or a stand-in with the same base).
     recorder : callable, optional
-        ``recorder(session) -> dict`` writes the record so far and returns what the page
-        is told (paths); without one, ``save`` is refused.
+        ``recorder(snapshot) -> dict`` writes the record of a :class:`Snapshot` and
+        returns what the page is told (paths); without one, ``save`` is refused.
     clock : callable
         Wall clock in seconds (``time.perf_counter``; tests may pass their own).
     """
@@ -73,9 +111,11 @@ class Session:
         self.pace = Pace()
         self.owed = 0.0
         self.last_wall = clock()
+        self.run = 0
         self._start_log()
 
     def _start_log(self) -> None:
+        self.run += 1
         self.log_t: list[float] = [self.loop.t]
         self.log_x: list[np.ndarray] = [self.loop.x.copy()]
         self.log_full = False
@@ -108,9 +148,7 @@ class Session:
             self.owed = 0.0
             self._start_log()
         elif cmd.kind == "save":
-            if self.recorder is None:
-                raise MessageError("save: this console has no record folder (start it with --out)")
-            return {"type": "saved", **self.recorder(self)}
+            return self.save_job()()
         elif loop.failure:
             raise MessageError(f"{cmd.kind}: the integrator stopped ({loop.failure}); send reset")
         elif cmd.kind == "u0":
@@ -185,6 +223,33 @@ class Session:
             "changes": len(loop.changes),
             "log_full": self.log_full,
         }
+
+    def snapshot(self) -> Snapshot:
+        """The log and the changes so far (call it on the loop's thread)."""
+        loop = self.loop
+        return Snapshot(
+            self.run,
+            self.log_t,
+            self.log_x,
+            len(self.log_t),
+            tuple(loop.changes),
+            tuple(loop.restarts),
+        )
+
+    def save_job(self) -> Callable[[], dict[str, Any]]:
+        """Snapshot now; the returned call writes the record and gives the ``saved`` reply.
+
+        The call may run on another thread (the loop goes on meanwhile).
+
+        Raises
+        ------
+        MessageError
+            Without a recorder.
+        """
+        if self.recorder is None:
+            raise MessageError("save: this console has no record folder (start it with --out)")
+        recorder, snap = self.recorder, self.snapshot()
+        return lambda: {"type": "saved", **recorder(snap)}
 
     def log_array(self) -> tuple[np.ndarray, np.ndarray]:
         """The logged times and states from t = 0."""
