@@ -9,6 +9,27 @@ SCENARIO ?= scenarios/paper.toml
 SWEEP ?= studies/example.toml
 STRICT ?= 0
 export STRICT
+# SET='KEY=VALUE;KEY=VALUE' (';' separates overrides; values may hold commas) and
+# VARIANT=NAME reach synth, sim, verify, report and demo as --set ... --variant NAME
+SET ?=
+VARIANT ?=
+export SET VARIANT
+KNOBS = set -f; set --; IFS=';'; for s in $$SET; do case "$$s" in *[!\ ]*) set -- "$$@" --set "$$s";; esac; done; unset IFS; \
+	if [ -n "$$VARIANT" ]; then set -- "$$@" --variant "$$VARIANT"; fi;
+KNOB_GOALS := all demo synth sim verify report venv
+ifeq ($(MAKELEVEL),0)
+# a misspelt knob on the command line is refused, not dropped
+MISSPELT := set=SET Set=SET SETS=SET sets=SET OVERRIDE=SET OVERRIDES=SET override=SET \
+	overrides=SET variant=VARIANT Variant=VARIANT VARIANTS=VARIANT variants=VARIANT \
+	scenario=SCENARIO SCENARIOS=SCENARIO sweep=SWEEP strict=STRICT port=PORT
+$(foreach p,$(MISSPELT),$(if $(filter command line,$(origin $(firstword $(subst =, ,$(p))))),\
+	$(error $(firstword $(subst =, ,$(p)))= is not a variable of this Makefile: use $(lastword $(subst =, ,$(p)))=)))
+ifneq ($(SET)$(VARIANT),)
+ifneq ($(filter-out $(KNOB_GOALS),$(MAKECMDGOALS)),)
+$(error SET=/VARIANT= are taken by synth, sim, verify, report and demo, not by $(filter-out $(KNOB_GOALS),$(MAKECMDGOALS)))
+endif
+endif
+endif
 
 .PHONY: all demo synth sim sweep console chromium verify report test lint bench clean clean-cache distclean
 
@@ -24,13 +45,13 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m verify demo $(SCENARIO)
+	@$(KNOBS) set -x; $(PY) -m verify demo $(SCENARIO) "$$@"
 
 synth: $(STAMP)
-	$(PY) -m synthesis synth $(SCENARIO)
+	@$(KNOBS) set -x; $(PY) -m synthesis synth $(SCENARIO) "$$@"
 
 sim: $(STAMP)
-	$(PY) -m generated sim $(SCENARIO)
+	@$(KNOBS) set -x; $(PY) -m generated sim $(SCENARIO) "$$@"
 
 sweep: $(STAMP)
 	$(PY) -m sweep run $(SWEEP)
@@ -48,10 +69,10 @@ chromium:
 		|| echo "chromium could not be installed: the console's browser test will be skipped"; fi
 
 verify: $(STAMP)
-	$(PY) -m verify check $(SCENARIO)
+	@$(KNOBS) set -x; $(PY) -m verify check $(SCENARIO) "$$@"
 
 report: $(STAMP)
-	$(PY) -m verify report $(SCENARIO)
+	@$(KNOBS) set -x; $(PY) -m verify report $(SCENARIO) "$$@"
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check core synthesis symbolic generated verify benchmarks sweep console tests

@@ -11,6 +11,7 @@ import argparse
 import sys
 
 from core.errors import run_cli
+from core.overrides import add_scenario_knobs, scenario_knobs
 from core.scenario import METHODS
 
 
@@ -20,17 +21,8 @@ def _parser() -> argparse.ArgumentParser:
     sim = sub.add_parser("sim", help="simulate a scenario with generated C")
     sim.add_argument("scenario", help="scenario TOML file")
     sim.add_argument("--method", choices=METHODS, help="override integration.method")
-    sim.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario field (TOML value), e.g. options.ablation=true; "
-        "the run is written to out/<name>-<variant>/",
-    )
+    add_scenario_knobs(sim)
     sim.add_argument("--ablation", action="store_true", help="same as --set options.ablation=true")
-    sim.add_argument("--variant", help="name suffix of an overridden run (default from the keys)")
     sim.add_argument("--opt", default="-O1", help="compiler optimisation flag (default -O1)")
     sim.add_argument("--compiler", default="gcc")
     sim.add_argument(
@@ -94,9 +86,7 @@ def _sim(args: argparse.Namespace) -> int:
     from generated import api
     from generated.codegen import CodegenSettings
 
-    overrides = dict(api.parse_override(s) for s in args.overrides)
-    if args.ablation:
-        overrides["options.ablation"] = True
+    overrides, variant = scenario_knobs(args, {"options.ablation": True} if args.ablation else None)
     cg = CodegenSettings(
         compiler=args.compiler,
         optimization=args.opt,
@@ -105,8 +95,8 @@ def _sim(args: argparse.Namespace) -> int:
     )
     res = api.run(
         args.scenario,
-        overrides=overrides or None,
-        variant=args.variant,
+        overrides=overrides,
+        variant=variant,
         method=args.method,
         codegen=cg,
         out_root=args.out,

@@ -1,4 +1,4 @@
-"""Command line: ``synth SCENARIO [--strict] [--out FILE]`` and ``certify GAINS [--strict]``.
+"""Command line: ``synth SCENARIO [--set KEY=VALUE] [--variant NAME] [--strict] [--out FILE]`` and ``certify GAINS [--strict]``.
 
 Exit codes: 0 ok (warnings about given gains go to stderr), 2 on failure with one
 line on stderr (via :func:`core.errors.run_cli`). ``STRICT=1`` in the
@@ -12,7 +12,7 @@ from pathlib import Path
 
 from core.artifacts import out_dir
 from core.errors import CliParser, SynthesisError, strict_mode
-from core.scenario import load_scenario
+from core.overrides import add_scenario_knobs, load, scenario_knobs
 from synthesis.api import synthesize
 from synthesis.certificate import certify
 from synthesis.gains import load_gains, save_gains
@@ -35,6 +35,7 @@ def main(argv: list[str]) -> int:
     sub = ap.add_subparsers(dest="cmd", required=True)
     s = sub.add_parser("synth", help="synthesise and certify gains for a scenario")
     s.add_argument("scenario")
+    add_scenario_knobs(s)
     s.add_argument("--strict", action="store_true", help="warnings about given gains fail")
     s.add_argument("--out", default=None, help="output file (default out/<name>/gains.json)")
     c = sub.add_parser("certify", help="re-check a gains.json from its numbers alone")
@@ -44,7 +45,7 @@ def main(argv: list[str]) -> int:
     strict = _strict(args.strict)
 
     if args.cmd == "synth":
-        scen = load_scenario(args.scenario)
+        scen = load(args.scenario, *scenario_knobs(args))
         g = synthesize(scen, strict=strict)
         path = Path(args.out) if args.out else out_dir(scen.name) / "gains.json"
         save_gains(g, path)

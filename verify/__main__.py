@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 
 from core.artifacts import OUT_ROOT
 from core.errors import CliParser, run_cli, strict_mode
+from core.overrides import add_scenario_knobs, scenario_knobs
 from verify.bounds import VerifyConfig, VerifyError
 
 if TYPE_CHECKING:
@@ -59,14 +60,7 @@ def _parser() -> argparse.ArgumentParser:
             help="skip the exact dV/dt checks (table from the trajectory only)",
         )
         p.add_argument("--no-gif", action="store_true", help="skip the animation")
-        p.add_argument(
-            "--set",
-            action="append",
-            default=[],
-            metavar="KEY=VALUE",
-            help="override a scenario field (e.g. options.feedforward=false); "
-            "the run goes to out/<name>-<variant>/",
-        )
+        add_scenario_knobs(p)
     return ap
 
 
@@ -144,22 +138,25 @@ def _obtain_runs(args: argparse.Namespace, root: Path) -> tuple[Run, Run | None]
     from verify import pipeline as P
 
     force = args.cmd == "demo"
-    overrides = dict(api.parse_override(x) for x in args.set) or None
+    overrides, variant = scenario_knobs(args)
     abl_over = {**(overrides or {}), **P.ABLATION}
+    abl_variant = None if variant is None else f"{variant}-ablation"
     if args.cmd == "demo":  # what is being run, before the stages
         from core.summary import summarize
 
-        print(summarize(api.load(args.scenario, overrides)), end="\n\n")
-    run = P.obtain_run(args.scenario, overrides, out_root=root, force=force)
+        print(summarize(api.load(args.scenario, overrides, variant)), end="\n\n")
+    run = P.obtain_run(args.scenario, overrides, variant=variant, out_root=root, force=force)
     _stage_line("run", run)
     ablation = None
     if args.cmd in ("report", "demo"):
-        ablation = P.obtain_run(args.scenario, abl_over, out_root=root, force=force)
+        ablation = P.obtain_run(
+            args.scenario, abl_over, variant=abl_variant, out_root=root, force=force
+        )
         _stage_line("ablation (42)", ablation)
     else:  # check: use the ablation run only if it is already there and fresh
-        asc = api.load(args.scenario, abl_over)
+        asc = api.load(args.scenario, abl_over, abl_variant)
         if P._fresh(root / asc.name, asc) is not None:
-            ablation = P.obtain_run(args.scenario, abl_over, out_root=root)
+            ablation = P.obtain_run(args.scenario, abl_over, variant=abl_variant, out_root=root)
     return run, ablation
 
 

@@ -110,6 +110,7 @@ def obtain_run(
     path: str | Path,
     overrides: dict | None = None,
     *,
+    variant: str | None = None,
     out_root: Path | None = None,
     force: bool = False,
     progress: bool = True,
@@ -127,6 +128,8 @@ def obtain_run(
         Scenario file.
     overrides : dict, optional
         E.g. :data:`ABLATION`.
+    variant : str, optional
+        Name suffix of the overridden run (:func:`generated.api.load`).
     out_root : Path, optional
     force : bool
         Simulate even when a fresh trajectory exists.
@@ -140,7 +143,7 @@ def obtain_run(
     from generated import api
 
     root = Path(out_root or OUT_ROOT)
-    sc = api.load(path, overrides)
+    sc = api.load(path, overrides, variant)
     folder = root / sc.name
     # the derivative filters' states are not in trajectory.csv: such runs are always re-simulated
     reusable = not force and sc.options.derivatives != "filtered"
@@ -153,7 +156,7 @@ def obtain_run(
             return Run(sc, df, None, meta, folder, simulated=False)
         if why != "no previous run":
             print(f"{folder / 'trajectory.csv'}: not reused ({why}); simulating")
-    res = api.run(path, overrides=overrides, out_root=root, progress=progress)
+    res = api.run(path, overrides=overrides, variant=variant, out_root=root, progress=progress)
     return Run(sc, res.frame, res.trajectory.x, res.meta, folder, simulated=True)
 
 
