@@ -156,6 +156,7 @@ class Leader:
     u0_trace: np.ndarray | None  # (K, 1+p): columns t, u0_1..u0_p (piecewise linear)
     alpha: float  # ‖u0‖ ≤ α
     u0_hold: bool = False  # the trace is held constant from each row to the next (zero-order hold)
+    u0_rise: float = 0.0  # the steps of u0 are shaped over this many seconds (core/shaping.py)
 
     @property
     def m(self) -> int:
@@ -985,7 +986,17 @@ def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) 
     hold = _key(ctx, LEADER, L, "leader", "u0_hold", sizes)
     if hold and trace is None:
         raise ctx.err("leader.u0_hold", "applies to u0_csv only", "u0_csv, or no u0_hold")
-    return Leader(A0=A0, B0=B0, C0=C0, eta0=eta0, u0=u0, u0_trace=trace, alpha=alpha, u0_hold=hold)
+    return Leader(
+        A0=A0,
+        B0=B0,
+        C0=C0,
+        eta0=eta0,
+        u0=u0,
+        u0_trace=trace,
+        alpha=alpha,
+        u0_hold=hold,
+        u0_rise=rise,
+    )
 
 
 def _u0_expressions(ctx: _Ctx, raw: Any, p: int) -> tuple[Expr, ...]:

@@ -16,9 +16,17 @@ MEDIANS = [
     ("formation_tail_max", "formation error, tail sup (max over followers)"),
     ("observer_tail_max", "observer |ebar_eta_i|, tail sup (max over followers)"),
     ("peak_u_max", "peak |u_i| (max over followers)"),
+    ("peak_u_late", "peak |u_i| after t = 1 s (max over followers)"),
+    (
+        "step_recovery_s",
+        "slowest return of a pinned follower within 0.05 of its slot after an operator step, where the slot is defined [s]",
+    ),
     ("steps", "integrator steps"),
     ("wall_s", "wall time per sample [s]"),
 ]
+
+#: columns whose largest value over the ok samples is reported too (a promise for every sample)
+WORST = ("peak_u_late", "step_recovery_s")
 
 
 def status_counts(table: pd.DataFrame) -> dict[str, int]:
@@ -244,13 +252,18 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
     lines = ["| quantity | value |", "|---|---|", f"| samples | {len(table)} |"]
     lines += [f"| {k} | {v} |" for k, v in c.items()]
     for col, label in [(c, lab.replace("|", "\\|")) for c, lab in MEDIANS]:
-        vals = pd.to_numeric(ok[col], errors="coerce").to_numpy(float)
+        vals = _num(ok, col)
         vals = vals[np.isfinite(vals)]
         lines.append(
             f"| median {label} | {np.median(vals):.4g} |"
             if len(vals)
             else f"| median {label} | - |"
         )
+    for col, label in [(c, lab.replace("|", "\\|")) for c, lab in MEDIANS if c in WORST]:
+        vals = _num(ok, col)
+        vals = vals[~np.isnan(vals)]  # inf stays: a follower that never came back
+        if len(vals):
+            lines.append(f"| largest {label} | {np.max(vals):.4g} |")
     lines += tail_split_lines(ok)
     t2 = entry_times(table)
     lines.append(

@@ -52,6 +52,8 @@ BASE_COLUMNS = [
     "observer_tail_max",
     "t2_entry_source",
     "peak_u_max",
+    "peak_u_late",
+    "step_recovery_s",
     "guaranteed_held",
     "guaranteed_failed",
     "consistency_held",
@@ -207,7 +209,29 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[
         **theorem2_entry(v.table, sample.scenario, run.frame, v.config),
         "tail_max_et": tail_max_et(run.frame, v.config.tail_fraction),
         **topology_in_tail(sample.scenario, run.frame, v.config.tail_fraction),
+        "step_recovery_s": step_recovery(sample.scenario, run),
     }
+
+
+def step_recovery(sc: Any, run: Any) -> float:
+    """The longest time a pinned follower takes back to its slot after an operator step.
+
+    Parameters
+    ----------
+    sc : Scenario
+        The sample's scenario (its u0 gives the step times).
+    run : verify.pipeline.Run
+        The sample's run (its gains give the gauge).
+
+    Returns
+    -------
+    float
+        Seconds (:func:`verify.operator_steps.worst_recovery`); NaN without operator steps.
+    """
+    from verify.operator_steps import worst_recovery
+    from verify.table import gauge
+
+    return worst_recovery(sc, run.frame, gauge(sc, run.gains))
 
 
 def _run_written(sample: Sample, paths: StudyPaths) -> Any:
@@ -349,6 +373,7 @@ def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
         "formation_tail_max": max_observed("Formation |p_i"),
         "observer_tail_max": max_observed("T1 |ebar_eta_i| -> 0 (tail sup)"),
         "peak_u_max": max_observed("peak |u_i|", exact=True),
+        "peak_u_late": max_observed("peak |u_i| after t = 1 s", exact=True),
         "guaranteed_held": all(holds[k] for k in g),
         "guaranteed_failed": "; ".join(
             _label(SimpleNamespace(claim=claims[k], agent=agents[k])) for k in failed
