@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 from pathlib import Path
 
@@ -13,9 +14,14 @@ from verify.__main__ import _parser as verify_parser
 ROOT = Path(__file__).resolve().parents[1]
 
 
+#: what a parent make (``make test``) hands its children; a user's shell has none of it
+_PARENT_MAKE = ("MAKELEVEL", "MAKEFLAGS", "MFLAGS", "MAKEOVERRIDES")
+
+
 def _make(*args: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k not in _PARENT_MAKE}
     return subprocess.run(
-        ["make", "-s", *args, "PY=/bin/echo"], cwd=ROOT, capture_output=True, text=True
+        ["make", "-s", *args, "PY=/bin/echo"], cwd=ROOT, capture_output=True, text=True, env=env
     )
 
 

@@ -150,6 +150,7 @@ def test_function_list_is_the_documented_list():
         "max",
         "step",
         "sat",
+        "smoothstep",
         "mod",
     }
 
