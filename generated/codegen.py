@@ -540,11 +540,13 @@ def entry_problem(folder: Path, key: str) -> str | None:
 
 @functools.lru_cache(maxsize=8)
 def preload(libraries: tuple[Path, ...]) -> None:
-    """Load shared libraries by absolute path, globally, once per process.
+    """Load shared libraries by absolute path, locally, once per process.
 
     A library linked against them names them only by soname (no rpath); the dynamic
     loader matches a NEEDED soname against the libraries already loaded, so loading
-    these first lets it load from any checkout or environment.
+    these first lets it load from any checkout or environment. Locally (RTLD_LOCAL):
+    loaded globally, their symbols would take precedence over those of the SUNDIALS
+    that CasADi's own CVODES and IDAS plugins bring, which have the same names.
 
     Parameters
     ----------
@@ -557,7 +559,7 @@ def preload(libraries: tuple[Path, ...]) -> None:
         If one cannot be loaded.
     """
     for lib in libraries:
-        ctypes.CDLL(str(lib), mode=ctypes.RTLD_GLOBAL)
+        ctypes.CDLL(str(lib), mode=ctypes.RTLD_LOCAL)
 
 
 def load_problem(path: Path, libraries: Sequence[Path] = ()) -> str | None:

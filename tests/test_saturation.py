@@ -26,10 +26,11 @@ from verify.reference import Reference, hand_gains
 from verify.report import saturation_statement
 from verify.table import SATURATION_NOTE, bounds_table, failures, mark_saturation
 
-#: sha256 of scenarios/paper.toml's trajectory.csv (native CVODE), recorded 2026-12-01 with the
-#: numbers as runtime parameters (docs/simulation.md; the C compiler no longer folds them: the
-#: run is identical to rounding up to 1 s, then within 5.7e-4 of the constant-folded one)
-PAPER_SHA = "777ac86823ed07e5f831fa191da6df3976817a7be166384e165bfe617c9b763f"
+#: sha256 of scenarios/paper.toml's trajectory.csv (native CVODE) on the CI machine, with the
+#: numbers as runtime parameters (docs/simulation.md). The bytes depend on the machine as well
+#: as on the code (the synthesised gains and libm differ in the last digits between CPUs), so
+#: the pin holds where CI runs.
+PAPER_SHA = "eec0ebfd78433842d471d09293b4dd048ede90419353ad7027553329db2bc695"
 TOL = {"abstol": 1e-8, "reltol": 1e-8, "max_num_steps": 500000}
 U_MAX = 200.0  # N·m: far below the paper run's start-up peaks (about 2e5 to 2e6)
 
