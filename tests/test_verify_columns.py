@@ -168,6 +168,7 @@ def test_summarize_table_by_hand():
         "formation_tail_max": 0.75,
         "observer_tail_max": 1e-3,
         "peak_u_max": 40.0,
+        "peak_u_late": 90.0,
         "guaranteed_held": False,
         "guaranteed_failed": "T2 provable (follower 2); T1 dV1/dt",
         "consistency_held": True,
