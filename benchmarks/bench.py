@@ -1088,10 +1088,13 @@ def _run_cells(
 def _report(records: list[dict[str, Any]], folder: Path) -> None:
     """bench.csv, bench.md and scaling.png in ``folder``; the table on stdout."""
     from core.artifacts import atomic_write_text
+    from core.provenance import provenance, provenance_line, write_provenance
 
     csv_path = write_csv(records, folder / "bench.csv")
     png = plot(records, folder / "scaling.png")
-    atomic_write_text(folder / "bench.md", markdown(records))
+    p = provenance()
+    write_provenance(folder, p)
+    atomic_write_text(folder / "bench.md", f"{provenance_line(p)}\n\n{markdown(records)}")
     print(table(records))
     print(f"wrote {csv_path}, {folder / 'bench.md'} and {png}")
 

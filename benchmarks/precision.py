@@ -192,6 +192,9 @@ def main(argv: list[str] | None = None) -> int:
     path = Path(a.out) / sc.name / "precision.csv"
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, df.to_csv(index=False))
+    from core.provenance import write_provenance
+
+    write_provenance(path.parent)
     print(
         f"{sc.name}: reference = {REFERENCE_METHOD} at rtol {ref_rtol:g}; it differs from "
         f"{CHECK_METHOD} at the same tolerance by {unc:.2g} (relative, max over states and times)"

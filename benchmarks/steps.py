@@ -39,6 +39,7 @@ import pandas as pd
 
 from core.artifacts import OUT_ROOT, atomic_write_text
 from core.errors import CliParser, IntegrationError, UsageError, run_cli
+from core.provenance import write_provenance
 from core.scenario import METHODS
 
 PAPER = Path(__file__).resolve().parent.parent / "scenarios" / "paper.toml"
@@ -354,6 +355,7 @@ def main(argv: list[str]) -> int:
     one = api.simulate(built, sc, dataclasses.replace(api.integrator_settings(sc), chunk=1e9))
     wf = windows_frame(wins)
     atomic_write_text(folder / "steps_windows.csv", wf.to_csv(index=False))
+    write_provenance(folder)
     print(f"step profile: {sc.name} (N = {sc.N}), {len(wins)} windows")
     print(wf.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
     tot = int(wf["steps"].sum())

@@ -77,6 +77,7 @@ from benchmarks.bench import BenchError
 from benchmarks.lone import sample_times
 from core.artifacts import OUT_ROOT, atomic_write_text
 from core.errors import run_cli
+from core.provenance import current_commit, machine
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_STUDY = ROOT / "studies" / "faults.toml"
@@ -476,7 +477,7 @@ def markdown(b: StudyBench, date: str, command: str) -> str:
     lines = [
         "# Study benchmark",
         "",
-        f"`{command}` ({date}, {os.cpu_count()} cores); study `{b.study}`.",
+        f"`{command}` ({date}, commit {current_commit()}, {machine()}); study `{b.study}`.",
         "",
         "| quantity | value |",
         "|---|---|",

@@ -19,7 +19,7 @@ MEDIANS = [
     ("peak_u_late", "peak |u_i| after t = 1 s (max over followers)"),
     (
         "step_recovery_s",
-        "slowest return of a pinned follower within 0.05 of its slot after an operator step, where the slot is defined [s]",
+        "slowest return of a pinned follower within 0.05 of its slot after an operator step, where defined [s]",
     ),
     ("steps", "integrator steps"),
     ("wall_s", "wall time per sample [s]"),
@@ -264,6 +264,7 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
         vals = vals[~np.isnan(vals)]  # inf stays: a follower that never came back
         if len(vals):
             lines.append(f"| largest {label} | {np.max(vals):.4g} |")
+    lines += step_lines(ok)
     lines += tail_split_lines(ok)
     t2 = entry_times(table)
     lines.append(
@@ -280,6 +281,31 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
         f"({n_cons} consistency rows in all) |"
     )
     return lines
+
+
+def step_lines(ok: pd.DataFrame) -> list[str]:
+    """How many (operator step, pinned follower) pairs of the ``ok`` rows came back to
+    their slot in time, and how many were late or undefined (:mod:`verify.operator_steps`);
+    no line when no row has a step.
+
+    Parameters
+    ----------
+    ok : DataFrame
+        The ``ok`` rows.
+    """
+    from verify.operator_steps import RECOVERY_LEVEL, RECOVERY_LIMIT
+
+    pairs = np.nansum(_num(ok, "step_pairs"))
+    if not pairs > 0:
+        return []
+    late = int(np.nansum(_num(ok, "step_pairs_late")))
+    undefined = int(np.nansum(_num(ok, "step_pairs_undefined")))
+    back, within = int(pairs) - late - undefined, f"{RECOVERY_LIMIT:g} s"
+    return [
+        f"| (operator step, pinned follower) pairs back within {RECOVERY_LEVEL:g} of the slot "
+        f"within {within} | {back} of {int(pairs)} ({late} late; {undefined} undefined: still "
+        f"out when the next step or the horizon came within {within}) |"
+    ]
 
 
 def tail_switched(table: pd.DataFrame) -> np.ndarray:
@@ -417,7 +443,8 @@ def write_report(results: Path, retried: int | None = None) -> Path:
     lines = [
         f"# Study {folder.name}",
         "",
-        f"Results of `{command}` ({date}); {len(table)} rows in `{results.name}`.",
+        f"Results of `{command}` ({date}; commit {info.get('commit', '?')}, "
+        f"{info.get('machine', '?')}); {len(table)} rows in `{results.name}`.",
         "",
         _retried_line(info.get("retried", "0") if retried is None else retried),
         "",

@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 
 from core.errors import UsageError
+from core.provenance import current_commit, machine
 from sweep.sampler import Sample, make_sample, write_scenario
 from sweep.study import Study, load_study
 
@@ -54,6 +55,9 @@ BASE_COLUMNS = [
     "peak_u_max",
     "peak_u_late",
     "step_recovery_s",
+    "step_pairs",
+    "step_pairs_late",
+    "step_pairs_undefined",
     "guaranteed_held",
     "guaranteed_failed",
     "consistency_held",
@@ -209,12 +213,12 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[
         **theorem2_entry(v.table, sample.scenario, run.frame, v.config),
         "tail_max_et": tail_max_et(run.frame, v.config.tail_fraction),
         **topology_in_tail(sample.scenario, run.frame, v.config.tail_fraction),
-        "step_recovery_s": step_recovery(sample.scenario, run),
+        **step_recovery(sample.scenario, run),
     }
 
 
-def step_recovery(sc: Any, run: Any) -> float:
-    """The longest time a pinned follower takes back to its slot after an operator step.
+def step_recovery(sc: Any, run: Any) -> dict[str, Any]:
+    """How the pinned followers came back to their slots after each operator step.
 
     Parameters
     ----------
@@ -225,13 +229,14 @@ def step_recovery(sc: Any, run: Any) -> float:
 
     Returns
     -------
-    float
-        Seconds (:func:`verify.operator_steps.worst_recovery`); NaN without operator steps.
+    dict
+        ``step_recovery_s`` (seconds; NaN without operator steps) and the counts of
+        (step, pinned follower) pairs (:func:`verify.operator_steps.recovery_summary`).
     """
-    from verify.operator_steps import worst_recovery
+    from verify.operator_steps import recoveries, recovery_summary
     from verify.table import gauge
 
-    return worst_recovery(sc, run.frame, gauge(sc, run.gains))
+    return recovery_summary(recoveries(sc, run.frame, gauge(sc, run.gains)))
 
 
 def _run_written(sample: Sample, paths: StudyPaths) -> Any:
@@ -705,6 +710,8 @@ def run_study(
         "command": command or " ".join(["python -m sweep", *sys.argv[1:]]),
         "study": str(Path(study_path)),
         "retried": str(retried),
+        "commit": current_commit(),
+        "machine": machine(),
     }
     if todo or not paths.results.is_file():
         opts = RunOptions(scheduler, workers, batch, keep, chunk)
