@@ -5,6 +5,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from core.hold import jumps
 from core.scenario import Leader
 
 
@@ -37,6 +38,9 @@ def operator_input(leader: Leader, t: ca.SX, lits: ca.SX | None = None) -> ca.SX
             k += nl
         return ca.vertcat(*out)
     tr = np.asarray(leader.u0_trace)
+    if leader.u0_hold and leader.u0_rise > 0:  # each jump a smoothstep ramp (core/hold.py)
+        r = leader.u0_rise
+        return ca.vertcat(*[_shaped(t, tr[:, 0], tr[:, k], r) for k in range(1, tr.shape[1])])
     if leader.u0_hold:  # zero-order hold, right-continuous; every row is a breakpoint
         return ca.vertcat(*[_held(t, tr[:, 0], tr[:, 1 + k]) for k in range(tr.shape[1] - 1)])
     tc = ca.fmin(ca.fmax(t, float(tr[0, 0])), float(tr[-1, 0]))
@@ -47,6 +51,16 @@ def operator_input(leader: Leader, t: ca.SX, lits: ca.SX | None = None) -> ca.SX
             for k in range(tr.shape[1] - 1)
         ]
     )
+
+
+def _shaped(t: ca.SX, ts: np.ndarray, vs: np.ndarray, rise: float) -> ca.SX:
+    """A held column whose jumps are smoothstep ramps over ``rise`` s: v_0 + Σ_j Δ_j S((t − t_j)/r)."""
+    tj, dj = jumps(ts, vs)
+    out = ca.SX(float(vs[0]))
+    for c, d in zip(tj, dj, strict=True):
+        x = ca.fmin(ca.fmax((t - float(c)) / rise, 0.0), 1.0)
+        out = out + float(d) * (x * x * (3.0 - 2.0 * x))
+    return out
 
 
 def _held(t: ca.SX, ts: np.ndarray, vs: np.ndarray) -> ca.SX:

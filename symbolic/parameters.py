@@ -298,6 +298,8 @@ def structure(sc: Scenario, gains: Gains) -> dict[str, Any]:
             "u0": None if L.u0 is None else [e.template() for e in L.u0],
             "u0_trace": trace,
             "u0_hold": L.u0_hold,  # a held trace is other code than an interpolated one
+            # a held trace's shaped jumps are written into the code (core/hold.py)
+            **({"u0_rise": L.u0_rise} if L.u0_hold and L.u0_rise > 0 else {}),
         },
         "graph": {
             "pattern": [m.astype(int).tolist() for m in graph_pattern(sc)],
