@@ -39,6 +39,7 @@ FUNCTIONS: dict[str, tuple[int, ...]] = {
     "step": (1,),  # Heaviside: 1 for x >= 0, else 0
     "sat": (1,),  # clip to [-1, 1]
     "smoothstep": (1,),  # C¹ step: 0 for x <= 0, 3x² - 2x³ on (0, 1), 1 for x >= 1
+    "prefilter": (1,),  # C¹ step: 0 for x <= 0, 1 - (1 + x)exp(-x) for x > 0
     "mod": (2,),  # floating remainder with the sign of x (C fmod)
 }
 CONSTANTS = {"pi": math.pi}
@@ -317,6 +318,15 @@ def _hermite(s: Any) -> Any:
     return s * s * (3.0 - 2.0 * s)
 
 
+def _critical(s: Any, exp: Callable[[Any], Any]) -> Any:
+    """1 − (1 + s)e^(−s) for s ≥ 0: the unit step response of 1/(1 + D)² (D = d/ds).
+
+    A critically damped second-order prefilter with time constant 1; zero value and
+    slope at s = 0, slope s e^(−s) ≤ 1/e, approaching 1 without overshoot.
+    """
+    return 1.0 - (1.0 + s) * exp(-s)
+
+
 class _Backend:
     def __init__(self, **ops: Any) -> None:
         self.__dict__.update(ops)
@@ -337,6 +347,7 @@ _CASADI = _Backend(
     step=lambda x: ca.if_else(x >= 0, 1.0, 0.0),
     sat=lambda x: ca.fmin(ca.fmax(x, -1.0), 1.0),
     smoothstep=lambda x: _hermite(ca.fmin(ca.fmax(x, 0.0), 1.0)),
+    prefilter=lambda x: _critical(ca.fmax(x, 0.0), ca.exp),
     mod=ca.fmod,
 )
 _NUMPY = _Backend(
@@ -354,6 +365,7 @@ _NUMPY = _Backend(
     step=lambda x: np.where(np.asarray(x) >= 0, 1.0, 0.0),
     sat=lambda x: np.clip(x, -1.0, 1.0),
     smoothstep=lambda x: _hermite(np.clip(x, 0.0, 1.0)),
+    prefilter=lambda x: _critical(np.maximum(x, 0.0), np.exp),
     mod=np.fmod,
 )
 
@@ -470,7 +482,7 @@ def _collect_breaks(node: tuple, out: list[float]) -> None:
     name, args = node[1], node[2]
     for a in args:
         _collect_breaks(a, out)
-    if name in ("step", "abs"):  # jump / kink where the argument is 0
+    if name in ("step", "abs", "prefilter"):  # jump / kink / curvature jump where it is 0
         cand = [args[0]]
     elif name == "smoothstep":  # curvature jumps where the argument is 0 and 1
         cand = [args[0], ("bin", "-", args[0], ("num", 1.0))]

@@ -74,7 +74,7 @@ from core.settings import (
     settings_of,
     zeros,
 )
-from core.shaping import shaped_steps
+from core.shaping import DEFAULT_SHAPE, SHAPES, default_rise, shaped_steps
 
 SIGN_MODES = ("exact", "sat", "tanh")
 GHAT_LAWS = ("paper", "sigma", "projection", "sigma+projection")
@@ -157,6 +157,7 @@ class Leader:
     alpha: float  # ‖u0‖ ≤ α
     u0_hold: bool = False  # the trace is held constant from each row to the next (zero-order hold)
     u0_rise: float = 0.0  # the steps of u0 are shaped over this many seconds (core/shaping.py)
+    u0_shape: str = DEFAULT_SHAPE  # how (core/shaping.py: smoothstep, prefilter or ramp)
 
     @property
     def m(self) -> int:
@@ -564,7 +565,10 @@ LEADER: dict[str, Setting] = {
     "u0": declare(EITHER, "expressions", dims=("p", "")),
     "u0_csv": declare(EITHER, "string"),
     "u0_hold": declare(False, "boolean"),
-    "u0_rise": declare(0.0, "number", NONNEG),
+    "u0_rise": declare(
+        Derived("1 s if u0 has a step, else 0 (`core.shaping.DEFAULT_RISE`)"), "number", NONNEG
+    ),
+    "u0_shape": Setting(DEFAULT_SHAPE, "choice", options=SHAPES),
     "alpha": declare(REQUIRED, "number", POSITIVE),
 }
 #: ``[graph]``; adjacency sets N
@@ -964,12 +968,15 @@ def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) 
             "u0 = [expressions of t] or u0_csv = 'file.csv'",
         )
     p = sizes["p"]
-    rise = _key(ctx, LEADER, L, "leader", "u0_rise", sizes)
-    if rise > 0 and "u0" not in L:
-        raise ctx.err("leader.u0_rise", "applies to u0 expressions only", "u0, or no u0_rise")
+    rise = _key(ctx, LEADER, L, "leader", "u0_rise", sizes) if "u0_rise" in L else None
+    shape = _key(ctx, LEADER, L, "leader", "u0_shape", sizes)
+    for key, given in (("u0_rise", bool(rise)), ("u0_shape", "u0_shape" in L)):
+        if given and "u0" not in L:
+            raise ctx.err(f"leader.{key}", "applies to u0 expressions only", f"u0, or no {key}")
     if "u0" in L:
         u0, trace = _u0_expressions(ctx, L["u0"], p), None
-        u0 = tuple(shaped_steps(e, rise) for e in u0) if rise > 0 else u0
+        rise = default_rise(u0) if rise is None else rise
+        u0 = tuple(shaped_steps(e, rise, shape) for e in u0) if rise > 0 else u0
         u_peak = _u0_peak(ctx, u0, tgrid)
         where_u = "leader.u0"
     else:
@@ -995,7 +1002,8 @@ def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) 
         u0_trace=trace,
         alpha=alpha,
         u0_hold=hold,
-        u0_rise=rise,
+        u0_rise=rise or 0.0,
+        u0_shape=shape,
     )
 
 

@@ -1,50 +1,148 @@
-"""Shaping the operator's command before it reaches the leader (``leader.u0_rise``).
+"""Shaping the operator's command before it reaches the leader (``leader.u0_rise``, ``u0_shape``).
 
 A human's command is piecewise: a key pressed, a stick pushed and released, written
 ``step(t - t_k)`` in a scenario. The followers' oracle feed-forward (η̈_i, and b̈_i
 through η⃛_i) differentiates the leader's input twice along the observer flow, so a
 jump in u0 reaches their torques as an impulse scaled by λ2/φ_i (docs/verification.md,
 'Operator steps'). A ground station smooths the stick before it drives the vehicle;
-here every ``step(x)`` of u0 becomes ``smoothstep(x / rise)``: the same change,
-made continuously differentiable over ``rise`` seconds (for x = t − t_k). The shaped
-command is a convex blend of the values it moves between, so ‖u0‖ ≤ α still holds
-where it held for the steps (the loader checks it again on the shaped command).
+here every ``step(x)`` of u0 becomes one of (x = t − t_k, T = ``u0_rise``):
+
+- ``smoothstep``: ``smoothstep(x / T)``, 3s² − 2s³ over T seconds (C¹, slope ≤ 1.5/T);
+- ``prefilter``: ``prefilter(x / T)``, 1 − (1 + s)e^(−s): the step through a critically
+  damped second-order prefilter 1/(1 + T D)² with time constant T (C¹, slope ≤ 1/(eT));
+- ``ramp``: a rate limit, ``(sat(2x/T − 1) + 1)/2``, linear over T seconds (C⁰ only).
+
+Every shaped step is a convex blend of the values it moves between, so ‖u0‖ ≤ α still
+holds where it held for the steps (the loader checks it again on the shaped command).
+
+A u0 with a step and no ``u0_rise`` is shaped by :data:`DEFAULT_SHAPE` over
+:data:`DEFAULT_RISE` seconds (:func:`default_rise`); a u0 without steps (the paper's
+2 cos t) is left as written, and ``u0_rise = 0`` keeps the raw steps.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 from core.expressions import Expr
 from core.faults import node_text
 
+#: the shapes a step of u0 can be given (``leader.u0_shape``)
+SHAPES = ("smoothstep", "prefilter", "ramp")
+#: the shape of a stepped u0 that names none
+DEFAULT_SHAPE = "smoothstep"
+#: seconds over which a stepped u0 without ``leader.u0_rise`` is shaped (docs/verification.md,
+#: 'Operator steps': the choice and the measurements behind it)
+DEFAULT_RISE = 1.0
+#: the atoms a shaped step is made of; each starts where its earliest kink is
+_STEP_ATOMS = ("step", "smoothstep", "prefilter", "sat")
 
-def shaped_steps(e: Expr, rise: float) -> Expr:
-    """``e`` with every ``step(x)`` replaced by ``smoothstep(x / rise)``.
+
+def has_steps(u0: Iterable[Expr]) -> bool:
+    """Whether any component of u0 holds a ``step`` atom.
+
+    Parameters
+    ----------
+    u0 : iterable of Expr
+        The leader's command, one expression per input.
+    """
+    return any(_mentions(e.node, "step") for e in u0)
+
+
+def default_rise(u0: Iterable[Expr]) -> float:
+    """The ``leader.u0_rise`` of a u0 that gives none: :data:`DEFAULT_RISE` if it steps, else 0.
+
+    Parameters
+    ----------
+    u0 : iterable of Expr
+        The leader's command as written.
+    """
+    return DEFAULT_RISE if has_steps(u0) else 0.0
+
+
+def shaped_steps(e: Expr, rise: float, shape: str = DEFAULT_SHAPE) -> Expr:
+    """``e`` with every ``step(x)`` replaced by its shaped form (module docstring).
 
     Parameters
     ----------
     e : Expr
         An expression of t (one component of u0).
     rise : float
-        Rise time in seconds, > 0 (for a step whose argument has slope 1 in t).
+        Rise time (time constant for ``prefilter``) in seconds, > 0, for a step whose
+        argument has slope 1 in t.
+    shape : str
+        One of :data:`SHAPES`.
 
     Returns
     -------
     Expr
         ``e`` itself when it holds no ``step``, else the shaped expression.
     """
-    node = _shape(e.node, float(rise))
+    if shape not in SHAPES:
+        raise ValueError(f"shape {shape!r} is not one of {SHAPES}")
+    node = _shape(e.node, float(rise), shape)
     return e if node == e.node else Expr(node_text(node), node)
 
 
-def _shape(node: tuple, rise: float) -> tuple:
+def step_onsets(u0: Iterable[Expr]) -> list[float]:
+    """The times t > 0 at which a step of u0 starts, raw or shaped, sorted and distinct.
+
+    Each ``step``, ``smoothstep``, ``prefilter`` or ``sat`` atom (a shaped step is one of
+    them) starts at its earliest kink whose time is affine in t (:meth:`Expr.breakpoints`
+    of the atom alone); atoms without such a kink contribute nothing.
+
+    Parameters
+    ----------
+    u0 : iterable of Expr
+        The leader's command (as the loader left it: shaped or not).
+    """
+    out: set[float] = set()
+    for e in u0:
+        for atom in _atoms(e.node):
+            kinks = Expr(node_text(atom), atom).breakpoints()
+            if kinks:
+                out.add(round(min(kinks), 12))
+    return sorted(out)
+
+
+def _atoms(node: tuple) -> list[tuple]:
+    """The outermost step-like atoms of ``node`` (a shaped step's inner sat is its own)."""
+    kind = node[0]
+    if kind in ("num", "t"):
+        return []
+    if kind == "neg":
+        return _atoms(node[1])
+    if kind == "bin":
+        return _atoms(node[2]) + _atoms(node[3])
+    if node[1] in _STEP_ATOMS:
+        return [node]
+    return [a for arg in node[2] for a in _atoms(arg)]
+
+
+def _mentions(node: tuple, name: str) -> bool:
+    kind = node[0]
+    if kind in ("num", "t"):
+        return False
+    if kind == "neg":
+        return _mentions(node[1], name)
+    if kind == "bin":
+        return _mentions(node[2], name) or _mentions(node[3], name)
+    return node[1] == name or any(_mentions(a, name) for a in node[2])
+
+
+def _shape(node: tuple, rise: float, shape: str) -> tuple:
     kind = node[0]
     if kind in ("num", "t"):
         return node
     if kind == "neg":
-        return ("neg", _shape(node[1], rise))
+        return ("neg", _shape(node[1], rise, shape))
     if kind == "bin":
-        return ("bin", node[1], _shape(node[2], rise), _shape(node[3], rise))
-    args = tuple(_shape(a, rise) for a in node[2])
-    if node[1] == "step":
-        return ("call", "smoothstep", (("bin", "/", args[0], ("num", rise)),))
-    return ("call", node[1], args)
+        return ("bin", node[1], _shape(node[2], rise, shape), _shape(node[3], rise, shape))
+    args = tuple(_shape(a, rise, shape) for a in node[2])
+    if node[1] != "step":
+        return ("call", node[1], args)
+    x = ("bin", "/", args[0], ("num", rise))
+    if shape == "ramp":  # (sat(2x/T − 1) + 1)/2: 0 before, x/T on [0, T], 1 after
+        inner = ("bin", "-", ("bin", "*", ("num", 2.0), x), ("num", 1.0))
+        return ("bin", "*", ("num", 0.5), ("bin", "+", ("call", "sat", (inner,)), ("num", 1.0)))
+    return ("call", shape, (x,))

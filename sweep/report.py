@@ -21,12 +21,16 @@ MEDIANS = [
         "step_recovery_s",
         "slowest return of a pinned follower within 0.05 of its slot after an operator step, where defined [s]",
     ),
+    (
+        "step_deviation_max",
+        "largest distance of a pinned follower from its slot after an operator step",
+    ),
     ("steps", "integrator steps"),
     ("wall_s", "wall time per sample [s]"),
 ]
 
 #: columns whose largest value over the ok samples is reported too (a promise for every sample)
-WORST = ("peak_u_late", "step_recovery_s")
+WORST = ("peak_u_late", "step_recovery_s", "step_deviation_max")
 
 
 def status_counts(table: pd.DataFrame) -> dict[str, int]:

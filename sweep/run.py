@@ -58,6 +58,7 @@ BASE_COLUMNS = [
     "step_pairs",
     "step_pairs_late",
     "step_pairs_undefined",
+    "step_deviation_max",
     "guaranteed_held",
     "guaranteed_failed",
     "consistency_held",

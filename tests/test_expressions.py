@@ -151,6 +151,7 @@ def test_function_list_is_the_documented_list():
         "step",
         "sat",
         "smoothstep",
+        "prefilter",
         "mod",
     }
 

@@ -102,6 +102,8 @@ def test_operator_step_on_the_paper_goes_to_sundials_log_and_meta(tmp_path: Path
         "--set",
         'leader.u0=["1.0*step(t-5) - 1.0*step(t-10)"]',
         "--set",
+        "leader.u0_rise=0",  # the raw step (a stepped u0 is shaped by default)
+        "--set",
         "integration.horizon=5.5",
     ]
     p = subprocess.run(argv, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)

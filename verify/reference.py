@@ -82,6 +82,9 @@ def _dual(node: tuple, t: float) -> tuple[float, float]:
     if name == "smoothstep":  # 3s² − 2s³ on [0, 1], flat outside
         s = min(max(a, 0.0), 1.0)
         return s * s * (3 - 2 * s), 6 * s * (1 - s) * da
+    if name == "prefilter":  # 1 − (1 + s)e^(−s) for s ≥ 0, flat before
+        s = max(a, 0.0)
+        return 1 - (1 + s) * math.exp(-s), s * math.exp(-s) * da
     (b, db) = args[1]
     if name == "atan2":
         r2 = a * a + b * b
