@@ -157,8 +157,21 @@ def _one_model(sc: Scenario) -> int:
     return groups[0][0]
 
 
-def _block(sc: Scenario, og: ObserverGains, lay: StateLayout) -> ca.Function:
-    """Follower i's block ``(t, xb, nb, cpl, prm, gf) -> (xbdot, jets)`` (module docstring)."""
+def agent_block(
+    sc: Scenario, og: ObserverGains, lay: StateLayout, model_index: int | None = None
+) -> ca.Function:
+    """Follower i's block ``(t, xb, nb, cpl, prm, gf) -> (xbdot, jets)`` (module docstring).
+
+    Parameters
+    ----------
+    sc : Scenario
+    og : ObserverGains
+    lay : StateLayout
+    model_index : int, optional
+        0-based follower whose model and parameters the block uses (the per-agent
+        kernels of :mod:`generated.agents`, one per model); default: the one model of
+        all followers (refused if they differ).
+    """
     m, n = sc.m, sc.n
     filtered = sc.options.derivatives == "filtered"
     C0 = ca.DM(np.atleast_2d(sc.leader.C0))
@@ -186,7 +199,7 @@ def _block(sc: Scenario, og: ObserverGains, lay: StateLayout) -> ca.Function:
         dpsi = lii * ca.mtimes(C0, sod[m : 2 * m]) + nb[n : 2 * n] - a0h * y0dot
         sodd = D1(so, psi, Pobs, sod, dpsi)
         ddpsi = lii * ca.mtimes(C0, sodd[m : 2 * m]) + nb[2 * n :] - a0h * y0ddot
-    agent = agent_function(sc, og, _one_model(sc))
+    agent = agent_function(sc, og, _one_model(sc) if model_index is None else model_index)
     res = dict(
         zip(agent.name_out(), agent(s, psi, dpsi, ddpsi, gf, ca.SX.zeros(n), prm), strict=True)
     )
@@ -244,7 +257,7 @@ def build_cascade(scenario: Scenario, gains: Gains) -> Cascade:
     order = topological_order(sc.graph.adjacency, sc.path)
     lay = make_layout(sc.m, n, N, sc.options.derivatives == "filtered")
     gm = graph_matrices(sc.graph, gains)  # h and L + B = H L̄ H from the gains
-    block = _block(sc, observer_gains(sc, gains), lay)
+    block = agent_block(sc, observer_gains(sc, gains), lay)
     faults, fidx = fault_function(sc)
     ptr, idx, wts = _upstream(gm.L_B)
     return Cascade(

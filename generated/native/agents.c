@@ -1,0 +1,782 @@
+/*
+ * The per-agent native driver (generated/agents.py): one CVODE run whose right-hand side
+ * and Newton systems are evaluated agent by agent from per-model kernels, with the graph,
+ * N, the pinning, the gauge signs and every switching time as runtime data.
+ *
+ * Appended (after common.c) to the C that CasADi generates for ONE follower model:
+ *   ag_jet0, ag_jet1, ag_jet2 (t, xb, nb, cpl, prm, gf) -> C0 eta_i, C0 eta_i', C0 eta_i''
+ *   ag_rhs (t, xb, nb, cpl, prm, gf) -> (xbdot, jets)
+ *   ag_jac (t, xb, nb, cpl, prm, gf) -> (jets, K),  K = d(xbdot, jets)/d(xb, nb) dense
+ *   ag_faults (t) -> values
+ * with xb = (eta0, s_i), nb = sum_j (L+B)_ij jets_j (3n) and cpl = (l_ii, a_i0 h_i).
+ * The driver never calls these by name: it receives one table of function pointers per
+ * follower model (hitl_agent_kernels), so followers of different models, each from its
+ * own library, run in one CVODE run.
+ *
+ * Right-hand side: passes over all agents, one per jet level. The level-l jet of agent i
+ * depends only on its own state and the levels < l of its neighbour sum (eta_i' on psi_i,
+ * eta_i'' on psi_i'), so pass l evaluates level l for every agent from the sums of pass
+ * l - 1, whatever the graph: a cycle is no special case. The last pass evaluates the
+ * agents' rates from the complete sums.
+ *
+ * Newton systems (I + c J) x = b (c = -gamma): with the leader solved first, agent i's
+ * rows are D_i x_i = b_i - c (A_s0 x_0 + B_s dnb_i), D_i = I + c A_ss, and its
+ * directional jets dj_i = C_0 x_0 + C_s x_i + E dnb_i, dnb_i = sum_j w_ij dj_j.
+ * Eliminating x_i: dj_i = r_i + G_i dnb_i with G_i = E - c C_s D_i^{-1} B_s and
+ * r_i = C_0 x_0 + C_s D_i^{-1} (b_i - c A_s0 x_0). The jets system
+ *   dj_i - G_i sum_j w_ij dj_j = r_i         (3n unknowns per agent)
+ * is solved by
+ *   HITL_AG_FORWARD  block forward substitution along a topological order (exact on an
+ *                    acyclic topology, one sweep),
+ *   HITL_AG_DENSE    a dense LU with partial pivoting of the whole jets system (exact on
+ *                    any graph; (3nN)^2 memory, for small N),
+ *   HITL_AG_GMRES    restarted GMRES on the jets system, right-preconditioned by the
+ *                    forward substitution along the order with the back edges dropped
+ *                    (exact, one iteration, on an acyclic topology),
+ * then x_i = D_i^{-1} (b_i - c A_s0 x_0) - c D_i^{-1} B_s dnb_i.
+ * HITL_AG_AUTO takes FORWARD on an acyclic topology and GMRES otherwise.
+ *
+ * Threads (OpenMP, when compiled with -fopenmp): the passes, the Jacobian blocks and the
+ * block factorisations are split over the agents.
+ */
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+enum { HITL_AG_AUTO = 0, HITL_AG_FORWARD = 1, HITL_AG_DENSE = 2, HITL_AG_GMRES = 3 };
+
+typedef int (*hitl_fn)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int);
+typedef int (*hitl_work_fn)(casadi_int *, casadi_int *, casadi_int *, casadi_int *);
+
+/* One follower model's kernels: pointers into its library (generated/agents.py) */
+typedef struct {
+  hitl_fn jet[3], rhs, jac;
+  hitl_work_fn jet_work[3], rhs_work, jac_work;
+} hitl_agent_kernels;
+
+/* The problem: sizes, kernels, per-agent data and the graph's topologies as CSR */
+typedef struct {
+  int N, m, na, n, npar;
+  int nmodels;
+  const hitl_agent_kernels *kern; /* nmodels */
+  const int *model;               /* N: kernel table of each follower */
+  hitl_fn faults;
+  hitl_work_fn faults_work;
+  int nfaults;
+  const int *fidx;      /* N x (1 + n) indices into the fault values */
+  const double *prm;    /* N x npar, agent-major */
+  int ntop;             /* topologies */
+  const double *t_switch; /* ntop - 1 start times of topologies 1.. */
+  const int *ptr;       /* ntop x (N + 1): CSR row pointers into idx/w (absolute) */
+  const int *idx;       /* followers each one hears */
+  const double *w;      /* weights (L + B)_ij */
+  const double *cpl;    /* ntop x N x 2: (l_ii, a_i0 h_i) */
+  const int *order;     /* ntop x N: topological order (cycles broken) */
+  const int *acyclic;   /* ntop flags */
+  int solver;           /* HITL_AG_* */
+  int nthreads;         /* <= 0: OpenMP's default */
+  int krylov;           /* GMRES restart length */
+  double ls_tol;        /* GMRES: relative residual reached */
+  int max_iter;         /* GMRES: iterations per solve before the setup fails */
+} hitl_agents_problem;
+
+/* The Jacobian: N blocks K_i (k x k, column-major) of the topology it was evaluated on,
+   representing c J (+ I once shifted) */
+typedef struct {
+  long len;
+  double *K;
+  double c;
+  int shifted, top;
+} hitl_agmat;
+
+#define HITL_AGMAT(A) ((hitl_agmat *)(A)->content)
+
+static SUNMatrix_ID hitl_agmat_id(SUNMatrix A) {
+  (void)A;
+  return SUNMATRIX_CUSTOM;
+}
+
+static SUNMatrix hitl_agmat_new(long len, SUNContext ctx);
+
+static SUNMatrix hitl_agmat_clone(SUNMatrix A) {
+  return hitl_agmat_new(HITL_AGMAT(A)->len, A->sunctx);
+}
+
+static void hitl_agmat_destroy(SUNMatrix A) {
+  if (!A) return;
+  if (A->content) {
+    free(HITL_AGMAT(A)->K);
+    free(A->content);
+    A->content = NULL;
+  }
+  SUNMatFreeEmpty(A);
+}
+
+static SUNErrCode hitl_agmat_zero(SUNMatrix A) {
+  hitl_agmat *m = HITL_AGMAT(A);
+  memset(m->K, 0, sizeof(double) * (size_t)m->len);
+  m->c = 1.0;
+  m->shifted = 0;
+  return SUN_SUCCESS;
+}
+
+static SUNErrCode hitl_agmat_copy(SUNMatrix A, SUNMatrix B) {
+  hitl_agmat *a = HITL_AGMAT(A), *b = HITL_AGMAT(B);
+  memcpy(b->K, a->K, sizeof(double) * (size_t)a->len);
+  b->c = a->c;
+  b->shifted = a->shifted;
+  b->top = a->top;
+  return SUN_SUCCESS;
+}
+
+static SUNErrCode hitl_agmat_scaleaddi(sunrealtype c, SUNMatrix A) {
+  hitl_agmat *m = HITL_AGMAT(A);
+  if (m->shifted) return SUN_ERR_NOT_IMPLEMENTED;
+  m->c *= c;
+  m->shifted = 1;
+  return SUN_SUCCESS;
+}
+
+static SUNMatrix hitl_agmat_new(long len, SUNContext ctx) {
+  SUNMatrix A = SUNMatNewEmpty(ctx);
+  hitl_agmat *m;
+  if (!A) return NULL;
+  m = (hitl_agmat *)calloc(1, sizeof *m);
+  if (m) m->K = (double *)calloc((size_t)len + 1, sizeof(double));
+  if (!m || !m->K) {
+    free(m);
+    SUNMatFreeEmpty(A);
+    return NULL;
+  }
+  m->len = len;
+  m->c = 1.0;
+  A->content = m;
+  A->ops->getid = hitl_agmat_id;
+  A->ops->clone = hitl_agmat_clone;
+  A->ops->destroy = hitl_agmat_destroy;
+  A->ops->zero = hitl_agmat_zero;
+  A->ops->copy = hitl_agmat_copy;
+  A->ops->scaleaddi = hitl_agmat_scaleaddi;
+  return A;
+}
+
+/* one thread's work arrays for the kernels and its agent's inputs */
+typedef struct {
+  const casadi_real **arg;
+  casadi_real **res;
+  casadi_int *iw;
+  casadi_real *w;
+  double *xb, *xbdot, *gf, *jscr, *col;
+} hitl_agwork;
+
+typedef struct {
+  hitl_ctx base; /* first member: CVODE's messages and counters */
+  const hitl_agents_problem *p;
+  int N, m, na, n, n3, k, npar, nthreads;
+  double *fvals, *jets, *nb; /* jets, nb: N x n3 */
+  hitl_agwork *wk;           /* nthreads */
+  /* linear solver */
+  double *lu;    /* (N + 1) x na x na: D_i's LU (block N: the leader's) */
+  int *piv;      /* (N + 1) x na */
+  double *F;     /* N x na x n3: D_i^{-1} B_s (column-major) */
+  double *G;     /* N x n3 x n3 (column-major) */
+  double *y;     /* N x na */
+  double *dj, *dnb, *rj; /* N x n3 */
+  double *S;     /* dense jets system (n3 N)^2, HITL_AG_DENSE */
+  int *Spiv;
+  int S_ok, ls_top, ls_mode;
+  double *V, *H, *cs, *sn, *g, *z; /* GMRES */
+  long n_krylov;
+} hitl_ag;
+
+static int hitl_ag_threads(const hitl_ag *d) { return d->nthreads; }
+
+static int hitl_ag_topology(const hitl_agents_problem *p, double t) {
+  int top = 0;
+  while (top < p->ntop - 1 && t >= p->t_switch[top]) top++;
+  return top;
+}
+
+/* nb_i (levels lo..hi-1, n each) from the agents' jets J (N x n3) on topology top */
+static void hitl_ag_gather(const hitl_ag *d, int top, int i, const double *J, double *nb,
+                           int lo, int hi) {
+  const hitl_agents_problem *p = d->p;
+  const int *ptr = p->ptr + (size_t)top * (d->N + 1);
+  int n = d->n;
+  for (int r = lo * n; r < hi * n; ++r) nb[r] = 0.0;
+  for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
+    const double *jj = J + (size_t)p->idx[q] * d->n3;
+    double w = p->w[q];
+    for (int r = lo * n; r < hi * n; ++r) nb[r] += w * jj[r];
+  }
+}
+
+/* agent i's kernel inputs in work wk: xb = (eta0, s_i), gf from the fault values */
+static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int top, int i, const double *y,
+                           double *tt) {
+  const hitl_agents_problem *p = d->p;
+  const int *fi = p->fidx + (size_t)(1 + d->n) * i;
+  memcpy(wk->xb, y, sizeof(double) * (size_t)d->m);
+  memcpy(wk->xb + d->m, y + d->m + (size_t)d->na * i, sizeof(double) * (size_t)d->na);
+  for (int r = 0; r <= d->n; ++r) wk->gf[r] = d->fvals[fi[r]];
+  wk->arg[0] = tt;
+  wk->arg[1] = wk->xb;
+  wk->arg[2] = d->nb + (size_t)d->n3 * i;
+  wk->arg[3] = p->cpl + ((size_t)top * d->N + i) * 2;
+  wk->arg[4] = p->prm + (size_t)d->npar * i;
+  wk->arg[5] = wk->gf;
+}
+
+/* The passes at (t, y): jets and neighbour sums of every level, then ydot (if not NULL)
+   and/or the Jacobian blocks K (if not NULL, N x k x k). Returns 0 or -1. */
+static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, double *K,
+                        int *top_out) {
+  const hitl_agents_problem *p = d->p;
+  hitl_ctx *c = &d->base;
+  casadi_real tt = t;
+  int N = d->N, n3 = d->n3, fail = 0;
+  int top = hitl_ag_topology(p, t);
+  if (top_out) *top_out = top;
+  c->arg[0] = &tt;
+  c->res[0] = d->fvals;
+  if (p->faults(c->arg, c->res, c->iw, c->w, 0)) return -1;
+  memset(d->nb, 0, sizeof(double) * (size_t)N * n3);
+  for (int lev = 0; lev < 3; ++lev) {
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
+    for (int i = 0; i < N; ++i) {
+#ifdef _OPENMP
+      hitl_agwork *wk = d->wk + omp_get_thread_num();
+#else
+      hitl_agwork *wk = d->wk;
+#endif
+      casadi_real ti = t;
+      const hitl_agent_kernels *kn = p->kern + p->model[i];
+      hitl_ag_inputs(d, wk, top, i, y, &ti);
+      wk->res[0] = d->jets + (size_t)n3 * i + (size_t)lev * d->n;
+      if (kn->jet[lev](wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
+    }
+    if (fail) return -1;
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
+    for (int i = 0; i < N; ++i)
+      hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)n3 * i, lev, lev + 1);
+  }
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
+  for (int i = 0; i < N; ++i) {
+#ifdef _OPENMP
+    hitl_agwork *wk = d->wk + omp_get_thread_num();
+#else
+    hitl_agwork *wk = d->wk;
+#endif
+    casadi_real ti = t;
+    const hitl_agent_kernels *kn = p->kern + p->model[i];
+    hitl_ag_inputs(d, wk, top, i, y, &ti);
+    if (ydot) {
+      wk->res[0] = wk->xbdot;
+      wk->res[1] = wk->jscr;
+      if (kn->rhs(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
+      if (i == 0) memcpy(ydot, wk->xbdot, sizeof(double) * (size_t)d->m);
+      memcpy(ydot + d->m + (size_t)d->na * i, wk->xbdot + d->m, sizeof(double) * (size_t)d->na);
+    }
+    if (K) {
+      wk->res[0] = wk->jscr;
+      wk->res[1] = K + (size_t)d->k * d->k * i;
+      if (kn->jac(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
+    }
+  }
+  return fail ? -1 : 0;
+}
+
+static int hitl_ag_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data) {
+  hitl_ag *d = (hitl_ag *)data;
+  casadi_real *out = N_VGetArrayPointer(ydot);
+  d->base.n_rhs++;
+  if (hitl_ag_pass(d, t, N_VGetArrayPointer(y), out, NULL, NULL)) return -1;
+  for (int i = 0; i < d->base.nx; ++i)
+    if (!isfinite(out[i])) return 1; /* recoverable: CVODE retries with a smaller step */
+  return 0;
+}
+
+static int hitl_ag_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, void *data,
+                       N_Vector t1, N_Vector t2, N_Vector t3) {
+  hitl_ag *d = (hitl_ag *)data;
+  hitl_agmat *M = HITL_AGMAT(J);
+  (void)fy; (void)t1; (void)t2; (void)t3;
+  d->base.n_jac++;
+  M->c = 1.0;
+  M->shifted = 0;
+  return hitl_ag_pass(d, t, N_VGetArrayPointer(y), NULL, M->K, &M->top) ? -1 : 0;
+}
+
+/* ---------------------------------------------------------------- small dense algebra */
+/* LU with partial pivoting of the n x n column-major a (in place); 0, or -1 if singular */
+static int hitl_lu(double *a, int n, int *piv) {
+  for (int j = 0; j < n; ++j) {
+    int pr = j;
+    double best = fabs(a[(size_t)j * n + j]);
+    for (int r = j + 1; r < n; ++r) {
+      double v = fabs(a[(size_t)j * n + r]);
+      if (v > best) best = v, pr = r;
+    }
+    piv[j] = pr;
+    if (!(best > 0.0) || !isfinite(best)) return -1;
+    if (pr != j)
+      for (int col = 0; col < n; ++col) {
+        double tmp = a[(size_t)col * n + j];
+        a[(size_t)col * n + j] = a[(size_t)col * n + pr];
+        a[(size_t)col * n + pr] = tmp;
+      }
+    double inv = 1.0 / a[(size_t)j * n + j];
+    for (int r = j + 1; r < n; ++r) a[(size_t)j * n + r] *= inv;
+    for (int col = j + 1; col < n; ++col) {
+      double f = a[(size_t)col * n + j];
+      if (f != 0.0)
+        for (int r = j + 1; r < n; ++r) a[(size_t)col * n + r] -= f * a[(size_t)j * n + r];
+    }
+  }
+  return 0;
+}
+
+/* solve (LU) x = b in place with hitl_lu's factors */
+static void hitl_lu_solve(const double *a, int n, const int *piv, double *b) {
+  for (int j = 0; j < n; ++j) /* the row swaps (whole rows, as LAPACK's getrf), then L */
+    if (piv[j] != j) {
+      double tmp = b[j];
+      b[j] = b[piv[j]];
+      b[piv[j]] = tmp;
+    }
+  for (int j = 0; j < n; ++j)
+    for (int r = j + 1; r < n; ++r) b[r] -= a[(size_t)j * n + r] * b[j];
+  for (int j = n - 1; j >= 0; --j) {
+    b[j] /= a[(size_t)j * n + j];
+    for (int r = 0; r < j; ++r) b[r] -= a[(size_t)j * n + r] * b[j];
+  }
+}
+
+/* ---------------------------------------------------------------- linear solver */
+/* K_i's entry (row, col) */
+#define KAT(K, k, row, col) ((K)[(size_t)(col) * (k) + (row)])
+
+static int hitl_ag_mode(const hitl_ag *d, int top) {
+  int s = d->p->solver;
+  if (s == HITL_AG_AUTO) return d->p->acyclic[top] ? HITL_AG_FORWARD : HITL_AG_GMRES;
+  return s;
+}
+
+/* y = A_jets v: (A v)_i = v_i - G_i sum_j w_ij v_j */
+static void hitl_ag_apply(hitl_ag *d, int top, const double *v, double *out) {
+  int n3 = d->n3, N = d->N;
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
+  for (int i = 0; i < N; ++i) {
+    double s[64];
+    const double *G = d->G + (size_t)n3 * n3 * i;
+    hitl_ag_gather(d, top, i, v, s, 0, 3);
+    for (int r = 0; r < n3; ++r) {
+      double acc = v[(size_t)n3 * i + r];
+      for (int q = 0; q < n3; ++q) acc -= G[(size_t)q * n3 + r] * s[q];
+      out[(size_t)n3 * i + r] = acc;
+    }
+  }
+}
+
+/* z = P^{-1} u: forward substitution along the order, edges from later agents dropped */
+static void hitl_ag_forward(hitl_ag *d, int top, const double *u, double *z, int *pos) {
+  const hitl_agents_problem *p = d->p;
+  const int *ord = p->order + (size_t)top * d->N;
+  const int *ptr = p->ptr + (size_t)top * (d->N + 1);
+  int n3 = d->n3, N = d->N;
+  for (int oi = 0; oi < N; ++oi) pos[ord[oi]] = oi;
+  for (int oi = 0; oi < N; ++oi) {
+    int i = ord[oi];
+    double s[64];
+    const double *G = d->G + (size_t)n3 * n3 * i;
+    for (int r = 0; r < n3; ++r) s[r] = 0.0;
+    for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
+      int j = p->idx[q];
+      if (pos[j] >= oi) continue;
+      for (int r = 0; r < n3; ++r) s[r] += p->w[q] * z[(size_t)n3 * j + r];
+    }
+    for (int r = 0; r < n3; ++r) {
+      double acc = u[(size_t)n3 * i + r];
+      for (int q = 0; q < n3; ++q) acc += G[(size_t)q * n3 + r] * s[q];
+      z[(size_t)n3 * i + r] = acc;
+    }
+  }
+}
+
+static double hitl_dot(const double *a, const double *b, long n) {
+  double s = 0.0;
+  for (long i = 0; i < n; ++i) s += a[i] * b[i];
+  return s;
+}
+
+/* Restarted right-preconditioned GMRES on the jets system: x from rhs (x: initial guess
+   0). Returns 0, or -1 if the residual did not reach ls_tol * |rhs| in max_iter. */
+static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
+  const hitl_agents_problem *p = d->p;
+  long n = (long)d->N * d->n3;
+  int kr = p->krylov, it = 0;
+  double beta0 = sqrt(hitl_dot(rhs, rhs, n)), tol = p->ls_tol * beta0;
+  double *V = d->V, *H = d->H, *z = d->z;
+  int *pos = (int *)(d->z + n);
+  memset(x, 0, sizeof(double) * (size_t)n);
+  if (beta0 == 0.0) return 0;
+  double *r = d->rj; /* residual */
+  memcpy(r, rhs, sizeof(double) * (size_t)n);
+  while (it < p->max_iter) {
+    double beta = sqrt(hitl_dot(r, r, n));
+    if (beta <= tol) return 0;
+    for (long q = 0; q < n; ++q) V[q] = r[q] / beta;
+    for (int q = 0; q <= kr; ++q) d->g[q] = 0.0;
+    d->g[0] = beta;
+    int j = 0;
+    for (; j < kr && it < p->max_iter; ++j, ++it) {
+      double *vj = V + (size_t)n * j, *w = V + (size_t)n * (j + 1);
+      hitl_ag_forward(d, top, vj, z, pos);
+      hitl_ag_apply(d, top, z, w);
+      for (int q = 0; q <= j; ++q) { /* modified Gram-Schmidt */
+        double h = hitl_dot(w, V + (size_t)n * q, n);
+        H[(size_t)j * (kr + 1) + q] = h;
+        for (long e = 0; e < n; ++e) w[e] -= h * V[(size_t)n * q + e];
+      }
+      double hn = sqrt(hitl_dot(w, w, n));
+      H[(size_t)j * (kr + 1) + j + 1] = hn;
+      if (hn > 0.0)
+        for (long e = 0; e < n; ++e) w[e] /= hn;
+      for (int q = 0; q < j; ++q) { /* earlier rotations */
+        double *hc = H + (size_t)j * (kr + 1);
+        double a = hc[q], b = hc[q + 1];
+        hc[q] = d->cs[q] * a + d->sn[q] * b;
+        hc[q + 1] = -d->sn[q] * a + d->cs[q] * b;
+      }
+      double *hc = H + (size_t)j * (kr + 1);
+      double den = hypot(hc[j], hc[j + 1]);
+      d->cs[j] = den > 0 ? hc[j] / den : 1.0;
+      d->sn[j] = den > 0 ? hc[j + 1] / den : 0.0;
+      hc[j] = den;
+      hc[j + 1] = 0.0;
+      d->g[j + 1] = -d->sn[j] * d->g[j];
+      d->g[j] = d->cs[j] * d->g[j];
+      d->n_krylov++;
+      if (fabs(d->g[j + 1]) <= tol) {
+        ++j, ++it;
+        break;
+      }
+    }
+    /* y = H^{-1} g (upper triangular j x j), x += P^{-1} V y */
+    for (int q = j - 1; q >= 0; --q) {
+      double acc = d->g[q];
+      for (int e = q + 1; e < j; ++e) acc -= H[(size_t)e * (kr + 1) + q] * d->g[e];
+      d->g[q] = acc / H[(size_t)q * (kr + 1) + q];
+    }
+    memset(r, 0, sizeof(double) * (size_t)n);
+    for (int q = 0; q < j; ++q)
+      for (long e = 0; e < n; ++e) r[e] += d->g[q] * V[(size_t)n * q + e];
+    hitl_ag_forward(d, top, r, z, pos);
+    for (long e = 0; e < n; ++e) x[e] += z[e];
+    /* true residual */
+    hitl_ag_apply(d, top, x, r);
+    for (long e = 0; e < n; ++e) r[e] = rhs[e] - r[e];
+  }
+  return sqrt(hitl_dot(r, r, n)) <= tol ? 0 : -1;
+}
+
+/* Set-up of M = I + c J: the leader's and every agent's D_i factorised, F_i = D_i^{-1}
+   B_s and G_i = E - c C_s F_i formed; HITL_AG_DENSE also factorises the jets system. */
+static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
+  hitl_ag *d = (hitl_ag *)S->content;
+  hitl_agmat *M = HITL_AGMAT(A);
+  int m = d->m, na = d->na, k = d->k, n3 = d->n3, N = d->N, fail = 0;
+  double c = M->c;
+  if (!M->shifted) return -1; /* CVODE always hands over I - gamma J */
+  d->base.n_fac++;
+  d->ls_top = M->top;
+  d->ls_mode = hitl_ag_mode(d, M->top);
+  { /* the leader: rows and columns 0..m-1 of agent 0's block */
+    double *L = d->lu + (size_t)na * na * N;
+    for (int col = 0; col < m; ++col)
+      for (int row = 0; row < m; ++row)
+        L[(size_t)col * m + row] = c * KAT(M->K, k, row, col) + (row == col ? 1.0 : 0.0);
+    if (hitl_lu(L, m, d->piv + (size_t)na * N)) fail = 1;
+  }
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
+  for (int i = 0; i < N; ++i) {
+    const double *K = M->K + (size_t)k * k * i;
+    double *L = d->lu + (size_t)na * na * i, *F = d->F + (size_t)na * n3 * i;
+    double *G = d->G + (size_t)n3 * n3 * i;
+    int *pv = d->piv + (size_t)na * i;
+    for (int col = 0; col < na; ++col)
+      for (int row = 0; row < na; ++row)
+        L[(size_t)col * na + row] = c * KAT(K, k, m + row, m + col) + (row == col ? 1.0 : 0.0);
+    if (hitl_lu(L, na, pv)) {
+      fail |= 1;
+      continue;
+    }
+    for (int q = 0; q < n3; ++q) { /* F = D^{-1} B_s */
+      double *Fq = F + (size_t)na * q;
+      for (int row = 0; row < na; ++row) Fq[row] = KAT(K, k, m + row, m + na + q);
+      hitl_lu_solve(L, na, pv, Fq);
+    }
+    for (int q = 0; q < n3; ++q) /* G = E - c C_s F */
+      for (int row = 0; row < n3; ++row) {
+        double acc = KAT(K, k, m + na + row, m + na + q);
+        for (int e = 0; e < na; ++e)
+          acc -= c * KAT(K, k, m + na + row, m + e) * F[(size_t)na * q + e];
+        G[(size_t)q * n3 + row] = acc;
+      }
+  }
+  if (fail) {
+    d->base.n_piv_fail++;
+    return SUNLS_LUFACT_FAIL; /* recoverable: CVODE retries with a smaller step */
+  }
+  if (d->ls_mode == HITL_AG_FORWARD && !d->p->acyclic[M->top]) return -1; /* forward substitution on a cycle: unrecoverable */
+  if (d->ls_mode == HITL_AG_DENSE) {
+    long nj = (long)N * n3;
+    const int *ptr = d->p->ptr + (size_t)M->top * (N + 1);
+    memset(d->S, 0, sizeof(double) * (size_t)nj * nj);
+    for (long e = 0; e < nj; ++e) d->S[(size_t)e * nj + e] = 1.0;
+    for (int i = 0; i < N; ++i) {
+      const double *G = d->G + (size_t)n3 * n3 * i;
+      for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
+        int j = d->p->idx[q];
+        double wq = d->p->w[q];
+        for (int col = 0; col < n3; ++col)
+          for (int row = 0; row < n3; ++row)
+            d->S[(size_t)(n3 * j + col) * nj + n3 * i + row] -= wq * G[(size_t)col * n3 + row];
+      }
+    }
+    if (hitl_lu(d->S, (int)nj, d->Spiv)) {
+      d->base.n_piv_fail++;
+      return SUNLS_LUFACT_FAIL;
+    }
+  }
+  return 0;
+}
+
+/* x = M^{-1} b */
+static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vector bv,
+                            sunrealtype tol) {
+  hitl_ag *d = (hitl_ag *)S->content;
+  hitl_agmat *M = HITL_AGMAT(A);
+  int m = d->m, na = d->na, k = d->k, n3 = d->n3, N = d->N, top = d->ls_top;
+  double c = M->c, *x = N_VGetArrayPointer(xv);
+  const double *b = N_VGetArrayPointer(bv);
+  (void)tol;
+  if (x != b) memcpy(x, b, sizeof(double) * (size_t)d->base.nx);
+  hitl_lu_solve(d->lu + (size_t)na * na * N, m, d->piv + (size_t)na * N, x); /* leader */
+  /* y_i = D_i^{-1} (b_i - c A_s0 x_0), r_i = C_0 x_0 + C_s y_i */
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
+  for (int i = 0; i < N; ++i) {
+    const double *K = M->K + (size_t)k * k * i;
+    double *yi = d->y + (size_t)na * i, *ri = d->rj + (size_t)n3 * i;
+    const double *bi = x + m + (size_t)na * i;
+    for (int row = 0; row < na; ++row) {
+      double acc = 0.0;
+      for (int col = 0; col < m; ++col) acc += KAT(K, k, m + row, col) * x[col];
+      yi[row] = bi[row] - c * acc;
+    }
+    hitl_lu_solve(d->lu + (size_t)na * na * i, na, d->piv + (size_t)na * i, yi);
+    for (int row = 0; row < n3; ++row) {
+      double acc = 0.0;
+      for (int col = 0; col < m; ++col) acc += KAT(K, k, m + na + row, col) * x[col];
+      for (int col = 0; col < na; ++col) acc += KAT(K, k, m + na + row, m + col) * yi[col];
+      ri[row] = acc;
+    }
+  }
+  if (d->ls_mode == HITL_AG_FORWARD) {
+    hitl_ag_forward(d, top, d->rj, d->dj, (int *)(d->z + (size_t)N * n3));
+  } else if (d->ls_mode == HITL_AG_DENSE) {
+    memcpy(d->dj, d->rj, sizeof(double) * (size_t)N * n3);
+    hitl_lu_solve(d->S, N * n3, d->Spiv, d->dj);
+  } else {
+    double *rhs = d->dnb; /* the GMRES residual uses rj: keep the right-hand side apart */
+    memcpy(rhs, d->rj, sizeof(double) * (size_t)N * n3);
+    if (hitl_ag_gmres(d, top, rhs, d->dj)) return SUNLS_CONV_FAIL; /* recoverable */
+  }
+  /* x_i = y_i - c F_i dnb_i */
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
+  for (int i = 0; i < N; ++i) {
+    double s[64];
+    const double *F = d->F + (size_t)na * n3 * i;
+    double *xi = x + m + (size_t)na * i;
+    const double *yi = d->y + (size_t)na * i;
+    hitl_ag_gather(d, top, i, d->dj, s, 0, 3);
+    for (int row = 0; row < na; ++row) {
+      double acc = 0.0;
+      for (int q = 0; q < n3; ++q) acc += F[(size_t)na * q + row] * s[q];
+      xi[row] = yi[row] - c * acc;
+    }
+  }
+  return 0;
+}
+
+/* ---------------------------------------------------------------- set-up */
+static int hitl_ag_work_alloc(hitl_ag *d, const casadi_int *sz) {
+  int m = d->m, na = d->na, n3 = d->n3, k = d->k;
+  d->wk = (hitl_agwork *)calloc((size_t)d->nthreads, sizeof(hitl_agwork));
+  if (!d->wk) return -1;
+  for (int q = 0; q < d->nthreads; ++q) {
+    hitl_agwork *wk = d->wk + q;
+    wk->arg = (const casadi_real **)calloc((size_t)sz[0] + 1, sizeof(casadi_real *));
+    wk->res = (casadi_real **)calloc((size_t)sz[1] + 1, sizeof(casadi_real *));
+    wk->iw = (casadi_int *)calloc((size_t)sz[2] + 1, sizeof(casadi_int));
+    wk->w = (casadi_real *)calloc((size_t)sz[3] + 1, sizeof(casadi_real));
+    wk->xb = (double *)calloc((size_t)(m + na), sizeof(double));
+    wk->xbdot = (double *)calloc((size_t)(m + na), sizeof(double));
+    wk->gf = (double *)calloc((size_t)d->n + 1, sizeof(double));
+    wk->jscr = (double *)calloc((size_t)n3 + 1, sizeof(double));
+    wk->col = (double *)calloc((size_t)k + 1, sizeof(double));
+    if (!wk->arg || !wk->res || !wk->iw || !wk->w || !wk->xb || !wk->xbdot || !wk->gf ||
+        !wk->jscr || !wk->col)
+      return -1;
+  }
+  return 0;
+}
+
+static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p, char *msg,
+                        int msglen, const char *log_path) {
+  hitl_ctx *c = &d->base;
+  casadi_int sz[4] = {0, 0, 0, 0};
+  int N = p->N, m = p->m, na = p->na, n = p->n;
+  int nx = m + N * na;
+  long nj = (long)N * 3 * n;
+  memset(d, 0, sizeof *d);
+  memset(s, 0, sizeof *s);
+  c->msg = msg;
+  c->msglen = msglen;
+  if (msglen > 0) msg[0] = '\0';
+  d->p = p;
+  d->N = N, d->m = m, d->na = na, d->n = n, d->n3 = 3 * n, d->k = m + na + 3 * n;
+  d->npar = p->npar;
+#ifdef _OPENMP
+  d->nthreads = p->nthreads > 0 ? p->nthreads : omp_get_max_threads();
+#else
+  d->nthreads = 1;
+#endif
+  if (d->n3 > 64) {
+    hitl_msg(c, "more than 21 output coordinates per follower");
+    return -1;
+  }
+  if (p->solver == HITL_AG_DENSE && nj > 6000) {
+    hitl_msg(c, "the dense jets solver is for 3nN <= 6000 (use gmres)");
+    return -1;
+  }
+  for (int q = 0; q < p->nmodels; ++q) {
+    const hitl_agent_kernels *kn = p->kern + q;
+    for (int l = 0; l < 3; ++l) hitl_work_size(kn->jet_work[l], sz);
+    hitl_work_size(kn->rhs_work, sz);
+    hitl_work_size(kn->jac_work, sz);
+  }
+  hitl_work_size(p->faults_work, sz);
+  if (hitl_ctx_alloc(c, nx, sz)) return -1;
+  d->fvals = (double *)calloc((size_t)p->nfaults + 1, sizeof(double));
+  d->jets = (double *)calloc((size_t)nj + 1, sizeof(double));
+  d->nb = (double *)calloc((size_t)nj + 1, sizeof(double));
+  d->lu = (double *)calloc((size_t)(N + 1) * na * na, sizeof(double));
+  d->piv = (int *)calloc((size_t)(N + 1) * na, sizeof(int));
+  d->F = (double *)calloc((size_t)N * na * d->n3 + 1, sizeof(double));
+  d->G = (double *)calloc((size_t)N * d->n3 * d->n3 + 1, sizeof(double));
+  d->y = (double *)calloc((size_t)N * na + 1, sizeof(double));
+  d->dj = (double *)calloc((size_t)nj + 1, sizeof(double));
+  d->dnb = (double *)calloc((size_t)nj + 1, sizeof(double));
+  d->rj = (double *)calloc((size_t)nj + 1, sizeof(double));
+  /* z: nj doubles, then N ints (positions in the order) */
+  d->z = (double *)calloc((size_t)nj + (size_t)N + 1, sizeof(double));
+  if (p->solver == HITL_AG_DENSE) {
+    d->S = (double *)calloc((size_t)nj * nj + 1, sizeof(double));
+    d->Spiv = (int *)calloc((size_t)nj + 1, sizeof(int));
+  }
+  {
+    int kr = p->krylov > 0 ? p->krylov : 1;
+    d->V = (double *)calloc((size_t)nj * (kr + 1) + 1, sizeof(double));
+    d->H = (double *)calloc((size_t)(kr + 1) * (kr + 1), sizeof(double));
+    d->cs = (double *)calloc((size_t)kr + 1, sizeof(double));
+    d->sn = (double *)calloc((size_t)kr + 1, sizeof(double));
+    d->g = (double *)calloc((size_t)kr + 2, sizeof(double));
+  }
+  if (!d->fvals || !d->jets || !d->nb || !d->lu || !d->piv || !d->F || !d->G || !d->y ||
+      !d->dj || !d->dnb || !d->rj || !d->z || !d->V || !d->H || !d->cs || !d->sn || !d->g ||
+      (p->solver == HITL_AG_DENSE && (!d->S || !d->Spiv)) || hitl_ag_work_alloc(d, sz)) {
+    hitl_msg(c, "out of memory");
+    return -1;
+  }
+  if (hitl_sundials_create(c, s, nx, log_path)) return -1;
+  s->A = hitl_agmat_new((long)N * d->k * d->k, s->ctx);
+  if (!s->A) {
+    hitl_msg(c, "out of memory");
+    return -1;
+  }
+  hitl_ls_attach(s, d, hitl_ag_ls_setup, hitl_ag_ls_solve);
+  return 0;
+}
+
+static void hitl_ag_free(hitl_ag *d, hitl_cvode *s) {
+  if (d->wk)
+    for (int q = 0; q < d->nthreads; ++q) {
+      hitl_agwork *wk = d->wk + q;
+      free(wk->arg), free(wk->res), free(wk->iw), free(wk->w), free(wk->xb);
+      free(wk->xbdot), free(wk->gf), free(wk->jscr), free(wk->col);
+    }
+  free(d->wk);
+  free(d->fvals), free(d->jets), free(d->nb), free(d->lu), free(d->piv), free(d->F);
+  free(d->G), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S);
+  free(d->Spiv), free(d->V), free(d->H), free(d->cs), free(d->sn), free(d->g);
+  hitl_cvode_free(&d->base, s);
+}
+
+CASADI_SYMBOL_EXPORT long hitl_agents_problem_size(void) {
+  return (long)sizeof(hitl_agents_problem);
+}
+
+/*
+ * Integrate the closed loop (nx = m + N*na) from x0 at o->t_out[0]; options and result
+ * as the whole-loop driver's (hitl_native_run). krylov_iters: GMRES iterations (or NULL).
+ * Returns r->filled, or -1 if CVODE could not be set up.
+ */
+CASADI_SYMBOL_EXPORT int hitl_agents_run(const hitl_agents_problem *p, const double *x0,
+                                         const hitl_options *o, hitl_result *r,
+                                         long *krylov_iters) {
+  hitl_ag d;
+  hitl_cvode s;
+  int ok, filled;
+  hitl_result_start(r);
+  ok = hitl_ag_init(&d, &s, p, r->msg, HITL_MSG_LEN, o->log_path) == 0;
+  filled = hitl_cvode_run(&d.base, &s, ok, &d, hitl_ag_rhs, hitl_ag_jac, x0, o, r);
+  if (krylov_iters) *krylov_iters = d.n_krylov;
+  hitl_ag_free(&d, &s);
+  return filled;
+}
+
+/*
+ * For tests: at (t, x), the right-hand side (xdot) and the solution of
+ * (I - gamma J) sol = b, exactly as a run evaluates and solves them. Returns 0, or -1
+ * with msg set.
+ */
+CASADI_SYMBOL_EXPORT int hitl_agents_probe(const hitl_agents_problem *p, double t,
+                                           const double *x, double gamma, const double *b,
+                                           double *xdot, double *sol, char *msg, int msglen) {
+  hitl_ag d;
+  hitl_cvode s;
+  int nx = p->m + p->N * p->na, ret = -1;
+  N_Vector bv = NULL, xv = NULL;
+  if (hitl_ag_init(&d, &s, p, msg, msglen, NULL)) goto done;
+  bv = N_VNew_Serial(nx, s.ctx);
+  xv = N_VNew_Serial(nx, s.ctx);
+  if (!bv || !xv) goto done;
+  memcpy(N_VGetArrayPointer(s.y), x, (size_t)nx * sizeof(double));
+  memcpy(N_VGetArrayPointer(bv), b, (size_t)nx * sizeof(double));
+  if (hitl_ag_pass(&d, t, x, xdot, NULL, NULL)) goto done;
+  if (hitl_ag_jac(t, s.y, NULL, s.A, &d, NULL, NULL, NULL)) goto done;
+  if (SUNMatScaleAddI(-gamma, s.A) || hitl_ag_ls_setup(s.LS, s.A) ||
+      hitl_ag_ls_solve(s.LS, s.A, xv, bv, 0.0)) {
+    hitl_msg(&d.base, "linear solve failed");
+    goto done;
+  }
+  memcpy(sol, N_VGetArrayPointer(xv), (size_t)nx * sizeof(double));
+  ret = 0;
+
+done:
+  if (bv) N_VDestroy(bv);
+  if (xv) N_VDestroy(xv);
+  hitl_ag_free(&d, &s);
+  return ret;
+}

@@ -1,0 +1,195 @@
+"""Per-agent kernels with the graph as runtime data (generated/agents.py, native/agents.c).
+
+Independent truths: the whole closed loop built by symbolic/closed_loop.py with the graph
+written into it (its right-hand side, and its Jacobian by CasADi's AD with numpy's dense
+solve for the Newton systems), and the whole-loop native integrator (generated C of
+the whole loop, its own sparse LU) for the trajectories.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from benchmarks.bench import bench_gains, bench_scenario
+from core.errors import IntegrationError
+from core.graph import Switch
+from core.scenario import Graph, load_scenario
+from generated import agents, api
+from generated.codegen import CodegenSettings
+from generated.integrate import IntegratorSettings, output_grid
+from symbolic.closed_loop import build_closed_loop
+
+PAPER = "scenarios/paper.toml"
+
+
+def _with_graph(sc, A, pin, switches=()):
+    g = Graph(adjacency=np.asarray(A, float), pinning=np.asarray(pin, float), switches=switches)
+    return dataclasses.replace(sc, graph=g)
+
+
+def _cyclic(N: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A ring through every follower plus random chords; follower 0 pinned."""
+    rng = np.random.default_rng(seed)
+    A = np.zeros((N, N))
+    for i in range(N):
+        A[i, (i - 1) % N] = 1.0
+    extra = rng.random((N, N)) < 0.2
+    np.fill_diagonal(extra, False)
+    A[extra] = 1.0
+    pin = np.zeros(N)
+    pin[0] = 1.0
+    return A, pin
+
+
+def _mixed(sc):
+    """Follower 2 a point mass, follower 4 a two-link arm with other link masses."""
+    fol = list(sc.followers)
+    fol[1] = dataclasses.replace(fol[1], model="point_mass_2d", params={"m": 1.5})
+    p4 = dict(fol[3].params)
+    p4[next(iter(p4))] = 1.3 * p4[next(iter(p4))]
+    fol[3] = dataclasses.replace(fol[3], params=p4)
+    return dataclasses.replace(sc, followers=tuple(fol))
+
+
+def _bench(N: int):
+    """The benchmark scenario; λ1 = 6 so that Theorem 1 holds on every graph here (the
+    gains are compiled into the kernels: one λ1 for all, one library)."""
+    sc = bench_scenario(N, horizon=0.3)
+    return dataclasses.replace(sc, observer=dataclasses.replace(sc.observer, lambda1=6.0))
+
+
+def _cases():
+    base = _bench(6)
+    A, pin = _cyclic(6, 3)
+    cyc = _with_graph(base, A, pin)
+    chords = [(i, j) for i, j in zip(*np.nonzero(A), strict=True) if j != (i - 1) % 6]
+    (i1, j1), (i2, j2) = chords[:2]  # the ring keeps every follower reachable
+    lost = _with_graph(
+        base,
+        A,
+        pin,
+        (Switch(0.1, i1, j1, 0.0), Switch(0.2, i1, j1, 1.0), Switch(0.2, i2, j2, 0.0)),
+    )
+    return {
+        "paper": load_scenario(PAPER),
+        "acyclic": base,
+        "cyclic": cyc,
+        "cyclic-mixed": _mixed(cyc),
+        "link-losses": lost,
+    }
+
+
+@pytest.fixture(scope="module")
+def build_root(tmp_path_factory):
+    return str(tmp_path_factory.mktemp("agents"))
+
+
+@pytest.fixture(scope="module")
+def cases(build_root):
+    cg = CodegenSettings(optimization="-O0", build_root=build_root)
+    out = {}
+    for name, sc in _cases().items():
+        gains = bench_gains(sc)[0]
+        libs, model = agents.build_models(sc, gains, cg)
+        out[name] = (
+            sc,
+            gains,
+            build_closed_loop(sc, gains),
+            libs,
+            agents.problem(sc, gains, model),
+        )
+    return out
+
+
+def _newton_reference(cl, t, x, gamma, b):
+    nx = x.size
+    tt, xx = ca.MX.sym("t"), ca.MX.sym("x", nx)
+    J = np.array(ca.Function("J", [tt, xx], [ca.jacobian(cl.ode(tt, xx), xx)])(t, x))
+    M = np.eye(nx) - gamma * J
+    return M, np.linalg.solve(M, b)
+
+
+@pytest.mark.parametrize("name", list(_cases()))
+@pytest.mark.parametrize("t", [0.05, 0.15, 0.25])  # link losses: each topology
+def test_rhs_and_newton_solves_against_the_whole_loop(cases, name, t):
+    """The passes are cl.ode; every solver solves (I − γJ) with J by AD, on any graph."""
+    sc, _, cl, libs, prob = cases[name]
+    paths = [lib.path for lib in libs]
+    rng = np.random.default_rng(7)
+    x = cl.x0 + rng.normal(scale=0.2, size=prob.nx)
+    b = rng.normal(size=prob.nx)
+    ref = np.array(cl.ode(t, x)).ravel()
+    solvers = ["auto", "dense", "gmres"] + (["forward"] if prob.acyclic else [])
+    for gamma in (1e-4, 1e-2, 0.3):
+        M, expected = _newton_reference(cl, t, x, gamma, b)
+        for s in solvers:
+            xdot, sol = agents.probe(paths, prob, t, x, gamma, b, agents.LinearSettings(solver=s))
+            np.testing.assert_allclose(xdot, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+            resid = np.abs(M @ sol - b).max() / (np.abs(M).max() * np.abs(sol).max())
+            assert resid < 1e-12, (name, s, gamma, resid)
+            np.testing.assert_allclose(sol, expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max())
+
+
+def test_one_library_per_model_for_every_graph_and_n(cases):
+    """The graph and N are data: other graphs, cycles and sizes reuse the same library."""
+    key = cases["acyclic"][3][0].key
+    assert cases["cyclic"][3][0].key == key
+    assert cases["link-losses"][3][0].key == key
+    assert cases["cyclic"][4].acyclic is False and cases["acyclic"][4].acyclic is True
+    assert len(cases["link-losses"][4].topologies) == 3
+    mixed = cases["cyclic-mixed"][3]
+    assert len(mixed) == 3 and mixed[0].key == key  # two_link, point mass, heavier arm
+    assert len({lib.key for lib in mixed}) == 3
+    # another N (the paper's faults cycled over 9 followers) on a cycle: the same library
+    sc9 = _bench(9)
+    A, pin = _cyclic(9, 5)
+    sc9 = _with_graph(sc9, A, pin)
+    libs, _ = agents.build_models(sc9, bench_gains(sc9)[0], _settings_of(cases))
+    assert libs[0].key == key and libs[0].cache_hit
+
+
+def _settings_of(cases):
+    root = str(cases["acyclic"][3][0].folder.parent)
+    return CodegenSettings(optimization="-O0", build_root=root)
+
+
+def test_forward_substitution_refuses_a_cycle(cases):
+    sc, _, cl, libs, prob = cases["cyclic"]
+    x = cl.x0
+    with pytest.raises(IntegrationError, match="per-agent driver"):
+        agents.probe(
+            [lib.path for lib in libs], prob, 0.1, x, 1e-2, x, agents.LinearSettings("forward")
+        )
+    with pytest.raises(IntegrationError, match="entries"):
+        agents.probe([lib.path for lib in libs], prob, 0.1, x[:-1], 1e-2, x)
+    with pytest.raises(IntegrationError, match="solver"):
+        agents.LinearSettings(solver="klu")
+
+
+@pytest.mark.parametrize("name", ["paper"])
+def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, name):
+    """Same integrator (CVODE BDF, exact Newton), kernels against the whole loop's C.
+
+    The two differ by rounding, which the loop's start-up amplifies to the integrators'
+    own error level; the difference must shrink with the tolerance.
+    """
+    sc, gains, cl, libs, prob = cases[name]
+    cg = CodegenSettings(optimization="-O0", build_root=build_root)
+    built = api.build(sc, gains, "native", cg, closed_loop=cl)
+    t_out = output_grid(0.25, 0.01)
+    bps = [b for b in sc.breakpoints() if b < 0.25]
+    diffs = []
+    for rtol in (1e-8, 1e-10):
+        s = IntegratorSettings(method="native", rtol=rtol, atol=rtol * 1e-2, max_steps=200000)
+        tr = agents.run([lib.path for lib in libs], prob, cl.x0, t_out, s, breakpoints=bps)
+        ref = api.integrate_built(built, cl.x0, t_out, s, bps)
+        assert tr.complete and ref.complete
+        assert tr.stats["restarts"] == ref.stats["restarts"]
+        assert 0.8 < tr.stats["steps"] / ref.stats["steps"] < 1.25
+        assert tr.stats["jac_evals"] < tr.stats["lin_setups"]  # CVODE reuses the Jacobian
+        diffs.append((np.abs(tr.x - ref.x) / np.maximum(1.0, np.abs(ref.x))).max())
+    assert diffs[1] < 1e-4 and diffs[1] < diffs[0] / 5, diffs
