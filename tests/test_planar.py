@@ -325,6 +325,7 @@ def test_guaranteed_rows_hold_and_torques_stay_bounded_after_the_steps(steps_run
     sc, res, table = steps_run
     rows = table[table["kind"] == "guaranteed"]
     assert len(rows) >= 3 * sc.N + 1  # φ-floor V̇1, and per follower T2 χ, e_t and Def. 1
+    assert rows["holds"].notna().all(), rows[rows["holds"].isna()]  # every row evaluated
     assert rows["holds"].astype(bool).all(), rows[~rows["holds"].astype(bool)]
     late = res.frame[res.frame["t"] >= 1.0]
     assert late.filter(regex=r"^u\d+_\d+$").abs().to_numpy().max() < 1e3
