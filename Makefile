@@ -87,6 +87,7 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.steps
 	$(PY) -m benchmarks.precision
 	$(PY) -m benchmarks.study
+	$(PY) -m benchmarks.remedies
 
 clean:
 	rm -rf out generated/build .pytest_cache

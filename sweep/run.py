@@ -59,6 +59,7 @@ BASE_COLUMNS = [
     "step_pairs_late",
     "step_pairs_undefined",
     "step_deviation_max",
+    "step_peak_u",
     "guaranteed_held",
     "guaranteed_failed",
     "consistency_held",
@@ -231,13 +232,16 @@ def step_recovery(sc: Any, run: Any) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``step_recovery_s`` (seconds; NaN without operator steps) and the counts of
-        (step, pinned follower) pairs (:func:`verify.operator_steps.recovery_summary`).
+        ``step_recovery_s`` (seconds; NaN without operator steps), the counts of
+        (step, pinned follower) pairs (:func:`verify.operator_steps.recovery_summary`) and
+        ``step_peak_u``, the largest torque within 2 s of a step
+        (:func:`verify.operator_steps.step_peak_u`).
     """
-    from verify.operator_steps import recoveries, recovery_summary
+    from verify.operator_steps import recoveries, recovery_summary, step_peak_u
     from verify.table import gauge
 
-    return recovery_summary(recoveries(sc, run.frame, gauge(sc, run.gains)))
+    items = recoveries(sc, run.frame, gauge(sc, run.gains))
+    return {**recovery_summary(items), "step_peak_u": step_peak_u(sc, run.frame)}
 
 
 def _run_written(sample: Sample, paths: StudyPaths) -> Any:

@@ -100,3 +100,16 @@ def test_tail_error_is_split_by_a_topology_switch_in_the_tail_window():
     assert "a topology switch (2 samples) | 200 |" in lines[1]
     assert tail_split_lines(ok.assign(tail_switches=0)) == []
     assert tail_split_lines(ok.drop(columns="tail_switches")) == []
+
+
+def test_step_lines_count_each_kind_of_step_pair():
+    """3 + 2 pairs, 1 late, 1 undefined: 3 back in time; no line for a study without steps."""
+    from sweep.report import step_lines
+
+    ok = pd.DataFrame(
+        {"step_pairs": [3, 2], "step_pairs_late": [1, 0], "step_pairs_undefined": [0, 1]}
+    )
+    (line,) = step_lines(ok)
+    assert "within 0.05 of the slot within 2 s | 3 of 5 (1 late; 1 undefined" in line
+    assert step_lines(ok.assign(step_pairs=0)) == []
+    assert step_lines(pd.DataFrame({"tail_max_et": [1.0]})) == []

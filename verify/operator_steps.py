@@ -262,6 +262,36 @@ def recovery_summary(items: list[StepRecovery]) -> dict[str, float | int]:
     }
 
 
+def step_peak_u(scenario: Scenario, df: S.Frame, window: float = RECOVERY_LIMIT) -> float:
+    """The largest |u_i| entry of any follower within ``window`` seconds after a step's onset.
+
+    Separates what a step costs from the torque the leader's speed asks for anyway (the
+    peak after t = 1 s of the whole run, ``peak |u_i| after t = 1 s``, includes both).
+
+    Parameters
+    ----------
+    scenario : Scenario
+    df : DataFrame
+        The trajectory (columns ``u<i>_<r>``).
+    window : float
+        Seconds after each onset; default :data:`RECOVERY_LIMIT`.
+
+    Returns
+    -------
+    float
+        NaN without a step inside the output times.
+    """
+    t = S.column(df, "t")
+    near = np.zeros(len(t), bool)
+    for a in step_starts(scenario):
+        near |= (t >= a) & (t <= a + window)
+    if not near.any():
+        return math.nan
+    N, n = scenario.N, scenario.n
+    u = S.take(df, [f"u{i}_{r}" for i in range(1, N + 1) for r in range(1, n + 1)])
+    return float(np.abs(u[near]).max())
+
+
 def worst_recovery(
     scenario: Scenario, df: S.Frame, h: np.ndarray, level: float = RECOVERY_LEVEL
 ) -> float:
