@@ -367,7 +367,9 @@ def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
 
     # plain lists: a few string tests per row cost less than pandas' string methods
     claims, kinds = table["claim"].tolist(), table["kind"].tolist()
-    holds, agents = table["holds"].tolist(), table["agent"].tolist()
+    # an empty holds (a row that cannot be evaluated) is neither held nor failed
+    holds = [h is True or h == True for h in table["holds"].fillna(False).tolist()]  # noqa: E712
+    agents = table["agent"].tolist()
     observed = table["observed"].to_numpy(float)
 
     def max_observed(claim: str, exact: bool = False) -> float:

@@ -142,13 +142,13 @@ def test_a_limit_never_reached_leaves_the_rows_unchanged(saturated_run, tmp_path
 def test_marking_turns_guaranteed_rows_into_info_and_keeps_the_rest():
     import pandas as pd
 
-    rows = [
-        ("T2 |chi_si| <= chi_bar_si, provable variant", "guaranteed", False, "x"),
-        ("Def. 1 |p_i - h_i y0 - b_i| <= derived bound (pointwise)", "guaranteed", True, ""),
-        ("consistency: (38) dV2/dt", "consistency", False, "y"),
-        ("T1 |ebar_eta_i| -> 0", "guaranteed", False, "z"),
+    rows = [  # the rule reads the registry's dependencies, by claim id
+        ("t2.chi.provable", "guaranteed", False, "x"),
+        ("def1.derived", "guaranteed", True, ""),
+        ("t2.eq38", "consistency", False, "y"),
+        ("t1.tail", "guaranteed", False, "z"),
     ]
-    tb = pd.DataFrame(rows, columns=["claim", "kind", "holds", "note"])
+    tb = pd.DataFrame(rows, columns=["claim_id", "kind", "holds", "note"])
     out = mark_saturation(tb, (0.0, 0.5))
     assert list(out["kind"]) == ["info", "info", "info", "guaranteed"]
     assert out["note"][0] == f"{SATURATION_NOTE} [0, 0.5] s; x"

@@ -301,21 +301,43 @@ def test_synthesised_lambda1_serves_the_weakest_topology(tmp_path):
 
 
 # --------------------------------------------------------------------------- verify rows
-def _table(rows: list[tuple[str, str, str]]) -> pd.DataFrame:
-    return pd.DataFrame(rows, columns=["claim", "kind", "note"]).assign(window="[0, 20] s")
+def _table(rows: list[tuple[str, str, str, str]]) -> pd.DataFrame:
+    """Rows (claim id, claim, kind, note) on the window [0, 20] s."""
+    tb = pd.DataFrame(rows, columns=["claim_id", "claim", "kind", "note"])
+    return tb.assign(window="[0, 20] s", t_start=0.0, t_end=20.0)
 
 
 def test_switching_marks_the_rows_built_on_V1_and_only_them(tmp_path):
     sc = load_scenario(paper_with(tmp_path, CUT_RESTORE))
     tb = _table(
         [
-            ("T1 dV1/dt <= -delta~ V1, supported rate (fraction of time)", "guaranteed", ""),
-            ("T1 |ebar_eta_i| decay rate >= delta~/2 (fit on tail)", "info", "V1 >= c"),
-            ("Def. 1 |p_i - h_i y0 - b_i| <= derived bound (pointwise)", "guaranteed", ""),
-            ("Lemma 1 reaching time t_f (V2 enters chi_v/(Omega(1-delta))), paper", "paper", ""),
-            ("T1 |ebar_eta_i| -> 0 (tail sup)", "info", ""),
-            ("consistency: (38) dV2/dt <= ...", "consistency", ""),
-            ("T2 |chi_si| <= chi_bar_si, provable variant", "guaranteed", "x"),
+            (
+                "t1.dv1.supported",
+                "T1 dV1/dt <= -delta~ V1, supported rate (fraction of time)",
+                "guaranteed",
+                "",
+            ),
+            (
+                "t1.decay_rate",
+                "T1 |ebar_eta_i| decay rate >= delta~/2 (fit on tail)",
+                "info",
+                "V1 >= c",
+            ),
+            (
+                "def1.derived",
+                "Def. 1 |p_i - h_i y0 - b_i| <= derived bound (pointwise)",
+                "guaranteed",
+                "",
+            ),
+            (
+                "lemma1.paper",
+                "Lemma 1 reaching time t_f (V2 enters chi_v/(Omega(1-delta))), paper",
+                "paper",
+                "",
+            ),
+            ("t1.tail", "T1 |ebar_eta_i| -> 0 (tail sup)", "info", ""),
+            ("t2.eq38", "consistency: (38) dV2/dt <= ...", "consistency", ""),
+            ("t2.chi.provable", "T2 |chi_si| <= chi_bar_si, provable variant", "guaranteed", "x"),
         ]
     )
     out = mark_switching(tb, sc)
@@ -331,8 +353,17 @@ def test_switching_marks_the_rows_built_on_V1_and_only_them(tmp_path):
 def test_paper_rows_are_marked_only_when_a_switch_lies_in_their_window(tmp_path):
     sc = load_scenario(paper_with(tmp_path, CUT_RESTORE))  # switches at 5 s and 10 s
     claim = "T2 |chi_si| <= chi_bar_si (31), paper"
-    windows = ["[10, 20] s", "[10.01, 20] s", "[4, 5] s", "[5.5, 9.9] s", "[0, 4.99] s"]
-    tb = pd.DataFrame({"claim": claim, "kind": "paper", "note": "", "window": windows})
+    windows = [(10, 20), (10.01, 20), (4, 5), (5.5, 9.9), (0, 4.99)]
+    tb = pd.DataFrame(
+        {
+            "claim_id": "t2.chi.paper",
+            "claim": claim,
+            "kind": "paper",
+            "note": "",
+            "t_start": [float(a) for a, _ in windows],
+            "t_end": [float(b) for _, b in windows],
+        }
+    )
     out = mark_switching(tb, sc)
     assert list(out["kind"]) == ["info", "paper", "info", "paper", "paper"]
     assert out["note"][0] == f"{SWITCHING_NOTE} (a switch at t = 10 s lies in the window)"
@@ -420,8 +451,15 @@ def test_a_switching_runs_table_marks_the_V1_rows_and_restarts_theorem2(switchin
     paper_tail = tb["claim"].str.endswith(", paper") & tb["window"].eq("[5, 10] s")
     assert on_v1.any() and paper_tail.any() and (marked == (on_v1 | paper_tail)).all()
     assert set(tb.loc[marked, "kind"]) == {"info"}
-    # Theorem 2's provable windows start after the last switch (6 s), not before
-    assert (_provable_starts(tb) > 6.0).all()
+    # Theorem 2 restarts at the switches that reach a follower's reference (follower 4's row
+    # changes at 0.5 s and 6 s, and follower 5 hears 4): evaluated only after the last one;
+    # the others' single interval from V2(0) has its comparison-lemma time beyond the 10 s
+    prov = tb[tb["claim"].str.contains("provable variant")]
+    ev = prov[prov["holds"].notna()]
+    assert set(ev["agent"]) == {"4", "5"} and (_provable_starts(ev) > 6.0).all()
+    assert ev["note"].str.contains("interval 3 of 3 .from graph switch at t = 6 s.").all()
+    rest = prov[prov["holds"].isna()]
+    assert rest["note"].str.contains("comparison-lemma time .* lies beyond").all()
     # the same trajectory read against the scenario without switches: nothing marked
     plain = dataclasses.replace(sc, graph=Graph(sc.graph.adjacency, sc.graph.pinning))
     tp = bounds_table(plain, res.frame, gains=gains)

@@ -160,7 +160,7 @@ def test_summarize_table_by_hand():
     ]
     table = pd.DataFrame(
         [
-            dict(zip(COLUMNS, (c, a, "", k, 1.0, o, o, h, "[0, 1] s", ""), strict=True))
+            dict(zip(COLUMNS[:10], (c, a, "", k, 1.0, o, o, h, "[0, 1] s", ""), strict=True))
             for c, a, k, o, h in rows
         ]
     )
@@ -219,7 +219,7 @@ def test_theorem2_entry_of_unprovable_followers_is_lemma1_observed_time(monkeypa
     ]
     table = pd.DataFrame(
         [
-            dict(zip(COLUMNS, (c, a, "", k, 1.0, o, o, h, "[0, 1] s", ""), strict=True))
+            dict(zip(COLUMNS[:10], (c, a, "", k, 1.0, o, o, h, "[0, 1] s", ""), strict=True))
             for c, a, k, o, h in rows
         ]
     )

@@ -73,7 +73,9 @@ def test_report_and_bounds_csv(tmp_path, data):
     assert "The ablation converges more slowly" in text
     back = pd.read_csv(bpath, keep_default_na=False)
     assert len(back) == len(tb)
-    np.testing.assert_allclose(back["bound"].astype(float), tb["bound"], rtol=1e-12)
+    # an empty cell is a bound the derivation gives but this run cannot compute
+    got = back["bound"].replace("", "nan").astype(float)
+    np.testing.assert_allclose(got, tb["bound"], rtol=1e-12)
     assert "Verdict (default): **PASS**" in text
 
 

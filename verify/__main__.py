@@ -220,7 +220,9 @@ def _print_outcome(v: Verification, bpath: Path, rpath: Path | None, strict: boo
     print(console_table(v.table))
     print()
     bad = v.failed(strict)
-    paper_bad = v.table[(v.table["kind"] == "paper") & ~v.table["holds"]]
+    from verify.rows import failed_mask
+
+    paper_bad = v.table[(v.table["kind"] == "paper") & failed_mask(v.table)]
     print(f"bounds: {bpath}")
     if rpath is not None:
         print(f"report: {rpath}")
@@ -233,6 +235,8 @@ def _print_outcome(v: Verification, bpath: Path, rpath: Path | None, strict: boo
         print(
             f"FAIL: {len(bad)} check(s) failed" + (" (strict)" if strict else ""), file=sys.stderr
         )
+        for line in v.headline(strict)[1:]:
+            print(line, file=sys.stderr)
         for r in bad.itertuples(index=False):
             print(
                 f"  {r.claim} [follower {r.agent}] bound {r.bound:.4g} observed "
@@ -240,7 +244,10 @@ def _print_outcome(v: Verification, bpath: Path, rpath: Path | None, strict: boo
                 file=sys.stderr,
             )
         return 1
-    print("PASS: every check the theory guarantees holds" + (" (strict)" if strict else ""))
+    head = v.headline(strict)
+    print(head[0] + (" (strict)" if strict else ""))
+    for line in head[1:]:
+        print(line)
     return 0
 
 

@@ -99,6 +99,9 @@ class Theorem2Constants:
         exact sign or when not provable).
     ghat_term : float
         Part of ``chi_v_var`` from ĝ: σ g (1/g − ĝ0)² / (2γ), or Ωv2 W_g with projection only.
+    rate_term : float
+        Part of ``chi_v_var`` from a varying health: sup|ġ| max(ĝ², 1/g²) / (2γ) (0 when g
+        is constant on the interval).
     why_not : str
         Why the variant's bound does not follow ('' when ``provable``).
     """
@@ -119,6 +122,7 @@ class Theorem2Constants:
     edot_bar_var: np.ndarray
     layer_term: float = 0.0
     ghat_term: float = 0.0
+    rate_term: float = 0.0
     why_not: str = ""
 
 
@@ -294,7 +298,10 @@ def mass_bounds(scenario: Scenario, agent: int) -> tuple[float, float]:
 
 
 def theorem2_constants(
-    scenario: Scenario, agent: int, config: VerifyConfig | None = None
+    scenario: Scenario,
+    agent: int,
+    config: VerifyConfig | None = None,
+    health: tuple[float, float, float] | None = None,
 ) -> Theorem2Constants:
     """Theorem 2's constants for follower ``agent`` (0-based), eq. (31); variants: docs/fidelity.md, D3.
 
@@ -305,6 +312,10 @@ def theorem2_constants(
         0-based follower index.
     config : VerifyConfig, optional
         Supplies Lemma 1's δ.
+    health : (g_lo, g_hi, gdot), optional
+        The range of g_i and sup |ġ_i| on the interval the constants serve
+        (:class:`verify.intervals.Piece`); default the whole run's, from
+        :func:`verify.intervals.health_pieces` (docs/verification.md, 'Theorem 2 on intervals').
 
     Returns
     -------
@@ -328,27 +339,44 @@ def theorem2_constants(
 
     law = scenario.options.ghat_law
     gamma = float(ctrl.gamma[agent])
-    g_lo = float(fo.g.minimum)  # constant health: g itself
-    gbar = 1.0 / g_lo
+    g_lo, g_hi, gdot = health if health is not None else _run_health(scenario, agent)
+    ends = (g_lo, g_hi)  # the ĝ terms below are convex in g > 0: largest at an end
     # boundary layer: θ̂ᵀ(|χ| − χ∘sgn_ε χ) − ½k2‖θ̂‖² ≤ Σ_r (c_s ε|θ̂_r| − ½k2 θ̂_r²) ≤ n(c_s ε)²/(2k2)
     cs_eps = layer_constant(scenario.options.sign) * scenario.options.sign_width
     layer = scenario.n * cs_eps**2 / (2.0 * k2)
     Om_v, gterm, why_not = Omega, 0.0, ""
+    band = BAND * (1.0 / ctrl.g_min - 1.0)
+    lo, hi = 1.0 - band, 1.0 / ctrl.g_min + band  # ĝ's interval under the projection
     if "projection" in law:
-        why_not = _projection_why_not(scenario, agent, gbar, law == "projection")
+        # 1/g_i inside [1, 1/g_min] at both ends of its range: then everywhere between
+        why_not = next(
+            (
+                w
+                for g in ends
+                if (w := _projection_why_not(scenario, agent, 1.0 / g, law == "projection"))
+            ),
+            "",
+        )
     if "sigma" in law:  # D3 (docs/fidelity.md): σ-modification adds decay in ĝ − 1/g
         sigma = float(ctrl.sigma[agent])
         ghat0 = float(ctrl.ghat_ref[agent])
         Om_v = min(Omega, sigma)
-        gterm = sigma * g_lo * (gbar - ghat0) ** 2 / (2.0 * gamma)
+        gterm = max(sigma * g * (1.0 / g - ghat0) ** 2 / (2.0 * gamma) for g in ends)
     elif law == "projection" and not why_not:  # ĝ stays in the band-widened interval
-        band = BAND * (1.0 / ctrl.g_min - 1.0)
-        lo, hi = 1.0 - band, 1.0 / ctrl.g_min + band
-        gterm = Omega * g_lo * max(gbar - lo, hi - gbar) ** 2 / (2.0 * gamma)
+        gterm = max(Omega * g * max(1.0 / g - lo, hi - 1.0 / g) ** 2 / (2.0 * gamma) for g in ends)
     elif law == "paper":
         why_not = "no decay in ghat - 1/g (docs/fidelity.md, D3)"
+    rate_term = 0.0
+    if gdot > 0.0 and not why_not:
+        if "projection" not in law:
+            why_not = (
+                f"outside the theory: g_{agent + 1} varies (sup |dg/dt| = {gdot:.3g}/s) and "
+                "ghat has no a-priori bound without the projection"
+            )
+        else:  # ∂V2/∂t = (ġ/(2γ))(ĝ² − 1/g²), |ĝ² − 1/g²| ≤ max(ĝ², 1/g²)
+            rate_term = gdot / (2.0 * gamma) * max(hi**2, 1.0 / g_lo**2)
     provable = not why_not
-    chi_vv = chi_v + gterm + layer if provable else chi_v
+    chi_vv = chi_v + gterm + layer + rate_term if provable else chi_v
     chi_bar_v = chi_bar_from(chi_vv, Om_v, lmin, delta) if provable else chi_bar
     e_bar_v, edot_bar_v = _lemma2_pair(chi_bar_v, lam)
     return Theorem2Constants(
@@ -368,7 +396,20 @@ def theorem2_constants(
         edot_bar_var=edot_bar_v,
         layer_term=layer if provable else 0.0,
         ghat_term=gterm if provable else 0.0,
+        rate_term=rate_term if provable else 0.0,
         why_not=why_not,
+    )
+
+
+def _run_health(scenario: Scenario, agent: int) -> tuple[float, float, float]:
+    """(min g_i, max g_i, sup |ġ_i|) over the whole run."""
+    from verify.intervals import health_pieces
+
+    pieces = health_pieces(scenario.followers[agent].g, float(scenario.integration.horizon))
+    return (
+        min(p[2] for p in pieces),
+        max(p[3] for p in pieces),
+        max(p[4] for p in pieces),
     )
 
 

@@ -595,7 +595,8 @@ def theorem2_rhs(
     chi: np.ndarray,
     thetahat: np.ndarray,
     ghat: np.ndarray,
-    g: float,
+    g: float | np.ndarray,
+    gdot: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Right side of eq. (38) for one follower, with the slack of a smoothed sign.
 
@@ -608,8 +609,11 @@ def theorem2_rhs(
         (K, n).
     ghat : ndarray
         (K,).
-    g : float
-        Actuator health (constant).
+    g : float or ndarray
+        Actuator health g_i at the K samples (or one constant).
+    gdot : ndarray, optional
+        ġ_i at the K samples; its exact term ∂V2/∂t = (ġ/(2γ))(ĝ² − 1/g²) is added
+        (docs/verification.md, 'Theorem 2 on intervals').
 
     Returns
     -------
@@ -632,21 +636,29 @@ def theorem2_rhs(
         )
         rhs = rhs + slack
         scale = scale + np.abs(slack)
+    gam = float(ctrl.gamma[agent])
     if "sigma" in opts.ghat_law:  # exact σ term of (g/γ) g̃ ĝ̇
-        sig, gam = float(ctrl.sigma[agent]), float(ctrl.gamma[agent])
+        sig = float(ctrl.sigma[agent])
         term = -(g * sig / gam) * (ghat - 1.0 / g) * (ghat - float(ctrl.ghat_ref[agent]))
+        rhs = rhs + term
+        scale = scale + np.abs(term)
+    if gdot is not None and np.any(gdot != 0.0):  # a varying health: ∂V2/∂t of the ĝ term
+        term = gdot / (2.0 * gam) * (ghat**2 - 1.0 / np.asarray(g) ** 2)
         rhs = rhs + term
         scale = scale + np.abs(term)
     return rhs, scale
 
 
-def theorem2_guaranteed(scenario: Scenario) -> tuple[bool, str]:
+def theorem2_guaranteed(scenario: Scenario, agent: int | None = None) -> tuple[bool, str]:
     """Whether eq. (38) must hold pointwise for this scenario's closed loop, and why not.
 
     Parameters
     ----------
     scenario : Scenario
         The scenario (its options, health functions and ĝ law).
+    agent : int, optional
+        0-based follower: also its own conditions (1/g_i inside the projection interval
+        over the range of g_i). Another follower's health never enters them.
     """
     o = scenario.options
     if o.ablation:
@@ -655,20 +667,44 @@ def theorem2_guaranteed(scenario: Scenario) -> tuple[bool, str]:
         return False, "feedforward off: eq. (29) as printed omits b-dot, b-ddot (section 9.2)"
     if o.derivatives != "oracle":
         return False, "filtered derivatives: their error joins the disturbance (section 6)"
-    if scenario.followers and any(fo.g.breakpoints for fo in scenario.followers):
-        return False, "time-varying health g_i(t): V2's weight g/(2 gamma) changes in time"
+    agents = range(scenario.N) if agent is None else (agent,)
     if "projection" in o.ghat_law:
         from symbolic.adaptive import BAND
 
         hi = 1.0 / scenario.controller.g_min
         band = BAND * (hi - 1.0)
-        for i, fo in enumerate(scenario.followers):
-            if not 1.0 + band <= 1.0 / fo.g.minimum <= hi - band:
-                return False, (
-                    f"1/g_{i + 1} = {1 / fo.g.minimum:.4g} outside the projection interval "
-                    f"[{1 + band:.4g}, {hi - band:.4g}]: the projection may increase dV2/dt"
-                )
+        from verify.bounds import _run_health
+
+        for i in agents:
+            g_lo, g_hi, _ = _run_health(scenario, i)  # the range of g_i over the run
+            for gi in (g_lo, g_hi):
+                if not 1.0 + band <= 1.0 / gi <= hi - band:
+                    return False, (
+                        f"1/g_{i + 1} = {1 / gi:.4g} outside the projection interval "
+                        f"[{1 + band:.4g}, {hi - band:.4g}]: the projection may increase dV2/dt"
+                    )
     return True, "exact feedforward (oracle): must hold up to round-off"
+
+
+def health_at(scenario: Scenario, agent: int, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """g_i(t) and ġ_i(t) at the samples (ġ by AD of the health expression; 0 when constant).
+
+    Parameters
+    ----------
+    scenario : Scenario
+    agent : int
+        0-based follower.
+    t : ndarray
+        (K,) times.
+    """
+    from verify.intervals import _gdot
+
+    h = scenario.followers[agent].g
+    t = np.asarray(t, float)
+    g = np.broadcast_to(np.asarray(h.expr.numpy(t), float), t.shape).copy()
+    if h.expr.is_constant():
+        return g, np.zeros_like(t)
+    return g, _gdot(h, t)
 
 
 def check_theorem2(
@@ -712,8 +748,8 @@ def check_theorem2(
         chi = agent_block(vals, "chi", i)
         th = state_block(cl, X, ("thetahat", i))
         gh = state_block(cl, X, ("ghat", i))[:, 0]
-        g = float(scenario.followers[i].g.minimum)
-        rhs, scale = theorem2_rhs(scenario, i, chi, th, gh, g)
+        g, gdot = health_at(scenario, i, t)
+        rhs, scale = theorem2_rhs(scenario, i, chi, th, gh, g, gdot)
         lhs = Vd[:, i]
         out.append(
             _make(

@@ -21,6 +21,7 @@ import pandas as pd
 from core.artifacts import OUT_ROOT
 from core.scenario import Scenario
 from verify.bounds import VerifyConfig, VerifyError, theorem1_floor, theorem1_rates
+from verify.intervals import u0_dependence
 from verify.lyapunov import check_theorem1, check_theorem2, closed_loop
 from verify.report import Verification, ablation_statement
 from verify.table import bounds_table
@@ -192,6 +193,7 @@ def verify_run(
     gains = run.gains if run.gains is not None else api.ensure_gains(sc, root)[0]
     notes = list(run.notes)
     t1, t2 = [], []
+    u0_dep = None
     if lyapunov:
         cl = run.closed_loop if run.gains is not None else None
         cl = cl or closed_loop(sc, gains)  # the symbolic loop is built once per structure
@@ -211,6 +213,7 @@ def verify_run(
             claim = "dV1/dt <= -delta~ V1 + c_phi (floor)"
             t1.append(check_theorem1(cl, t, X, fl.rate, offset=fl.c_phi, claim=claim, config=cfg))
         t2 = check_theorem2(cl, sc, t, X, config=cfg)
+        u0_dep = u0_dependence(cl, sc)
     else:
         notes.append("Lyapunov derivative checks skipped (--no-lyapunov)")
     if not run.meta.get("complete", True):
@@ -223,12 +226,18 @@ def verify_run(
         theorem2=t2,
         ablation=None if ablation is None else ablation.frame,
         config=cfg,
+        u0_dep=u0_dep,
     )
     meta = dict(run.meta)
     ws = meta.get("wall_seconds")
     if isinstance(ws, dict):
         meta["wall_seconds"] = round(float(ws.get("total", math.nan)), 2)
+    from verify.headline import run_numbers
+    from verify.table import STARTUP, gauge
+
+    numbers = run_numbers(sc, run.frame, gauge(sc, gains), cfg.tail_fraction, STARTUP)
     return Verification(
+        numbers=numbers,
         scenario=sc,
         table=table,
         gains=gains,

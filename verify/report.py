@@ -13,6 +13,7 @@ from core.artifacts import atomic_write_text
 from core.scenario import Scenario
 from verify.bounds import VerifyConfig, theorem1_floor, theorem1_rates, theorem2_constants
 from verify.lyapunov import InequalityCheck, theorem2_guaranteed
+from verify.rows import KINDS, failed_mask, held_mask
 from verify.table import (
     FIG13_LEVEL_FACTOR,
     SATURATION_NOTE,
@@ -45,6 +46,9 @@ class Verification:
     meta : dict
         Simulation metadata (method, stats) when known.
     config : VerifyConfig
+    numbers : list of verify.headline.Worst
+        The headline's three numbers (:func:`verify.headline.run_numbers`; empty when the
+        trajectory was not at hand).
     """
 
     scenario: Scenario
@@ -57,6 +61,19 @@ class Verification:
     notes: list[str] = field(default_factory=list)
     meta: dict = field(default_factory=dict)
     config: VerifyConfig = field(default_factory=VerifyConfig)
+    numbers: list = field(default_factory=list)
+
+    def headline(self, strict: bool = False) -> list[str]:
+        """The verdict, one line per follower and the three numbers (:mod:`verify.headline`).
+
+        Parameters
+        ----------
+        strict : bool
+            Also count the paper's own claims.
+        """
+        from verify.headline import headline_lines
+
+        return headline_lines(self.table, self.numbers, strict)
 
     def failed(self, strict: bool = False) -> pd.DataFrame:
         """Rows that fail ``check`` (guaranteed; plus the paper's claims when strict).
@@ -141,7 +158,7 @@ def findings(v: Verification) -> list[str]:
     if not prov.empty:
         out.append(
             f"- Theorem 2, provable variant (every term of the derivation included): "
-            f"{int(prov['holds'].sum())} of {len(prov)} rows hold, observed/bound at most "
+            f"{int(held_mask(prov).sum())} of {len(prov)} rows hold, observed/bound at most "
             f"{prov['ratio'].max():.3g}."
         )
     paper_t2 = tb[(tb["kind"] == "paper") & tb["claim"].str.startswith("T2")]
@@ -149,8 +166,8 @@ def findings(v: Verification) -> list[str]:
         worst = paper_t2["ratio"].max()
         verdict = (
             "they hold here although they do not follow as printed (docs/fidelity.md, D3)"
-            if paper_t2["holds"].all()
-            else f"{int((~paper_t2['holds']).sum())} of {len(paper_t2)} are violated"
+            if not failed_mask(paper_t2).any()
+            else f"{int(failed_mask(paper_t2).sum())} of {len(paper_t2)} are violated"
         )
         out.append(
             f"- Theorem 2's printed bounds (31): observed/bound at most {worst:.3g} on the "
@@ -283,15 +300,26 @@ def summary_section(v: Verification, strict: bool) -> list[str]:
     """
     tb = v.table
     L = ["## Summary", ""]
-    for kind in ("guaranteed", "consistency", "paper", "info"):
+    for kind in KINDS:
         sub = tb[tb["kind"] == kind]
         if sub.empty:
             continue
-        bad = int((~sub["holds"]).sum())
-        L.append(f"- **{kind}**: {len(sub)} rows, {len(sub) - bad} hold, {bad} do not.")
-    fg, fp = v.failed(False), tb[(tb["kind"] == "paper") & ~tb["holds"]]
-    verdict = "PASS" if fg.empty and (not strict or fp.empty) else "FAIL"
+        bad, good = int(failed_mask(sub).sum()), int(held_mask(sub).sum())
+        rest = len(sub) - bad - good
+        L.append(
+            f"- **{kind}**: {len(sub)} rows, {good} hold, {bad} do not"
+            + (f", {rest} not evaluated (the note says why)." if rest else ".")
+        )
+    fg, fp = v.failed(False), tb[(tb["kind"] == "paper") & failed_mask(tb)]
+    head = v.headline(strict)
+    verdict = head[0].split(":", 1)[0] if fg.empty and (not strict or fp.empty) else "FAIL"
     L += [
+        "",
+        "Coverage and the headline numbers (computed from the rows below):",
+        "",
+        "```",
+        *head,
+        "```",
         "",
         f"Verdict ({'strict' if strict else 'default'}): **{verdict}**. `guaranteed` rows follow "
         "from the theory for this reconstruction (a failure is a bug); `consistency` rows cannot "

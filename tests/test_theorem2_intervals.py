@@ -1,0 +1,184 @@
+"""Theorem 2 restarted on intervals: restart points per follower, constants per interval, and
+the operator-step reproduction (docs/verification.md, 'Theorem 2 on intervals').
+
+The reproduction: the paper scenario with u0 = cos t + 0.8 step(t − 14), unshaped. At
+t = 14 s the pinned follower's χ_1, hence V2_1, jumps with u0 (measured: V2_1 from 23.9 to
+7.9e8 at the same state); eq. (38) holds on both sides. The comparison lemma started from
+V2(0) over the whole run fails after the step (the old row); restarted from the measured
+V2_1(t_k⁺) it holds, and a trajectory whose V2_1 does not jump (a forged log) fails it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from helpers import PAPER
+
+from verify import claims as CL
+from verify.bounds import BAND, comparison_reaching_time, theorem2_constants
+from verify.intervals import (
+    Cause,
+    covered_fraction,
+    follower_pieces,
+    operator_jumps,
+    u0_dependence,
+)
+from verify.table import bounds_table, failures
+
+STEP_U0 = ["cos(t) + 0.8*step(t - 14)"]
+
+
+def _load(overrides: dict):
+    from generated import api
+
+    return api.load(PAPER, overrides)
+
+
+# ------------------------------------------------------------------------- restart points
+def test_abrupt_fault_restarts_only_its_own_follower():
+    sc = _load({"followers[2].faults": [{"type": "abrupt", "onset": 6.0, "severity": 0.4}]})
+    p2 = follower_pieces(sc, 1)
+    assert [(p.start, p.end) for p in p2] == [(0.0, 6.0), (6.0, 20.0)]
+    assert p2[1].causes == (Cause.HEALTH_JUMP,) and p2[1].constant
+    np.testing.assert_allclose([p2[0].g_lo, p2[1].g_lo], [0.95, 0.95 * 0.6], rtol=1e-12)
+    for i in (0, 2, 3, 4):  # another follower's fault enters no other derivation
+        assert [(p.start, p.end) for p in follower_pieces(sc, i)] == [(0.0, 20.0)]
+
+
+def test_ramp_is_a_varying_piece_with_its_rate():
+    sc = _load(
+        {"followers[1].faults": [{"type": "ramp", "onset": 5.0, "severity": 0.4, "duration": 2.0}]}
+    )
+    p = follower_pieces(sc, 0)
+    assert [(x.start, x.end) for x in p] == [(0.0, 5.0), (5.0, 7.0), (7.0, 20.0)]
+    assert p[1].causes == (Cause.HEALTH_KINK,) and not p[1].constant
+    np.testing.assert_allclose(p[1].gdot, 0.95 * 0.4 / 2.0, rtol=1e-9)  # slope of the ramp
+    assert p[0].constant and p[2].constant
+    np.testing.assert_allclose([p[1].g_lo, p[1].g_hi], [0.95 * 0.6, 0.95], rtol=1e-6)
+
+
+def test_intermittent_fault_switches_at_every_edge():
+    fault = {"type": "intermittent", "onset": 4.0, "severity": 0.3, "period": 2.0, "duty": 0.5}
+    sc = _load({"followers[3].faults": [fault]})
+    starts = [x.start for x in follower_pieces(sc, 2)]
+    assert starts == [0.0, *np.arange(4.0, 20.0, 1.0).tolist()]
+    assert all(x.constant for x in follower_pieces(sc, 2))
+
+
+def test_operator_jumps_are_steps_not_kinks_and_not_shaped_steps():
+    assert operator_jumps(_load({"leader.u0": STEP_U0, "leader.u0_rise": 0})) == (14.0,)
+    assert operator_jumps(_load({"leader.u0": ["0.1*abs(t - 3)"]})) == ()
+    assert operator_jumps(_load({"leader.u0": STEP_U0, "leader.u0_rise": 1.0})) == ()
+    sc = _load({"leader.u0": STEP_U0, "leader.u0_rise": 0})
+    assert [x.start for x in follower_pieces(sc, 0, u0_dep=True)] == [0.0, 14.0]
+    assert [x.start for x in follower_pieces(sc, 1, u0_dep=False)] == [0.0]
+
+
+def test_covered_fraction_of_overlapping_windows():
+    assert covered_fraction([(0, 2), (1, 3), (5, 6)], 10.0) == pytest.approx(0.4)
+    assert covered_fraction([(-1, 20)], 10.0) == 1.0 and covered_fraction([], 10.0) == 0.0
+
+
+# ------------------------------------------------------------------------- constants
+def test_a_varying_health_adds_its_rate_term_or_is_outside_the_theory(paper_scenario):
+    sc = paper_scenario
+    c0 = theorem2_constants(sc, 0, health=(0.57, 0.95, 0.0))
+    c1 = theorem2_constants(sc, 0, health=(0.57, 0.95, 0.19))
+    gam, gmin = float(sc.controller.gamma[0]), float(sc.controller.g_min)
+    hi = 1.0 / gmin + BAND * (1.0 / gmin - 1.0)
+    want = 0.19 / (2.0 * gam) * max(hi**2, 1.0 / 0.57**2)  # (ġ/(2γ)) max(ĝ², 1/g²)
+    assert c0.rate_term == 0.0 and c1.rate_term == pytest.approx(want, rel=1e-12)
+    assert c1.chi_v_var == pytest.approx(c0.chi_v_var + want, rel=1e-12)
+    # the σ term is convex in g: its value at the worse end of [0.57, 0.95]
+    sig, g0 = float(sc.controller.sigma[0]), float(sc.controller.ghat_ref[0])
+    ends = [sig * g * (1 / g - g0) ** 2 / (2 * gam) for g in (0.57, 0.95)]
+    assert c0.ghat_term == pytest.approx(max(ends), rel=1e-12)
+    sigma_only = replace(sc, options=replace(sc.options, ghat_law="sigma"))
+    c2 = theorem2_constants(sigma_only, 0, health=(0.57, 0.95, 0.19))
+    assert not c2.provable and c2.why_not.startswith("outside the theory: g_1 varies")
+
+
+# ------------------------------------------------------------------------- the reproduction
+@pytest.fixture(scope="module")
+def step_run(tmp_path_factory):
+    from generated import api
+    from verify.pipeline import Run, verify_run
+
+    root = tmp_path_factory.mktemp("out")
+    ov = {"leader.u0": STEP_U0, "leader.u0_rise": 0}
+    res = api.run(PAPER, overrides=ov, out_root=root, progress=False)
+    sc = api.load(PAPER, ov)
+    gains, _ = api.ensure_gains(sc, root)
+    v = verify_run(Run(sc, res.frame, res.trajectory.x, res.meta, root), out_root=root)
+    return sc, gains, res, v
+
+
+def test_chi_depends_on_u0_only_for_the_pinned_follower(step_run):
+    from verify.lyapunov import closed_loop
+
+    sc, gains, _, _ = step_run
+    dep = u0_dependence(closed_loop(sc, gains), sc)
+    assert dep.tolist() == (np.asarray(sc.graph.pinning) > 0).tolist() == [True] + [False] * 4
+
+
+def test_V2_jumps_with_u0_and_eq38_holds_on_both_sides(step_run):
+    from verify.lyapunov import check_theorem2, closed_loop, evaluate_p, fast_functions
+
+    sc, gains, res, _ = step_run
+    cl = closed_loop(sc, gains)
+    t = res.trajectory.t
+    k = int(np.flatnonzero(np.isclose(t, 14.0))[0])
+    tt, XX = np.array([14.0 - 1e-9, 14.0 + 1e-9]), np.vstack([res.trajectory.x[k]] * 2)
+    V, _, chi = evaluate_p(fast_functions(cl, "test-step"), "V2", tt, XX, cl.p0)
+    assert V[1, 0, 0] > 1e6 * V[0, 0, 0]  # follower 1: the same state, u0 one step higher
+    np.testing.assert_allclose(V[1, 1:, 0], V[0, 1:, 0], rtol=1e-9)  # the others: no jump
+    assert np.linalg.norm(chi[1, 0]) > 1e4 * np.linalg.norm(chi[0, 0])
+    assert all(chk.ok for chk in check_theorem2(cl, sc, tt, XX))
+
+
+def test_the_comparison_lemma_from_V2_0_over_the_whole_run_fails(step_run):
+    sc, _, res, _ = step_run
+    df = res.frame
+    c = theorem2_constants(sc, 0)
+    tc = comparison_reaching_time(c.Omega_var, c.chi_v_var, df["V2_1"].iloc[0], 0.5)
+    t = df["t"].to_numpy()
+    chi = np.linalg.norm(df[["chi1_1", "chi1_2"]].to_numpy(), axis=1)
+    assert tc < 14.0 and chi[t >= tc].max() > 1e3 * c.chi_bar_var  # the old row: 1.65e4 > 4.45
+
+
+def test_restarted_rows_hold_and_say_where_they_are_not_stated(step_run):
+    _, _, _, v = step_run
+    tb = v.table
+    assert failures(tb).empty
+    one = tb[(tb["agent"] == "1") & tb["claim_id"].isin(CL.TRACKING)]
+    held = one[one["kind"] == "guaranteed"]
+    assert len(held) == 4 and held["holds"].all() and (held["t_end"] < 14.0).all()
+    after = one[one["t_start"] >= 14.0]
+    assert len(after) == 4 and after["holds"].isna().all()
+    assert after["note"].str.contains("interval 2 of 2 .from operator step at t = 14 s.").all()
+    assert after["note"].str.contains("comparison-lemma time .* beyond the horizon").all()
+    # the others are not restarted: one interval each, guaranteed
+    others = tb[(tb["agent"] != "1") & (tb["claim_id"] == CL.T2_CHI.id)]
+    assert len(others) == 4 and (others["kind"] == "guaranteed").all() and others["holds"].all()
+
+
+def test_the_restarted_rows_fail_on_forged_trajectories(step_run):
+    sc, gains, res, _ = step_run
+    dep = np.array([True, False, False, False, False])
+    # χ_1 thirty times larger before the step: interval 1's row fails
+    df = res.frame.copy()
+    before = df["t"] < 14.0
+    df.loc[before, ["chi1_1", "chi1_2"]] *= 30.0
+    bad = failures(bounds_table(sc, df, gains=gains, u0_dep=dep))
+    assert ((bad["claim_id"] == CL.T2_CHI.id) & (bad["agent"] == "1")).any()
+    # a log whose V2_1 does not jump at the step: restarted from it, the lemma gives t_c at
+    # once and the row on [14, 20] s fails on the real χ_1
+    df = res.frame.copy()
+    k = int(np.searchsorted(df["t"].to_numpy(), 14.0, side="right"))
+    df.loc[k, "V2_1"] = float(df["V2_1"].iloc[k - 2])
+    bad = failures(bounds_table(sc, df, gains=gains, u0_dep=dep))
+    late = bad[(bad["agent"] == "1") & (bad["t_start"] >= 14.0)]
+    assert (late["claim_id"] == CL.T2_CHI.id).any() and math.isfinite(late["t_start"].min())

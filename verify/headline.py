@@ -1,0 +1,259 @@
+"""The headline of a verification: per follower what is guaranteed and what is not, and the
+three numbers a user looks at first.
+
+Everything here is computed from the bound-vs-actual table (and the trajectory for the
+three numbers), so the headline, the report and the study's rows say the same thing:
+
+- per follower: guaranteed rows held / total, the share of the horizon its guaranteed
+  tracking rows (Theorem 2's provable bound and Definition 1's derived bound,
+  :data:`verify.claims.TRACKING`) cover, and every interval they do not cover with why;
+- for the run: the coverage over followers, the worst formation deviation
+  ‖p_i − h_i y0 − b_i‖ and the worst tracking error ‖e_ti‖ on the tail window (after the
+  transient), and the peak ‖u_i‖ after t = 1 s, each with its follower and time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from verify import claims as CL
+from verify import signals as S
+from verify.intervals import covered_fraction
+from verify.rows import failed_mask, held_mask
+
+
+@dataclass(frozen=True)
+class FollowerCoverage:
+    """What the table guarantees for one follower.
+
+    Attributes
+    ----------
+    agent : int
+        1-based follower.
+    held, total : int
+        Guaranteed rows that hold, and all guaranteed rows (evaluated ones).
+    tracking : int
+        Guaranteed tracking rows (:data:`verify.claims.TRACKING`).
+    covered : float
+        Share of the horizon inside the windows of its guaranteed tracking rows.
+    gaps : tuple of str
+        ``"[a, b] s: why"`` for each interval no guaranteed tracking row covers.
+    """
+
+    agent: int
+    held: int
+    total: int
+    tracking: int
+    covered: float
+    gaps: tuple[str, ...] = field(default_factory=tuple)
+
+
+def _per_agent(table: pd.DataFrame, agent: int) -> pd.DataFrame:
+    return table[table["agent"].astype(str) == str(agent)]
+
+
+def _gaps(
+    rows: pd.DataFrame, covered: list[tuple[float, float]], t0: float, t1: float
+) -> list[str]:
+    """Uncovered parts of [t0, t1], each with the reason of a row stated on it."""
+    out, at = [], t0
+    pieces = sorted(covered)
+    for a, b in [*pieces, (t1, t1)]:
+        if a > at + 1e-9:
+            out.append(f"[{at:.4g}, {a:.4g}] s: {_why(rows, at, a)}")
+        at = max(at, b)
+    return out
+
+
+def _why(rows: pd.DataFrame, a: float, b: float) -> str:
+    """Why no guaranteed tracking row covers [a, b]: the note of a Theorem 2 row stated there
+    that is not guaranteed, else the transient before the comparison-lemma time."""
+    chi = rows[rows["claim_id"] == CL.T2_CHI.id]
+    if chi.empty:
+        return "no provable variant for this ghat law (options.ghat_law)"
+    for r in chi.itertuples(index=False):
+        if r.kind == CL.Kind.GUARANTEED.value or not (r.t_start <= b and r.t_end >= a):
+            continue
+        note = str(r.note)
+        for cut in ("not evaluated: ", "not guaranteed: ", "invalidated"):
+            if cut in note:
+                return note.split(cut, 1)[1] if cut != "invalidated" else note
+        return f"{r.kind} row: {note}"
+    return "transient: before the comparison-lemma time"
+
+
+def coverage(table: pd.DataFrame, horizon: tuple[float, float]) -> list[FollowerCoverage]:
+    """Per follower, what the guaranteed rows cover (module docstring).
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+    horizon : (float, float)
+        First and last output time.
+    """
+    t0, t1 = horizon
+    agents = sorted({int(a) for a in table["agent"].astype(str) if a.isdigit()})
+    out = []
+    for a in agents:
+        rows = _per_agent(table, a)
+        g = rows[rows["kind"] == CL.Kind.GUARANTEED.value]
+        track = g[g["claim_id"].isin(CL.TRACKING)]
+        wins = [
+            (float(x), float(y))
+            for x, y in zip(track["t_start"], track["t_end"], strict=True)
+            if math.isfinite(x) and math.isfinite(y)
+        ]
+        span = t1 - t0
+        cov = covered_fraction([(x - t0, y - t0) for x, y in wins], span) if span > 0 else 0.0
+        out.append(
+            FollowerCoverage(
+                agent=a,
+                held=int(held_mask(g).sum()),
+                total=len(g),
+                tracking=len(track),
+                covered=cov,
+                gaps=tuple(_gaps(rows, wins, t0, t1)),
+            )
+        )
+    return out
+
+
+@dataclass(frozen=True)
+class Worst:
+    """A largest value with where and when it occurs."""
+
+    what: str
+    value: float
+    agent: int
+    t: float
+    window: tuple[float, float]
+
+    def text(self) -> str:
+        """``'worst tracking error |e_ti| on [10, 20] s: 0.0041 (follower 2, t = 10 s)'``."""
+        a, b = self.window
+        if not math.isfinite(self.value):
+            return f"{self.what} on [{a:.4g}, {b:.4g}] s: not available"
+        return (
+            f"{self.what} on [{a:.4g}, {b:.4g}] s: {self.value:.4g} "
+            f"(follower {self.agent}, t = {self.t:.4g} s)"
+        )
+
+
+def _worst(what: str, t: np.ndarray, mask: np.ndarray, per_agent: list[np.ndarray]) -> Worst:
+    best = Worst(what, math.nan, 0, math.nan, (float(t[mask][0]), float(t[-1])))
+    for i, x in enumerate(per_agent):
+        x = np.where(mask & np.isfinite(x), x, -np.inf)
+        k = int(np.argmax(x))
+        if np.isfinite(x[k]) and not (x[k] <= best.value):
+            best = Worst(what, float(x[k]), i + 1, float(t[k]), best.window)
+    return best
+
+
+def run_numbers(
+    scenario, df: S.Frame, h: np.ndarray, tail_fraction: float, startup: float
+) -> list[Worst]:  # noqa: ANN001
+    """The three numbers: worst formation deviation and tracking error on the tail, peak ‖u_i‖
+    after ``startup``.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its leader's C0.
+    df : DataFrame
+        The trajectory.
+    h : ndarray
+        The gauge h_i.
+    tail_fraction : float
+        The tail window (after the transient).
+    startup : float
+        Peak effort is taken from this time on (s).
+    """
+    df = S.Columns.of(df)
+    dm = S.dims(df)
+    t = S.column(df, "t")
+    tail = S.tail_mask(t, tail_fraction)
+    y0 = S.leader_output(df, scenario.leader.C0)
+    dev, et, un = [], [], []
+    for i in range(dm.N):
+        p, b = S.block(df, "p", i + 1, dm.n), S.block(df, "b", i + 1, dm.n)
+        dev.append(np.linalg.norm(p - h[i] * y0 - b, axis=1))
+        et.append(S.agent_norm(df, "et", i + 1, dm.n))
+        un.append(
+            S.agent_norm(df, "u", i + 1, dm.n)
+            if S.has(df, f"u{i + 1}_1")
+            else np.full(len(t), np.nan)
+        )
+    late = t >= startup
+    if not late.any():
+        late = np.ones_like(t, bool)
+    return [
+        _worst("worst formation deviation |p_i - h_i y0 - b_i|", t, tail, dev),
+        _worst("worst tracking error |e_ti|", t, tail, et),
+        _worst(f"peak |u_i| after t = {startup:g} s", t, late, un),
+    ]
+
+
+def verdict(table: pd.DataFrame, cov: list[FollowerCoverage], strict: bool = False) -> str:
+    """One line: PASS only with a guaranteed tracking row for every follower, else says what
+    is missing; FAIL with the number of failed rows.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+    cov : list of FollowerCoverage
+        :func:`coverage` of the table.
+    strict : bool
+        Also count the paper's claims.
+    """
+    kinds = [*CL.BUG_KINDS, CL.Kind.PAPER.value] if strict else list(CL.BUG_KINDS)
+    bad = int((table["kind"].isin(kinds) & failed_mask(table)).sum())
+    g = table[table["kind"] == CL.Kind.GUARANTEED.value]
+    held, total = int(held_mask(g).sum()), len(g)
+    if bad:
+        return f"FAIL: {bad} check(s) failed ({held} of {total} guaranteed rows hold)"
+    bare = [c.agent for c in cov if c.tracking == 0]
+    mean = float(np.mean([c.covered for c in cov])) if cov else 0.0
+    if bare:
+        who = ", ".join(map(str, bare))
+        return (
+            f"PASS WITH GAPS: all {total} guaranteed rows hold, but follower(s) {who} have no "
+            f"guaranteed tracking row; tracking rows cover {100 * mean:.0f}% of follower-time"
+        )
+    return (
+        f"PASS: all {total} guaranteed rows hold; every follower has guaranteed tracking rows, "
+        f"covering {100 * mean:.0f}% of follower-time"
+    )
+
+
+def headline_lines(table: pd.DataFrame, numbers: list[Worst], strict: bool = False) -> list[str]:
+    """The verdict, one line per follower, and the three numbers.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+    numbers : list of Worst
+        :func:`run_numbers`.
+    strict : bool
+        Also count the paper's claims.
+    """
+    t0 = float(np.nanmin(table["t_start"])) if len(table) else 0.0
+    t1 = float(np.nanmax(table["t_end"])) if len(table) else 0.0
+    cov = coverage(table, (t0, t1))
+    lines = [verdict(table, cov, strict)]
+    for c in cov:
+        line = (
+            f"  follower {c.agent}: {c.held} of {c.total} guaranteed rows hold; tracking rows "
+            f"({c.tracking}) cover {100 * c.covered:.0f}% of [{t0:g}, {t1:g}] s"
+        )
+        if c.gaps:
+            line += "; not covered: " + "; ".join(c.gaps)
+        lines.append(line)
+    lines += [f"  {w.text()}" for w in numbers]
+    return lines
