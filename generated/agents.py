@@ -202,7 +202,11 @@ class Topology:
     cpl : ndarray
         N × 2: (l̄_ii, a_i0 h_i).
     order : ndarray
+        Sorted by depth on an acyclic topology (each follower after all it hears).
     acyclic : bool
+    waves : ndarray
+        Pointers into ``order``: wave w (followers of depth w) is
+        ``order[waves[w]:waves[w+1]]``; one wave per follower on a cycle.
     """
 
     t_start: float
@@ -212,6 +216,35 @@ class Topology:
     cpl: np.ndarray
     order: np.ndarray
     acyclic: bool
+    waves: np.ndarray
+
+
+def depth_waves(
+    ptr: np.ndarray, idx: np.ndarray, order: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``order`` regrouped by depth (1 + the largest depth of the followers heard).
+
+    Parameters
+    ----------
+    ptr, idx : ndarray
+        CSR of an acyclic topology.
+    order : ndarray
+        A topological order of it.
+
+    Returns
+    -------
+    (order, waves) : (ndarray, ndarray)
+        The followers sorted by (depth, position in ``order``) and the wave pointers.
+    """
+    depth = np.zeros(len(order), dtype=int)
+    for i in order:
+        js = idx[ptr[i] : ptr[i + 1]]
+        depth[i] = 1 + depth[js].max() if len(js) else 0
+    pos = np.empty(len(order), dtype=int)
+    pos[order] = np.arange(len(order))
+    new = np.asarray(sorted(order, key=lambda i: (depth[i], pos[i])), dtype=np.int32)
+    counts = np.bincount(depth, minlength=depth.max() + 1)
+    return new, np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
 
 
 def topology(t_start: float, adjacency: np.ndarray, pinning: np.ndarray, h: np.ndarray) -> Topology:
@@ -237,8 +270,12 @@ def topology(t_start: float, adjacency: np.ndarray, pinning: np.ndarray, h: np.n
         ptr.append(len(idx))
     p, q = np.asarray(ptr, np.int32), np.asarray(idx, np.int32)
     order, acyclic = topological_order(p, q)
+    if acyclic:
+        order, waves = depth_waves(p, q, order)
+    else:
+        waves = np.arange(N + 1, dtype=np.int32)
     cpl = np.column_stack([np.diag(L_B), np.asarray(pinning, float) * h]).astype(float)
-    return Topology(float(t_start), p, q, np.asarray(w, float), cpl, order, acyclic)
+    return Topology(float(t_start), p, q, np.asarray(w, float), cpl, order, acyclic, waves)
 
 
 @dataclass(frozen=True)
@@ -363,6 +400,8 @@ class Problem(ctypes.Structure):
         ("cpl", _DP),
         ("order", _IP),
         ("acyclic", _IP),
+        ("nwaves", _IP),
+        ("wave_ptr", _IP),
         ("solver", ctypes.c_int),
         ("nthreads", ctypes.c_int),
         ("krylov", ctypes.c_int),
@@ -464,6 +503,10 @@ def _c_problem(
         "cpl": np.ascontiguousarray(np.concatenate([t.cpl.ravel() for t in tops]), float),
         "order": np.ascontiguousarray(np.concatenate([t.order for t in tops]), np.int32),
         "acyclic": np.asarray([int(t.acyclic) for t in tops], np.int32),
+        "nwaves": np.asarray([len(t.waves) - 1 if t.acyclic else 0 for t in tops], np.int32),
+        "wave_ptr": np.concatenate(
+            [np.pad(t.waves, (0, N + 1 - len(t.waves))) for t in tops]
+        ).astype(np.int32),
     }
     kern = (Kernels * len(libs))(*[_kernels(lib) for lib in libs])
     c = Problem(

@@ -17,7 +17,9 @@
  * depends only on its own state and the levels < l of its neighbour sum (eta_i' on psi_i,
  * eta_i'' on psi_i'), so pass l evaluates level l for every agent from the sums of pass
  * l - 1, whatever the graph: a cycle is no special case. The last pass evaluates the
- * agents' rates from the complete sums.
+ * agents' rates from the complete sums. On an acyclic topology one pass suffices: along
+ * the depth levels ("waves") of a topological order, every agent's sums are complete
+ * from the waves before it.
  *
  * Newton systems (I + c J) x = b (c = -gamma): with the leader solved first, agent i's
  * rows are D_i x_i = b_i - c (A_s0 x_0 + B_s dnb_i), D_i = I + c A_ss, and its
@@ -26,8 +28,9 @@
  * r_i = C_0 x_0 + C_s D_i^{-1} (b_i - c A_s0 x_0). The jets system
  *   dj_i - G_i sum_j w_ij dj_j = r_i         (3n unknowns per agent)
  * is solved by
- *   HITL_AG_FORWARD  block forward substitution along a topological order (exact on an
- *                    acyclic topology, one sweep),
+ *   HITL_AG_FORWARD  block forward substitution along a topological order, through the
+ *                    states themselves (acyclic topologies only: x_i from the dj of the
+ *                    agents it hears, then dj_i; only the D_i are factorised),
  *   HITL_AG_DENSE    a dense LU with partial pivoting of the whole jets system (exact on
  *                    any graph; (3nN)^2 memory, for small N),
  *   HITL_AG_GMRES    restarted GMRES on the jets system, right-preconditioned by the
@@ -73,6 +76,8 @@ typedef struct {
   const double *cpl;    /* ntop x N x 2: (l_ii, a_i0 h_i) */
   const int *order;     /* ntop x N: topological order (cycles broken) */
   const int *acyclic;   /* ntop flags */
+  const int *nwaves;    /* ntop: depth levels of an acyclic topology (0 on a cycle) */
+  const int *wave_ptr;  /* ntop x (N + 1): wave w is order[wave_ptr[w] .. wave_ptr[w+1]) */
   int solver;           /* HITL_AG_* */
   int nthreads;         /* <= 0: OpenMP's default */
   int krylov;           /* GMRES restart length */
@@ -229,6 +234,46 @@ static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int top, int i, const do
 
 /* The passes at (t, y): jets and neighbour sums of every level, then ydot (if not NULL)
    and/or the Jacobian blocks K (if not NULL, N x k x k). Returns 0 or -1. */
+/* On an acyclic topology: one pass along the waves (depth levels) of its order, each
+   agent's neighbour sums complete from the waves before it (the jets come out of the
+   rate and Jacobian kernels themselves). */
+static int hitl_ag_wave_pass(hitl_ag *d, int top, double t, const double *y, double *ydot,
+                             double *K) {
+  const hitl_agents_problem *p = d->p;
+  const int *ord = p->order + (size_t)top * d->N;
+  const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
+  int n3 = d->n3, fail = 0;
+  for (int wv = 0; wv < p->nwaves[top]; ++wv) {
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8) reduction(| : fail)
+    for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
+#ifdef _OPENMP
+      hitl_agwork *wk = d->wk + omp_get_thread_num();
+#else
+      hitl_agwork *wk = d->wk;
+#endif
+      int i = ord[oi];
+      casadi_real ti = t;
+      const hitl_agent_kernels *kn = p->kern + p->model[i];
+      hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)n3 * i, 0, 3);
+      hitl_ag_inputs(d, wk, top, i, y, &ti);
+      if (ydot) {
+        wk->res[0] = wk->xbdot;
+        wk->res[1] = d->jets + (size_t)n3 * i;
+        if (kn->rhs(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
+        if (i == 0) memcpy(ydot, wk->xbdot, sizeof(double) * (size_t)d->m);
+        memcpy(ydot + d->m + (size_t)d->na * i, wk->xbdot + d->m,
+               sizeof(double) * (size_t)d->na);
+      } else {
+        wk->res[0] = d->jets + (size_t)n3 * i;
+        wk->res[1] = K + (size_t)d->k * d->k * i;
+        if (kn->jac(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
+      }
+    }
+    if (fail) return -1;
+  }
+  return 0;
+}
+
 static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, double *K,
                         int *top_out) {
   const hitl_agents_problem *p = d->p;
@@ -240,6 +285,8 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
   c->arg[0] = &tt;
   c->res[0] = d->fvals;
   if (p->faults(c->arg, c->res, c->iw, c->w, 0)) return -1;
+  if (p->nwaves[top] > 0 && (ydot == NULL || K == NULL))
+    return hitl_ag_wave_pass(d, top, t, y, ydot, K);
   memset(d->nb, 0, sizeof(double) * (size_t)N * n3);
   for (int lev = 0; lev < 3; ++lev) {
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
@@ -480,6 +527,43 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
   return sqrt(hitl_dot(r, r, n)) <= tol ? 0 : -1;
 }
 
+/* Block forward substitution through the states along the waves of an acyclic
+   topology: D_i x_i = b_i - c (A_s0 x_0 + B_s dnb_i), then dj_i = C_0 x_0 + C_s x_i +
+   E dnb_i (x holds b on entry, the leader solved) */
+static int hitl_ag_forward_x(hitl_ag *d, const hitl_agmat *M, double *x) {
+  const hitl_agents_problem *p = d->p;
+  int m = d->m, na = d->na, k = d->k, n3 = d->n3, top = d->ls_top;
+  const int *ord = p->order + (size_t)top * d->N;
+  const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
+  double c = M->c;
+  for (int wv = 0; wv < p->nwaves[top]; ++wv) {
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8)
+    for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
+      int i = ord[oi];
+      double s[64];
+      const double *K = M->K + (size_t)k * k * i;
+      double *xi = x + m + (size_t)na * i, *dj = d->dj + (size_t)n3 * i;
+      hitl_ag_gather(d, top, i, d->dj, s, 0, 3);
+      for (int row = 0; row < na; ++row) {
+        double acc = 0.0;
+        for (int col = 0; col < m; ++col) acc += KAT(K, k, m + row, col) * x[col];
+        for (int col = 0; col < n3; ++col) acc += KAT(K, k, m + row, m + na + col) * s[col];
+        xi[row] -= c * acc;
+      }
+      hitl_lu_solve(d->lu + (size_t)na * na * i, na, d->piv + (size_t)na * i, xi);
+      for (int row = 0; row < n3; ++row) {
+        int r = m + na + row;
+        double acc = 0.0;
+        for (int col = 0; col < m; ++col) acc += KAT(K, k, r, col) * x[col];
+        for (int col = 0; col < na; ++col) acc += KAT(K, k, r, m + col) * xi[col];
+        for (int col = 0; col < n3; ++col) acc += KAT(K, k, r, m + na + col) * s[col];
+        dj[row] = acc;
+      }
+    }
+  }
+  return 0;
+}
+
 /* Set-up of M = I + c J: the leader's and every agent's D_i factorised, F_i = D_i^{-1}
    B_s and G_i = E - c C_s F_i formed; HITL_AG_DENSE also factorises the jets system. */
 static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
@@ -511,6 +595,7 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
       fail |= 1;
       continue;
     }
+    if (d->ls_mode == HITL_AG_FORWARD) continue; /* the solve substitutes through x */
     for (int q = 0; q < n3; ++q) { /* F = D^{-1} B_s */
       double *Fq = F + (size_t)na * q;
       for (int row = 0; row < na; ++row) Fq[row] = KAT(K, k, m + row, m + na + q);
@@ -563,6 +648,7 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
   (void)tol;
   if (x != b) memcpy(x, b, sizeof(double) * (size_t)d->base.nx);
   hitl_lu_solve(d->lu + (size_t)na * na * N, m, d->piv + (size_t)na * N, x); /* leader */
+  if (d->ls_mode == HITL_AG_FORWARD) return hitl_ag_forward_x(d, M, x);
   /* y_i = D_i^{-1} (b_i - c A_s0 x_0), r_i = C_0 x_0 + C_s y_i */
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
   for (int i = 0; i < N; ++i) {
@@ -582,9 +668,7 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
       ri[row] = acc;
     }
   }
-  if (d->ls_mode == HITL_AG_FORWARD) {
-    hitl_ag_forward(d, top, d->rj, d->dj, (int *)(d->z + (size_t)N * n3));
-  } else if (d->ls_mode == HITL_AG_DENSE) {
+  if (d->ls_mode == HITL_AG_DENSE) {
     memcpy(d->dj, d->rj, sizeof(double) * (size_t)N * n3);
     hitl_lu_solve(d->S, N * n3, d->Spiv, d->dj);
   } else {
