@@ -182,3 +182,44 @@ def test_the_restarted_rows_fail_on_forged_trajectories(step_run):
     bad = failures(bounds_table(sc, df, gains=gains, u0_dep=dep))
     late = bad[(bad["agent"] == "1") & (bad["t_start"] >= 14.0)]
     assert (late["claim_id"] == CL.T2_CHI.id).any() and math.isfinite(late["t_start"].min())
+
+
+# ------------------------------------------------------------------------- every row exists
+def _frame_for(sc):
+    """The synthetic trajectory on the scenario's horizon, widened to its leader's size m."""
+    from verify.synthetic import synthetic_trajectory
+
+    df = synthetic_trajectory(N=sc.N, horizon=sc.integration.horizon)
+    extra = {}
+    for k in range(3, sc.m + 1):
+        extra[f"eta0_{k}"] = 0.0
+        for i in range(1, sc.N + 1):
+            extra[f"eta{i}_{k}"] = df[f"eta0_{k - 2}"] * 0.0
+            extra[f"eeta{i}_{k}"] = 0.0
+    return df.assign(**extra)
+
+
+@pytest.mark.parametrize("path", sorted((PAPER.parent).glob("*.toml")), ids=lambda p: p.name)
+def test_every_row_a_derivation_gives_exists_or_says_why(path):
+    from core.scenario import load_scenario
+
+    sc = load_scenario(path)
+    tb = bounds_table(sc, _frame_for(sc))
+    for i in range(sc.N):
+        rows = tb[tb["agent"] == str(i + 1)]
+        count = rows["claim_id"].value_counts()
+        k = len(follower_pieces(sc, i))  # one set of provable rows per interval
+        want = {
+            CL.T2_CHI_PAPER.id: 1,
+            CL.T2_E_PAPER.id: sc.n,
+            CL.LEMMA2_PAPER.id: sc.n,
+            CL.LEMMA1_PAPER.id: 1,
+            CL.DEF1_PAPER.id: 1,
+            CL.T2_CHI.id: k,
+            CL.T2_E.id: sc.n * k,
+            CL.DEF1_DERIVED.id: k,
+        }
+        assert {c: int(count.get(c, 0)) for c in want} == want, (path.name, i + 1)
+    empty = tb[tb["holds"].isna()]
+    assert (empty["kind"] == "info").all()
+    assert empty["note"].str.match(r"not evaluated: \S").all()
