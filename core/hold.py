@@ -60,15 +60,17 @@ def shaped_hold(ts: np.ndarray, vs: np.ndarray, rise: float, t: Any) -> tuple[An
     return u, ud
 
 
-def shaped_breakpoints(ts: np.ndarray, rise: float) -> list[float]:
-    """Where a shaped held trace's curvature jumps: every row and every row + ``rise``.
+def shaped_breakpoints(trace: np.ndarray, rise: float) -> list[float]:
+    """Where a shaped held trace restarts the integrator: every row (a held trace's rows
+    are its breakpoints), and the end t_j + r of every ramp (where its curvature jumps).
 
     Parameters
     ----------
-    ts : ndarray
-        Row times.
+    trace : ndarray, shape (K, 1 + p)
+        The trace: times, then one column per input.
     rise : float
         Rise time r > 0.
     """
-    ts = [float(t) for t in np.asarray(ts, dtype=float)]
-    return ts + [t + rise for t in ts]
+    tr = np.asarray(trace, dtype=float)
+    ends = {float(t) + rise for k in range(1, tr.shape[1]) for t in jumps(tr[:, 0], tr[:, k])[0]}
+    return [float(t) for t in tr[:, 0]] + sorted(ends)
