@@ -9,8 +9,10 @@ Exit status 2 with one line on stderr on any toolkit error.
 from __future__ import annotations
 
 import ipaddress
+import math
 import sys
 
+from console.engine import CONSOLE_RISE
 from console.server import FPS_RANGE, is_loopback
 from core.errors import CliParser, UsageError, run_cli
 
@@ -34,6 +36,13 @@ def _parser() -> CliParser:
     s.add_argument("--fps", type=float, default=30.0, help="frames per second to pages (20-60)")
     s.add_argument("--bias-max", type=float, default=5.0, help="largest bias component")
     s.add_argument("--out", default=None, help="output root for gains and records (default out/)")
+    s.add_argument(
+        "--rise",
+        type=float,
+        default=None,
+        help="seconds over which each change of u0 ramps in (default: twice the scenarios' "
+        "default rise, docs/console.md)",
+    )
     return ap
 
 
@@ -52,6 +61,9 @@ def main(argv: list[str]) -> int:
     check_host(args.host, allow_remote)  # before the (slow) build
     if not FPS_RANGE[0] <= args.fps <= FPS_RANGE[1]:
         raise UsageError(f"--fps: {args.fps:g} (expected {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g})")
+    rise = CONSOLE_RISE if args.rise is None else args.rise
+    if not (math.isfinite(rise) and rise > 0):
+        raise UsageError(f"--rise: {rise:g} (expected a rise time in seconds > 0)")
     con = open_console(
         args.scenario,
         out_root=args.out,
@@ -59,6 +71,7 @@ def main(argv: list[str]) -> int:
         fps=args.fps,
         allow_remote=allow_remote,
         hosts=_hosts(args.host, args.allow_remote or []),
+        rise=rise,
     )
     serve(con, host=args.host, port=args.port)
     return 0

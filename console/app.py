@@ -7,12 +7,13 @@ on a port of their own.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from console.engine import LiveLoop
+from console.engine import CONSOLE_RISE, LiveLoop
 from console.record import Recorder
 from console.scenario import BIAS_MAX, console_scenario, console_table
 from console.server import MAX_FRAME_BYTES, Hub, create_app, is_loopback
@@ -40,6 +41,7 @@ def open_console(
     fps: float = 30.0,
     allow_remote: bool = False,
     hosts: Sequence[str] = (),
+    rise: float = CONSOLE_RISE,
 ) -> Console:
     """Build everything a console needs for the scenario file at ``path``.
 
@@ -57,6 +59,8 @@ def open_console(
         Accept non-loopback peers.
     hosts : sequence of str
         Host names a request may name besides the loopback ones (``--allow-remote HOST``).
+    rise : float
+        Rise time (s) of the shaped changes of u0 (``--rise``; > 0).
 
     Raises
     ------
@@ -65,12 +69,14 @@ def open_console(
     """
     from generated import api
 
+    if not (math.isfinite(rise) and rise > 0):
+        raise UsageError(f"--rise: {rise:g} (expected a rise time in seconds > 0)")
     table = console_table(path, bias_max)
     sc = console_scenario(path, table)
     root = Path(out_root or OUT_ROOT)
     gains, _ = api.ensure_gains(sc, root)
     built = api.build(sc, gains)
-    loop = LiveLoop(sc, gains, built, bias_max)
+    loop = LiveLoop(sc, gains, built, bias_max, rise=rise)
     out = root / sc.name
     session = Session(loop, recorder=Recorder(out, table, loop))
     hub = Hub(session, loop.limits, fps=fps, allow_remote=allow_remote, hosts=hosts, title=sc.name)

@@ -4,17 +4,38 @@
 and added bias, the cut links), what the loop currently integrates with, the
 simulated clock and the record of every change with its time. A change asked for
 between two integrator calls takes effect at the *end* of the next call, a multiple
-of the quantum ``h`` (one frame of latency): inside that call the new value enters
-through a step at its last time, ``a + (b − a)·step(t − t_end)``, exactly as the
-replay's held trace, health table and bias faults (right-continuous steps) bring it
-in, so the integrator evaluates the same right-hand side at every point in both runs;
-the next call starts there (a restart, as at a breakpoint of the replay).
+of the quantum ``h`` (one frame of latency), and the next call starts there: every
+change is a restart point of the integrator (as at a breakpoint of the replay).
+
+**u0 is shaped.** A change of the operator's command from u to u' at time c is not a
+jump: it enters as the C¹ ramp (u' − u)·S((t − c)/r), S the smoothstep 3x² − 2x³ of
+``leader.u0_rise`` (core/shaping.py) and r the rise time
+(:data:`CONSOLE_RISE`, twice :data:`core.shaping.DEFAULT_RISE`: a console's change can be a
+reversal of 2α) unless the console is given another. Ramps that
+overlap add up; the command is then a convex blend of the values held
+(core/hold.py), so ‖u0‖ ≤ α holds for every command the protocol accepts. At most
+:data:`RAMP_SLOTS` ramps run at once (the compiled loop has that many); a change
+asked for while all run waits for the oldest to end. The end of a ramp (c + r, where
+its curvature jumps) is a breakpoint of the call that crosses it.
+
+Health, bias and links enter as steps: at the end of the call, through
+``a + (b − a)·step(t − t_end)``, exactly as the replay's health table, bias faults
+and graph switches (right-continuous steps) bring them in.
+
+**Failures.** When the integrator stops inside a call, the loop restarts it from the
+last state reached with a smaller first step (:meth:`LoopBase.integrate`'s
+``attempt``), up to :data:`MAX_ATTEMPTS` times; each failure is an :class:`Event`
+(the session's log, the record's ``events.csv``, the page). If every attempt fails the
+loop is *held* at the last good state (``failure`` says why); ``resume`` tries again
+from there and :meth:`LoopBase.reset` goes back to t = 0. Nothing is ever retried in
+a loop without the clock advancing or the loop being held.
 
 :class:`LiveLoop` integrates the compiled closed loop, whose numbers are a runtime
-vector ``p`` (``symbolic.parameters``): the console scenario writes u0_k and g_i as
+vector ``p`` (``symbolic.parameters``): the console scenario writes u0_k as
+``a + Σ_j d_j*smoothstep((t - c_j)/r_j)`` (:data:`RAMP_SLOTS` terms), g_i as
 ``a + d*step(t - c)`` and each f_ir as ``(f_ir) + a + d*step(t - c)``, and the console
-sets their literals (a, d, c); a link's weight is in ``graph`` (it switches between
-two calls). Nothing is regenerated or recompiled while the console runs.
+sets their literals; a link's weight is in ``graph`` (it switches between two calls).
+Nothing is regenerated or recompiled while the console runs.
 """
 
 from __future__ import annotations
@@ -27,6 +48,20 @@ import numpy as np
 
 from console.protocol import Limits
 from core.errors import BuildError
+from core.shaping import DEFAULT_RISE
+
+#: rise time (s) of the console's shaped changes of u0: twice the scenarios' default. A
+#: scenario's step changes u0 by at most α (‖u0‖ ≤ α on both sides of it); a console's
+#: change can be a reversal, up to 2α. Smoothstep's largest slope is 1.5·Δ/r, so a change
+#: of 2α over 2·DEFAULT_RISE is no steeper than a step of α over DEFAULT_RISE, the slope the
+#: scenarios' default was chosen for (docs/console.md, 'Shaped commands')
+CONSOLE_RISE = 2.0 * DEFAULT_RISE
+#: ramps of u0 that may run at once (terms of the console scenario's u0 expressions)
+RAMP_SLOTS = 12
+#: integrator attempts per call before the loop is held (the first one and the restarts)
+MAX_ATTEMPTS = 4
+#: first step (s) of the first restart after a failure; each further restart takes 1/100 of it
+FIRST_STEP = 1e-6
 
 
 @dataclass(frozen=True)
@@ -53,6 +88,61 @@ class Change:
     follower: int | None = None
     neighbour: int | None = None
     values: tuple[float, ...] = ()
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something the integrator did that the operator is told about.
+
+    Attributes
+    ----------
+    t : float
+        Simulated time it happened at (the last good state's).
+    kind : str
+        ``failure`` (an attempt stopped; the loop restarts), ``recovered`` (a restart
+        reached the end of the call), ``held`` (every attempt failed) or ``resumed``.
+    text : str
+        One line: the integrator's reason, or what was done.
+    """
+
+    t: float
+    kind: str
+    text: str
+
+
+@dataclass(frozen=True)
+class Ramp:
+    """One shaped change of u0: ``d · S((t − c)/r)``.
+
+    Attributes
+    ----------
+    c : float
+        Its start (the time the change landed).
+    d : ndarray, shape (p,)
+        The change.
+    r : float
+        Its rise time (s).
+    """
+
+    c: float
+    d: np.ndarray
+    r: float
+
+    @property
+    def end(self) -> float:
+        """Where it reaches its full size (its curvature jumps)."""
+        return self.c + self.r
+
+
+def smoothstep(x: np.ndarray | float) -> np.ndarray:
+    """3x² − 2x³ on [0, 1], 0 below, 1 above (core.expressions' ``smoothstep``).
+
+    Parameters
+    ----------
+    x : float or ndarray
+    """
+    x = np.clip(np.asarray(x, dtype=float), 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
 
 
 @dataclass
@@ -106,8 +196,17 @@ class LoopBase:
         The state at t = 0.
     """
 
-    def __init__(self, limits: Limits, quantum: float, nominal: Settings, x0: np.ndarray) -> None:
-        self.limits, self.quantum = limits, float(quantum)
+    def __init__(
+        self,
+        limits: Limits,
+        quantum: float,
+        nominal: Settings,
+        x0: np.ndarray,
+        rise: float = CONSOLE_RISE,
+    ) -> None:
+        if not (math.isfinite(rise) and rise > 0):
+            raise BuildError(f"--rise: {rise:g} (expected a rise time in seconds > 0)")
+        self.limits, self.quantum, self.rise = limits, float(quantum), float(rise)
         self.nominal, self.x0 = nominal, np.asarray(x0, dtype=float)
         self.switch_at: float | None = None  # end time of the call that brings in changes
         self.reset()
@@ -121,9 +220,40 @@ class LoopBase:
         self.target = self.nominal.copy()  # what the operator asked for
         self.changes: list[Change] = []
         self.restarts: list[float] = []  # times an integrator call started (after t = 0)
-        self.failure = ""
+        self.u0_base = self.nominal.u0.copy()  # u0 with every finished ramp added
+        self.ramps: list[Ramp] = []  # running ramps, oldest first
+        self.events: list[Event] = []
+        self.failure = ""  # non-empty: the loop is held (every attempt failed), and why
         self.steps = 0
         self.parameters_changed()
+
+    def resume(self) -> None:
+        """Release a held loop: the next call tries again from the last good state."""
+        if self.failure:
+            self.events.append(Event(self.t, "resumed", "restart from the last good state"))
+            self.failure = ""
+
+    # ---------------------------------------------------------------- u0
+    def u0_at(self, t: float | np.ndarray) -> np.ndarray:
+        """The shaped command at time(s) ``t`` >= the current call's start.
+
+        Parameters
+        ----------
+        t : float or ndarray
+            Time(s); shape (p,) for a scalar, (len(t), p) for an array.
+        """
+        t = np.asarray(t, dtype=float)
+        u = np.broadcast_to(self.u0_base, (*t.shape, self.u0_base.size)).copy()
+        for rp in self.ramps:
+            u = u + smoothstep((t - rp.c) / rp.r)[..., None] * rp.d
+        return u
+
+    def _fold_ramps(self) -> None:
+        """Add the ramps that ended by now to the base command (they are constant on)."""
+        done = [rp for rp in self.ramps if rp.end <= self.t]
+        for rp in done:
+            self.u0_base = self.u0_base + rp.d
+        self.ramps = [rp for rp in self.ramps if rp.end > self.t]
 
     @property
     def t(self) -> float:
@@ -203,7 +333,7 @@ class LoopBase:
         """
         old, new = self.settings, self.target
         out = []
-        if np.any(old.u0 != new.u0):
+        if np.any(old.u0 != new.u0) and len(self.ramps) < RAMP_SLOTS:
             out.append(Change(t, "u0", values=tuple(map(float, new.u0))))
         for i in range(self.limits.N):
             if old.health[i] != new.health[i]:
@@ -230,34 +360,86 @@ class LoopBase:
         Returns
         -------
         Advance
-            On a failure the clock stops at the last time reached and ``failure`` says
-            why; further calls return nothing until :meth:`reset`.
+            The states reached. An attempt that stops is restarted from the last state
+            reached with a smaller first step; when :data:`MAX_ATTEMPTS` attempts fail
+            the loop is held there (``failure`` says why, :meth:`resume` releases it) and
+            the pending changes wait.
         """
         if self.failure or quanta < 1:
             return Advance(np.empty(0), np.empty((0, self.x.size)), self.failure)
+        self._fold_ramps()
         ks = self.k + np.arange(0, quanta + 1)
-        t_out = ks * self.quantum
+        t_end = float(ks[-1] * self.quantum)
         if self.k > 0:
             self.restarts.append(self.t)
-        changes = self.pending(float(t_out[-1]))
-        self.switch_at = float(t_out[-1]) if changes else None
+        changes = self.pending(t_end)
+        self.switch_at = t_end if any(c.kind != "u0" for c in changes) else None
         self.parameters_changed()
-        res = self.integrate(self.x, t_out)
-        reached = len(res.t)  # includes t_out[0]
-        if reached > 1:
-            self.k = int(ks[reached - 1])
-            self.x = np.asarray(res.x[-1], dtype=float).copy()
-        self.steps += res.steps
-        if res.failure:
-            self.failure = res.failure
-        elif changes:
-            self.settings = self.target.copy()
-            self.changes.extend(changes)
+        ts, xs, steps, why = self._attempts(ks)
+        if why:
+            self.failure = why
+        else:
+            self._land(changes, t_end)
         self.switch_at = None
         self.parameters_changed()
-        return Advance(res.t[1:], res.x[1:], res.failure, res.steps)
+        return Advance(np.array(ts), np.array(xs).reshape(len(ts), self.x.size), why, steps)
 
-    def integrate(self, x0: np.ndarray, t_out: np.ndarray) -> Advance:
+    def _attempts(self, ks: np.ndarray) -> tuple[list[float], list[np.ndarray], int, str]:
+        """Integrate to ``ks[-1]`` quanta, restarting after a failure; what was reached.
+
+        Returns the times and states reached (after the start), the steps taken and,
+        when every attempt failed, why (else ``""``).
+        """
+        ts: list[float] = []
+        xs: list[np.ndarray] = []
+        steps = 0
+        for attempt in range(MAX_ATTEMPTS):
+            rest = ks[ks >= self.k]
+            t_out = rest * self.quantum
+            breaks = [rp.end for rp in self.ramps if t_out[0] < rp.end < t_out[-1]]
+            res = self.integrate(self.x, t_out, sorted(breaks), attempt)
+            reached = len(res.t)  # includes t_out[0]
+            if reached > 1:
+                self.k = int(rest[reached - 1])
+                self.x = np.asarray(res.x[-1], dtype=float).copy()
+                ts.extend(float(v) for v in res.t[1:])
+                xs.extend(np.asarray(r, dtype=float) for r in res.x[1:])
+            steps += res.steps
+            self.steps += res.steps
+            if not res.failure:
+                if attempt:
+                    self.events.append(
+                        Event(self.t, "recovered", f"attempt {attempt + 1} reached t = {self.t:g}")
+                    )
+                return ts, xs, steps, ""
+            self.events.append(Event(self.t, "failure", res.failure))
+            if self.k > int(rest[0]):  # progress was made: restarts begin there
+                self.restarts.append(self.t)
+        why = (
+            f"held at t = {self.t:g} s: {MAX_ATTEMPTS} integrator attempts failed "
+            f"({self.events[-1].text}); resume retries from here, reset starts again at t = 0"
+        )
+        self.events.append(Event(self.t, "held", why))
+        return ts, xs, steps, why
+
+    def _land(self, changes: list[Change], t_end: float) -> None:
+        """Apply the changes that land at the end of a completed call."""
+        if not changes:
+            return
+        for c in changes:
+            if c.kind == "u0":
+                d = np.array(c.values) - self.settings.u0
+                self.ramps.append(Ramp(t_end, d, self.rise))
+                self.settings.u0 = np.array(c.values)
+        u0 = self.settings.u0
+        self.settings = self.target.copy()
+        if not any(c.kind == "u0" for c in changes):  # a u0 change that waits for a ramp
+            self.settings.u0 = u0
+        self.changes.extend(changes)
+
+    def integrate(
+        self, x0: np.ndarray, t_out: np.ndarray, breaks: list[float], attempt: int = 0
+    ) -> Advance:
         """States at the output times; subclasses.
 
         Parameters
@@ -266,6 +448,11 @@ class LoopBase:
             The state at ``t_out[0]`` (now).
         t_out : ndarray
             Output times, the first one now.
+        breaks : list of float
+            Restart times strictly inside (the ends of ramps of u0).
+        attempt : int
+            0 for the first attempt of a call; k > 0 for the k-th restart after a
+            failure (a smaller first step).
         """
         raise NotImplementedError
 
@@ -338,9 +525,13 @@ class LiveLoop(LoopBase):
         Its compiled closed loop (:func:`generated.api.build`), whose library takes p.
     bias_max : float
         Largest bias component accepted (the scenario's d already includes it).
+    rise : float
+        Rise time of the shaped changes of u0 (s).
     """
 
-    def __init__(self, sc: Any, gains: Any, built: Any, bias_max: float) -> None:
+    def __init__(
+        self, sc: Any, gains: Any, built: Any, bias_max: float, rise: float = CONSOLE_RISE
+    ) -> None:
         from generated import api
         from symbolic.parameters import layout_of
 
@@ -354,8 +545,14 @@ class LiveLoop(LoopBase):
         self.settings_int = api.integrator_settings(sc)
         self.p0 = np.asarray(built.p, dtype=float)
         lay = layout_of(sc)
+        # u0_k: a + Σ_j d_j*smoothstep((t - c_j)/r_j), literals a, then (d_j, c_j, r_j)
+        self.u0_slices = [lay.slices[f"expr:leader.u0[{k}]"] for k in range(sc.p)]
+        if any(sl.stop - sl.start != 1 + 3 * RAMP_SLOTS for sl in self.u0_slices):
+            raise BuildError(
+                f"{sc.path}: leader.u0: not the console's ramp expressions "
+                "(console.scenario.console_table writes them)"
+            )
         # the literals (a, d, c) of a + d*step(t - c): the last three of each expression
-        self.idx_u0 = [lay.slices[f"expr:leader.u0[{k}]"].stop - 3 for k in range(sc.p)]
         self.idx_g = [lay.slices[f"expr:followers[{i}].g"].stop - 3 for i in range(sc.N)]
         self.idx_f = [
             [lay.slices[f"expr:followers[{i}].f[{r}]"].stop - 3 for r in range(sc.n)]
@@ -380,14 +577,16 @@ class LiveLoop(LoopBase):
             edges=edges,
         )
         nominal = Settings(
-            u0=self.p0[self.idx_u0].copy(),
+            u0=np.array([self.p0[sl.start] for sl in self.u0_slices]),
             health=self.p0[self.idx_g].copy(),
             bias=np.zeros((sc.N, sc.n)),
             weights=weights,
         )
         self.layout = built.closed_loop.layout
         self._bound: Any = None
-        super().__init__(limits, sc.integration.output_step, nominal, built.closed_loop.x0)
+        super().__init__(
+            limits, sc.integration.output_step, nominal, built.closed_loop.x0, rise=rise
+        )
 
     # ---------------------------------------------------------------- parameters
     def parameters_changed(self) -> None:
@@ -403,8 +602,13 @@ class LiveLoop(LoopBase):
         def put(k: int, a: float, b: float) -> None:  # a + (b − a) step(t − c)
             p[k : k + 3] = (a, 0.0, 0.0) if c is None else (a, b - a, c)
 
-        for k, idx in enumerate(self.idx_u0):
-            put(idx, old.u0[k], new.u0[k])
+        for k, sl in enumerate(self.u0_slices):
+            p[sl.start] = self.u0_base[k]
+            for j in range(RAMP_SLOTS):
+                rp = self.ramps[j] if j < len(self.ramps) else None
+                # an unused slot: no change (d = 0) with the console's rise time
+                ramp = (0.0, 0.0, self.rise) if rp is None else (rp.d[k], rp.c, rp.r)
+                p[sl.start + 1 + 3 * j : sl.start + 4 + 3 * j] = ramp
         for i, idx in enumerate(self.idx_g):
             put(idx, old.health[i], new.health[i])
             for r, k in enumerate(self.idx_f[i]):
@@ -429,11 +633,11 @@ class LiveLoop(LoopBase):
 
     def bound(self) -> Any:
         """The build with the current p (the library is the same; only p changes)."""
+        import dataclasses
+
+        from generated.api import fix_parameters
+
         if self._bound is None:
-            import dataclasses
-
-            from generated.api import fix_parameters
-
             p = self.param_vector()
             b = dataclasses.replace(self.built, p=p)
             if self.sc.integration.method != "native":  # CasADi's integrators call dyn
@@ -442,8 +646,18 @@ class LiveLoop(LoopBase):
         return self._bound
 
     # ---------------------------------------------------------------- time
-    def integrate(self, x0: np.ndarray, t_out: np.ndarray) -> Advance:
+    def integrate(
+        self, x0: np.ndarray, t_out: np.ndarray, breaks: list[float], attempt: int = 0
+    ) -> Advance:
         """The compiled loop from ``x0`` at ``t_out[0]`` (a restart, as at a breakpoint).
+
+        The first attempt uses the scenario's settings. The k-th restart after a failure
+        (``attempt`` = k >= 1) starts again from ``x0``, the last state reached, with
+        10^k × ``max_steps`` and a smaller first step: through CasADi's CVODES
+        (``integration.method = "cvodes"``) a first step of :data:`FIRST_STEP` / 100^(k−1)
+        s; the native driver lets CVODE choose its first step, so there the first output
+        interval is cut by 10^k − 1 restarts (each a fresh CVODE start, whose first step
+        CVODE chooses from the tolerances and the right-hand side at that point).
 
         Parameters
         ----------
@@ -451,10 +665,25 @@ class LiveLoop(LoopBase):
             The state at ``t_out[0]``.
         t_out : ndarray
             Output times (multiples of the quantum).
+        breaks : list of float
+            Restart times strictly inside (ends of u0 ramps).
+        attempt : int
+            0, or the restart after a failure.
         """
+        import dataclasses
+
         from generated.api import integrate_built
 
-        traj = integrate_built(self.bound(), x0, t_out, self.settings_int, [])
+        s = self.settings_int
+        if attempt:
+            s = dataclasses.replace(s, max_steps=int(s.max_steps * 10**attempt))
+            if self.sc.integration.method == "native":
+                cuts = t_out[0] + (t_out[1] - t_out[0]) * np.arange(1, 10**attempt) / 10**attempt
+                breaks = sorted(set(breaks) | {float(c) for c in cuts})
+            else:
+                h0 = FIRST_STEP / 100.0 ** (attempt - 1)
+                s = dataclasses.replace(s, extra_options=(*s.extra_options, ("step0", h0)))
+        traj = integrate_built(self.bound(), x0, t_out, s, breaks)
         fail = "" if traj.complete else traj.message
         return Advance(traj.t, traj.x, fail, int(traj.stats.get("steps", 0) or 0))
 
@@ -469,17 +698,15 @@ class LiveLoop(LoopBase):
         b = self.bound()
         out = b.outputs_p.call({"t": self.t, "x": x, "p": b.p})
         o = {k: np.asarray(v, dtype=float) for k, v in out.items()}
-        L = self.sc.leader
-        eta0 = x[self.layout.slices["eta0"]]
         y0 = o["y0"].ravel()
-        eta0dot = L.A0 @ eta0 + L.B0 @ self.settings.u0
         P = np.array([x[self.layout.slices[("p", i)]] for i in range(self.sc.N)])
-        b0 = np.array([fo.b0 for fo in self.sc.followers])
+        b = o["b"].reshape(self.sc.N, -1)  # the offsets the controllers track (blended)
         norm = lambda a: np.linalg.norm(a.reshape(self.sc.N, -1), axis=1).tolist()  # noqa: E731
         return {
             "y0": y0.tolist(),
             "p": P.tolist(),
-            "slots": desired_formation(y0, eta0dot, b0).tolist(),
+            "slots": (y0 + b).tolist(),
+            "u0_now": self.u0_at(self.t).tolist(),
             "et": norm(o["et"]),
             "est": norm(o["ebar"]),
             "ghat": o["ghat"].ravel().tolist(),

@@ -102,6 +102,24 @@ class Command:
     cut: bool = False
 
 
+#: the fields each message type may have (any other is refused, named)
+FIELDS = {
+    "u0": ("value",),
+    "scale": ("value",),
+    "health": ("follower", "value"),
+    "bias": ("follower", "value"),
+    "link": ("follower", "neighbour", "cut"),
+    "clear": ("follower",),
+}
+
+
+class _Constant:
+    """JSON's NaN/Infinity/-Infinity, kept as a marker so the field that holds one is named."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+
 def parse_message(text: str | bytes, limits: Limits) -> Command:
     """Validate one raw message.
 
@@ -124,7 +142,7 @@ def parse_message(text: str | bytes, limits: Limits) -> Command:
     if len(text) > MAX_MESSAGE_BYTES:
         raise MessageError(f"message: {len(text)} bytes (expected at most {MAX_MESSAGE_BYTES})")
     try:
-        msg = json.loads(text, parse_constant=_no_constant)
+        msg = json.loads(text, parse_constant=_Constant)
     except (ValueError, RecursionError) as exc:
         raise MessageError(f"message: not JSON ({_brief(exc)}) (expected a JSON object)") from None
     if not isinstance(msg, dict):
@@ -134,12 +152,22 @@ def parse_message(text: str | bytes, limits: Limits) -> Command:
         raise MessageError(
             f"type: {_show(kind)} is unknown (expected one of {', '.join(sorted(KNOWN))})"
         )
+    allowed = FIELDS.get(kind, ())
+    unknown = sorted(k for k in msg if k != "type" and k not in allowed)
+    if unknown:
+        names = ", ".join(_show(k) for k in unknown)
+        want = ", ".join(allowed) if allowed else "no field besides type"
+        raise MessageError(
+            f"{names}: unknown field{'s' if len(unknown) > 1 else ''} of a {kind!r} message "
+            f"(expected {want})"
+        )
     return _PARSERS.get(kind, _bare)(kind, msg, limits)
 
 
-def _no_constant(name: str) -> Any:
-    """JSON's NaN/Infinity extensions are refused at parse time."""
-    raise ValueError(f"{name} is not a number")
+def _num(x: float) -> str:
+    """A number with every digit it needs to be told apart (shortest round trip), no '.0'."""
+    r = repr(float(x))
+    return r[:-2] if r.endswith(".0") else r
 
 
 def _brief(exc: Exception) -> str:
@@ -147,20 +175,34 @@ def _brief(exc: Exception) -> str:
 
 
 def _show(v: Any) -> str:
-    s = json.dumps(v) if not isinstance(v, str) else repr(v)
+    if isinstance(v, _Constant):
+        return v.name
+    try:
+        s = json.dumps(v, default=lambda c: c.name) if not isinstance(v, str) else repr(v)
+    except ValueError:  # an integer too long for json.dumps' digit limit
+        s = "a number too large"
     return s if len(s) <= 40 else s[:37] + "..."
 
 
 def _number(v: Any, field_: str, lo: float, hi: float) -> float:
     """A finite JSON number in [lo, hi] (booleans are not numbers)."""
+    bounds = f"[{_num(lo)}, {_num(hi)}]"
+    if isinstance(v, _Constant):
+        raise MessageError(f"{field_}: {v.name} is not a finite number (expected one in {bounds})")
     if isinstance(v, bool) or not isinstance(v, int | float):
+        raise MessageError(f"{field_}: {_show(v)} is not a number (expected a number in {bounds})")
+    try:
+        x = float(v)
+    except OverflowError:  # an integer of hundreds of digits
+        digits = len(str(abs(v)))
         raise MessageError(
-            f"{field_}: {_show(v)} is not a number (expected a number in [{lo:g}, {hi:g}])"
-        )
-    x = float(v)
-    if not math.isfinite(x) or not lo <= x <= hi:
+            f"{field_}: a {digits}-digit number is out of range {bounds} (expected a number in it)"
+        ) from None
+    if not math.isfinite(x):
+        raise MessageError(f"{field_}: {x!r} is not a finite number (expected one in {bounds})")
+    if not lo <= x <= hi:
         raise MessageError(
-            f"{field_}: {x:g} is out of range (expected a number in [{lo:g}, {hi:g}])"
+            f"{field_}: {_num(x)} is out of range {bounds} (expected a number in it)"
         )
     return x
 

@@ -3,7 +3,9 @@
 ``<folder>/`` (``record-<date>-<time>-<microseconds>``, created exclusively: a record
 never replaces another)
   ``u0.csv``          the operator's command, one row per change (t, u0_1..u0_p) and a last
-                      row at the end time; held constant between rows (``leader.u0_hold``)
+                      row at the end time; each change a smoothstep ramp from its row on
+                      (``leader.u0_hold`` with ``leader.u0_rise``, core/hold.py)
+  ``events.csv``      what the integrator did: failures, restarts, holds (t, kind, text)
   ``<name>.toml``     the console's scenario with ``leader.u0_csv = "u0.csv"``, the health
                       changes as each follower's ``g`` table, each bias change as a
                       ``bias`` fault (its onset and the change as amplitude), the horizon
@@ -25,6 +27,8 @@ complete or not at all (a temporary file and :func:`os.replace`).
 from __future__ import annotations
 
 import copy
+import csv
+import io
 import os
 import shutil
 import tempfile
@@ -37,7 +41,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from console.engine import Change, LoopBase
+from console.engine import CONSOLE_RISE, Change, Event, LoopBase
 from core.artifacts import atomic_write_text
 from core.errors import ToolkitError
 from core.scenario import load_scenario
@@ -46,7 +50,7 @@ from sweep.sampler import scenario_toml
 if TYPE_CHECKING:
     from console.session import Snapshot
 
-TRACE_NAME, LOG_NAME = "u0.csv", "console.csv"
+TRACE_NAME, LOG_NAME, EVENTS_NAME = "u0.csv", "console.csv", "events.csv"
 
 
 @dataclass(frozen=True)
@@ -121,7 +125,12 @@ def u0_rows(
 
 
 def replay_table(
-    table: dict, changes: Sequence[Change], nominal_health: Sequence[float], t_end: float, h: float
+    table: dict,
+    changes: Sequence[Change],
+    nominal_health: Sequence[float],
+    t_end: float,
+    h: float,
+    rise: float = CONSOLE_RISE,
 ) -> dict:
     """The console's scenario table turned into the replay of a run.
 
@@ -137,6 +146,8 @@ def replay_table(
         Horizon of the replay (the last logged time).
     h : float
         The console's quantum, the replay's output step.
+    rise : float
+        Rise time of the console's shaped changes of u0 (``leader.u0_rise``).
     """
     data = copy.deepcopy(table)
     data["name"] = f"{table['name']}-replay"
@@ -145,6 +156,7 @@ def replay_table(
     leader.pop("u0", None)
     leader["u0_csv"] = TRACE_NAME
     leader["u0_hold"] = True
+    leader["u0_rise"] = float(rise)
     bias = {}
     for i, fo in enumerate(data["followers"]):
         g = [[0.0, float(nominal_health[i])]]
@@ -192,8 +204,10 @@ def write_record(
     columns: Sequence[str],
     h: float,
     restarts: Sequence[float] = (),
+    rise: float = CONSOLE_RISE,
+    events: Sequence[Event] = (),
 ) -> Record:
-    """Write ``u0.csv``, ``console.csv`` and, when replayable, the scenario (atomically).
+    """Write ``u0.csv``, ``console.csv``, ``events.csv`` and, when replayable, the scenario.
 
     Parameters
     ----------
@@ -215,12 +229,33 @@ def write_record(
         The console's quantum.
     restarts : sequence of float
         Times the console's integrator restarted (rows of the trace, see :func:`u0_rows`).
+    rise : float
+        Rise time of the shaped changes of u0.
+    events : sequence of Event
+        The integrator's failures, restarts and holds.
     """
     folder.mkdir(parents=True, exist_ok=True)
     text = _csv_header(columns) + _csv_rows(t_log, x_log)
     atomic_write_text(folder / LOG_NAME, text)
+    write_events(folder, events)
     run = (changes, u0_start, nominal_health, restarts)
-    return write_replay(folder, table, run, float(t_log[-1]), len(t_log), h)
+    return write_replay(folder, table, run, float(t_log[-1]), len(t_log), h, rise)
+
+
+def write_events(folder: Path, events: Sequence[Event]) -> Path:
+    """``events.csv``: t, kind, text of every integrator event (a header only when none).
+
+    Parameters
+    ----------
+    folder : Path
+        An existing folder.
+    events : sequence of Event
+    """
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["t", "kind", "text"])
+    w.writerows([repr(float(e.t)), e.kind, e.text] for e in events)
+    return atomic_write_text(folder / EVENTS_NAME, buf.getvalue())
 
 
 def write_replay(
@@ -230,6 +265,7 @@ def write_replay(
     t_end: float,
     rows: int,
     h: float,
+    rise: float = CONSOLE_RISE,
 ) -> Record:
     """Write ``u0.csv`` and, when replayable, the scenario (``console.csv`` is written apart).
 
@@ -248,6 +284,8 @@ def write_replay(
         Rows of ``console.csv``.
     h : float
         The console's quantum.
+    rise : float
+        Rise time of the shaped changes of u0.
     """
     changes, u0_start, nominal_health, restarts = run
     trace = u0_rows(changes, u0_start, t_end, restarts) if t_end > 0 else []
@@ -257,7 +295,7 @@ def write_replay(
     if t_end <= 0:
         return Record(folder, None, rows, t_end, "nothing to replay yet (t = 0)")
     used = [c for c in changes if c.t < t_end]
-    data = replay_table(table, used, nominal_health, t_end, h)
+    data = replay_table(table, used, nominal_health, t_end, h, rise)
     data["name"] = f"{table['name']}-{folder.name}"
     path = atomic_write_text(folder / f"{data['name']}.toml", scenario_toml(data))
     try:
@@ -402,7 +440,10 @@ class Recorder:
             self._spool(snap).copy_to(folder / LOG_NAME)
             nominal = loop.nominal
             run = (snap.changes, nominal.u0.tolist(), nominal.health.tolist(), snap.restarts)
-            rec = write_replay(folder, self.table, run, snap.t_end, snap.rows, loop.quantum)
+            write_events(folder, snap.events)
+            rec = write_replay(
+                folder, self.table, run, snap.t_end, snap.rows, loop.quantum, loop.rise
+            )
         return rec.message()
 
     def _spool(self, snap: Snapshot) -> LogSpool:

@@ -2,10 +2,12 @@
 
 From the file the console is started on, :func:`console_table` keeps everything but:
 
-* ``leader.u0 = ["0.0 + 0.0*step(t - 0.0)", ...]``: a held number per input, a + d·step(t − c),
-  whose literals (a, d, c) are runtime parameters (``expr:leader.u0[k]``) the console
-  sets: a the command held, d and c a change landing at time c (a trace ``u0_csv`` is
-  dropped);
+* ``leader.u0 = ["0.0 + 0.0*smoothstep((t - 0.0)/1.0) + ...", ...]``: per input a number a
+  and :data:`console.engine.RAMP_SLOTS` shaped changes d_j·smoothstep((t − c_j)/r_j), whose
+  literals are runtime parameters (``expr:leader.u0[k]``) the console sets: a the command
+  with every finished ramp, (d_j, c_j, r_j) a change of size d_j landing at time c_j and
+  rising over r_j seconds (a trace ``u0_csv``, ``u0_rise`` and ``u0_shape`` are dropped:
+  the console shapes the operator's changes itself);
 * each follower's ``g`` is its value at t = 0 in the same form (``expr:followers[i].g``);
 * each follower's ``f_r`` becomes ``(f_r) + a + d*step(t - c)``, a the bias the operator
   adds (``expr:followers[i].f[r]``, last three literals);
@@ -30,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from console.engine import RAMP_SLOTS
 from core.errors import ScenarioError
 from core.scenario import Scenario, load_scenario, scenario_from_dict
 from sweep.sampler import scenario_toml
@@ -38,6 +41,8 @@ from sweep.sampler import scenario_toml
 BIAS_MAX = 5.0
 #: a number the console sets, a, switching to a + d at time c (literals a, d, c)
 SWITCHED = "{!r} + 0.0*step(t - 0.0)"
+#: the operator's command: a number a and RAMP_SLOTS ramps d*smoothstep((t - c)/r)
+RAMPED = "0.0" + " + 0.0*smoothstep((t - 0.0)/1.0)" * RAMP_SLOTS
 
 
 def console_table(path: str | Path, bias_max: float = BIAS_MAX) -> dict:
@@ -63,9 +68,9 @@ def console_table(path: str | Path, bias_max: float = BIAS_MAX) -> dict:
     data = copy.deepcopy(raw)
     data["name"] = f"{base.name}-console"
     leader = data["leader"]
-    for k in ("u0_csv", "u0_hold"):
+    for k in ("u0_csv", "u0_hold", "u0_rise", "u0_shape"):
         leader.pop(k, None)
-    leader["u0"] = [SWITCHED.format(0.0)] * base.p
+    leader["u0"] = [RAMPED] * base.p
     graph = data["graph"]
     graph.pop("switches", None)
     # one switch that changes nothing: the compiled loop then has two topologies, the

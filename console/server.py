@@ -9,7 +9,9 @@ keeps the newest), it never slows the loop. Replies (errors, saves) are queued p
 page and never dropped below :data:`MAX_REPLIES`.
 
 Roles: the first page to send ``drive`` drives; the others watch (their commands get
-an error) until the driver's page closes. Closing a page stops nothing else.
+an error naming the page's drive button) until the driver's page closes; every frame says
+whether a page drives (``driven``), and a watcher's drive button then takes over.
+Closing a page stops nothing else.
 Connections from addresses that are not loopback are refused unless the server was
 started with ``allow_remote``; a page or WebSocket whose ``Host`` header is not a loopback
 name at the serving port (or one of ``hosts``) is refused (DNS rebinding: another site's
@@ -203,7 +205,10 @@ class Hub:
         text = json.dumps(_finite(frame), separators=(",", ":"))
         for page in self.pages:
             role = "driver" if page is self.driver else "watcher"
-            page.push_frame(text[:-1] + f',"role":"{role}","pages":{len(self.pages)}}}')
+            driven = "true" if self.driver is not None else "false"
+            page.push_frame(
+                text[:-1] + f',"role":"{role}","pages":{len(self.pages)},"driven":{driven}}}'
+            )
 
     # ---------------------------------------------------------------- pages
     def allowed(self, host: str | None) -> bool:
@@ -285,13 +290,15 @@ class Hub:
             cmd = parse_message(raw, self.limits)
             if cmd.kind == "drive":
                 if self.driver is not None and self.driver is not page:
-                    raise MessageError("drive: another page drives (it must close first)")
+                    raise MessageError(
+                        "drive: another page drives (the drive button takes over once it closes)"
+                    )
                 self.driver = page
                 page.push_reply({"type": "role", "role": "driver"})
                 return
             if cmd.kind in DRIVER_ONLY and page is not self.driver:
                 raise MessageError(
-                    f"{cmd.kind}: this page watches (send drive when no page drives)"
+                    f"{cmd.kind}: this page watches (press drive to take over when no page drives)"
                 )
             if cmd.kind == "save":
                 self._save(page)

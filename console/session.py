@@ -14,6 +14,7 @@ only grows, and a reset starts a new one, so the rows a snapshot names never cha
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections import deque
@@ -23,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from console.engine import Change, LoopBase
+from console.engine import Change, Event, LoopBase
 from console.protocol import Command, MessageError
 
 #: most wall-clock seconds one tick pays for (a longer stall slows the run down instead)
@@ -34,6 +35,10 @@ MAX_QUANTA = 2000
 MAX_LOG_ROWS = 1_000_000
 #: window of the simulated/real ratio shown on the page (s)
 RATIO_WINDOW = 1.0
+#: the integrator's latest events sent with every frame
+EVENTS_SHOWN = 5
+#: the console's log: the integrator's failures, restarts and holds
+LOG = logging.getLogger("console")
 
 
 @dataclass
@@ -77,6 +82,8 @@ class Snapshot:
         The run's changes so far.
     restarts : tuple of float
         Times the integrator restarted so far.
+    events : tuple of Event
+        The integrator's failures, restarts and holds so far.
     """
 
     run: int
@@ -85,6 +92,7 @@ class Snapshot:
     rows: int
     changes: tuple[Change, ...]
     restarts: tuple[float, ...]
+    events: tuple[Event, ...] = ()
 
     @property
     def t_end(self) -> float:
@@ -116,6 +124,7 @@ class Session:
 
     def _start_log(self) -> None:
         self.run += 1
+        self.events_logged = 0
         self.log_t: list[float] = [self.loop.t]
         self.log_x: list[np.ndarray] = [self.loop.x.copy()]
         self.log_full = False
@@ -129,17 +138,19 @@ class Session:
         cmd : Command
             From :func:`console.protocol.parse_message`.
 
+        Changes are accepted while the loop is held (they land when it runs again).
+
         Raises
         ------
         MessageError
-            For a command that cannot apply now (a change after a failure, a save
-            without a recorder).
+            For a save without a recorder.
         """
         loop = self.loop
         if cmd.kind == "pause":
             self.pace.paused = True
         elif cmd.kind == "resume":
             self.pace.paused = False
+            loop.resume()  # a held loop tries again from its last good state
             self.last_wall = self.clock()
         elif cmd.kind == "scale":
             self.pace.scale = cmd.values[0]
@@ -149,8 +160,6 @@ class Session:
             self._start_log()
         elif cmd.kind == "save":
             return self.save_job()()
-        elif loop.failure:
-            raise MessageError(f"{cmd.kind}: the integrator stopped ({loop.failure}); send reset")
         elif cmd.kind == "u0":
             loop.set_u0(cmd.values)
         elif cmd.kind == "health":
@@ -182,8 +191,16 @@ class Session:
                 advanced = self.loop.t - t_before
                 self.owed = 0.0 if adv.failure else max(self.owed - quanta * h, 0.0)
                 self._log(adv.t, adv.x)
+        self._report_events()
         self._measure(now, wall, advanced, busy)
         return self.frame()
+
+    def _report_events(self) -> None:
+        """The integrator's new events into the console's log (logger ``console``)."""
+        events = self.loop.events
+        for e in events[self.events_logged :]:
+            LOG.warning("t = %.6g s: integrator %s: %s", e.t, e.kind, e.text)
+        self.events_logged = len(events)
 
     def _log(self, t: np.ndarray, x: np.ndarray) -> None:
         room = MAX_LOG_ROWS - len(self.log_t)
@@ -220,6 +237,10 @@ class Session:
             "load": self.pace.load,
             "steps": loop.steps,
             "failure": loop.failure,
+            "events": [[e.t, e.kind, e.text] for e in loop.events[-EVENTS_SHOWN:]],
+            "recoveries": sum(e.kind == "recovered" for e in loop.events),
+            "ramps": len(loop.ramps),
+            "queued": bool(np.any(loop.settings.u0 != st.u0)),
             "changes": len(loop.changes),
             "log_full": self.log_full,
         }
@@ -234,6 +255,7 @@ class Session:
             len(self.log_t),
             tuple(loop.changes),
             tuple(loop.restarts),
+            tuple(loop.events),
         )
 
     def save_job(self) -> Callable[[], dict[str, Any]]:

@@ -27,9 +27,19 @@ GAIN = 3.0
 
 
 class FakeLoop(LoopBase):
-    """Three followers following a double-integrator leader; optional failure time."""
+    """Three followers following a double-integrator leader; optional failure time.
 
-    def __init__(self, fail_at: float | None = None, quantum: float = 0.01) -> None:
+    ``fail_at``: an attempt (numbered below ``fail_attempts``; default: every attempt)
+    whose step from a to b has a <= fail_at < b stops at a.
+    """
+
+    def __init__(
+        self,
+        fail_at: float | None = None,
+        quantum: float = 0.01,
+        fail_attempts: int = 10**9,
+        rise: float = 1.0,
+    ) -> None:
         N = len(B0)
         limits = Limits(
             N=N,
@@ -47,27 +57,33 @@ class FakeLoop(LoopBase):
             weights={(0, -1): 1.0, (1, 0): 1.0, (2, 0): 1.0, (2, 1): 1.0},
         )
         x0 = np.concatenate([[0.0, 0.0], (B0 + 1.0).ravel()])
-        self.fail_at = fail_at
-        super().__init__(limits, quantum, nominal, x0)
+        self.fail_at, self.fail_attempts = fail_at, fail_attempts
+        self.attempts: list[tuple[float, int]] = []  # (start, attempt) of every call
+        super().__init__(limits, quantum, nominal, x0, rise=rise)
 
-    def rhs(self, x: np.ndarray) -> np.ndarray:
+    def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
         st = self.settings
         y0 = np.array([x[0], 0.0])
         P = x[2:].reshape(-1, 2)
         dP = GAIN * st.health[:, None] * (y0 + B0 - P) + st.bias
-        return np.concatenate([[x[1], st.u0[0]], dP.ravel()])
+        return np.concatenate([[x[1], self.u0_at(t)[0]], dP.ravel()])
 
-    def integrate(self, x0: np.ndarray, t_out: np.ndarray) -> Advance:
+    def integrate(
+        self, x0: np.ndarray, t_out: np.ndarray, breaks: list[float], attempt: int = 0
+    ) -> Advance:
+        self.attempts.append((float(t_out[0]), attempt))
         xs, x, steps = [x0.copy()], x0.copy(), 0
         for a, b in zip(t_out[:-1], t_out[1:], strict=True):
-            if self.fail_at is not None and b > self.fail_at:
+            fails = self.fail_at is not None and a <= self.fail_at < b
+            if fails and attempt < self.fail_attempts:
                 return Advance(t_out[: len(xs)], np.array(xs), f"fake failure at t = {a:g}", steps)
             hs = (b - a) / 4
-            for _ in range(4):  # RK4
-                k1 = self.rhs(x)
-                k2 = self.rhs(x + hs / 2 * k1)
-                k3 = self.rhs(x + hs / 2 * k2)
-                k4 = self.rhs(x + hs * k3)
+            for k in range(4):  # RK4
+                t = a + k * hs
+                k1 = self.rhs(t, x)
+                k2 = self.rhs(t + hs / 2, x + hs / 2 * k1)
+                k3 = self.rhs(t + hs / 2, x + hs / 2 * k2)
+                k4 = self.rhs(t + hs, x + hs * k3)
                 x = x + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
                 steps += 1
             xs.append(x.copy())

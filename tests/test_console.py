@@ -39,10 +39,21 @@ LIMITS = FakeLoop().limits
         ('{"type": "u0", "value": 1.0}', "value"),
         ('{"type": "u0", "value": ["1"]}', "value[0]"),
         ('{"type": "u0", "value": [true]}', "value[0]"),
-        ('{"type": "u0", "value": [NaN]}', "NaN is not a number"),
-        ('{"type": "u0", "value": [Infinity]}', "Infinity is not a number"),
-        ('{"type": "u0", "value": [1e999]}', "value[0]"),
+        ('{"type": "u0", "value": [NaN]}', "value[0]: NaN is not a finite number"),
+        ('{"type": "u0", "value": [Infinity]}', "value[0]: Infinity is not a finite number"),
+        ('{"type": "u0", "value": [-Infinity]}', "value[0]: -Infinity is not a finite number"),
+        ('{"type": "scale", "value": NaN}', "value: NaN is not a finite number"),
+        ('{"type": "health", "follower": NaN, "value": 1}', "follower: NaN is not a follower"),
+        ('{"type": "u0", "value": [1e999]}', "value[0]: inf is not a finite number"),
+        ('{"type": "u0", "value": [%s]}' % ("9" * 400), "value[0]: a 400-digit number is out"),
+        ('{"type": "bias", "follower": 1, "value": [1, %s]}' % ("1" * 400), "value[1]: a 400-"),
         ('{"type": "u0", "value": [2.5]}', "out of range"),
+        ('{"type": "u0", "value": [2.0000001]}', "value[0]: 2.0000001 is out of range [-2, 2]"),
+        ('{"type": "u0", "value": [-2.0000000000000004]}', "-2.0000000000000004 is out"),
+        ('{"type": "scale", "value": 20.000001}', "value: 20.000001 is out of range [0.05, 20]"),
+        ('{"type": "u0", "value": [1], "speed": 2}', "'speed': unknown field of a 'u0' message"),
+        ('{"type": "pause", "now": 1, "all": 0}', "'all', 'now': unknown fields of a 'pause'"),
+        ('{"type": "link", "follower": 3, "neighbour": 2, "cut": true, "w": 0}', "'w': unknown"),
         ('{"type": "u0", "value": [1, 1]}', "list of 1 numbers"),
         ('{"type": "health", "follower": 4, "value": 0.8}', "follower"),
         ('{"type": "health", "follower": 0, "value": 0.8}', "follower"),
@@ -160,8 +171,8 @@ def test_replay_table_writes_health_tables_and_bias_steps() -> None:
         Change(1.0, "bias", 0, values=(1.0, 2.0)),
         Change(2.0, "bias", 0, values=(0.0, 0.5)),
     ]
-    data = replay_table(table, ch, [1.0, 0.9], 3.0, 0.01)
-    assert data["leader"] == {"u0_csv": "u0.csv", "u0_hold": True}
+    data = replay_table(table, ch, [1.0, 0.9], 3.0, 0.01, rise=0.75)
+    assert data["leader"] == {"u0_csv": "u0.csv", "u0_hold": True, "u0_rise": 0.75}
     assert data["followers"][0]["g"] == 1.0
     assert data["followers"][1]["g"] == [[0.0, 0.9], [0.5, 0.7]]
     faults = data["followers"][0]["faults"]
@@ -257,26 +268,78 @@ def test_watchers_and_closing_pages() -> None:
             assert [m["type"] for m in other] == ["role"] and frames[-1]["u0"] == [1.0]
 
 
-def test_integrator_failure_is_shown_and_reset_recovers() -> None:
-    """When the integrator gives up, frames carry the reason, changes are refused with it,
-    the loop keeps serving, and reset starts again from t = 0."""
+def test_integrator_failure_holds_the_loop_resume_retries_reset_restarts() -> None:
+    """When every attempt fails, frames carry the reason (held, with the attempts), the loop
+    makes no further attempt until resume, changes are still accepted, resume continues
+    from the last good state (not t = 0) and reset starts again from t = 0."""
+    from console.engine import MAX_ATTEMPTS
+
     hub = fake_hub(fail_at=0.3)
+    loop = hub.session.loop
     with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
         _drive(ws)
         frames, _ = _states(ws, 0.8)
-        assert "fake failure" in frames[-1]["failure"] and frames[-1]["t"] <= 0.3
+        f = frames[-1]
+        assert "fake failure" in f["failure"] and "held at t = 0.3" in f["failure"]
+        assert f["t"] == pytest.approx(0.3) and [e[1] for e in f["events"]][-1] == "held"
+        # the call that failed: its first attempt, then MAX_ATTEMPTS - 1 restarts at 0.3 s
+        restarts = [(round(t, 9), k) for t, k in loop.attempts if k > 0]
+        assert restarts == [(0.3, k) for k in range(1, MAX_ATTEMPTS)]
+        n = len(loop.attempts)
+        _states(ws, 0.3)
+        assert len(loop.attempts) == n  # held: no dead loop of retries
         ws.send(json.dumps({"type": "u0", "value": [1.0]}))
         _, other = _states(ws, 0.2)
-        assert "send reset" in other[-1]["message"]
-        hub.session.loop.fail_at = None
+        assert other == []  # a change is accepted while held (it lands when the loop runs)
+        loop.fail_at = None
+        ws.send(json.dumps({"type": "resume"}))
+        frames, _ = _states(ws, 0.4)
+        assert frames[-1]["failure"] == "" and frames[-1]["t"] > 0.4
+        assert [c.t for c in loop.changes] == [pytest.approx(frames[0]["t"], abs=0.2)]
+        assert loop.changes[0].t > 0.3  # it landed after the resume, not before the hold
         ws.send(json.dumps({"type": "reset"}))
         frames, _ = _states(ws, 0.4)
         assert frames[-1]["failure"] == "" and 0.2 < frames[-1]["t"] < 0.8
 
 
+def test_a_failed_attempt_restarts_from_the_last_good_state() -> None:
+    """An attempt that stops is retried from the last state it reached with attempt 1
+    (the smaller first step): the run goes on, the failure and the recovery are events,
+    and the states equal those of a run that never failed (the same RK4 steps)."""
+    from console_fake import FakeLoop
+
+    good, flaky = FakeLoop(), FakeLoop(fail_at=0.255, fail_attempts=1)
+    for loop in (good, flaky):
+        loop.set_u0((2.0,))
+        for _ in range(10):
+            adv = loop.advance(5)
+            assert adv.failure == ""
+    assert flaky.failure == "" and flaky.t == pytest.approx(0.5)
+    assert [e.kind for e in flaky.events] == ["failure", "recovered"]
+    assert flaky.events[0].t == pytest.approx(0.25)  # the last good state
+    assert (0.25, 1) in [(round(t, 9), a) for t, a in flaky.attempts]
+    assert 0.25 in [round(t, 9) for t in flaky.restarts]
+    assert np.allclose(flaky.x, good.x, rtol=0, atol=1e-12)
+
+
+def ramp_position(a: float, tau: float, r: float) -> float:
+    """Position of a double integrator at rest under u0 = a S(τ/r), S = 3x² − 2x³ on [0, 1].
+
+    ∫S = x³ − x⁴/2 and ∫∫S = x⁴/4 − x⁵/10 (x = τ/r, times r and r²); after the ramp,
+    y = a (τ − r/2)²/2 + a r²/40 (the value and slope at τ = r continue).
+    """
+    if tau <= 0:
+        return 0.0
+    if tau >= r:
+        return a * (tau - r / 2) ** 2 / 2 + a * r**2 / 40
+    x = tau / r
+    return a * r**2 * (x**4 / 4 - x**5 / 10)
+
+
 def test_pause_scale_and_held_command_against_closed_form() -> None:
-    """A held u0 = a landing at t_a moves the leader as η0_1 = a (t − t_a)² / 2; pause
-    freezes the clock; scale 4 runs four simulated seconds per wall second."""
+    """A command u0 = a landing at t_a ramps in as a S((t − t_a)/r) and moves the leader
+    as :func:`ramp_position`; pause freezes the clock; scale 4 runs four simulated seconds
+    per wall second."""
     hub = fake_hub()
     with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
         _drive(ws)
@@ -291,7 +354,9 @@ def test_pause_scale_and_held_command_against_closed_form() -> None:
         # the command lands at the end of the first call after the pause (one frame later)
         (change,) = hub.session.loop.changes
         assert change.kind == "u0" and t_pause < change.t <= t_pause + 4 * 0.25
-        assert f["y0"][0] == pytest.approx((f["t"] - change.t) ** 2, rel=1e-9)  # a/2 = 1
+        rise = hub.session.loop.rise
+        # RK4 (h = 0.0025) across the ramp's curvature jumps at c and c + r: local error ~1e-8
+        assert f["y0"][0] == pytest.approx(ramp_position(2.0, f["t"] - change.t, rise), abs=1e-6)
         assert f["ratio"] == pytest.approx(4.0, rel=0.1)
         ws.send(json.dumps({"type": "pause"}))
         frames, _ = _states(ws, 0.5)
@@ -390,9 +455,13 @@ def test_record_refuses_a_replay_the_loader_refuses(tmp_path: Path) -> None:
         Change(0.7, "health", 2, values=(0.6,)),
         Change(1.2, "bias", 3, values=(1.0, -1.0)),
     ]
-    rec = write_record(tmp_path / "ok", args[0], ok, *args[1:])
+    rec = write_record(tmp_path / "ok", args[0], ok, *args[1:], rise=0.75)
     sc = load_scenario(rec.scenario)
     assert sc.leader.u0_hold and sc.integration.horizon == 2.0
-    assert {0.5, 0.7, 1.2} <= set(sc.breakpoints())
-    assert sc.leader.u0_numpy(0.49)[0] == 0.0 and sc.leader.u0_numpy(0.5)[0] == 2.0
+    r = sc.leader.u0_rise
+    assert r > 0 and {0.5, 0.7, 1.2, 0.5 + r} <= set(sc.breakpoints())
+    # the change ramps in from its row: 2 S((t − 0.5)/r), S(x) = 3x² − 2x³
+    for t in (0.49, 0.5, 0.5 + r / 4, 0.5 + r / 2, 0.5 + r, 1.99):
+        x = min(max((t - 0.5) / r, 0.0), 1.0)
+        assert sc.leader.u0_numpy(t)[0] == pytest.approx(2.0 * (3 * x**2 - 2 * x**3), abs=1e-15)
     assert sc.followers[2].g.expr.numpy(0.7) == pytest.approx(0.6)

@@ -7,7 +7,9 @@ const TRAIL_S = 5, PLOT_S = 10;
 let info = null, last = null, ws = null;
 let trails = [], hist = [];
 let keys = { left: false, right: false, up: false, down: false };
-let sentU0 = null;
+let sentU0 = null, wantScale = null;
+// what the page drew last (tests read it): the world view's slots and the plots' scales
+window.__drawn = { frames: [], plots: {} };
 
 const $ = (id) => document.getElementById(id);
 const color = (i) => COLORS[i % COLORS.length];
@@ -22,9 +24,21 @@ function connect() {
     if (msg.type === "state") onState(msg);
     else if (msg.type === "hello") onHello(msg);
     else if (msg.type === "error") logError(msg.message);
-    else if (msg.type === "saved") $("saved").textContent = "saved: " + msg.scenario + " (" + msg.rows + " rows)";
+    else if (msg.type === "saved") onSaved(msg);
+    else if (msg.type === "role") $("drive").disabled = true;
   };
   ws.onclose = () => { $("role").textContent = "disconnected"; };
+}
+
+function onSaved(msg) {
+  const el = $("saved");
+  if (msg.reason) {  // the record was written but the server refused to make it a replay
+    el.className = "refused";
+    el.textContent = `record ${msg.folder} (${msg.rows} rows) saved, replay refused: ${msg.reason}`;
+  } else {
+    el.className = "";
+    el.textContent = `saved: ${msg.scenario} (${msg.rows} rows, replay with make sim SCENARIO=…)`;
+  }
 }
 
 function logError(text) {
@@ -35,6 +49,9 @@ function logError(text) {
 function onHello(msg) {
   info = msg;
   $("title").textContent = msg.title || "console";
+  $("inputs").textContent = msg.p === 1
+    ? "This leader has one input: every arrow drives u0 (→ ↑ +, ← ↓ −), so it moves on a line; a gamepad's left stick x-axis sets it."
+    : `This leader has ${msg.p} inputs: ← → drive u0[1], ↑ ↓ drive u0[2] (each up to ±${fmtNum(msg.u_max)}); a gamepad's left stick sets both.`;
   trails = Array.from({ length: msg.N }, () => []);
   buildTable();
 }
@@ -73,6 +90,7 @@ function buildTable() {
 function onState(s) {
   if (last && s.t < last.t) { trails = trails.map(() => []); hist = []; }
   last = s;
+  if (wantScale !== null && Math.abs(s.scale - wantScale) < 1e-12) wantScale = null;
   if (!info) return;
   for (let i = 0; i < info.N; i++) {
     if (s.p && s.p[i]) trails[i].push([s.t, s.p[i][0], s.p[i][1]]);
@@ -83,11 +101,18 @@ function onState(s) {
   $("t").textContent = s.t.toFixed(2);
   $("ratio").textContent = s.ratio.toFixed(2);
   $("scale").textContent = s.scale;
-  $("health").textContent = s.failure ? "FAILED" : (s.paused ? "paused" : "ok");
+  $("health").textContent = s.failure ? "HELD" : (s.paused ? "paused" : "ok");
+  $("recoveries").textContent = s.recoveries ? `, ${s.recoveries} restart${s.recoveries > 1 ? "s" : ""} after a failure` : "";
+  $("events").textContent = (s.events || []).map((e) => `t = ${e[0].toFixed(2)} s ${e[1]}: ${e[2]}`).join("\n");
+  $("queued").textContent = s.queued ? " (waiting for a ramp to end)" : "";
   $("steps").textContent = s.steps;
   $("load").textContent = (100 * s.load).toFixed(0) + " %";
   $("u0").textContent = s.u0.map((v) => v.toFixed(2)).join(", ");
   $("role").textContent = `${s.role} (${s.pages} page${s.pages > 1 ? "s" : ""})`;
+  const drive = $("drive");
+  drive.style.display = s.role === "watcher" ? "inline" : "none";
+  drive.disabled = s.driven;  // another page drives: it must close first
+  drive.title = s.driven ? "another page drives" : "no page drives: take over";
   $("banner").style.display = s.failure ? "block" : "none";
   $("why").textContent = s.failure;
   $("pause").textContent = s.paused ? "resume" : "pause";
@@ -109,6 +134,7 @@ function onState(s) {
 }
 
 function fmt(v) { return v === null ? "—" : (Math.abs(v) >= 1000 ? v.toExponential(1) : v.toFixed(2)); }
+function fmtNum(v) { return String(+v.toPrecision(6)); }
 
 function drawWorld(s) {
   const cv = $("world"), g = cv.getContext("2d");
@@ -140,7 +166,20 @@ function drawWorld(s) {
   }
   g.fillStyle = "#000"; g.beginPath(); g.arc(X(cx), Y(cy), 8, 0, 2 * Math.PI); g.fill();
   g.fillText("leader y0", X(cx) + 10, Y(cy) + 14);
-  g.fillText("● follower p_i   □ slot y0 + R(τ0) b_i0", 8, cv.height - 8);
+  g.fillText("● follower p_i   □ slot y0 + b_i (the offset each controller tracks)", 8, cv.height - 8);
+  const fr = window.__drawn.frames;
+  fr.push({ t: s.t, y0: s.y0, slots: s.slots, p: s.p, et: s.et, u0: s.u0_now || s.u0 });
+  if (fr.length > 600) fr.shift();
+}
+
+// robust scale of a plot: the 98th percentile of the window (× 1.25), never a lone spike
+function robustTop(values) {
+  const v = values.filter((x) => x !== null && isFinite(x)).sort((a, b) => a - b);
+  if (!v.length) return { top: 1e-9, max: 0, clipped: false };
+  const q = v[Math.min(v.length - 1, Math.floor(0.98 * v.length))];
+  const max = v[v.length - 1];
+  const top = Math.max(1.25 * q, 1e-9);
+  return max > top ? { top, max, clipped: true } : { top: Math.max(max, 1e-9), max, clipped: false };
 }
 
 function drawPlot(cv, col) {
@@ -148,22 +187,44 @@ function drawPlot(cv, col) {
   g.clearRect(0, 0, cv.width, cv.height);
   if (!hist.length || !hist[hist.length - 1][col]) return;
   const t1 = hist[hist.length - 1][0], t0 = t1 - PLOT_S;
-  let top = 1e-9;
-  for (const h of hist) for (const v of h[col]) if (v !== null) top = Math.max(top, v);
-  const X = (t) => 30 + (cv.width - 35) * (t - t0) / PLOT_S, Y = (v) => cv.height - 12 - (cv.height - 20) * v / top;
-  g.fillStyle = "#555"; g.fillText(top.toPrecision(2), 2, 10); g.fillText("0", 2, cv.height - 12);
+  const L = 42, B = 16, T = 6;  // margins: value labels left, time axis below
+  const sc = robustTop(hist.flatMap((h) => h[col]));
+  const X = (t) => L + (cv.width - L - 5) * (t - t0) / PLOT_S;
+  const Y = (v) => cv.height - B - (cv.height - B - T) * Math.min(v, sc.top) / sc.top;
+  g.strokeStyle = "#999"; g.fillStyle = "#555";
+  g.beginPath(); g.moveTo(L, T); g.lineTo(L, cv.height - B); g.lineTo(cv.width - 5, cv.height - B); g.stroke();
+  g.fillText(sc.top.toPrecision(2), 2, T + 8); g.fillText("0", 2, cv.height - B);
+  const ticks = [];
+  for (let k = Math.ceil(Math.max(t0, 0)); k <= t1; k += 1) {  // a tick every simulated second
+    const x = X(k);
+    g.beginPath(); g.moveTo(x, cv.height - B); g.lineTo(x, cv.height - B + 3); g.stroke();
+    if (k % 2 === 0) g.fillText(k + " s", x - 6, cv.height - 3);
+    ticks.push(k);
+  }
   for (let i = 0; i < info.N; i++) {
     g.strokeStyle = color(i); g.beginPath();
     hist.forEach((h, n) => { const v = h[col][i] ?? 0; n ? g.lineTo(X(h[0]), Y(v)) : g.moveTo(X(h[0]), Y(v)); });
     g.stroke();
   }
+  if (sc.clipped) {  // values above the scale are drawn at its top, and the page says so
+    g.fillStyle = "#c62828";
+    g.fillRect(L, T - 2, cv.width - L - 5, 2);
+    g.fillText(`clipped: max ${sc.max.toPrecision(3)}`, cv.width - 130, T + 10);
+  }
+  window.__drawn.plots[cv.id] = { top: sc.top, max: sc.max, clipped: sc.clipped, ticks, t0, t1 };
 }
 
 // ---- operator input: keyboard and the Gamepad API
 function commandFromKeys() {
+  // one input: every arrow drives it (→ ↑ +, ← ↓ −); two or more: ← → u0[1], ↑ ↓ u0[2]
   const u = Array(info.p).fill(0), a = info.u_max;
-  u[0] = a * ((keys.right || keys.up && info.p === 1 ? 1 : 0) - (keys.left || keys.down && info.p === 1 ? 1 : 0));
-  if (info.p > 1) u[1] = a * ((keys.up ? 1 : 0) - (keys.down ? 1 : 0));
+  const plus = (b) => (b ? 1 : 0);
+  if (info.p === 1) {
+    u[0] = a * Math.sign(plus(keys.right || keys.up) - plus(keys.left || keys.down));
+  } else {
+    u[0] = a * (plus(keys.right) - plus(keys.left));
+    u[1] = a * (plus(keys.up) - plus(keys.down));
+  }
   return u;
 }
 
@@ -186,7 +247,10 @@ window.addEventListener("keyup", (e) => {
 });
 
 function scaleBy(f) {
-  const s = Math.min(20, Math.max(0.05, (last ? last.scale : 1) * f));
+  // from the scale asked for last, not the last frame's: quick presses each count
+  const base = wantScale !== null ? wantScale : (last ? last.scale : 1);
+  const s = Math.min(20, Math.max(0.05, base * f));
+  wantScale = s;
   send({ type: "scale", value: s });
 }
 
@@ -197,8 +261,9 @@ function pollGamepad() {
     $("pads").textContent = "gamepad: " + pad.id;
     const dead = (v) => (Math.abs(v) < 0.1 ? 0 : v);
     const u = Array(info.p).fill(0);
-    u[0] = +(info.u_max * dead(pad.axes[0] || 0)).toFixed(3);
-    if (info.p > 1) u[1] = +(-info.u_max * dead(pad.axes[1] || 0)).toFixed(3);
+    const clip = (v) => Math.max(-info.u_max, Math.min(info.u_max, v));
+    u[0] = clip(+(info.u_max * dead(pad.axes[0] || 0)).toFixed(3));
+    if (info.p > 1) u[1] = clip(+(-info.u_max * dead(pad.axes[1] || 0)).toFixed(3));  // stick up = +
     if (!Object.values(keys).some((k) => k)) pushU0(u);
   }
   requestAnimationFrame(pollGamepad);
@@ -206,6 +271,8 @@ function pollGamepad() {
 
 $("pause").onclick = () => send({ type: last && last.paused ? "resume" : "pause" });
 $("reset").onclick = $("reset2").onclick = () => send({ type: "reset" });
+$("retry").onclick = () => send({ type: "resume" });
+$("drive").onclick = () => send({ type: "drive" });
 $("slower").onclick = () => scaleBy(0.5);
 $("faster").onclick = () => scaleBy(2);
 $("save").onclick = () => send({ type: "save" });
