@@ -32,6 +32,7 @@ from typing import Any, NamedTuple, TypeVar
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from core import methods
 from core.errors import ExpressionError, ScenarioError, ToolkitError, UsageError
 from core.expressions import Expr, parse_expression
 from core.faults import (
@@ -56,7 +57,6 @@ from core.graph import (
     topology_violation,
     unreachable_followers,
 )
-from core.hold import shaped_breakpoints, shaped_hold
 from core.settings import (
     EITHER,
     NONNEG,
@@ -80,47 +80,13 @@ from core.shaping import DEFAULT_SHAPE, SHAPES, default_rise, shaped_steps
 SIGN_MODES = ("exact", "sat", "tanh")
 GHAT_LAWS = ("paper", "sigma", "projection", "sigma+projection")
 DERIVATIVES = ("oracle", "filtered")
-# Integration methods a scenario file may name: the built-in ones, plus any that
-# generated.solvers.register declares (this layer cannot import the registry).
-BUILTIN_METHODS = ("cvodes", "native", "idas", "fixed")
-METHODS = list(BUILTIN_METHODS)
-FIXED_STEP_METHODS = {"fixed"}  # the methods that may integrate the exact sign function
+METHODS = methods.METHODS  # the live list of core.methods (integration.method's choices)
 START_MODES = ("given", "formation")
 MAX_TABLE_ROWS = 1000  # rows of a piecewise g_i table
 MAX_FAULTS = 100  # [[followers.faults]] tables of one follower
 MAX_GRAPH_SWITCHES = 1000  # [[graph.switches]] tables (each topology is an N×N copy)
 MAX_TRACE_ROWS = 1_000_000  # rows of a CSV operator trace
 MAX_TRACE_BYTES = 64 * 2**20  # size of a CSV operator trace (read whole)
-
-
-def declare_method(name: str, *, fixed_step: bool) -> None:
-    """Let scenario files name an integration method (called by the solver registry).
-
-    Parameters
-    ----------
-    name : str
-        The method's ``integration.method``.
-    fixed_step : bool
-        Whether it steps with a fixed step, so that ``options.sign = "exact"`` is allowed.
-    """
-    if name not in METHODS:
-        METHODS.append(name)
-    if fixed_step:
-        FIXED_STEP_METHODS.add(name)
-    else:
-        FIXED_STEP_METHODS.discard(name)
-
-
-def withdraw_method(name: str) -> None:
-    """Undo :func:`declare_method` for a method that is not built in.
-
-    Parameters
-    ----------
-    name : str
-    """
-    if name in METHODS and name not in BUILTIN_METHODS:
-        METHODS.remove(name)
-        FIXED_STEP_METHODS.discard(name)
 
 
 MAX_SCENARIO_BYTES = 64 * 2**20  # size of a scenario file (read whole)
@@ -157,7 +123,7 @@ class Leader:
     u0_trace: np.ndarray | None  # (K, 1+p): columns t, u0_1..u0_p (piecewise linear)
     alpha: float  # ‖u0‖ ≤ α
     u0_hold: bool = False  # the trace is held constant from each row to the next (zero-order hold)
-    u0_rise: float = 0.0  # the steps of u0 (or a held trace's jumps) are shaped over this many s
+    u0_rise: float = 0.0  # the steps of u0 are shaped over this many seconds (core/shaping.py)
     u0_shape: str = DEFAULT_SHAPE  # how (core/shaping.py: smoothstep, prefilter or ramp)
 
     @property
@@ -181,9 +147,6 @@ class Leader:
             return np.array([np.broadcast_to(e.numpy(ts), ts.shape) for e in self.u0])
         tr = self.u0_trace
         assert tr is not None
-        if self.u0_hold and self.u0_rise > 0:  # each jump a smoothstep ramp (core/hold.py)
-            cols = [shaped_hold(tr[:, 0], tr[:, 1 + k], self.u0_rise, ts)[0] for k in range(self.p)]
-            return np.array(cols)
         if self.u0_hold:  # right-continuous: row j's value from its time t_j on
             j = np.clip(np.searchsorted(tr[:, 0], ts, side="right") - 1, 0, len(tr) - 1)
             return np.moveaxis(tr[j, 1:], -1, 0)
@@ -410,8 +373,6 @@ class Scenario:
         if self.leader.u0 is not None:
             for e in self.leader.u0:
                 times.update(e.breakpoints())
-        elif self.leader.u0_hold and self.leader.u0_rise > 0:  # rows and rows + rise
-            times.update(shaped_breakpoints(self.leader.u0_trace, self.leader.u0_rise))
         elif self.leader.u0_hold:  # each row of a held trace is a jump
             times.update(float(t) for t in self.leader.u0_trace[:, 0])
         exact |= set(switch_times(self.graph.switches))  # the graph switches exactly then
@@ -487,7 +448,7 @@ def _g_min_below_health(s: Scenario) -> Problem | None:
 
 
 def _exact_sign_needs_fixed_step(s: Scenario) -> Problem | None:
-    if s.options.sign == "exact" and s.integration.method not in FIXED_STEP_METHODS:
+    if s.options.sign == "exact" and not methods.is_fixed_step(s.integration.method):
         return (
             "'exact' makes variable-step integrators chatter and fail",
             "sign = 'tanh' or 'sat', or integration.method = 'fixed'",
@@ -976,8 +937,7 @@ def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) 
     p = sizes["p"]
     rise = _key(ctx, LEADER, L, "leader", "u0_rise", sizes) if "u0_rise" in L else None
     shape = _key(ctx, LEADER, L, "leader", "u0_shape", sizes)
-    held = L.get("u0_hold") is True  # a held trace's jumps are shaped too (core/hold.py)
-    for key, given in (("u0_rise", bool(rise) and not held), ("u0_shape", "u0_shape" in L)):
+    for key, given in (("u0_rise", bool(rise)), ("u0_shape", "u0_shape" in L)):
         if given and "u0" not in L:
             raise ctx.err(f"leader.{key}", "applies to u0 expressions only", f"u0, or no {key}")
     if "u0" in L:

@@ -10,9 +10,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from core import methods
 from core.errors import run_cli
 from core.overrides import add_scenario_knobs, scenario_knobs
-from core.scenario import METHODS
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -20,7 +20,7 @@ def _parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="cmd", required=True)
     sim = sub.add_parser("sim", help="simulate a scenario with generated C")
     sim.add_argument("scenario", help="scenario TOML file")
-    sim.add_argument("--method", choices=METHODS, help="override integration.method")
+    sim.add_argument("--method", choices=methods.METHODS, help="override integration.method")
     add_scenario_knobs(sim)
     sim.add_argument("--ablation", action="store_true", help="same as --set options.ablation=true")
     sim.add_argument("--opt", default="-O1", help="compiler optimisation flag (default -O1)")

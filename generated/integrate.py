@@ -1,39 +1,20 @@
-"""Integration of a compiled closed loop: CVODES (BDF), IDAS (DAE form) and a fixed step.
+"""The integration engine over a compiled closed loop: schedule, chunks, replay, statistics.
 
-All three methods run over the same generated code (a Function with the integrator
-signature ``(t, x, z, p, u) -> (ode, alg, quad, zero)``, usually a
-:func:`casadi.external` from :mod:`generated.codegen`).
+The methods that integrate a generated ``casadi.Function`` with the integrator signature
+``(t, x, z, p, u) -> (ode, alg, quad, zero)`` (usually a :func:`casadi.external` from
+:mod:`generated.codegen`) each give a *stepper* (:mod:`generated.solvers.cvodes`,
+``idas``, ``fixed``); this module runs it.
 
 The run is split at the known discontinuity times (fault onsets, steps in inputs):
 each segment is a fresh integrator started from the state reached, so a
 variable-step method never steps across a jump. Segments are further cut into
-chunks of ``IntegratorSettings.chunk`` seconds: one integrator call each, which
+chunks of ``IntegratorSettings.chunk`` seconds: one stepper call each, which
 bounds the work lost on a failure and drives the progress bar. On a failure
-(too many steps, step size too small, repeated convergence failures, NaN) the
-failing chunk is replayed one output interval at a time, so the returned
-:class:`Trajectory` keeps every output time reached; it is marked incomplete and
-carries the method, the time reached and the solver's reason.
-
-The fixed-step method is the L-stable two-stage Rosenbrock method ROS2 of Verwer,
-Spee, Blom and Hundsdorfer (SIAM J. Sci. Comput. 20, 1999), applied to the
-autonomised system (t' = 1), with the generated sparse Jacobian and a sparse LU
-(CasADi Linsol), γ = 1 + 1/√2:
-
-    (I − γhJ) k1 = f(t_n, x_n) + γh ∂f/∂t
-    (I − γhJ) k2 = f(t_n + h, x_n + h k1) − 2 k1 − γh ∂f/∂t
-    x_{n+1} = x_n + (3/2) h k1 + (1/2) h k2.
-
-It is linearly implicit: no Newton iteration that could fail to converge on the
-exact sign function, and order 2 for any Jacobian approximation (a W-method), so
-the Jacobian of the discontinuous terms (zero almost everywhere) does no harm.
-Explicit RK4 at dt = 1e-4 diverges on the paper's closed loop (its adaptive laws
-are stiff); this scheme is unconditionally stable on the linear part. The step is
-fixed (``fixed_step``, equal steps per output interval); a loose safeguard
-recomputes an output interval as two halves (recursively) where the embedded
-first-order error estimate exceeds ``fixed_rtol``/``fixed_atol`` or a NaN
-appears: at the paper's t = 0 the Jacobian has eigenvalues with real parts
-±1e5 and entries ~1e10 (ĝ's rate), which no fixed step of 1e-3 or 1e-4 resolves.
-The exact sign's chattering (a jump Δ in f gives an estimate hΔ/2) passes it.
+(a stepper raises :class:`generated.solvers.ChunkFailure`: too many steps, step size
+too small, repeated convergence failures, NaN) the failing chunk is replayed one output
+interval at a time, so the returned :class:`Trajectory` keeps every output time
+reached; it is marked incomplete and carries the method, the time reached and the
+solver's reason.
 """
 
 from __future__ import annotations
@@ -52,16 +33,10 @@ import casadi as ca
 import numpy as np
 
 from core.errors import IntegrationError
-from core.scenario import METHODS as SCENARIO_METHODS
 from core.scenario import Integration
 from core.settings import default_of
 from generated import solvers
-from generated.solvers import Status, flag_status
-
-#: the methods a scenario file may name (any registered method works through the API:
-#: :func:`generated.solvers.names`)
-METHODS = SCENARIO_METHODS
-GAMMA_ROS2 = 1.0 + 1.0 / math.sqrt(2.0)
+from generated.solvers import ChunkFailure, Status, flag_status
 
 #: SUNDIALS return flags -> readable reason
 _REASONS = {
@@ -501,8 +476,13 @@ def flag_reason(flag: str) -> str:
     return f"{flag}: {_REASONS.get(flag, 'solver failure')}"
 
 
-def _reason(exc: Exception) -> tuple[str, Status]:
-    """The readable reason and the :class:`Status` of a CasADi integrator's exception."""
+def failure_reason(exc: Exception) -> tuple[str, Status]:
+    """The readable reason and the :class:`Status` of a CasADi integrator's exception.
+
+    Parameters
+    ----------
+    exc : Exception
+    """
     m = re.search(r'returned "((?:CV|IDA)_\w+)"', str(exc))
     if m:
         return flag_reason(m.group(1)), flag_status(m.group(1))
@@ -522,7 +502,13 @@ _STAT_KEYS = {
 }
 
 
-def _add_stats(acc: dict[str, Any], st: dict[str, Any]) -> None:
+def add_stats(acc: dict[str, Any], st: dict[str, Any]) -> None:
+    """Add a SUNDIALS integrator's counters ``st`` to the run's statistics ``acc``.
+
+    Parameters
+    ----------
+    acc, st : dict
+    """
     h = st.get("hlast")
     if isinstance(h, float) and math.isfinite(h) and h > 0:
         acc["last_step"] = h
@@ -532,261 +518,6 @@ def _add_stats(acc: dict[str, Any], st: dict[str, Any]) -> None:
             if v is not None and isinstance(v, int | float) and math.isfinite(v):
                 acc[k] += int(v)
                 break
-
-
-class SundialsStepper:
-    """One CVODES/IDAS call per chunk (a fresh integrator: a restart).
-
-    Parameters
-    ----------
-    f : casadi.Function
-        Integrator form; ``nz`` algebraic states for IDAS, none for CVODES.
-    s : IntegratorSettings
-    nz : int
-    plugin : str
-        CasADi's integrator plugin, ``"cvodes"`` or ``"idas"``.
-    """
-
-    def __init__(self, f: ca.Function, s: IntegratorSettings, nz: int, plugin: str) -> None:
-        self.f, self.s, self.nz = f, s, nz
-        self.plugin = plugin
-        opts: dict[str, Any] = {
-            "abstol": s.atol,
-            "reltol": s.rtol,
-            "max_num_steps": int(s.max_steps),
-            "newton_scheme": s.newton_scheme,
-            "disable_internal_warnings": True,
-            "show_eval_warnings": False,
-        }
-        if s.newton_scheme == "direct":
-            opts["linear_solver"] = s.linear_solver
-        self._znewton: ca.Function | None = None
-        if self.plugin == "cvodes":
-            opts["linear_multistep_method"] = "bdf"
-        else:
-            opts["suppress_algebraic"] = True  # without it IDAS stalls at t ≈ 0.008 s
-            if nz:
-                # z out of the Newton test too (see IntegratorSettings.algebraic_atol)
-                nx = int(f.size1_in(1))
-                opts["abstolv"] = [float(s.atol)] * nx + [float(s.algebraic_atol)] * nz
-                self._znewton = _z_newton_step(f, nz, s.linear_solver)
-        opts.update(dict(s.extra_options))
-        self.opts = opts
-
-    def consistent_z(self, t0: float, x: np.ndarray, z: np.ndarray) -> np.ndarray | None:
-        """z with alg(t0, x, z) = 0 (Newton in z, x fixed), or None if that fails.
-
-        Replaces IDACalcIC, whose convergence test uses the same weights: with z out of
-        it, IDACalcIC stops with z(0) off by 5e-8 relative (friction DAE of the tests).
-
-        Parameters
-        ----------
-        t0 : float
-        x, z : ndarray
-            The state and the guess of the algebraic states.
-        """
-        if self._znewton is None:
-            return None
-        z = np.array(z, dtype=float).ravel()
-        for _ in range(20):
-            try:
-                dz = np.array(self._znewton(t0, x, z), dtype=float).ravel()
-            except RuntimeError:  # singular ∂alg/∂z
-                return None
-            if not np.all(np.isfinite(dz)):
-                return None
-            z = z - dz
-            if np.max(np.abs(dz)) <= 1e-12 * (1.0 + np.max(np.abs(z))):
-                return z
-        return None
-
-    def _call_options(
-        self, t0: float, x: np.ndarray, z: np.ndarray, new_segment: bool
-    ) -> tuple[dict[str, Any], np.ndarray]:
-        """The options of one call and the z it starts from."""
-        if self.plugin != "idas" or not self.nz:
-            return self.opts, z
-        # at t0 and at breakpoints z is solved from alg = 0 here; at other chunk
-        # boundaries it is carried over (consistent already). IDACalcIC only as a
-        # fallback (it failed once with a line search at t = 14.08 s on the paper run)
-        zc = self.consistent_z(t0, x, z) if new_segment else np.asarray(z, dtype=float)
-        if zc is None:
-            return {**self.opts, "calc_ic": True}, z
-        xdot = np.array(self.f(t0, x, zc, [], [])[0], dtype=float).ravel()
-        return {**self.opts, "calc_ic": False, "init_xdot": xdot.tolist()}, zc
-
-    def _solve(
-        self, t0: float, x: np.ndarray, z: np.ndarray, times: list[float], acc: dict, new: bool
-    ) -> dict[str, Any]:
-        """One CasADi integrator call (its counters added to ``acc`` even on a failure)."""
-        opts, z = self._call_options(t0, x, z, new)
-        integ = ca.integrator("sim", self.plugin, self.f, t0, times, opts)
-        acc["integrator_calls"] += 1
-        try:
-            return integ(x0=x, z0=z)
-        finally:
-            try:
-                _add_stats(acc, integ.stats())
-            except RuntimeError:  # no stats when the call failed before the solver ran
-                pass
-
-    def __call__(
-        self,
-        t0: float,
-        x: np.ndarray,
-        z: np.ndarray,
-        times: list[float],
-        acc: dict,
-        new_segment: bool = True,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """States (and algebraic states) at ``times``; raises :class:`_ChunkFailure`."""
-        try:
-            res = self._solve(t0, x, z, times, acc, new_segment)
-        except RuntimeError as exc:
-            raise _ChunkFailure(*_reason(exc), times[-1]) from None
-        X = np.array(res["xf"], dtype=float).reshape(len(x), len(times), order="F").T
-        Z = (
-            np.array(res["zf"], dtype=float).reshape(self.nz, len(times), order="F").T
-            if self.nz
-            else np.zeros((len(times), 0))
-        )
-        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Z))):
-            raise _ChunkFailure("state is not finite (NaN or Inf)", Status.NOT_FINITE, times[-1])
-        return X, Z
-
-
-def _z_newton_step(f: ca.Function, nz: int, linear_solver: str) -> ca.Function | None:
-    """``(t, x, z) -> Δz``: one Newton step on alg(t, x, z) = 0 in z (None without ∂alg/∂z)."""
-    t, x, z = ca.MX.sym("t"), ca.MX.sym("x", f.size1_in(1)), ca.MX.sym("z", nz)
-    e = ca.MX(0, 1)
-    try:
-        alg = f(t, x, z, e, e)[1]
-        return ca.Function(
-            "z_newton", [t, x, z], [ca.solve(ca.jacobian(alg, z), alg, linear_solver)]
-        )
-    except RuntimeError:  # e.g. a library generated without jac_<name> (jvp builds)
-        return None
-
-
-class Ros2Stepper:
-    """The fixed-step ROS2 method over a compiled ``(t, x, ...) -> ode`` with its Jacobian.
-
-    Parameters
-    ----------
-    f : casadi.Function
-        Integrator form of an ODE (its library has ``jac_<name>``).
-    s : IntegratorSettings
-        ``fixed_step``, the safeguard tolerances and the sparse linear solver.
-    nx : int
-    """
-
-    def __init__(self, f: ca.Function, s: IntegratorSettings, nx: int) -> None:
-        self.s = s
-        x = ca.MX.sym("x", nx)
-        t = ca.MX.sym("t")
-        h = ca.MX.sym("h")
-        e = ca.MX(0, 1)
-
-        def rhs(tt: ca.MX, xx: ca.MX) -> ca.MX:
-            return f(tt, xx, e, e, e)[0]
-
-        t2 = ca.MX.sym("t2")  # time of stage 2: t + h, or its left limit at a segment end
-        k0 = rhs(t, x)
-        J = ca.jacobian(k0, x)  # uses jac_<name> from the library: sparse
-        ft = ca.jacobian(k0, t)  # ∂f/∂t: ROS2 applied to the autonomised system (t' = 1)
-        W = ca.MX.eye(nx) - GAMMA_ROS2 * h * J
-        k1 = ca.solve(W, k0 + GAMMA_ROS2 * h * ft, s.linear_solver)
-        k2 = ca.solve(W, rhs(t2, x + h * k1) - 2 * k1 - GAMMA_ROS2 * h * ft, s.linear_solver)
-        xn = x + 1.5 * h * k1 + 0.5 * h * k2
-        # embedded first-order solution x + h k1: scaled local error estimate (max norm)
-        est = ca.fabs(0.5 * h * (k1 + k2)) / (s.fixed_atol + s.fixed_rtol * ca.fabs(x))
-        emax = ca.MX.sym("emax")
-        self.step = ca.Function("ros2_step", [x, emax, t, h, t2], [xn, ca.fmax(emax, ca.mmax(est))])
-        self._runs: dict[int, ca.Function] = {}
-
-    def _run(self, K: int) -> ca.Function:
-        f = self._runs.get(K)
-        if f is None:  # K steps in one call; (x, emax) accumulated
-            f = self._runs[K] = self.step.mapaccum(f"ros2_{K}", K, 2)
-        return f
-
-    def advance(self, t0: float, t1: float, x: np.ndarray, acc: dict) -> np.ndarray:
-        """Advance over [t0, t1] in equal steps <= fixed_step; bisect where the error test fails.
-
-        Parameters
-        ----------
-        t0, t1 : float
-        x : ndarray
-            The state at t0.
-        acc : dict
-            Statistics, updated.
-        """
-        K = max(1, math.ceil((t1 - t0) / self.s.fixed_step - 1e-9))
-        return self._advance(t0, t1, x, K, 0, acc)
-
-    def _advance(self, t0: float, t1: float, x: np.ndarray, K: int, depth: int, acc: dict):
-        h = (t1 - t0) / K
-        tv = t0 + h * np.arange(K)
-        t2 = tv + h
-        # the last stage-2 evaluation takes the left limit at t1: a jump at t1 (a
-        # breakpoint) belongs to the next segment, as with the variable-step restarts
-        t2[-1] = np.nextafter(t1, t0)
-        acc["steps"] += K
-        acc["rhs_evals"] += 2 * K
-        acc["jac_evals"] += K
-        acc["lin_setups"] += K
-        acc["integrator_calls"] += 1
-        try:
-            X, E = self._run(K)(x, 0.0, tv.reshape(1, -1), np.full((1, K), h), t2.reshape(1, -1))
-            xn = np.array(X[:, -1], dtype=float).ravel()
-            err = float(E[-1])
-        except RuntimeError:  # NaN met inside the interval (e.g. in the linear solve)
-            xn, err = np.full_like(x, np.nan), math.inf  # refine, as for a failed error test
-        if np.all(np.isfinite(xn)) and err <= 1.0:
-            return xn
-        if depth >= self.s.fixed_max_halvings:
-            raise _ChunkFailure(
-                f"error test still fails with steps {2**depth} times smaller "
-                f"(estimate {err:.3g}; raise fixed_rtol/fixed_atol or lower fixed_step)",
-                Status.ERROR_TEST,
-                t1,
-            )
-        # the same number of steps on each half: the step is halved where needed only
-        acc["refined_intervals"] += 1
-        tm = 0.5 * (t0 + t1)
-        xm = self._advance(t0, tm, x, K, depth + 1, acc)
-        return self._advance(tm, t1, xm, K, depth + 1, acc)
-
-    def __call__(
-        self,
-        t0: float,
-        x: np.ndarray,
-        z: np.ndarray,
-        times: list[float],
-        acc: dict,
-        new_segment: bool = True,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """States at ``times`` (no algebraic states); raises :class:`_ChunkFailure`."""
-        out = []
-        tp, xp = t0, x
-        for tt in times:
-            try:
-                xp = self.advance(tp, tt, xp, acc)
-            except RuntimeError as exc:  # singular iteration matrix, NaN in the factorisation
-                raise _ChunkFailure(*_reason(exc), tt) from None
-            if not np.all(np.isfinite(xp)):
-                raise _ChunkFailure(
-                    "state is not finite (NaN or Inf): unstable step", Status.NOT_FINITE, tt
-                )
-            out.append(xp)
-            tp = tt
-        return np.array(out), np.zeros((len(times), 0))
-
-
-class _ChunkFailure(Exception):
-    def __init__(self, reason: str, status: Status, t_target: float) -> None:
-        super().__init__(reason)
-        self.reason, self.status, self.t_target = reason, status, t_target
 
 
 @dataclass
@@ -809,7 +540,7 @@ class _Rows:
             self.Z[idx] = z
         self.last = idx
 
-    def trajectory(self, method: str, failure: _ChunkFailure | None, acc: dict) -> Trajectory:
+    def trajectory(self, method: str, failure: ChunkFailure | None, acc: dict) -> Trajectory:
         n = self.last + 1
         message = ""
         if failure is not None:
@@ -920,7 +651,7 @@ class _Run:
         z: np.ndarray,
         dae: bool,
         progress: Callable[[float], None] | None,
-    ) -> _ChunkFailure | None:
+    ) -> ChunkFailure | None:
         """Integrate every chunk; return the failure that stopped the run, or None."""
         restarts = set(self.sched.breaks.tolist())  # compared exactly: targets are these times
         t_cur = float(self.sched.t_out[0])
@@ -945,7 +676,7 @@ class _Run:
 
     def _advance(
         self, t0: float, x, z, times: list[float], new_seg: bool, first_dae: bool
-    ) -> tuple[Any, Any, _ChunkFailure | None]:
+    ) -> tuple[Any, Any, ChunkFailure | None]:
         """One chunk, replayed target by target after a failure to keep what was reached."""
         try:
             if first_dae:  # t0 in the grid: row 0 gets the consistent z(t0) the solve started from
@@ -954,7 +685,7 @@ class _Run:
                 return Xc, Zc, None
             Xc, Zc = self.stepper(t0, x, z, times, self.acc, new_seg)
             return Xc, Zc, None
-        except _ChunkFailure:
+        except ChunkFailure:
             return self._replay(t0, x, z, times, new_seg)
 
     def _replay(self, t0: float, x, z, times: list[float], new_segment: bool):
@@ -963,7 +694,7 @@ class _Run:
         for k, tt in enumerate(times):
             try:
                 Xi, Zi = self.stepper(t0, x, z, [tt], self.acc, new_segment and k == 0)
-            except _ChunkFailure as fail:
+            except ChunkFailure as fail:
                 return xs, zs, fail
             x, t0 = Xi[-1], tt
             z = Zi[-1] if len(Zi[-1]) else z

@@ -164,3 +164,104 @@ def printed_law_ode(sc: Scenario, cl) -> ca.Function:  # noqa: ANN001 (ClosedLoo
         pos = sl.stop
     parts.append(xdot[pos:])
     return ca.Function("ode_printed", [t, x], [ca.vertcat(*parts)])
+
+
+#: a two-follower scenario with a fault at t = 0.3 s and a short horizon (tests of generated/)
+SMALL = """
+name = "small"
+description = "two followers, short horizon (tests of generated/)"
+
+[leader]
+A0 = [[0.0, 1.0], [0.0, 0.0]]
+B0 = [[0.0], [1.0]]
+C0 = [[1.0, 1.0], [2.0, 2.0]]
+eta0 = [0.0, 0.0]
+u0 = ["2*cos(t)"]
+alpha = 2.0
+
+[graph]
+adjacency = [[0.0, 0.0], [1.0, 0.0]]
+pinning = [1.0, 1.0]
+
+[[followers]]
+model = "two_link"
+p0 = [1.0, 0.5]
+q0 = [0.0, 0.0]
+b0 = [1.0, 0.0]
+g = [[0.0, 1.0], [0.3, 0.8]]        # a fault at t = 0.3 s: a breakpoint
+f = ["sin(2*t)", "cos(t)"]
+
+[[followers]]
+model = "two_link"
+p0 = [0.5, 1.0]
+q0 = [0.0, 0.0]
+b0 = [0.0, 1.0]
+g = 0.9
+f = ["0.5*sin(t)", "0.5"]
+
+[observer]
+lambda1 = 1.9
+lambda2 = 2.0
+Q = [[35.4, 14.9]]
+Theta = "synthesize"
+alpha1 = 1.0
+alpha1_bar = 1.0
+phi0 = 1.0
+phi_min = 1e-3
+lambda_bar1 = 1.0
+delta1 = 0.5
+delta2 = 1.0
+delta1_hat = 0.25
+delta2_hat = 0.5
+
+[controller]
+Lambda = 10.0
+k1 = 5.0
+k2 = 1.0
+
+[options]
+sign = "tanh"
+sign_width = 0.05
+ghat_law = "projection"
+tau_threshold = 0.5
+
+[initial]
+eta = [0.0, 0.0]
+mu = [0.0, 0.0]
+ghat = 1.1   # inside the projection interval [1, 2]: at its edge (1.0) IDAS fails at t = 0
+
+[integration]
+method = "cvodes"
+rtol = 1e-8
+atol = 1e-10
+horizon = 0.5
+output_step = 0.01
+fixed_step = 1e-3
+max_steps = 20000
+"""
+
+#: tolerances at which two integrators must agree to TIGHT_BOUND (the fixture's rtol 1e-8
+#: leaves each its own error of the start-up transient, ~1e-5 in this norm)
+TIGHT = {"rtol": 1e-10, "atol": 1e-13, "max_steps": 200000}
+TIGHT_BOUND = 1e-6
+
+#: the paper's two-link parameters (section 4)
+TWO_LINK_PAPER = {"m1": 0.5, "m2": 1.5, "r1": 1.0, "r2": 0.8, "J1": 5.0, "J2": 5.0, "g0": 9.81}
+
+
+def two_link_closed_form(p, q, m1, m2, r1, r2, J1, J2, g0):
+    """Plain numpy transcription of docs/reading.md, 'Followers' (the paper's printed M, C, G)."""
+    c2 = np.cos(p[1])
+    m11 = (m1 + m2) * r1**2 + m2 * r2**2 + 2 * m2 * r1 * r2 * c2 + J1
+    m12 = m2 * r2**2 + m2 * r1 * r2 * c2
+    m22 = m2 * r2**2 + J2
+    c = m2 * r1 * r2 * np.sin(p[1])
+    M = np.array([[m11, m12], [m12, m22]])
+    C = np.array([[-c * q[1], -c * (q[0] + q[1])], [c * q[0], 0.0]])
+    G = np.array(
+        [
+            ((m1 + m2) * r1 * np.cos(p[0]) + m2 * r2 * np.cos(p[0] + p[1])) * g0,
+            m2 * r2 * np.cos(p[0] + p[1]) * g0,
+        ]
+    )
+    return M, C, G

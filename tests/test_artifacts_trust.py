@@ -25,7 +25,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 import pytest
-from test_sim_api import SMALL
+from helpers import SMALL
 
 from core.artifacts import atomic_write_text, sha256_file
 from core.errors import SynthesisError, run_cli

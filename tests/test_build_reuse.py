@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from test_sim_api import SMALL
+from helpers import SMALL
 
 from generated import api
 from generated.codegen import CodegenSettings

@@ -162,7 +162,7 @@ def test_breakpoints_faults_and_two_pinned_followers(tmp_path):
     with the tolerance (measured 2026-12-01: 2.7e-5, 1.3e-4, 3.3e-6, 1.8e-7 at rtol 1e-8,
     1e-9, 1e-10, 1e-11 with atol = rtol/100).
     """
-    from test_sim_api import SMALL
+    from helpers import SMALL
 
     from synthesis import synthesize
 

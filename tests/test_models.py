@@ -5,30 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
+from helpers import TWO_LINK_PAPER as PAPER
+from helpers import two_link_closed_form
 
 from core.errors import ScenarioError
 from core.models import REGISTRY, ModelSpec, build_model, register
 from core.models.derive import check_properties, euler_lagrange_matrices
-
-PAPER = {"m1": 0.5, "m2": 1.5, "r1": 1.0, "r2": 0.8, "J1": 5.0, "J2": 5.0, "g0": 9.81}
-
-
-def two_link_closed_form(p, q, m1, m2, r1, r2, J1, J2, g0):
-    """Plain numpy transcription of docs/reading.md, 'Followers' (the paper's printed M, C, G)."""
-    c2 = np.cos(p[1])
-    m11 = (m1 + m2) * r1**2 + m2 * r2**2 + 2 * m2 * r1 * r2 * c2 + J1
-    m12 = m2 * r2**2 + m2 * r1 * r2 * c2
-    m22 = m2 * r2**2 + J2
-    c = m2 * r1 * r2 * np.sin(p[1])
-    M = np.array([[m11, m12], [m12, m22]])
-    C = np.array([[-c * q[1], -c * (q[0] + q[1])], [c * q[0], 0.0]])
-    G = np.array(
-        [
-            ((m1 + m2) * r1 * np.cos(p[0]) + m2 * r2 * np.cos(p[0] + p[1])) * g0,
-            m2 * r2 * np.cos(p[0] + p[1]) * g0,
-        ]
-    )
-    return M, C, G
 
 
 @pytest.mark.parametrize(

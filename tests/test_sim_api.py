@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from helpers import SMALL, TIGHT, TIGHT_BOUND
 
 from core.errors import BuildError, IntegrationError, ScenarioError, run_cli
 from generated import api
@@ -24,79 +25,6 @@ from generated.__main__ import main as cli_main
 from generated.codegen import CodegenSettings
 from generated.meta import MetaFileError, RunMeta
 from generated.progress import progress_bar
-
-SMALL = """
-name = "small"
-description = "two followers, short horizon (tests of generated/)"
-
-[leader]
-A0 = [[0.0, 1.0], [0.0, 0.0]]
-B0 = [[0.0], [1.0]]
-C0 = [[1.0, 1.0], [2.0, 2.0]]
-eta0 = [0.0, 0.0]
-u0 = ["2*cos(t)"]
-alpha = 2.0
-
-[graph]
-adjacency = [[0.0, 0.0], [1.0, 0.0]]
-pinning = [1.0, 1.0]
-
-[[followers]]
-model = "two_link"
-p0 = [1.0, 0.5]
-q0 = [0.0, 0.0]
-b0 = [1.0, 0.0]
-g = [[0.0, 1.0], [0.3, 0.8]]        # a fault at t = 0.3 s: a breakpoint
-f = ["sin(2*t)", "cos(t)"]
-
-[[followers]]
-model = "two_link"
-p0 = [0.5, 1.0]
-q0 = [0.0, 0.0]
-b0 = [0.0, 1.0]
-g = 0.9
-f = ["0.5*sin(t)", "0.5"]
-
-[observer]
-lambda1 = 1.9
-lambda2 = 2.0
-Q = [[35.4, 14.9]]
-Theta = "synthesize"
-alpha1 = 1.0
-alpha1_bar = 1.0
-phi0 = 1.0
-phi_min = 1e-3
-lambda_bar1 = 1.0
-delta1 = 0.5
-delta2 = 1.0
-delta1_hat = 0.25
-delta2_hat = 0.5
-
-[controller]
-Lambda = 10.0
-k1 = 5.0
-k2 = 1.0
-
-[options]
-sign = "tanh"
-sign_width = 0.05
-ghat_law = "projection"
-tau_threshold = 0.5
-
-[initial]
-eta = [0.0, 0.0]
-mu = [0.0, 0.0]
-ghat = 1.1   # inside the projection interval [1, 2]: at its edge (1.0) IDAS fails at t = 0
-
-[integration]
-method = "cvodes"
-rtol = 1e-8
-atol = 1e-10
-horizon = 0.5
-output_step = 0.01
-fixed_step = 1e-3
-max_steps = 20000
-"""
 
 
 @pytest.fixture(scope="module")
@@ -114,12 +42,6 @@ def base(env):
     text1 = r1.csv_path.read_bytes()
     r2 = api.run(env["scenario"], codegen=env["cg"], out_root=env["out"], progress=False)
     return r1, text1, r2
-
-
-#: tolerances at which two integrators must agree to TIGHT_BOUND (the fixture's rtol 1e-8
-#: leaves each its own error of the start-up transient, ~1e-5 in this norm)
-TIGHT = {"rtol": 1e-10, "atol": 1e-13, "max_steps": 200000}
-TIGHT_BOUND = 1e-6
 
 
 def tight_frame(env, method: str) -> pd.DataFrame:

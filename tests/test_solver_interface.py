@@ -21,13 +21,13 @@ from collections.abc import Callable, Sequence
 import casadi as ca
 import numpy as np
 import pytest
+from helpers import SMALL, TIGHT, TIGHT_BOUND
 
 from core.errors import IntegrationError, ScenarioError
 from generated import api, native, solvers
 from generated.codegen import CodegenSettings
 from generated.integrate import IntegratorSettings, Trajectory, integrate, output_grid
 from generated.solvers import Solver, Status
-from tests.test_sim_api import SMALL, TIGHT, TIGHT_BOUND
 
 
 def _c_layout(tmp_path) -> dict[str, int]:

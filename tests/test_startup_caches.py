@@ -16,13 +16,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import TWO_LINK_PAPER as PAPER
+from helpers import two_link_closed_form
 
 import synthesis.api
 from core.models import build_model, cache, derive
 from core.scenario import load_scenario
 from generated import gains_cache
 from synthesis.gains import Gains, gains_from_dict
-from tests.test_models import PAPER, two_link_closed_form
 
 ROOT = Path(__file__).resolve().parents[1]
 SYNTH = ROOT / "scenarios" / "paper-synth.toml"

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from test_sim_api import SMALL
+from helpers import SMALL
 
 from benchmarks.steps import (
     default_edges,

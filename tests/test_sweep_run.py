@@ -11,11 +11,11 @@ import tomllib
 
 import pandas as pd
 import pytest
+from helpers import SMALL
 
 from sweep.run import run_study
 from sweep.sampler import samples
 from sweep.study import load_study
-from tests.test_sim_api import SMALL
 
 STUDY = """
 name = "tiny"

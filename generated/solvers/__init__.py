@@ -1,27 +1,31 @@
-"""The integration methods, by name: one :class:`Solver` per module, found through the registry.
+"""The integration methods' implementations, by name: one :class:`Solver` per module.
 
 ::
 
     from generated import solvers
     solvers.get("native")        # the Solver instance; a ToolkitError lists the known names
     solvers.names()              # ('cvodes', 'native', 'idas', 'fixed', ...)
-    solvers.register(MySolver()) # a new method (see docs/ARCHITECTURE.md)
+    solvers.register(MySolver()) # a method defined outside the registry's list
 
-The built-in methods (``cvodes``, ``native``, ``idas``, ``fixed``) are registered the
-first time the registry is consulted, so importing this package stays cheap and the
-method modules may import the integration engine freely.
+The one list of methods is :mod:`core.methods` (below this layer, so that the scenario
+loader and ``--method`` ask the same registry): each :class:`~core.methods.MethodSpec`
+names the module that implements it, imported here the first time the method is
+needed, so importing this package stays cheap and the method modules may import the
+integration engine freely.
 """
 
 from __future__ import annotations
 
 import importlib
 
+from core import methods
 from core.errors import IntegrationError
-from core.scenario import declare_method, withdraw_method
-from generated.solvers.base import FORMS, BuildPlan, Solver, Status, flag_status
+from core.methods import MethodSpec
+from generated.solvers.base import FORMS, BuildPlan, ChunkFailure, Solver, Status, flag_status
 
 __all__ = [
     "BuildPlan",
+    "ChunkFailure",
     "Solver",
     "Status",
     "flag_status",
@@ -31,23 +35,15 @@ __all__ = [
     "unregister",
 ]
 
-#: the built-in methods' modules, in the order :func:`names` lists them
-BUILTIN = ("cvodes", "native", "idas", "fixed")
-
 _REGISTRY: dict[str, Solver] = {}
-_loaded = False
-
-
-def _load_builtins() -> None:
-    global _loaded
-    if not _loaded:
-        _loaded = True
-        for module in BUILTIN:
-            importlib.import_module(f"generated.solvers.{module}")
 
 
 def register(solver: Solver, *, replace: bool = False) -> Solver:
-    """Make ``solver`` available under ``solver.name``.
+    """Make ``solver`` the implementation of the method ``solver.name``.
+
+    A method declared in :mod:`core.methods` must agree with it on ``form`` and
+    ``fixed_step``; any other name is declared there from the solver's attributes (so
+    scenario files and ``--method`` accept it too).
 
     Parameters
     ----------
@@ -63,39 +59,46 @@ def register(solver: Solver, *, replace: bool = False) -> Solver:
     Raises
     ------
     IntegrationError
-        For a name taken (without ``replace``), not a plain word, or an unknown form.
+        For a name taken (without ``replace``), not a plain word, an unknown form or a
+        solver that disagrees with the method's declaration.
     """
     name = getattr(solver, "name", "")
-    if not (isinstance(name, str) and name.replace("-", "").replace("_", "").isalnum()):
-        raise IntegrationError(f"solver name {name!r}: a plain word (letters, digits, - and _)")
     if solver.form not in FORMS:
         raise IntegrationError(f"solver {name!r}: form {solver.form!r} is not one of {FORMS}")
     if name in _REGISTRY and not replace and _REGISTRY[name] is not solver:
         raise IntegrationError(f"solver {name!r} is registered already (pass replace=True)")
+    spec = methods.get(name) if name in methods.names() else None
+    if spec is None or replace:
+        module = type(solver).__module__
+        spec = MethodSpec(name, solver.form, bool(solver.fixed_step), module, solver.summary)
+        methods.declare(spec, replace=True)
+    if (spec.form, spec.fixed_step) != (solver.form, bool(solver.fixed_step)):
+        raise IntegrationError(
+            f"solver {name!r}: form {solver.form!r}, fixed_step {solver.fixed_step} disagree "
+            f"with core.methods ({spec.form!r}, {spec.fixed_step})"
+        )
     _REGISTRY[name] = solver
-    declare_method(name, fixed_step=solver.fixed_step)  # scenario files may name it
     return solver
 
 
 def unregister(name: str) -> None:
-    """Remove a method (tests that register a toy method clean up with this).
+    """Remove a method that is not built in (tests that register a toy method use this).
 
     Parameters
     ----------
     name : str
     """
     _REGISTRY.pop(name, None)
-    withdraw_method(name)
+    methods.withdraw(name)
 
 
 def names() -> tuple[str, ...]:
-    """The registered method names (built-ins first)."""
-    _load_builtins()
-    return tuple(_REGISTRY)
+    """The method names (built-ins first): those of :func:`core.methods.names`."""
+    return methods.names()
 
 
 def get(name: str) -> Solver:
-    """The :class:`Solver` registered as ``name``.
+    """The :class:`Solver` of method ``name`` (its module imported on first use).
 
     Parameters
     ----------
@@ -104,12 +107,17 @@ def get(name: str) -> Solver:
     Raises
     ------
     IntegrationError
-        For an unknown name, in one line listing the known ones.
+        For an unknown name, in one line listing the known ones, or a module that does
+        not register its method.
     """
-    _load_builtins()
     solver = _REGISTRY.get(name)
     if solver is None:
-        raise IntegrationError(
-            f"integration method {name!r} is unknown; known: {', '.join(_REGISTRY)}"
-        )
+        spec = methods.get(name)
+        importlib.import_module(spec.module)
+        solver = _REGISTRY.get(name)
+        if solver is None:
+            raise IntegrationError(
+                f"integration method {name!r}: {spec.module} does not register it "
+                "(end the module with SOLVER = register(MySolver()))"
+            )
     return solver

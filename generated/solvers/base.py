@@ -86,6 +86,23 @@ def flag_status(flag: str) -> Status:
     return _FLAG_STATUS.get(re.sub(r"^(?:CV|IDA)_", "", flag.strip()), Status.FAILED)
 
 
+class ChunkFailure(Exception):
+    """A stepper's failure to reach the end of its chunk (the engine replays and reports it).
+
+    Parameters
+    ----------
+    reason : str
+        One readable line (the trajectory's message).
+    status : Status
+    t_target : float
+        The time it was working towards.
+    """
+
+    def __init__(self, reason: str, status: Status, t_target: float) -> None:
+        super().__init__(reason)
+        self.reason, self.status, self.t_target = reason, status, t_target
+
+
 @dataclass(frozen=True)
 class BuildPlan:
     """What a method adds to the closed loop's compiled library.
@@ -126,12 +143,17 @@ class Solver(ABC):
     fixed_step : bool
         Whether it steps with a fixed step (only such a method may integrate the exact
         sign function, ``options.sign = "exact"``).
+    integrates_dyn : bool
+        Whether it integrates ``Built.dyn`` (the compiled right-hand side as a
+        ``casadi.Function``), so that a caller who binds new runtime parameters must bind
+        them into ``dyn`` too; the native drivers call their own C entry points instead.
     """
 
     name: ClassVar[str]
     form: ClassVar[str] = "ode"
     summary: ClassVar[str] = ""
     fixed_step: ClassVar[bool] = False
+    integrates_dyn: ClassVar[bool] = True
 
     def prepare(self, sc: Scenario, gains: Gains) -> Any:
         """Checks and data needed before the closed loop is built (default: none).

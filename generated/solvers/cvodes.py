@@ -5,12 +5,22 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from generated.solvers import register
-from generated.solvers.engine import CasadiSolver
+from generated.solvers.engine import CasadiSolver, SundialsStepper
 
 if TYPE_CHECKING:
     import casadi as ca
 
     from generated.integrate import IntegratorSettings
+
+
+class CvodesStepper(SundialsStepper):
+    """CVODES' BDF on the ODE form, one CasADi integrator call per chunk."""
+
+    plugin = "cvodes"
+
+    def plugin_options(self) -> dict[str, Any]:
+        """BDF (CVODES' ``linear_multistep_method``)."""
+        return {"linear_multistep_method": "bdf"}
 
 
 class Cvodes(CasadiSolver):
@@ -21,16 +31,14 @@ class Cvodes(CasadiSolver):
     summary = "BDF (SUNDIALS CVODES) through CasADi"
 
     def stepper(self, f: ca.Function, settings: IntegratorSettings, nx: int, nz: int) -> Any:
-        """A :class:`generated.integrate.SundialsStepper` with the ``cvodes`` plugin.
+        """A :class:`CvodesStepper`.
 
         Parameters
         ----------
         f, settings, nx, nz
             As :meth:`generated.solvers.engine.CasadiSolver.stepper`.
         """
-        from generated.integrate import SundialsStepper
-
-        return SundialsStepper(f, settings, nz, "cvodes")
+        return CvodesStepper(f, settings, nz)
 
 
 SOLVER = register(Cvodes())

@@ -38,6 +38,7 @@ class Native(Solver):
 
     name = "native"
     form = "ode"
+    integrates_dyn = False  # the C drivers' own entry points, not Built.dyn
     summary = "BDF (SUNDIALS CVODE) driven from generated C"
 
     def prepare(self, sc: Scenario, gains: Gains) -> Any:
