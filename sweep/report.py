@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from core.artifacts import atomic_write_text
+from sweep.coverage import coverage_lines
 
 #: (column, label) of the medians in the summary table
 MEDIANS = [
@@ -459,6 +460,8 @@ def write_report(results: Path, retried: int | None = None) -> Path:
         "table has it, else Lemma 1's observed reaching time (column `t2_entry_source`).",
         "",
         *fault_type_lines(points),
+        "",
+        *coverage_lines(table, points),
         "",
         "## Figures",
         "",

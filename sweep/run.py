@@ -31,6 +31,7 @@ import pandas as pd
 
 from core.errors import UsageError
 from core.provenance import current_commit, machine
+from sweep.coverage import coverage_columns
 from sweep.sampler import Sample, make_sample, write_scenario
 from sweep.study import Study, load_study
 
@@ -212,6 +213,7 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[
         "steps": run.meta.get("steps"),
         "library": library_key(run.meta),
         **summarize_table(v.table),
+        **coverage_columns(v.table),
         **theorem2_entry(v.table, sample.scenario, run.frame, v.config),
         "tail_max_et": tail_max_et(run.frame, v.config.tail_fraction),
         **topology_in_tail(sample.scenario, run.frame, v.config.tail_fraction),

@@ -223,3 +223,34 @@ def test_every_row_a_derivation_gives_exists_or_says_why(path):
     empty = tb[tb["holds"].isna()]
     assert (empty["kind"] == "info").all()
     assert empty["note"].str.match(r"not evaluated: \S").all()
+
+
+# ------------------------------------------------------------------------- zero bounds
+def test_zero_bounds_are_asymptotic_claims_and_the_sentence_counts_the_rows(paper_scenario):
+    from verify.report import paper_t2_sentence
+    from verify.rows import held_mask
+    from verify.synthetic import synthetic_trajectory
+
+    sc = paper_scenario
+    sc0 = replace(sc, followers=tuple(replace(fo, d=np.zeros(sc.n)) for fo in sc.followers))
+    df = synthetic_trajectory()
+    tb = bounds_table(sc0, df)
+    rows = tb[tb["claim_id"].isin([CL.T2_CHI_PAPER.id, CL.T2_E_PAPER.id])]
+    assert len(rows) == sc.N * (1 + sc.n) and (rows["bound"] == 0).all()
+    assert rows["note"].str.startswith("asymptotic claim (bound 0").all()
+    assert rows["holds"].all()  # the synthetic errors decay exponentially
+    text = paper_t2_sentence(rows)
+    assert f"{len(rows)} rows have bound 0" in text and f"of which {len(rows)} decay" in text
+    assert "positive bound" not in text  # no ratio is taken over NaN
+    # errors that stop decaying on the tail: the asymptotic claim fails
+    flat = df.copy()
+    t = flat["t"].to_numpy()
+    for i in range(sc.N):
+        for r in range(sc.n):
+            flat[f"chi{i + 1}_{r + 1}"] = 0.1 * (1 + (t > 15))
+            flat[f"et{i + 1}_{r + 1}"] = 0.1 * (1 + (t > 15))
+    rows = bounds_table(sc0, flat)
+    rows = rows[rows["claim_id"].isin([CL.T2_CHI_PAPER.id, CL.T2_E_PAPER.id])]
+    assert not rows["holds"].any()
+    n_held = int(held_mask(rows).sum())
+    assert f"of which {n_held} decay" in paper_t2_sentence(rows)

@@ -30,8 +30,9 @@ from verify.bounds import (
     theorem2_constants,
 )
 from verify.intervals import Piece
-from verify.lyapunov import InequalityCheck, theorem2_guaranteed
+from verify.lyapunov import InequalityCheck
 from verify.rows import Rows, Span
+from verify.theorem2_check import theorem2_guaranteed
 
 #: why the printed Theorem 2 rows are the paper's claims, not guarantees
 PAPER_NOTE = "Lemma 1 applied with no decay in ghat (docs/fidelity.md, D3)"

@@ -1,0 +1,120 @@
+"""What a study's samples guarantee: per-sample coverage columns and the report's coverage lines.
+
+Per sample and follower i (1-based), from the bounds table's rows
+(:func:`verify.headline.coverage`, the numbers the headline prints):
+
+- ``t2_rows:<i>``: the follower's guaranteed tracking rows (Theorem 2's provable bound,
+  Definition 1's derived bound);
+- ``covered:<i>``: the share of the horizon their windows cover;
+- ``last_covered:<i>``: whether its last interval (after its last restart: health switch,
+  operator step, neighbourhood switch) has a guaranteed Theorem 2 row and a guaranteed
+  Definition 1 row, both reaching the horizon;
+
+and ``coverage`` (mean of ``covered:<i>``) and ``followers_covered`` (how many
+``last_covered:<i>``).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+#: the per-follower coverage columns, by prefix
+PREFIXES = ("t2_rows:", "covered:", "last_covered:")
+
+
+def _last_covered(table: pd.DataFrame, agent: int, t1: float) -> bool:
+    """A guaranteed Theorem 2 row and a guaranteed Definition 1 row of ``agent`` reach ``t1``."""
+    from verify import claims as CL
+
+    rows = table[
+        (table["agent"].astype(str) == str(agent))
+        & (table["kind"] == CL.Kind.GUARANTEED.value)
+        & (np.abs(table["t_end"].astype(float) - t1) <= 1e-9 * max(1.0, abs(t1)))
+    ]
+    ids = set(rows["claim_id"])
+    return CL.T2_CHI.id in ids and CL.DEF1_DERIVED.id in ids
+
+
+def coverage_columns(table: pd.DataFrame) -> dict[str, Any]:
+    """The sample's coverage columns (module docstring).
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table (:func:`verify.table.bounds_table`).
+    """
+    from verify.headline import coverage
+
+    if not len(table) or "t_start" not in table:
+        return {"coverage": math.nan, "followers_covered": 0}
+    t0 = float(np.nanmin(table["t_start"].astype(float)))
+    t1 = float(np.nanmax(table["t_end"].astype(float)))
+    out: dict[str, Any] = {}
+    covered, last = [], 0
+    for c in coverage(table, (t0, t1)):
+        ok = _last_covered(table, c.agent, t1)
+        out[f"t2_rows:{c.agent}"] = c.tracking
+        out[f"covered:{c.agent}"] = c.covered
+        out[f"last_covered:{c.agent}"] = ok
+        covered.append(c.covered)
+        last += int(ok)
+    out["coverage"] = float(np.mean(covered)) if covered else math.nan
+    out["followers_covered"] = last
+    return out
+
+
+def _followers(table: pd.DataFrame) -> list[int]:
+    return sorted(
+        int(m.group(1)) for c in table.columns if (m := re.fullmatch(r"last_covered:(\d+)", c))
+    )
+
+
+def coverage_lines(table: pd.DataFrame, points: pd.DataFrame) -> list[str]:
+    """Markdown: follower-samples covered on their last interval, overall and by fault type.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The study's results.
+    points : DataFrame
+        :func:`sweep.report.fault_points` (the fault type of each sample).
+    """
+    ok = table[table["status"] == "ok"]
+    agents = _followers(ok)
+    if not len(ok) or not agents:
+        return []
+    last = ok[[f"last_covered:{a}" for a in agents]].astype(bool).to_numpy()
+    cov = ok[[f"covered:{a}" for a in agents]].astype(float).to_numpy()
+    held = ok["guaranteed_held"].astype(bool).to_numpy()
+    lines = [
+        "Coverage: a follower-sample is covered when its last interval (after its last health "
+        "switch, operator step or neighbourhood switch) has guaranteed Theorem 2 and "
+        "Definition 1 rows; the fraction of the horizon is that inside the windows of its "
+        "guaranteed tracking rows.",
+        "",
+        "| samples | all guaranteed rows held | follower-samples covered | mean fraction of "
+        "the horizon covered |",
+        "|---|---|---|---|",
+        _line("all", held, last, cov),
+    ]
+    if len(points):
+        kind = points.drop_duplicates("id").set_index("id")["type"]
+        types = ok["id"].map(kind)
+        for t in sorted(types.dropna().unique()):
+            sel = (types == t).to_numpy()
+            lines.append(_line(str(t), held[sel], last[sel], cov[sel]))
+    return lines
+
+
+def _line(label: str, held: np.ndarray, last: np.ndarray, cov: np.ndarray) -> str:
+    n = last.size
+    share = 100.0 * last.sum() / n if n else math.nan
+    return (
+        f"| {label} ({len(held)}) | {int(held.sum())} of {len(held)} | {int(last.sum())} of "
+        f"{n} ({share:.1f}%) | {100 * float(np.nanmean(cov)):.1f}% |"
+    )
