@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
+import hashlib
+import json
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -112,10 +114,60 @@ def kernel_settings(settings: CodegenSettings | None = None) -> CodegenSettings:
     return dataclasses.replace(s, extra_cflags=extra, jacobian="sparse", expand=True)
 
 
+#: kernel libraries built in this process, by :func:`kernel_key`
+_BUILT: dict[str, Library] = {}
+#: the gains the kernels compile in (graph-independent: the leader's LMIs and the UIO)
+KERNEL_GAINS = ("A0", "B0", "C0", "Q", "Gamma", "Phi", "lambda1", "lambda2")
+
+
+def kernel_key(
+    sc: Scenario, gains: Gains, model_index: int, settings: CodegenSettings | None = None
+) -> str:
+    """SHA-256 of everything the kernels of one model compile in (never the graph, never N).
+
+    The follower model and its parameters, the leader, the observer's, controller's and
+    options' structural settings (:func:`symbolic.parameters.structure` without its
+    graph, followers and gains), the gains of :data:`KERNEL_GAINS`, the distinct fault
+    expressions in order, the driver sources and the compiler settings. Two scenarios
+    with equal keys compile to the same library: this process builds it once
+    (the build cache keys it again by its source).
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+    model_index : int
+    settings : CodegenSettings, optional
+    """
+    from symbolic.parameters import structure
+
+    st = structure(sc, gains)
+    fo = sc.followers[model_index]
+    texts: list[str] = []
+    for f in sc.followers:
+        for e in (f.g.expr, *f.f):
+            if e.text not in texts:
+                texts.append(e.text)
+    desc = {
+        "structure": {k: v for k, v in st.items() if k not in ("graph", "followers", "gains")},
+        "gains": {k: np.asarray(getattr(gains, k), float).tolist() for k in KERNEL_GAINS},
+        "model": [fo.model, sorted(fo.params.items())],
+        "faults": texts,
+        "driver": hashlib.sha256(
+            (native.COMMON.read_text() + DRIVER.read_text()).encode()
+        ).hexdigest(),
+        "settings": repr(kernel_settings(settings)),
+    }
+    return hashlib.sha256(json.dumps(desc, sort_keys=True, default=str).encode()).hexdigest()
+
+
 def build_models(
     sc: Scenario, gains: Gains, settings: CodegenSettings | None = None
 ) -> tuple[list[Library], np.ndarray]:
     """Compile (or reuse from the cache) one kernel library per follower model.
+
+    A model whose :func:`kernel_key` was built before in this process reuses that
+    library without building anything symbolic.
 
     Parameters
     ----------
@@ -137,8 +189,15 @@ def build_models(
     libs = []
     for g, members in enumerate(groups):
         model[members] = g
-        fns = kernel_functions(sc, gains, members[0], cse=s.cse)
-        libs.append(build_library(fns, s, toolchain=native.toolchain(DRIVER)))
+        key = kernel_key(sc, gains, members[0], settings)
+        lib = _BUILT.get(key)
+        if lib is None or not lib.path.is_file():
+            fns = kernel_functions(sc, gains, members[0], cse=s.cse)
+            lib = build_library(fns, s, toolchain=native.toolchain(DRIVER))
+            _BUILT[key] = lib
+        else:
+            lib = dataclasses.replace(lib, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0)
+        libs.append(lib)
     return libs, model
 
 
@@ -643,3 +702,43 @@ def probe(
             f"per-agent driver: {msg.value.decode(errors='replace') or 'solve failed'}"
         )
     return xdot, sol
+
+
+def initial_state(sc: Scenario) -> np.ndarray:
+    """x(0) of ``sc`` without the whole closed loop (``initial.start = "given"``, oracle).
+
+    The same state as :func:`symbolic.closed_loop.initial_state` for these options (which
+    then needs no output of the loop): Table 2's states as given.
+
+    Parameters
+    ----------
+    sc : Scenario
+
+    Raises
+    ------
+    ScenarioError
+        For ``initial.start = "formation"`` or filtered derivatives (their x(0) needs
+        η̇_i(0) and b_i(0): use the whole closed loop's x0).
+    """
+    if sc.initial.start != "given" or sc.options.derivatives != "oracle":
+        raise ScenarioError(
+            sc.path,
+            "initial.start",
+            "x(0) of 'formation' or filtered derivatives needs the closed loop's outputs",
+            'initial.start = "given" with options.derivatives = "oracle", or the whole '
+            "closed loop's x0",
+        )
+    N = sc.N
+    lay = make_layout(sc.m, sc.n, N, False)
+    return lay.pack(
+        {
+            "eta0": sc.leader.eta0,
+            "mu": sc.initial.mu,
+            "eta": sc.initial.eta,
+            "phi": sc.observer.phi0.reshape(N, 1),
+            "p": np.array([fo.p0 for fo in sc.followers]),
+            "q": np.array([fo.q0 for fo in sc.followers]),
+            "thetahat": sc.initial.theta_hat,
+            "ghat": sc.initial.ghat.reshape(N, 1),
+        }
+    )

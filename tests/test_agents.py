@@ -193,3 +193,20 @@ def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, na
         assert tr.stats["jac_evals"] < tr.stats["lin_setups"]  # CVODE reuses the Jacobian
         diffs.append((np.abs(tr.x - ref.x) / np.maximum(1.0, np.abs(ref.x))).max())
     assert diffs[1] < 1e-4 and diffs[1] < diffs[0] / 5, diffs
+
+
+def test_initial_state_is_the_closed_loops(cases):
+    for name in ("paper", "cyclic-mixed", "link-losses"):
+        sc, _, cl, _, _ = cases[name]
+        np.testing.assert_array_equal(agents.initial_state(sc), cl.x0)
+
+
+def test_kernel_key_ignores_the_graph_and_n_but_not_what_is_compiled(cases):
+    sc, gains = cases["acyclic"][:2]
+    key = agents.kernel_key(sc, gains, 0)
+    sc_c, gains_c = cases["cyclic"][:2]
+    assert agents.kernel_key(sc_c, gains_c, 0) == key
+    other = dataclasses.replace(gains, lambda1=gains.lambda1 * 2)
+    assert agents.kernel_key(sc, other, 0) != key
+    mixed, gm = cases["cyclic-mixed"][:2]
+    assert agents.kernel_key(mixed, gm, 1) != key  # the point mass

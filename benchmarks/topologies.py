@@ -1,0 +1,216 @@
+"""A topology study on one library per follower model (``studies/topologies.toml``).
+
+``python -m benchmarks.topologies [STUDY]`` draws the study's samples with the study
+machinery (:func:`sweep.sampler.samples`: random digraphs with a spanning tree from the
+leader, N and link losses as the file says; the loader refuses a sample whose topology
+breaks Assumption 1) and integrates each with the per-agent driver
+(:mod:`generated.agents`): the kernels are compiled once, for the first sample, and
+every later sample — any graph, any N, any switching — runs the same library with its
+graph as data.
+
+Gains: the study's gains are those of the base scenario with its settings (the leader's
+LMIs, the UIO and λ1, λ2 do not depend on the graph and are what the kernels compile
+in); per sample only the graph's own quantities change: H = I (the study's graphs are
+cooperative) and L̄ = L + B. The sample's Theorem 1 condition λ1 > λ̄1 / w is evaluated
+on every topology with Lemma 3's w for the paper's z = (L̄ᵀ)⁻¹1 (column ``theorem1``;
+the synthesis stage may find a larger w with its best diagonal Z, so ``False`` here is
+"not shown by the paper's z", not a proof of failure).
+
+Per sample: N, links, whether a topology has a cycle, link losses, w_min, theorem1,
+CVODE's status and counters, the integration time, the library key(s) and whether
+they were compiled for this sample, and the observer's tail error max |η_i − η0| over
+the last quarter of the horizon. Output: ``out/topologies/results.csv`` and
+``report.md`` (counts, timing, the libraries used).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import multiprocessing as mp
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from core.artifacts import atomic_write_text
+from core.errors import run_cli
+
+STUDY = "studies/topologies.toml"
+_STATE: dict[str, Any] = {}
+
+
+def sample_gains(base: Any, sc: Any) -> tuple[Any, float, bool]:
+    """The base gains with ``sc``'s graph quantities, its w_min and Theorem 1's verdict.
+
+    Parameters
+    ----------
+    base : Gains
+        Gains of the study's first sample (synthesised).
+    sc : Scenario
+        A sample on a cooperative graph.
+
+    Returns
+    -------
+    (Gains, float, bool)
+    """
+    from core.graph import pinned_laplacian
+    from synthesis.lemma3 import lemma3_z, w_of
+
+    L_bar = pinned_laplacian(sc.graph.adjacency, sc.graph.pinning).toarray()
+    ws = []
+    for top in sc.graph.topologies():
+        Lk = pinned_laplacian(top.adjacency, top.pinning)
+        ws.append(float(w_of(Lk.toarray(), lemma3_z(Lk))))
+    w = min(ws)
+    g = dataclasses.replace(base, L_bar=L_bar, H=np.eye(sc.N), w=w)
+    return g, w, bool(base.lambda1 > base.lambda_bar1 / w)
+
+
+def _run_one(sample: Any) -> dict[str, Any]:
+    from generated import agents, api
+
+    row: dict[str, Any] = {"sample": sample.id}
+    sc = sample.scenario
+    if sc is None:
+        return {**row, "status": "refused", "reason": sample.reason}
+    base, cg = _STATE["gains"], _STATE["codegen"]
+    gains, w, thm = sample_gains(base, sc)
+    tops = sc.graph.topologies()
+    t0 = time.perf_counter()
+    libs, model = agents.build_models(sc, gains, cg)
+    prob = agents.problem(sc, gains, model)
+    x0 = agents.initial_state(sc)
+    t1 = time.perf_counter()
+    s = api.integrator_settings(sc, "native", cg)
+    from generated.integrate import output_grid
+
+    H = sc.integration.horizon
+    t_out = output_grid(H, sc.integration.output_step)
+    tr = agents.run([lib.path for lib in libs], prob, x0, t_out, s, breakpoints=sc.breakpoints())
+    t2 = time.perf_counter()
+    lay = agents.make_layout(sc.m, sc.n, sc.N, False)
+    tail = t_out >= 0.75 * H
+    X = tr.x[tail & np.isfinite(tr.x).all(axis=1)]
+    eta0 = X[:, : sc.m]
+    err = (
+        max(np.abs(X[:, lay.slices[("eta", i)]] - eta0).max() for i in range(sc.N))
+        if len(X)
+        else np.nan
+    )
+    return {
+        **row,
+        "N": sc.N,
+        "links": int((np.asarray(sc.graph.adjacency) != 0).sum()),
+        "cyclic": not prob.acyclic,
+        "losses": len(tops) - 1,
+        "w_min": w,
+        "theorem1": thm,
+        "status": "complete" if tr.complete else "incomplete",
+        "steps": int(tr.stats["steps"]),
+        "prepare_s": round(t1 - t0, 4),
+        "simulate_s": round(t2 - t1, 4),
+        "library": ";".join(lib.key[:12] for lib in libs),
+        "compiled": any(not lib.cache_hit for lib in libs),
+        "tail_obs_err": float(err),
+    }
+
+
+def _init_worker() -> None:
+    import os
+
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+def run_study(path: str, count: int | None, workers: int, build_root: str | None) -> list[dict]:
+    """All samples of the study (or the first ``count``); the first one compiles.
+
+    Parameters
+    ----------
+    path : str
+    count : int, optional
+    workers : int
+        Processes (forked after the first sample: they inherit its libraries).
+    build_root : str, optional
+    """
+    from generated import api
+    from generated.codegen import CodegenSettings
+    from sweep.sampler import samples
+    from sweep.study import load_study
+
+    study = load_study(path)
+    n = study.count if count is None else min(count, study.count)
+    todo = list(samples(study, range(n)))
+    first = next(s for s in todo if s.scenario is not None)
+    _STATE["codegen"] = CodegenSettings(build_root=build_root)
+    _STATE["gains"] = api.scenario_gains(first.scenario, f"gains of sample {first.id}")
+    rows = [_run_one(first)]
+    rest = [s for s in todo if s is not first]
+    if workers > 1:
+        with mp.get_context("fork").Pool(workers, initializer=_init_worker) as pool:
+            rows += pool.map(_run_one, rest, chunksize=max(1, len(rest) // (4 * workers)))
+    else:
+        rows += [_run_one(s) for s in rest]
+    return sorted(rows, key=lambda r: r["sample"])
+
+
+def report(rows: list[dict], wall: float, path: str) -> str:
+    """The study's summary (Markdown)."""
+    ran = [r for r in rows if r["status"] != "refused"]
+    comp = [r for r in ran if r["status"] == "complete"]
+    cyc = [r for r in ran if r["cyclic"]]
+    libs = sorted({r["library"] for r in ran})
+    compiled = [r["sample"] for r in ran if r["compiled"]]
+    sim = np.array([r["simulate_s"] for r in ran]) if ran else np.zeros(1)
+    thm = [r for r in ran if r["theorem1"]]
+    err = np.array([r["tail_obs_err"] for r in comp]) if comp else np.zeros(1)
+    lines = [
+        f"# Topology study ({path})",
+        "",
+        f"- samples: {len(rows)}; refused by the loader (Assumption 1 on a topology): "
+        f"{len(rows) - len(ran)}; integrated: {len(ran)}, complete: {len(comp)}",
+        f"- cyclic: {len(cyc)}, acyclic: {len(ran) - len(cyc)}; with link losses: "
+        f"{sum(1 for r in ran if r['losses'] > 0)}",
+        f"- N from {min(r['N'] for r in ran)} to {max(r['N'] for r in ran)}",
+        f"- wall time: {wall:.1f} s; integration per sample: median {np.median(sim):.2f} s, "
+        f"max {sim.max():.2f} s",
+        f"- libraries: {len(libs)} ({', '.join(libs)}); compiled for sample(s) "
+        f"{compiled or 'none (all from the cache)'}",
+        f"- Theorem 1 shown with the paper's z: {len(thm)} of {len(ran)}",
+        f"- observer tail error max |η_i − η0| (complete runs): median {np.median(err):.2e}, "
+        f"max {err.max():.2e}",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _csv(rows: list[dict]) -> str:
+    cols = list(dict.fromkeys(k for r in rows for k in r))
+    out = [",".join(cols)]
+    for r in rows:
+        out.append(",".join(str(r.get(c, "")).replace(",", ";") for c in cols))
+    return "\n".join(out) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.topologies", description=__doc__)
+    ap.add_argument("study", nargs="?", default=STUDY)
+    ap.add_argument("--count", type=int, default=None, help="only the first COUNT samples")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--out", default="out/topologies")
+    ap.add_argument("--build-root", default=None)
+    a = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    rows = run_study(a.study, a.count, a.workers, a.build_root)
+    wall = time.perf_counter() - t0
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "results.csv", _csv(rows))
+    text = report(rows, wall, a.study)
+    atomic_write_text(out / "report.md", text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(run_cli(main))
