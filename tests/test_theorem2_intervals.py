@@ -160,6 +160,10 @@ def test_restarted_rows_hold_and_say_where_they_are_not_stated(step_run):
     assert len(after) == 4 and after["holds"].isna().all()
     assert after["note"].str.contains("interval 2 of 2 .from operator step at t = 14 s.").all()
     assert after["note"].str.contains("comparison-lemma time .* beyond the horizon").all()
+    # the envelope from V2(t_s) bounds each interval's transient, the step's too
+    env = tb[(tb["agent"] == "1") & tb["claim_id"].isin(CL.ENVELOPE)]
+    assert len(env) == 4 and (env["kind"] == "guaranteed").all() and env["holds"].all()
+    assert sorted(env["t_start"].round(6).unique()) == [0.0, 14.01]
     # the others are not restarted: one interval each, guaranteed
     others = tb[(tb["agent"] != "1") & (tb["claim_id"] == CL.T2_CHI.id)]
     assert len(others) == 4 and (others["kind"] == "guaranteed").all() and others["holds"].all()
@@ -174,6 +178,7 @@ def test_the_restarted_rows_fail_on_forged_trajectories(step_run):
     df.loc[before, ["chi1_1", "chi1_2"]] *= 30.0
     bad = failures(bounds_table(sc, df, gains=gains, u0_dep=dep))
     assert ((bad["claim_id"] == CL.T2_CHI.id) & (bad["agent"] == "1")).any()
+    assert ((bad["claim_id"] == CL.T2_CHI_ENV.id) & (bad["agent"] == "1")).any()
     # a log whose V2_1 does not jump at the step: restarted from it, the lemma gives t_c at
     # once and the row on [14, 20] s fails on the real χ_1
     df = res.frame.copy()
@@ -182,6 +187,7 @@ def test_the_restarted_rows_fail_on_forged_trajectories(step_run):
     bad = failures(bounds_table(sc, df, gains=gains, u0_dep=dep))
     late = bad[(bad["agent"] == "1") & (bad["t_start"] >= 14.0)]
     assert (late["claim_id"] == CL.T2_CHI.id).any() and math.isfinite(late["t_start"].min())
+    assert {CL.T2_CHI_ENV.id, CL.DEF1_ENV.id} <= set(late["claim_id"])
 
 
 # ------------------------------------------------------------------------- every row exists

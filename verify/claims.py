@@ -162,11 +162,33 @@ T2_E = register(
     SW,
     STEP,
 )
+T2_CHI_ENV = register(
+    "t2.chi.envelope",
+    "T2 |chi_si(t)| <= sqrt(2 W(t)/lambda_min(M)), comparison-lemma envelope from V2(t_s) "
+    "(pointwise)",
+    G,
+    SAT,
+    DER,
+    H,
+    SW,
+    STEP,
+)
 # Definition 1 (formation tracking)
 DEF1_PAPER = register("def1.paper", "Def. 1 limsup |p_i - h_i y0 - b_i| <= chi_bar, paper", P, SAT)
 DEF1_DERIVED = register(
     "def1.derived",
     "Def. 1 |p_i - h_i y0 - b_i| <= derived bound (pointwise)",
+    G,
+    SAT,
+    DER,
+    H,
+    SW,
+    STEP,
+    BG,
+)
+DEF1_ENV = register(
+    "def1.envelope",
+    "Def. 1 |p_i - h_i y0 - b_i| <= envelope bound from V2(t_s) (pointwise)",
     G,
     SAT,
     DER,
@@ -195,5 +217,7 @@ FIG13_RATE = register(
 )
 FIG13_TAIL = register("fig13.tail", "Fig. 13: tail sup |e_ti|: ablation (42) vs FTC (29)", I)
 
-#: the claims a follower's tracking guarantee consists of (the headline counts them)
+#: the claims of a follower's tracking guarantee at its ultimate level (after t_c)
 TRACKING = frozenset({T2_CHI.id, T2_E.id, DEF1_DERIVED.id})
+#: the claims that bound the transient of each interval from its start (comparison lemma)
+ENVELOPE = frozenset({T2_CHI_ENV.id, DEF1_ENV.id})

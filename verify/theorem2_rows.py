@@ -60,6 +60,10 @@ class IntervalWindow:
         Output times of the window (None when the window is empty).
     why : str
         Why no rows are evaluated on it ('' when they are).
+    env : ndarray or None
+        Output times of the envelope's window [t_s, end) (None when it cannot be stated).
+    W : ndarray or None
+        The comparison-lemma envelope of V2 at those times.
     """
 
     piece: Piece
@@ -70,6 +74,8 @@ class IntervalWindow:
     tc: float
     mask: np.ndarray | None
     why: str
+    env: np.ndarray | None = None
+    W: np.ndarray | None = None
 
     @property
     def last(self) -> bool:
@@ -117,7 +123,7 @@ def interval_windows(
         # the first piece starts at t[0]; a restart at the first output time after it
         ks = 0 if k == 0 else int(np.searchsorted(t, p.start, side="right"))
         inside = ks < len(t) and (last or t[ks] < p.end)
-        tc, mask, why = math.inf, None, ""
+        tc, mask, why, env, W = math.inf, None, "", None, None
         if not c.provable:
             why = c.why_not
         elif V2 is None:
@@ -128,7 +134,9 @@ def interval_windows(
             tc = float(t[ks]) + comparison_reaching_time(
                 c.Omega_var, c.chi_v_var, float(V2[ks]), cfg.lemma1_delta
             )
-            m = (t >= tc) & (t >= t[ks]) & ((t < p.end) if not last else True)
+            env = (t >= t[ks]) & ((t < p.end) if not last else True)
+            W = envelope(c, float(V2[ks]), t[env] - t[ks])
+            m = (t >= tc) & env
             if m.any():
                 mask = m
             elif not math.isfinite(tc):
@@ -136,8 +144,29 @@ def interval_windows(
             else:
                 end = "the horizon" if last else "the interval's end"
                 why = f"comparison-lemma time {tc:.4g} s lies beyond {end} ({p.end:.4g} s)"
-        out.append(IntervalWindow(p, k, len(pieces), c, ks, tc, mask, why))
+        out.append(IntervalWindow(p, k, len(pieces), c, ks, tc, mask, why, env, W))
     return out
+
+
+def envelope(c: Theorem2Constants, V2_start: float, dt: np.ndarray) -> np.ndarray:
+    """Comparison lemma: V2(t_s + dt) ≤ V2(t_s) e^{−Ω dt} + (χv/Ω)(1 − e^{−Ω dt}).
+
+    Parameters
+    ----------
+    c : Theorem2Constants
+        The interval's constants (provable variant: Ω, χv).
+    V2_start : float
+        The logged V2 at t_s.
+    dt : ndarray
+        Times since t_s (≥ 0).
+    """
+    decay = np.exp(-c.Omega_var * np.asarray(dt, float))
+    return V2_start * decay + c.chi_v_var / c.Omega_var * (1.0 - decay)
+
+
+def chi_envelope(c: Theorem2Constants, W: np.ndarray) -> np.ndarray:
+    """‖χ‖ ≤ sqrt(2W/λ_min(M)): ½λ_min(M)‖χ‖² ≤ ½χᵀMχ ≤ V2 ≤ W (eq. (39))."""
+    return np.sqrt(2.0 * np.maximum(W, 0.0) / c.lam_min_M)
 
 
 def theorem2_rows(
@@ -320,6 +349,7 @@ def _provable_rows(
     invariant); the printed χ̄/λ_r is only asymptotic.
     """
     c = w.c
+    _envelope_row(R, w, t, chin, i, guaranteed, why)
     if w.mask is None:
         R.missing(CL.T2_CHI, w.bounds(t), w.why + w.label(), agent=i, bound=c.chi_bar_var)
         for r in range(et.shape[1]):
@@ -345,6 +375,34 @@ def _provable_rows(
             f"; bound = |e_r(t_s)| = {e0:.3g} > chi_bar/lambda" if e0 > c.e_bar_var[r] else ""
         )
         R.add(CL.T2_E, kind, bound, np.abs(et[win, r]).max(), wv, note, agent=i, component=r)
+
+
+def _envelope_row(
+    R: Rows, w: IntervalWindow, t: np.ndarray, chin: np.ndarray, i: int, ok: bool, why: str
+) -> None:
+    """‖χ_i(t)‖ ≤ sqrt(2W(t)/λ_min(M)) at every output time of the interval from t_s on."""
+    if w.env is None:
+        win = (w.piece.start, min(w.piece.end, float(t[-1])))
+        R.missing(CL.T2_CHI_ENV, win, (w.why or "no start sample") + w.label(), agent=i)
+        return
+    bound = chi_envelope(w.c, w.W)
+    obs = chin[w.env]
+    ts = t[w.env]
+    note = (
+        f"pointwise; V2 from {w.W[0]:.4g} at t_s = {ts[0]:g} s toward chi_v/Omega = "
+        f"{w.c.chi_v_var / w.c.Omega_var:.4g}; bound {bound[0]:.4g} at t_s, {bound[-1]:.4g} at "
+        f"the end" + w.label() + ("" if ok else f"; not guaranteed: {why}")
+    )
+    R.add(
+        CL.T2_CHI_ENV,
+        CL.Kind.GUARANTEED if ok else CL.Kind.INFO,
+        float(bound.max()),
+        float(obs.max()),
+        (float(ts[0]), float(ts[-1])),
+        note,
+        agent=i,
+        holds=bool(np.all(obs <= bound)),
+    )
 
 
 def gauge(scenario: Scenario, gains: Gains | None = None) -> np.ndarray:
@@ -479,13 +537,13 @@ def definition1_rows(
             ok, why = theorem2_guaranteed(scenario, i)
             for w in ws:
                 if fl is None:
-                    R.missing(
-                        CL.DEF1_DERIVED,
-                        w.bounds(t),
-                        "needs the synthesised gains and the V1, phi columns" + w.label(),
-                        agent=i,
-                    )
-                elif w.mask is None:
+                    why_fl = "needs the synthesised gains and the V1, phi columns" + w.label()
+                    R.missing(CL.DEF1_ENV, w.bounds(t), why_fl, agent=i)
+                    R.missing(CL.DEF1_DERIVED, w.bounds(t), why_fl, agent=i)
+                    continue
+                lam = np.asarray(scenario.controller.Lambda[i], float)
+                _definition1_envelope(R, df, fl, w, t, k0, dev, i, ok and certified, why, lam)
+                if w.mask is None:
                     R.missing(CL.DEF1_DERIVED, w.bounds(t), w.why + w.label(), agent=i)
                 else:
                     _definition1_derived(R, df, fl, w, t, k0, dev, i, ok and certified, why)
@@ -502,6 +560,57 @@ def definition1_rows(
                 "(no derived bound)",
                 agent=i,
             )
+
+
+def _definition1_envelope(
+    R: Rows,
+    df: S.Frame,
+    fl,  # noqa: ANN001 (verify.bounds.Theorem1Floor)
+    w: IntervalWindow,
+    t: np.ndarray,
+    k0: int,
+    dev: np.ndarray,
+    i: int,
+    ok: bool,
+    why: str,
+    lam: np.ndarray,
+) -> None:
+    """‖p_i − h_i y0 − b_i‖ ≤ ‖B_e(t)‖ + ‖C0 ē_ηi‖ bound from t_s, with the χ envelope.
+
+    ė_r = −λ_r e_r + χ_r with |χ_r| ≤ c(t) = max over [t_s, t] of the χ envelope gives
+    |e_r(t)| ≤ max(|e_r(t_s)|, c(t)/λ_r) (the interval [−c/λ_r, c/λ_r] attracts).
+    """
+    if w.env is None:
+        win = (w.piece.start, min(w.piece.end, float(t[-1])))
+        R.missing(CL.DEF1_ENV, win, (w.why or "no start sample") + w.label(), agent=i)
+        return
+    c = w.c
+    et = S.block(df, "et", i + 1, lam.size)
+    ks = int(np.argmax(w.env))
+    cmax = np.maximum.accumulate(chi_envelope(c, w.W))  # running max of the χ envelope
+    Be = np.linalg.norm(np.maximum(np.abs(et[ks])[None, :], cmax[:, None] / lam[None, :]), axis=1)
+    kv = min(k0, ks)
+    V1b = fl.v1_bound(float(S.column(df, "V1")[kv]), t[w.env] - t[kv])
+    phi = np.asfortranarray(S.take(df, [f"phi{j + 1}" for j in range(fl.h.size)])[w.env])
+    bound = Be + fl.c0_error_bound(V1b, phi)[:, i]
+    obs = dev[w.env]
+    ts = t[w.env]
+    note = (
+        f"pointwise; |e_ti| from the chi envelope (T2, V2 from t_s = {ts[0]:g} s) + "
+        f"|C0 ebar_eta_i| (T1 with the phi floor, V1 from t = {t[kv]:g} s)"
+        + w.label()
+        + ("" if ok else f"; not guaranteed: {why}")
+    )
+    R.add(
+        CL.DEF1_ENV,
+        CL.Kind.GUARANTEED if ok else CL.Kind.INFO,
+        float(bound.max()),
+        float(obs.max()),
+        (float(ts[0]), float(ts[-1])),
+        note,
+        agent=i,
+        holds=bool(np.all(obs <= bound)),
+    )
 
 
 def _definition1_derived(
