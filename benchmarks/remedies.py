@@ -71,7 +71,7 @@ def _shaped(shape: str, rise: float, what: str) -> Remedy:
 #: the remedies compared, in the table's order
 REMEDIES: tuple[Remedy, ...] = (
     Remedy("raw", {"leader.u0_rise": 0.0}, "raw steps (`u0_rise = 0`)"),
-    *(_shaped("smoothstep", T, f"smoothstep over {T:g} s") for T in (0.25, 0.5, 1.0, 2.0)),
+    *(_shaped("smoothstep", T, f"smoothstep over {T:g} s") for T in (0.25, 0.5, 1.0, 1.5, 2.0)),
     *(_shaped("prefilter", T, f"prefilter 1/(1 + {T:g}s)²") for T in (0.25, 0.5)),
     _shaped("ramp", 1.0, "rate limit: ramp over 1 s"),
     Remedy(

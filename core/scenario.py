@@ -533,7 +533,7 @@ LEADER: dict[str, Setting] = {
     "u0_csv": declare(EITHER, "string"),
     "u0_hold": declare(False, "boolean"),
     "u0_rise": declare(
-        Derived("1 s if u0 has a step, else 0 (`core.shaping.DEFAULT_RISE`)"), "number", NONNEG
+        Derived("2 s if u0 has a step, else 0 (`core.shaping.DEFAULT_RISE`)"), "number", NONNEG
     ),
     "u0_shape": Setting(DEFAULT_SHAPE, "choice", options=SHAPES),
     "alpha": declare(REQUIRED, "number", POSITIVE),

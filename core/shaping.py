@@ -33,7 +33,7 @@ SHAPES = ("smoothstep", "prefilter", "ramp")
 DEFAULT_SHAPE = "smoothstep"
 #: seconds over which a stepped u0 without ``leader.u0_rise`` is shaped (docs/verification.md,
 #: 'Operator steps': the choice and the measurements behind it)
-DEFAULT_RISE = 1.0
+DEFAULT_RISE = 2.0
 #: the atoms a shaped step is made of; each starts where its earliest kink is
 _STEP_ATOMS = ("step", "smoothstep", "prefilter", "sat")
 
