@@ -336,7 +336,7 @@ def main(argv: list[str]) -> int:
     vary = [parse_vary(v) for v in args.vary] if args.vary else list(DEFAULT_VARY)
 
     if args.bench_n is not None:
-        from benchmarks.bench import bench_gains, bench_scenario
+        from benchmarks.scenarios import bench_gains, bench_scenario
 
         if args.bench_n < 1:
             raise UsageError(f"--bench-n {args.bench_n}: must be >= 1")
@@ -348,14 +348,12 @@ def main(argv: list[str]) -> int:
     sc = api.with_method(sc, args.method)
     built = api.build(sc, gains)
     folder = Path(args.out) if args.out else Path(OUT_ROOT) / "steps" / sc.name
-    folder.mkdir(parents=True, exist_ok=True)
-
+    write_provenance(folder)  # (creates the folder)
     edges = default_edges(sc.integration.horizon)
     wins = step_profile(built, sc, edges)
     one = api.simulate(built, sc, dataclasses.replace(api.integrator_settings(sc), chunk=1e9))
     wf = windows_frame(wins)
     atomic_write_text(folder / "steps_windows.csv", wf.to_csv(index=False))
-    write_provenance(folder)
     print(f"step profile: {sc.name} (N = {sc.N}), {len(wins)} windows")
     print(wf.to_string(index=False, float_format=lambda v: f"{v:.3g}"))
     tot = int(wf["steps"].sum())

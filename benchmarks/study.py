@@ -73,7 +73,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from benchmarks.bench import BenchError
+from benchmarks.catalogue import BenchError
 from benchmarks.lone import sample_times
 from core.artifacts import OUT_ROOT, atomic_write_text
 from core.errors import run_cli

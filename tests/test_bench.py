@@ -13,7 +13,9 @@ import pytest
 import scipy.linalg as sla
 from helpers import ROOT
 
-from benchmarks.bench import BenchError, bench_scenario, main, random_graph
+from benchmarks.bench import main
+from benchmarks.catalogue import BenchError
+from benchmarks.scenarios import bench_scenario, random_graph
 from core.errors import ToolkitError
 from generated.codegen import CodegenSettings, build_library
 from generated.integrate import IntegratorSettings, integrate
@@ -214,7 +216,8 @@ def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None
     import dataclasses
     import os
 
-    from benchmarks.bench import OUTPUT_STEP, bench_gains
+    from benchmarks.catalogue import OUTPUT_STEP
+    from benchmarks.scenarios import bench_gains
     from generated.api import build_from_closed_loop, integrator_settings, native_cascade, simulate
     from symbolic.closed_loop import build_closed_loop
 
@@ -274,7 +277,7 @@ def _rk45_final(sc, gains, x0, horizon: float, rtol: float) -> np.ndarray:  # no
 
 
 def test_finish_ratios_and_table_from_synthetic_records() -> None:
-    from benchmarks.bench import finish, table
+    from benchmarks.tables import finish, table
 
     x = np.array([1.0, 100.0])
     recs = [
@@ -309,7 +312,7 @@ def test_finish_ratios_and_table_from_synthetic_records() -> None:
 
 def test_ours_is_what_make_sim_runs() -> None:
     """Native CVODE at every N: the whole loop up to N = 20, graph-ordered blocks above."""
-    from benchmarks.bench import ours_method
+    from benchmarks.catalogue import ours_method
     from generated.largescale import DIRECT_MAX_AGENTS
 
     assert ours_method(5) == ours_method(DIRECT_MAX_AGENTS) == "c-cvode-native"
@@ -400,7 +403,7 @@ def test_api_auto_picks_the_large_n_plan_and_agrees_with_direct(tmp_path: Path) 
 
 def synthesize_gains(sc):
     """Gains of a benchmark scenario (synthesis, as the benchmark does)."""
-    from benchmarks.bench import bench_gains
+    from benchmarks.scenarios import bench_gains
 
     return bench_gains(sc)[0]
 
@@ -408,7 +411,7 @@ def synthesize_gains(sc):
 def test_bench_methods_map_through_the_registry() -> None:
     """Every benchmark method of ours names a registered integration method; the scipy
     ones name none (consistency check of the table, not a measurement)."""
-    from benchmarks.bench import BENCH_METHODS, integration_method
+    from benchmarks.catalogue import BENCH_METHODS, integration_method
     from generated import solvers
 
     for m in BENCH_METHODS.values():

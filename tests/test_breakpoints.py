@@ -339,7 +339,7 @@ def test_graph_ordered_driver_with_drawn_faults(paper_env, faulty, g1, g4, case)
 
 def test_graph_ordered_driver_at_25_followers_with_a_fault(tmp_path):
     """N = 25 (the default method runs the graph-ordered driver) with a fault at 0.7 s."""
-    from benchmarks.bench import bench_gains, bench_scenario
+    from benchmarks.scenarios import bench_gains, bench_scenario
 
     sc = bench_scenario(25, horizon=1.0)
     fault = api.load(PAPER, {"followers[1].g": [[0.0, 1.0], [0.7, 0.9]]}).followers[0].g

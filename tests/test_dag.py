@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from benchmarks.bench import bench_gains, bench_scenario
+from benchmarks.scenarios import bench_gains, bench_scenario
 from core.errors import IntegrationError, ScenarioError
 from generated import api, dag
 from generated.codegen import CodegenSettings

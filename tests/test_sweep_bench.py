@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from helpers import ROOT
 
-from benchmarks.bench import BenchError
+from benchmarks.catalogue import BenchError
 from benchmarks.study import _study_copy, round_ratios, split_files
 from sweep.sampler import samples
 from sweep.study import load_study
