@@ -88,6 +88,7 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.precision
 	$(PY) -m benchmarks.study
 	$(PY) -m benchmarks.remedies
+	$(PY) -m benchmarks.agents
 
 clean:
 	rm -rf out generated/build .pytest_cache
