@@ -112,14 +112,13 @@ def large_rows(
     from generated import agents
     from generated.codegen import CodegenSettings
     from generated.integrate import IntegratorSettings, output_grid
-    from symbolic.closed_loop import build_closed_loop
 
     rows = []
     base = bench_scenario(N, horizon=horizon)
     for kind, sc in (("acyclic", base), ("cyclic", cyclic_variant(base))):
         t0 = time.perf_counter()
         gains = bench_gains(sc)[0]
-        x0 = build_closed_loop(sc, gains).x0
+        x0 = agents.initial_state(sc)
         t1 = time.perf_counter()
         libs, model = agents.build_models(sc, gains, CodegenSettings(build_root=build_root))
         prob = agents.problem(sc, gains, model)
