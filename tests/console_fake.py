@@ -2,7 +2,8 @@
 
 ``FakeLoop`` has the console's bookkeeping (:class:`console.engine.LoopBase`) but
 integrates a small numpy model instead of the compiled closed loop: a double-integrator
-leader η̇0 = (η0_2, u0), y0 = (η0_1, 0), and followers ṗ_i = k g_i (y0 + b_i0 − p_i) +
+leader η̇0 = (η0_2, u0), y0 = (η0_1, 0) (with two inputs one double integrator per axis,
+y0 = (η0_1, η0_3)), and followers ṗ_i = k g_i (y0 + b_i0 − p_i) +
 bias_i (the neighbours' links scale k). Its solution for a held u0 is known in closed
 form, which the tests use as truth.
 """
@@ -39,34 +40,42 @@ class FakeLoop(LoopBase):
         quantum: float = 0.01,
         fail_attempts: int = 10**9,
         rise: float = 1.0,
+        p: int = 1,
     ) -> None:
         N = len(B0)
         limits = Limits(
             N=N,
             n=2,
-            p=1,
-            u_max=2.0,
+            p=p,
+            u_max=2.0 / np.sqrt(p),
             g_min=0.5,
             bias_max=10.0,
             edges=frozenset({(1, 0), (2, 1), (3, 1), (3, 2)}),
         )
+        self.p = p
         nominal = Settings(
-            u0=np.zeros(1),
+            u0=np.zeros(p),
             health=np.ones(N),
             bias=np.zeros((N, 2)),
             weights={(0, -1): 1.0, (1, 0): 1.0, (2, 0): 1.0, (2, 1): 1.0},
         )
-        x0 = np.concatenate([[0.0, 0.0], (B0 + 1.0).ravel()])
+        x0 = np.concatenate([np.zeros(2 * p), (B0 + 1.0).ravel()])
         self.fail_at, self.fail_attempts = fail_at, fail_attempts
         self.attempts: list[tuple[float, int]] = []  # (start, attempt) of every call
         super().__init__(limits, quantum, nominal, x0, rise=rise)
 
+    def leader_output(self, x: np.ndarray) -> np.ndarray:
+        """y0: (η0_1, 0) for one input, (η0_1, η0_3) for two (a double integrator per axis)."""
+        return np.array([x[0], x[2] if self.p > 1 else 0.0])
+
     def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
         st = self.settings
-        y0 = np.array([x[0], 0.0])
-        P = x[2:].reshape(-1, 2)
+        y0 = self.leader_output(x)
+        P = x[2 * self.p :].reshape(-1, 2)
         dP = GAIN * st.health[:, None] * (y0 + B0 - P) + st.bias
-        return np.concatenate([[x[1], self.u0_at(t)[0]], dP.ravel()])
+        u = self.u0_at(t)
+        lead = np.ravel([[x[2 * k + 1], u[k]] for k in range(self.p)])
+        return np.concatenate([lead, dP.ravel()])
 
     def integrate(
         self, x0: np.ndarray, t_out: np.ndarray, breaks: list[float], attempt: int = 0
@@ -90,9 +99,9 @@ class FakeLoop(LoopBase):
         return Advance(t_out, np.array(xs), "", steps)
 
     def signals(self, x: np.ndarray) -> dict:
-        y0 = np.array([x[0], 0.0])
-        P = x[2:].reshape(-1, 2)
-        slots = desired_formation(y0, np.array([x[1], 0.0]), B0)
+        y0 = self.leader_output(x)
+        P = x[2 * self.p :].reshape(-1, 2)
+        slots = desired_formation(y0, np.array([x[1], x[3] if self.p > 1 else 0.0]), B0)
         return {
             "y0": y0.tolist(),
             "p": P.tolist(),
@@ -133,7 +142,7 @@ def running(hub: Hub, host: str = "127.0.0.1"):
         th.join(timeout=10)
 
 
-def fake_hub(fail_at: float | None = None, fps: float = 30.0) -> Hub:
-    """A hub around a :class:`FakeLoop`."""
-    loop = FakeLoop(fail_at)
-    return Hub(Session(loop), loop.limits, fps=fps, title="fake")
+def fake_hub(fail_at: float | None = None, fps: float = 30.0, p: int = 1, recorder=None) -> Hub:
+    """A hub around a :class:`FakeLoop` (``p`` inputs; an optional recorder for saves)."""
+    loop = FakeLoop(fail_at, p=p)
+    return Hub(Session(loop, recorder=recorder), loop.limits, fps=fps, title="fake")
