@@ -24,11 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import json
-import os
-import shutil
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -40,22 +36,28 @@ import numpy as np
 import pandas as pd
 
 from core.artifacts import OUT_ROOT, atomic_write_text
-from core.errors import BuildError, ScenarioError
+from core.errors import ScenarioError
 from core.scenario import Scenario
 from generated import solvers
 from generated.codegen import (
-    MANIFEST_NAME,
-    TMP_PREFIX,
     CodegenSettings,
     Library,
     build_library,
     check_dyn_signature,
-    entry_problem,
-    preload,
     renamed,
 )
 from generated.gains_cache import GainsInfo, ensure_gains, scenario_gains
 from generated.integrate import IntegratorSettings, Trajectory, output_grid, sundials_summary
+from generated.loaded import (
+    BUILDS,
+    DAE_NAME,
+    ODE_NAME,
+    OUT_NAME,
+    Compiled,
+    Image,
+    current,
+    open_image,
+)
 from generated.meta import LibraryRecord, RunMeta, WallSeconds
 from generated.overrides import (
     MAX_SET_DEPTH,
@@ -115,8 +117,6 @@ __all__ = [
     "trajectory_text",
     "with_method",
 ]
-
-ODE_NAME, DAE_NAME, OUT_NAME = "cl_ode", "cl_dae", "cl_out"
 
 
 # --------------------------------------------------------------------------- scenario
@@ -215,136 +215,7 @@ class Built:
     driver: Any = None
 
 
-@dataclass(frozen=True)
-class _Image:
-    """A library loaded from a private copy of the bytes its cache entry vouches for.
-
-    Attributes
-    ----------
-    stamp : tuple of int
-        :func:`_stamp` of the cache entry when those bytes were read.
-    dyn_p, outputs_p : casadi.Function
-        The closed loop's right-hand side and outputs, p an input.
-    driver : ctypes.CDLL or None
-        The native driver's entry points, for a native build.
-    """
-
-    stamp: tuple[int, ...]
-    dyn_p: ca.Function
-    outputs_p: ca.Function
-    driver: Any = None
-
-
-def _stamp(lib: Library) -> tuple[int, ...] | None:
-    """Identity of a cache entry's library and manifest files (None if one is missing).
-
-    Device, inode, size, modification and change time: rewriting, replacing or touching
-    either file changes it (the change time cannot be set back).
-    """
-    try:
-        stats = [os.stat(f) for f in (lib.path, lib.folder / MANIFEST_NAME)]
-    except OSError:
-        return None
-    return tuple(
-        v for s in stats for v in (s.st_dev, s.st_ino, s.st_size, s.st_mtime_ns, s.st_ctime_ns)
-    )
-
-
-def _verified_bytes(lib: Library) -> tuple[bytes, tuple[int, ...]]:
-    """The library's bytes, checked against its manifest (``entry_problem`` on these bytes).
-
-    Raises
-    ------
-    BuildError
-        If the entry does not check out, or changed while it was read.
-    """
-    stamp = _stamp(lib)
-    try:
-        data = lib.path.read_bytes()
-        info = json.loads((lib.folder / MANIFEST_NAME).read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        data, info = b"", None
-    ok = (
-        isinstance(info, dict)
-        and info.get("key") == lib.key
-        and info.get("library_sha256") == hashlib.sha256(data).hexdigest()
-    )
-    if not ok or stamp is None or _stamp(lib) != stamp:
-        why = entry_problem(lib.folder, lib.key) or "changed while it was loaded"
-        raise BuildError(f"build cache {lib.folder}: {why}; build again to rebuild it")
-    return data, stamp
-
-
-def _open_image(lib: Library, form: str) -> _Image:
-    """Load ``lib`` from a private copy of its verified bytes, removed once loaded.
-
-    A loaded library's file must not change: its pages are mapped from the file, so an
-    in-place rewrite of the cache entry would change code this process runs (and crash
-    it, at the latest when the Functions are released at exit). The copy lives in a
-    folder named like a build's temporary folder (removed with the build leftovers if
-    this process dies before removing it).
-    """
-    from generated import native
-
-    data, stamp = _verified_bytes(lib)
-    root = lib.folder.parent
-    try:
-        tmp = Path(tempfile.mkdtemp(dir=root, prefix=f"{TMP_PREFIX}{lib.key[:12]}-{os.getpid()}-"))
-    except OSError:  # a read-only cache root
-        tmp = Path(tempfile.mkdtemp(prefix=f"hitl-{lib.key[:12]}-"))
-    try:
-        copy = tmp / lib.path.name
-        copy.write_bytes(data)
-        names = (DAE_NAME if form == "dae" else ODE_NAME, OUT_NAME)
-        for name in names:
-            if name not in lib.names:
-                raise BuildError(
-                    f"library {lib.path}: no function {name!r} (it has {', '.join(lib.names)})"
-                )
-        try:
-            preload(lib.preload)  # the libraries it names by soname (native: SUNDIALS)
-            dyn_p, outputs_p = (ca.external(name, str(copy)) for name in names)
-        except (OSError, RuntimeError) as exc:
-            first = str(exc).strip().splitlines()
-            raise BuildError(
-                f"build cache {lib.folder}: cannot be loaded ({first[0] if first else exc})"
-            ) from None
-        driver = native.open_library(copy) if native.RHS_NAME in lib.names else None
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return _Image(stamp, dyn_p, outputs_p, driver)
-
-
-@dataclass(frozen=True)
-class _Compiled:
-    """What a process keeps of a build for later scenarios of its structure.
-
-    Its loaded library (:class:`_Image`) is used only while the cache entry is the file
-    it was loaded from (same :func:`_stamp`); a changed entry is checked and loaded
-    again, or rebuilt.
-    """
-
-    closed_loop: Any
-    library: Library
-    form: str
-    image: _Image
-
-
-#: compiled builds of this process by (structure key, method, codegen settings)
-_BUILDS: dict[tuple, _Compiled] = {}
-
-
-def _current(c: _Compiled) -> _Compiled | None:
-    """``c``, loaded again if its cache entry changed on disk; None if it no longer checks out."""
-    if _stamp(c.library) == c.image.stamp:
-        return c
-    try:
-        return dataclasses.replace(c, image=_open_image(c.library, c.form))
-    except BuildError:
-        return None
-
-
-def _reuse(c: _Compiled, sc: Scenario, gains: Gains, key: str) -> Built:
+def _reuse(c: Compiled, sc: Scenario, gains: Gains, key: str) -> Built:
     """``c``'s loaded library bound to ``sc`` (whose structure key is ``key``)."""
     from symbolic.closed_loop import bind
 
@@ -390,19 +261,19 @@ def build(
     # loop is built
     cascade = solvers.get(method).prepare(sc, gains)
     key = (structure_key(sc, gains), method, settings) if cascade is None else None
-    if closed_loop is None and key in _BUILDS:
-        c = _current(_BUILDS[key])
+    if closed_loop is None and key in BUILDS:
+        c = current(BUILDS[key])
         if c is not None:
-            _BUILDS[key] = c
+            BUILDS[key] = c
             return _reuse(c, sc, gains, key[0])
-        del _BUILDS[key]  # its entry no longer checks out: build again (the cache says why)
+        del BUILDS[key]  # its entry no longer checks out: build again (the cache says why)
     if closed_loop is None:
         from symbolic.closed_loop import build_closed_loop
 
         closed_loop = build_closed_loop(sc, gains)
     built, image = _compile(closed_loop, method, settings, t0, cascade)
     if key is not None and closed_loop.parametric is not None:
-        _BUILDS[key] = _Compiled(built.closed_loop, built.library, built.form, image)
+        BUILDS[key] = Compiled(built.closed_loop, built.library, built.form, image)
     return built
 
 
@@ -465,7 +336,7 @@ def _compile(
     settings: CodegenSettings | None,
     t_symbolic_start: float | None,
     cascade: Any,
-) -> tuple[Built, _Image]:
+) -> tuple[Built, Image]:
     """:func:`build_from_closed_loop`, and the loaded library the Built uses."""
     solver = solvers.get(method)
     settings = resolve_codegen(cl.layout.N, settings)
@@ -491,13 +362,13 @@ def _compile(
         "codegen": lib.codegen_seconds + (dag_lib.codegen_seconds if dag_lib else 0.0),
         "compile": lib.compile_seconds + (dag_lib.compile_seconds if dag_lib else 0.0),
     }
-    image = _open_image(lib, form)
+    image = open_image(lib, form)
     dag = (dag_lib, plan.data) if dag_lib else None
     return _bound(cl, lib, image, form, timings, dag), image
 
 
 def _bound(
-    cl: Any, lib: Library, image: _Image, form: str, timings: dict[str, float], dag: Any = None
+    cl: Any, lib: Library, image: Image, form: str, timings: dict[str, float], dag: Any = None
 ) -> Built:
     """The Built of ``cl`` on a loaded library: its Functions with ``cl``'s p filled in."""
     dyn_p, outputs_p, driver = image.dyn_p, image.outputs_p, image.driver

@@ -1,0 +1,184 @@
+"""Compiled libraries loaded in this process, from bytes their cache entry vouches for.
+
+A build-cache entry (:mod:`generated.codegen`) is loaded from a private copy of its
+library's bytes, checked against its manifest (:func:`verified_bytes`), so that a
+rewrite of the entry can never change code this process runs. :data:`BUILDS` keeps,
+per (structure key, method, codegen settings), the loaded library of a build for later
+scenarios of that structure; an entry is used only while its files are the ones it was
+loaded from (:func:`library_stamp`), else it is checked and loaded again
+(:func:`current`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+
+from core.errors import BuildError
+from generated.codegen import (
+    MANIFEST_NAME,
+    TMP_PREFIX,
+    Library,
+    entry_problem,
+    preload,
+)
+
+#: the names of the closed loop's Functions in every library (ODE or DAE form, outputs)
+ODE_NAME, DAE_NAME, OUT_NAME = "cl_ode", "cl_dae", "cl_out"
+
+
+@dataclass(frozen=True)
+class Image:
+    """A library loaded from a private copy of the bytes its cache entry vouches for.
+
+    Attributes
+    ----------
+    stamp : tuple of int
+        :func:`library_stamp` of the cache entry when those bytes were read.
+    dyn_p, outputs_p : casadi.Function
+        The closed loop's right-hand side and outputs, p an input.
+    driver : ctypes.CDLL or None
+        The native driver's entry points, for a native build.
+    """
+
+    stamp: tuple[int, ...]
+    dyn_p: ca.Function
+    outputs_p: ca.Function
+    driver: Any = None
+
+
+def library_stamp(lib: Library) -> tuple[int, ...] | None:
+    """Identity of a cache entry's library and manifest files (None if one is missing).
+
+    Device, inode, size, modification and change time: rewriting, replacing or touching
+    either file changes it (the change time cannot be set back).
+
+    Parameters
+    ----------
+    lib : Library
+    """
+    try:
+        stats = [os.stat(f) for f in (lib.path, lib.folder / MANIFEST_NAME)]
+    except OSError:
+        return None
+    return tuple(
+        v for s in stats for v in (s.st_dev, s.st_ino, s.st_size, s.st_mtime_ns, s.st_ctime_ns)
+    )
+
+
+def verified_bytes(lib: Library) -> tuple[bytes, tuple[int, ...]]:
+    """The library's bytes, checked against its manifest (``entry_problem`` on these bytes).
+
+    Parameters
+    ----------
+    lib : Library
+
+    Raises
+    ------
+    BuildError
+        If the entry does not check out, or changed while it was read.
+    """
+    stamp = library_stamp(lib)
+    try:
+        data = lib.path.read_bytes()
+        info = json.loads((lib.folder / MANIFEST_NAME).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        data, info = b"", None
+    ok = (
+        isinstance(info, dict)
+        and info.get("key") == lib.key
+        and info.get("library_sha256") == hashlib.sha256(data).hexdigest()
+    )
+    if not ok or stamp is None or library_stamp(lib) != stamp:
+        why = entry_problem(lib.folder, lib.key) or "changed while it was loaded"
+        raise BuildError(f"build cache {lib.folder}: {why}; build again to rebuild it")
+    return data, stamp
+
+
+def open_image(lib: Library, form: str) -> Image:
+    """Load ``lib`` from a private copy of its verified bytes, removed once loaded.
+
+    A loaded library's file must not change: its pages are mapped from the file, so an
+    in-place rewrite of the cache entry would change code this process runs (and crash
+    it, at the latest when the Functions are released at exit). The copy lives in a
+    folder named like a build's temporary folder (removed with the build leftovers if
+    this process dies before removing it).
+
+    Parameters
+    ----------
+    lib : Library
+    form : str
+        ``"ode"`` or ``"dae"``: which right-hand side to load.
+    """
+    from generated import native
+
+    data, stamp = verified_bytes(lib)
+    root = lib.folder.parent
+    try:
+        tmp = Path(tempfile.mkdtemp(dir=root, prefix=f"{TMP_PREFIX}{lib.key[:12]}-{os.getpid()}-"))
+    except OSError:  # a read-only cache root
+        tmp = Path(tempfile.mkdtemp(prefix=f"hitl-{lib.key[:12]}-"))
+    try:
+        copy = tmp / lib.path.name
+        copy.write_bytes(data)
+        names = (DAE_NAME if form == "dae" else ODE_NAME, OUT_NAME)
+        for name in names:
+            if name not in lib.names:
+                raise BuildError(
+                    f"library {lib.path}: no function {name!r} (it has {', '.join(lib.names)})"
+                )
+        try:
+            preload(lib.preload)  # the libraries it names by soname (native: SUNDIALS)
+            dyn_p, outputs_p = (ca.external(name, str(copy)) for name in names)
+        except (OSError, RuntimeError) as exc:
+            first = str(exc).strip().splitlines()
+            raise BuildError(
+                f"build cache {lib.folder}: cannot be loaded ({first[0] if first else exc})"
+            ) from None
+        driver = native.open_library(copy) if native.RHS_NAME in lib.names else None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return Image(stamp, dyn_p, outputs_p, driver)
+
+
+@dataclass(frozen=True)
+class Compiled:
+    """What a process keeps of a build for later scenarios of its structure.
+
+    Its loaded library (:class:`Image`) is used only while the cache entry is the file
+    it was loaded from (same :func:`library_stamp`); a changed entry is checked and loaded
+    again, or rebuilt.
+    """
+
+    closed_loop: Any
+    library: Library
+    form: str
+    image: Image
+
+
+#: compiled builds of this process by (structure key, method, codegen settings)
+BUILDS: dict[tuple, Compiled] = {}
+
+
+def current(c: Compiled) -> Compiled | None:
+    """``c``, loaded again if its cache entry changed on disk; None if it no longer checks out.
+
+    Parameters
+    ----------
+    c : Compiled
+    """
+    if library_stamp(c.library) == c.image.stamp:
+        return c
+    try:
+        return dataclasses.replace(c, image=open_image(c.library, c.form))
+    except BuildError:
+        return None
