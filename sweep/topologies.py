@@ -1,6 +1,6 @@
 """A topology study on one library per follower model (``studies/topologies.toml``).
 
-``python -m benchmarks.topologies [STUDY]`` draws the study's samples with the study
+``python -m sweep.topologies [STUDY]`` draws the study's samples with the study
 machinery (:func:`sweep.sampler.samples`: random digraphs with a spanning tree from the
 leader, N and link losses as the file says; the loader refuses a sample whose topology
 breaks Assumption 1) and integrates each with the per-agent driver
@@ -193,7 +193,7 @@ def _csv(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.topologies", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m sweep.topologies", description=__doc__)
     ap.add_argument("study", nargs="?", default=STUDY)
     ap.add_argument("--count", type=int, default=None, help="only the first COUNT samples")
     ap.add_argument("--workers", type=int, default=2)
