@@ -367,15 +367,18 @@ def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
     """
     from types import SimpleNamespace
 
-    # plain lists: a few string tests per row cost less than pandas' string methods
+    from verify import claims as CL
+
+    # plain lists: a few comparisons per row cost less than pandas' methods
     claims, kinds = table["claim"].tolist(), table["kind"].tolist()
+    ids = table["claim_id"].tolist()
     # an empty holds (a row that cannot be evaluated) is neither held nor failed
     holds = [h is True or h == True for h in table["holds"].fillna(False).tolist()]  # noqa: E712
     agents = table["agent"].tolist()
     observed = table["observed"].to_numpy(float)
 
-    def max_observed(claim: str, exact: bool = False) -> float:
-        hit = [c == claim if exact else c.startswith(claim) for c in claims]
+    def max_observed(cid: str) -> float:
+        hit = [c == cid for c in ids]
         vals = observed[np.asarray(hit, dtype=bool)]
         vals = vals[~np.isnan(vals)]  # NaN skipped, as pandas' max does
         return float(vals.max()) if vals.size else math.nan
@@ -384,10 +387,10 @@ def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
     c = [k for k, kind in enumerate(kinds) if kind == "consistency"]
     failed = [k for k in g if not bool(holds[k])]
     out: dict[str, Any] = {
-        "formation_tail_max": max_observed("Formation |p_i"),
-        "observer_tail_max": max_observed("T1 |ebar_eta_i| -> 0 (tail sup)"),
-        "peak_u_max": max_observed("peak |u_i|", exact=True),
-        "peak_u_late": max_observed("peak |u_i| after t = 1 s", exact=True),
+        "formation_tail_max": max_observed(CL.FORMATION.id),
+        "observer_tail_max": max_observed(CL.T1_TAIL.id),
+        "peak_u_max": max_observed(CL.PEAK_U.id),
+        "peak_u_late": max_observed(CL.PEAK_U_LATE.id),
         "guaranteed_held": all(holds[k] for k in g),
         "guaranteed_failed": "; ".join(
             _label(SimpleNamespace(claim=claims[k], agent=agents[k])) for k in failed
@@ -443,7 +446,9 @@ def theorem2_entry(
             sources.add("comparison lemma")
         else:
             if lem is None:  # the table is searched only when some follower needs it
-                lem = table[table["claim"].str.startswith("Lemma 1 reaching time t_f")]
+                from verify import claims as CL
+
+                lem = table[table["claim_id"] == CL.LEMMA1_PAPER.id]
             obs = lem.loc[lem["agent"].astype(str) == str(i + 1), "observed"].astype(float)
             out[f"t2_entry:{i + 1}"] = float(obs.iloc[0]) if len(obs) else math.nan
             sources.add("Lemma 1 observed")

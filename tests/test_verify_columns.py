@@ -147,21 +147,28 @@ def test_pinned_laplacian_by_value_and_copies():
 
 def test_summarize_table_by_hand():
     rows = [
-        ("Formation |p_i - h_i y0 - R| (tail sup)", "1", "info", 0.5, True),
-        ("Formation |p_i - h_i y0 - R| (tail sup)", "2", "info", math.nan, True),
-        ("Formation |p_i - h_i y0 - R| (tail sup)", "3", "info", 0.75, True),
-        ("T1 |ebar_eta_i| -> 0 (tail sup)", "1", "info", 1e-3, True),
-        ("peak |u_i|", "1", "info", 40.0, True),
-        ("peak |u_i| after t = 1 s", "1", "info", 90.0, True),  # not the exact claim
-        ("T2 provable", "2", "guaranteed", 1.0, False),
-        ("T1 dV1/dt", "all", "guaranteed", 1.0, False),
-        ("Def. 1 derived", "4", "guaranteed", 1.0, True),
-        ("consistency: (38)", "1", "consistency", 1.0, True),
+        ("formation.leader", "Formation |p_i - h_i y0 - R| (tail sup)", "1", "info", 0.5, True),
+        (
+            "formation.leader",
+            "Formation |p_i - h_i y0 - R| (tail sup)",
+            "2",
+            "info",
+            math.nan,
+            True,
+        ),
+        ("formation.leader", "Formation |p_i - h_i y0 - R| (tail sup)", "3", "info", 0.75, True),
+        ("t1.tail", "T1 |ebar_eta_i| -> 0 (tail sup)", "1", "info", 1e-3, True),
+        ("effort.peak", "peak |u_i|", "1", "info", 40.0, True),
+        ("effort.peak_late", "peak |u_i| after t = 1 s", "1", "info", 90.0, True),
+        ("t2.chi.provable", "T2 provable", "2", "guaranteed", 1.0, False),
+        ("t1.dv1.supported", "T1 dV1/dt", "all", "guaranteed", 1.0, False),
+        ("def1.derived", "Def. 1 derived", "4", "guaranteed", 1.0, True),
+        ("t2.eq38", "consistency: (38)", "1", "consistency", 1.0, True),
     ]
     table = pd.DataFrame(
         [
-            dict(zip(COLUMNS[:10], (c, a, "", k, 1.0, o, o, h, "[0, 1] s", ""), strict=True))
-            for c, a, k, o, h in rows
+            dict(zip(COLUMNS[:11], (c, a, "", k, 1.0, o, o, h, "[0, 1] s", "", i), strict=True))
+            for i, c, a, k, o, h in rows
         ]
     )
     assert summarize_table(table) == {
@@ -219,7 +226,13 @@ def test_theorem2_entry_of_unprovable_followers_is_lemma1_observed_time(monkeypa
     ]
     table = pd.DataFrame(
         [
-            dict(zip(COLUMNS[:10], (c, a, "", k, 1.0, o, o, h, "[0, 1] s", ""), strict=True))
+            dict(
+                zip(
+                    COLUMNS[:11],
+                    (c, a, "", k, 1.0, o, o, h, "[0, 1] s", "", "lemma1.paper"),
+                    strict=True,
+                )
+            )
             for c, a, k, o, h in rows
         ]
     )

@@ -96,18 +96,16 @@ def ablation_statement(table: pd.DataFrame) -> str:
     table : DataFrame
         The bound-vs-actual table.
     """
-    if not any(str(c).startswith("Fig. 13: time") for c in table["claim"].tolist()):
-        return "No ablation run: Fig. 13 was not reproduced."  # (pandas' string test costs more)
-    claim = table["claim"]
-    rows = table[claim.str.startswith("Fig. 13: time") & (table["kind"] == "paper")]
+    cid = table["claim_id"]
+    rows = table[(cid == CL.FIG13_VERDICT.id) & (table["kind"] == "paper")]
     if rows.empty:
         return "No ablation run: Fig. 13 was not reproduced."
     ft, ab = rows["bound"].to_numpy(float), rows["observed"].to_numpy(float)
     slower = int(np.sum(ab > ft))
     same = int(np.sum(np.isclose(ab, ft)))
-    tr = table[claim.str.startswith("Fig. 13: tail")]["ratio"].to_numpy(float)
-    fixed = table[claim.str.startswith("Fig. 13: time") & (table["kind"] != "paper")]
-    rates = table[claim.str.startswith("Fig. 13: decay rate")]
+    tr = table[cid == CL.FIG13_TAIL.id]["ratio"].to_numpy(float)
+    fixed = table[cid.isin([CL.FIG13_VERDICT.id, CL.FIG13_FIXED.id]) & (table["kind"] != "paper")]
+    rates = table[cid == CL.FIG13_RATE.id]
     txt = (
         f"Fig. 13 (eq. (42) ablation u_i = Psi_i vs the fault-tolerant u_i = ghat_i Psi_i): "
         f"the ablation's |e_ti| enters {FIG13_LEVEL_FACTOR:g} x the larger tail sup of both runs "
@@ -188,7 +186,7 @@ def findings(v: Verification) -> list[str]:
             f"- Consistency (not evidence for Theorem 2): eq. (38) with exact dV2/dt holds at "
             f"every output time for {n_ok} of {len(v.theorem2)} followers."
         )
-    prov = tb[(tb["kind"] == "guaranteed") & tb["claim"].str.contains("provable variant")]
+    prov = tb[(tb["kind"] == "guaranteed") & tb["claim_id"].isin([CL.T2_CHI.id, CL.T2_E.id])]
     if not prov.empty:
         out.append(
             f"- Theorem 2, provable variant (every term of the derivation included): "
@@ -205,12 +203,12 @@ def findings(v: Verification) -> list[str]:
         out.append(
             f"- dV1/dt <= -delta~ V1 {what} holds at {100 * chk.fraction:.1f}% of output times."
         )
-    ebar = tb[tb["claim"].str.startswith("T1 |ebar_eta_i| -> 0")]
+    ebar = tb[tb["claim_id"] == CL.T1_TAIL.id]
     if not ebar.empty:
         out.append(
             f"- Observer error on the tail: max |ebar_eta_i| = {ebar['observed'].max():.3g}."
         )
-    lem = tb[tb["claim"].str.startswith("Lemma 1 reaching")]
+    lem = tb[tb["claim_id"] == CL.LEMMA1_PAPER.id]
     if not lem.empty:
         out.append(
             f"- Lemma 1: V2 enters its level after {lem['observed'].min():.3g}–"
@@ -229,7 +227,7 @@ def effort_section(table: pd.DataFrame) -> list[str]:
     table : DataFrame
         The bound-vs-actual table (its ``peak |u_i|`` rows).
     """
-    rows = table[table["claim"].str.startswith("peak |u_i|")]
+    rows = table[table["claim_id"].isin([CL.PEAK_U.id, CL.PEAK_U_LATE.id])]
     if rows.empty:
         return []
     L = [
