@@ -57,6 +57,7 @@ from core.graph import (
     topology_violation,
     unreachable_followers,
 )
+from core.hold import shaped_breakpoints, shaped_hold
 from core.settings import (
     EITHER,
     NONNEG,
@@ -123,7 +124,7 @@ class Leader:
     u0_trace: np.ndarray | None  # (K, 1+p): columns t, u0_1..u0_p (piecewise linear)
     alpha: float  # ‖u0‖ ≤ α
     u0_hold: bool = False  # the trace is held constant from each row to the next (zero-order hold)
-    u0_rise: float = 0.0  # the steps of u0 are shaped over this many seconds (core/shaping.py)
+    u0_rise: float = 0.0  # the steps of u0 (or a held trace's jumps) are shaped over this many s
     u0_shape: str = DEFAULT_SHAPE  # how (core/shaping.py: smoothstep, prefilter or ramp)
 
     @property
@@ -147,6 +148,9 @@ class Leader:
             return np.array([np.broadcast_to(e.numpy(ts), ts.shape) for e in self.u0])
         tr = self.u0_trace
         assert tr is not None
+        if self.u0_hold and self.u0_rise > 0:  # each jump a smoothstep ramp (core/hold.py)
+            cols = [shaped_hold(tr[:, 0], tr[:, 1 + k], self.u0_rise, ts)[0] for k in range(self.p)]
+            return np.array(cols)
         if self.u0_hold:  # right-continuous: row j's value from its time t_j on
             j = np.clip(np.searchsorted(tr[:, 0], ts, side="right") - 1, 0, len(tr) - 1)
             return np.moveaxis(tr[j, 1:], -1, 0)
@@ -373,6 +377,8 @@ class Scenario:
         if self.leader.u0 is not None:
             for e in self.leader.u0:
                 times.update(e.breakpoints())
+        elif self.leader.u0_hold and self.leader.u0_rise > 0:  # rows and rows + rise
+            times.update(shaped_breakpoints(self.leader.u0_trace, self.leader.u0_rise))
         elif self.leader.u0_hold:  # each row of a held trace is a jump
             times.update(float(t) for t in self.leader.u0_trace[:, 0])
         exact |= set(switch_times(self.graph.switches))  # the graph switches exactly then
@@ -937,7 +943,8 @@ def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) 
     p = sizes["p"]
     rise = _key(ctx, LEADER, L, "leader", "u0_rise", sizes) if "u0_rise" in L else None
     shape = _key(ctx, LEADER, L, "leader", "u0_shape", sizes)
-    for key, given in (("u0_rise", bool(rise)), ("u0_shape", "u0_shape" in L)):
+    held = L.get("u0_hold") is True  # a held trace's jumps are shaped too (core/hold.py)
+    for key, given in (("u0_rise", bool(rise) and not held), ("u0_shape", "u0_shape" in L)):
         if given and "u0" not in L:
             raise ctx.err(f"leader.{key}", "applies to u0 expressions only", f"u0, or no {key}")
     if "u0" in L:
