@@ -7,6 +7,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 SCENARIO ?= scenarios/paper.toml
 SWEEP ?= studies/example.toml
+SEARCH ?= studies/search-faults.toml
 STRICT ?= 0
 export STRICT
 # SET='KEY=VALUE;KEY=VALUE' (';' separates overrides; values may hold commas) and
@@ -21,7 +22,7 @@ ifeq ($(MAKELEVEL),0)
 # a misspelt knob on the command line is refused, not dropped
 MISSPELT := set=SET Set=SET SETS=SET sets=SET OVERRIDE=SET OVERRIDES=SET override=SET \
 	overrides=SET variant=VARIANT Variant=VARIANT VARIANTS=VARIANT variants=VARIANT \
-	scenario=SCENARIO SCENARIOS=SCENARIO sweep=SWEEP strict=STRICT port=PORT
+	scenario=SCENARIO SCENARIOS=SCENARIO sweep=SWEEP search=SEARCH strict=STRICT port=PORT
 $(foreach p,$(MISSPELT),$(if $(filter command line,$(origin $(firstword $(subst =, ,$(p))))),\
 	$(error $(firstword $(subst =, ,$(p)))= is not a variable of this Makefile: use $(lastword $(subst =, ,$(p)))=)))
 ifneq ($(SET)$(VARIANT),)
@@ -31,7 +32,7 @@ endif
 endif
 endif
 
-.PHONY: all demo synth sim sweep console chromium verify report test lint bench clean clean-cache distclean
+.PHONY: all demo synth sim sweep search console chromium verify report test lint bench clean clean-cache distclean
 
 all: demo
 
@@ -56,6 +57,10 @@ sim: $(STAMP)
 sweep: $(STAMP)
 	$(PY) -m sweep run $(SWEEP)
 
+# worst-case search of a search file's requirements over its study space (docs/search.md)
+search: $(STAMP)
+	$(PY) -m search run $(SEARCH)
+
 # the live operator console on http://127.0.0.1:$(PORT)/ (docs/console.md)
 PORT ?= 8765
 console: $(STAMP)
@@ -75,8 +80,8 @@ report: $(STAMP)
 	@$(KNOBS) set -x; $(PY) -m verify report $(SCENARIO) "$$@"
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check core synthesis symbolic generated verify benchmarks sweep console tests
-	$(VENV)/bin/ruff format --check core synthesis symbolic generated verify benchmarks sweep console tests
+	$(VENV)/bin/ruff check core synthesis symbolic generated verify benchmarks sweep search console tests
+	$(VENV)/bin/ruff format --check core synthesis symbolic generated verify benchmarks sweep search console tests
 	$(VENV)/bin/lint-imports
 
 test: lint chromium
