@@ -260,3 +260,71 @@ def test_zero_bounds_are_asymptotic_claims_and_the_sentence_counts_the_rows(pape
     assert not rows["holds"].any()
     n_held = int(held_mask(rows).sum())
     assert f"of which {n_held} decay" in paper_t2_sentence(rows)
+
+
+# ------------------------------------------------------------------------- faults
+@pytest.fixture(scope="module")
+def faults_run(tmp_path_factory):
+    """scenarios/faults-example.toml (5 s): abrupt, ramp, intermittent faults and a bias."""
+    from generated import api
+    from verify.pipeline import Run, verify_run
+
+    path = PAPER.parent / "faults-example.toml"
+    root = tmp_path_factory.mktemp("out")
+    res = api.run(path, out_root=root, progress=False)
+    sc = api.load(path)
+    v = verify_run(Run(sc, res.frame, res.trajectory.x, res.meta, root), out_root=root)
+    return sc, res, v
+
+
+def test_the_ramp_term_is_dV2_dt_and_eq38_holds_with_it(faults_run):
+    """Follower 2's ramp (g from 0.95 to 0.71 over [0.2, 3.2] s): ∂V2/∂t at a fixed state,
+    by central differences of the closed loop's V2 output in t, is (ġ/(2γ))(ĝ² − 1/g²), the
+    term (38) adds; with it (38) holds at every output time."""
+    from verify.lyapunov import (
+        closed_loop,
+        evaluate_p,
+        fast_functions,
+        health_at,
+        state_block,
+        theorem2_rhs,
+    )
+
+    sc, res, v = faults_run
+    assert failures(v.table).empty
+    cl = closed_loop(sc, v.gains)
+    t, X = res.trajectory.t, res.trajectory.x
+    fns = fast_functions(cl, "test-ramp")
+    _, Vd, chi = evaluate_p(fns, "V2", t, X, cl.p0)
+    i = 1  # not pinned: χ_2 does not depend on t at a fixed state
+    g, gdot = health_at(sc, i, t)
+    ramp = (t > 0.25) & (t < 3.15)
+    np.testing.assert_allclose(gdot[ramp], -0.95 * 0.25 / 3.0, rtol=1e-9)
+    assert np.all(gdot[t > 3.3] == 0.0)
+    gh = state_block(cl, X, ("ghat", i))[:, 0]
+    gam = float(sc.controller.gamma[i])
+    k = np.flatnonzero(ramp)[::40]
+    h = 1e-5
+    Vp = evaluate_p(fns, "V2", t[k] + h, X[k], cl.p0)[0][:, i, 0]
+    Vm = evaluate_p(fns, "V2", t[k] - h, X[k], cl.p0)[0][:, i, 0]
+    want = gdot[k] / (2 * gam) * (gh[k] ** 2 - 1 / g[k] ** 2)
+    np.testing.assert_allclose((Vp - Vm) / (2 * h), want, rtol=1e-5)
+    assert np.abs(want).min() > 0.1  # a term of size, not round-off
+    th = state_block(cl, X, ("thetahat", i))
+    rhs, scale = theorem2_rhs(sc, i, chi[:, i, :], th, gh, g, gdot)
+    lhs = Vd[:, i, 0]
+    assert np.all(lhs - rhs <= 1e-7 * (scale + np.abs(lhs)))
+
+
+def test_fault_rows_are_per_follower_and_per_interval(faults_run):
+    sc, _, v = faults_run
+    tb = v.table
+    for i in range(sc.N):
+        pieces = follower_pieces(sc, i)
+        chi = tb[(tb["agent"] == str(i + 1)) & (tb["claim_id"] == CL.T2_CHI_ENV.id)]
+        assert len(chi) == len(pieces)  # one envelope row per interval, each evaluated
+        assert (chi["kind"] == "guaranteed").all() and chi["holds"].all()
+    # the ramp's interval carries the health-rate term in its constants
+    ramp = tb[(tb["agent"] == "2") & (tb["claim_id"] == CL.T2_CHI.id)]
+    notes = " ".join(ramp["note"])
+    assert "health ramp start/end at t = 0.2 s" in notes
