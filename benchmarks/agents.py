@@ -120,8 +120,9 @@ def large_rows(
         gains = bench_gains(sc)[0]
         x0 = agents.initial_state(sc)
         t1 = time.perf_counter()
-        libs, model = agents.build_models(sc, gains, CodegenSettings(build_root=build_root))
-        prob = agents.problem(sc, gains, model)
+        cg = CodegenSettings(build_root=build_root)
+        builds = {th: agents.build_models(sc, gains, cg, openmp=th > 1) for th in set(threads)}
+        prob = agents.problem(sc, gains, builds[threads[0]][1])
         t2 = time.perf_counter()
         s = IntegratorSettings(method="native", rtol=1e-6, atol=1e-8, max_steps=1000000)
         t_out = output_grid(horizon, 0.1)
@@ -135,7 +136,7 @@ def large_rows(
                 ls = agents.LinearSettings(solver=solver, threads=th)
                 t3 = time.perf_counter()
                 tr = agents.run(
-                    [lib.path for lib in libs],
+                    [lib.path for lib in builds[th][0]],
                     prob,
                     x0,
                     t_out,

@@ -102,15 +102,22 @@ def kernel_functions(
     return fns
 
 
-def kernel_settings(settings: CodegenSettings | None = None) -> CodegenSettings:
-    """``settings`` with the kernels' flags (OpenMP) added.
+def kernel_settings(
+    settings: CodegenSettings | None = None, openmp: bool = False
+) -> CodegenSettings:
+    """``settings`` for the kernels: with OpenMP's flags for a threaded build.
 
     Parameters
     ----------
     settings : CodegenSettings, optional
+    openmp : bool
+        Threads over the agents (``LinearSettings.threads`` > 1). A serial build has no
+        OpenMP region: at small N entering one costs more than the pass it runs.
     """
     s = settings or CodegenSettings()
-    extra = tuple(s.extra_cflags) + tuple(f for f in OPENMP_FLAGS if f not in s.extra_cflags)
+    extra = tuple(s.extra_cflags)
+    if openmp:
+        extra += tuple(f for f in OPENMP_FLAGS if f not in extra)
     return dataclasses.replace(s, extra_cflags=extra, jacobian="sparse", expand=True)
 
 
@@ -121,7 +128,11 @@ KERNEL_GAINS = ("A0", "B0", "C0", "Q", "Gamma", "Phi", "lambda1", "lambda2")
 
 
 def kernel_key(
-    sc: Scenario, gains: Gains, model_index: int, settings: CodegenSettings | None = None
+    sc: Scenario,
+    gains: Gains,
+    model_index: int,
+    settings: CodegenSettings | None = None,
+    openmp: bool = False,
 ) -> str:
     """SHA-256 of everything the kernels of one model compile in (never the graph, never N).
 
@@ -138,6 +149,7 @@ def kernel_key(
     gains : Gains
     model_index : int
     settings : CodegenSettings, optional
+    openmp : bool
     """
     from symbolic.parameters import structure
 
@@ -156,13 +168,13 @@ def kernel_key(
         "driver": hashlib.sha256(
             (native.COMMON.read_text() + DRIVER.read_text()).encode()
         ).hexdigest(),
-        "settings": repr(kernel_settings(settings)),
+        "settings": repr(kernel_settings(settings, openmp)),
     }
     return hashlib.sha256(json.dumps(desc, sort_keys=True, default=str).encode()).hexdigest()
 
 
 def build_models(
-    sc: Scenario, gains: Gains, settings: CodegenSettings | None = None
+    sc: Scenario, gains: Gains, settings: CodegenSettings | None = None, openmp: bool = False
 ) -> tuple[list[Library], np.ndarray]:
     """Compile (or reuse from the cache) one kernel library per follower model.
 
@@ -175,6 +187,9 @@ def build_models(
     gains : Gains
     settings : CodegenSettings, optional
         Compiler, flags, cache root and ``cse``.
+    openmp : bool
+        A threaded build (:func:`kernel_settings`), needed for ``LinearSettings.threads``
+        above 1.
 
     Returns
     -------
@@ -183,13 +198,13 @@ def build_models(
     model : ndarray
         N ints: the library of each follower.
     """
-    s = kernel_settings(settings)
+    s = kernel_settings(settings, openmp)
     groups = model_groups(sc)
     model = np.zeros(sc.N, dtype=np.int32)
     libs = []
     for g, members in enumerate(groups):
         model[members] = g
-        key = kernel_key(sc, gains, members[0], settings)
+        key = kernel_key(sc, gains, members[0], settings, openmp)
         lib = _BUILT.get(key)
         if lib is None or not lib.path.is_file():
             fns = kernel_functions(sc, gains, members[0], cse=s.cse)
@@ -534,6 +549,7 @@ def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
     opts, res = ctypes.POINTER(native.Options), ctypes.POINTER(native.Result)
     for lib, p in zip(libs, libraries, strict=True):
         lib.hitl_agents_problem_size.restype = ctypes.c_long
+        lib.hitl_agents_openmp.restype = ci
         lib.hitl_agents_run.restype = ci
         lib.hitl_agents_run.argtypes = [prob, _DP, opts, res, ctypes.POINTER(ctypes.c_long)]
         lib.hitl_agents_probe.restype = ci
@@ -592,6 +608,14 @@ def _c_problem(
     return c, [kern, *arrays.values()]
 
 
+def _check_threads(libs: list[ctypes.CDLL], linear: LinearSettings) -> None:
+    if linear.threads != 1 and not libs[0].hitl_agents_openmp():
+        raise IntegrationError(
+            f"agents threads: {linear.threads} needs the threaded build "
+            "(build_models(..., openmp=True)); or threads = 1"
+        )
+
+
 def _state(prob: AgentProblem, x: np.ndarray) -> np.ndarray:
     x = np.ascontiguousarray(x, dtype=float).ravel()
     if x.size != prob.nx:
@@ -636,8 +660,10 @@ def run(
     wall0 = time.perf_counter()
     libs = load(libraries)
     x = _state(prob, x0)
+    linear = linear or LinearSettings()
+    _check_threads(libs, linear)
     call = native.DriverCall.of(x.size, t_out, settings, breakpoints)
-    cp, _keep = _c_problem(libs, prob, linear or LinearSettings())
+    cp, _keep = _c_problem(libs, prob, linear)
     kry = ctypes.c_long(0)
     libs[0].hitl_agents_run(
         ctypes.byref(cp),
@@ -681,10 +707,12 @@ def probe(
         Wrong sizes, or the driver failed (singular block, GMRES not converged).
     """
     libs = load(libraries)
+    linear = linear or LinearSettings()
+    _check_threads(libs, linear)
     x, b = _state(prob, x), _state(prob, b)
     xdot, sol = np.zeros_like(x), np.zeros_like(x)
     msg = ctypes.create_string_buffer(native.MSG_LEN)
-    cp, _keep = _c_problem(libs, prob, linear or LinearSettings())
+    cp, _keep = _c_problem(libs, prob, linear)
     dp = native.dptr
     ret = libs[0].hitl_agents_probe(
         ctypes.byref(cp),

@@ -39,8 +39,9 @@
  * then x_i = D_i^{-1} (b_i - c A_s0 x_0) - c D_i^{-1} B_s dnb_i.
  * HITL_AG_AUTO takes FORWARD on an acyclic topology and GMRES otherwise.
  *
- * Threads (OpenMP, when compiled with -fopenmp): the passes, the Jacobian blocks and the
- * block factorisations are split over the agents.
+ * Threads (OpenMP, when compiled with -fopenmp; a serial build has no OpenMP region at
+ * all, whose entry costs more than a pass at small N): the passes, the Jacobian blocks,
+ * the block factorisations and the GMRES products are split over the agents.
  */
 #ifdef _OPENMP
 #include <omp.h>
@@ -805,6 +806,15 @@ static void hitl_ag_free(hitl_ag *d, hitl_cvode *s) {
   free(d->G), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S);
   free(d->Spiv), free(d->V), free(d->H), free(d->cs), free(d->sn), free(d->g);
   hitl_cvode_free(&d->base, s);
+}
+
+/* 1 if compiled with OpenMP (threads over the agents), else 0 */
+CASADI_SYMBOL_EXPORT int hitl_agents_openmp(void) {
+#ifdef _OPENMP
+  return 1;
+#else
+  return 0;
+#endif
 }
 
 CASADI_SYMBOL_EXPORT long hitl_agents_problem_size(void) {
