@@ -168,7 +168,7 @@ function drawWorld(s) {
   g.fillText("leader y0", X(cx) + 10, Y(cy) + 14);
   g.fillText("● follower p_i   □ slot y0 + b_i (the offset each controller tracks)", 8, cv.height - 8);
   const fr = window.__drawn.frames;
-  fr.push({ t: s.t, y0: s.y0, slots: s.slots, p: s.p, et: s.et, u0: s.u0_now || s.u0 });
+  fr.push({ t: s.t, y0: s.y0, slots: s.slots, p: s.p, et: s.et, est: s.est, unorm: s.unorm, u0: s.u0_now || s.u0 });
   if (fr.length > 600) fr.shift();
 }
 
