@@ -328,3 +328,33 @@ def test_fault_rows_are_per_follower_and_per_interval(faults_run):
     ramp = tb[(tb["agent"] == "2") & (tb["claim_id"] == CL.T2_CHI.id)]
     notes = " ".join(ramp["note"])
     assert "health ramp start/end at t = 0.2 s" in notes
+
+
+# ------------------------------------------------------------------------- headline
+def test_the_headline_never_says_a_bare_pass_without_tracking_rows(paper_scenario):
+    from verify.headline import coverage, headline_lines, run_numbers, verdict
+    from verify.synthetic import synthetic_trajectory
+    from verify.table import gauge
+
+    sc = paper_scenario
+    df = synthetic_trajectory()
+    tb = bounds_table(sc, df)
+    head = headline_lines(tb, [])
+    assert head[0].startswith("PASS: all ") and len(head) == 1 + sc.N
+    off = replace(sc, options=replace(sc.options, feedforward=False))  # (38) not guaranteed
+    tb_off = bounds_table(off, df)
+    line = verdict(tb_off, coverage(tb_off, (0.0, 20.0)))
+    assert line.startswith("PASS WITH GAPS") and "follower(s) 1, 2, 3, 4, 5" in line
+    # the three numbers, against the synthetic signals computed here
+    nums = run_numbers(sc, df, gauge(sc), 0.5, 1.0)
+    t = df["t"].to_numpy()
+    tail = t >= 10.0 - 1e-9
+    et = [np.hypot(df[f"et{i}_1"], df[f"et{i}_2"]).to_numpy() for i in range(1, sc.N + 1)]
+    best = max(range(sc.N), key=lambda i: et[i][tail].max())
+    assert nums[1].agent == best + 1 and nums[1].value == pytest.approx(et[best][tail].max())
+    assert nums[1].t == pytest.approx(t[tail][np.argmax(et[best][tail])])
+    # a failing row: FAIL, with the count
+    bad = tb.copy()
+    k = bad.index[bad["kind"] == "guaranteed"][0]
+    bad.loc[k, "holds"] = False
+    assert verdict(bad, coverage(bad, (0.0, 20.0))).startswith("FAIL: 1 check(s) failed")
