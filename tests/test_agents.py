@@ -210,3 +210,26 @@ def test_kernel_key_ignores_the_graph_and_n_but_not_what_is_compiled(cases):
     assert agents.kernel_key(sc, other, 0) != key
     mixed, gm = cases["cyclic-mixed"][:2]
     assert agents.kernel_key(mixed, gm, 1) != key  # the point mass
+
+
+def test_threads_give_the_serial_results(cases, build_root):
+    """Two threads over the agents: the same numbers (each agent's work is its own)."""
+    sc, gains, cl, libs, prob = cases["cyclic-mixed"]
+    cg = CodegenSettings(optimization="-O0", build_root=build_root)
+    tlibs, _ = agents.build_models(sc, gains, cg, openmp=True)
+    rng = np.random.default_rng(11)
+    x = cl.x0 + rng.normal(scale=0.2, size=prob.nx)
+    b = rng.normal(size=prob.nx)
+    for s in ("dense", "gmres"):
+        one = agents.probe(
+            [lib.path for lib in libs], prob, 0.2, x, 1e-2, b, agents.LinearSettings(s)
+        )
+        two = agents.probe(
+            [lib.path for lib in tlibs], prob, 0.2, x, 1e-2, b, agents.LinearSettings(s, threads=2)
+        )
+        np.testing.assert_array_equal(one[0], two[0])
+        np.testing.assert_allclose(one[1], two[1], rtol=1e-13, atol=1e-13 * np.abs(one[1]).max())
+    with pytest.raises(IntegrationError, match="threaded build"):
+        agents.probe(
+            [lib.path for lib in libs], prob, 0.2, x, 1e-2, b, agents.LinearSettings(threads=2)
+        )
