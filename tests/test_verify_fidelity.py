@@ -35,7 +35,7 @@ def test_scan_finds_the_core_equations():
     emap = equation_map(ROOT)
     for k in (3, 7, 9, 15, 16, 17, 28, 29, 30, 32, 38, 40, 42):
         assert emap.get(k), f"no '# eq. ({k})' comment in the code"
-    assert any("verify.lyapunov" in loc for loc in emap[38])
+    assert any("verify.theorem2_check" in loc for loc in emap[38])
 
 
 def test_scan_reads_every_range_in_a_comment(tmp_path):
