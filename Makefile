@@ -32,7 +32,7 @@ endif
 endif
 endif
 
-.PHONY: all demo synth sim sweep search console chromium verify report test lint bench clean clean-cache distclean
+.PHONY: all demo synth sim sweep search console chromium verify report check test lint bench clean clean-cache distclean
 
 all: demo
 
@@ -83,6 +83,11 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check core synthesis symbolic generated verify benchmarks sweep search console tests
 	$(VENV)/bin/ruff format --check core synthesis symbolic generated verify benchmarks sweep search console tests
 	$(VENV)/bin/lint-imports
+
+# the quick tier for the edit loop: ruff, the import contract and the tests not marked slow
+# (tests/conftest.py marks the modules that compile generated C or integrate whole runs)
+check: lint
+	$(PY) -m pytest -m "not slow"
 
 test: lint chromium
 	$(PY) -m pytest

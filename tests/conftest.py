@@ -1,4 +1,10 @@
-"""Shared pytest set-up: repeatable property-based examples and shared fixtures.
+"""Shared pytest set-up: repeatable property-based examples, the test tiers, shared fixtures.
+
+Two tiers: ``make check`` runs the tests not marked ``slow`` (for the edit loop: the
+loader, expressions, synthesis, docs and repository checks, verification on synthetic
+trajectories), ``make test`` runs everything. A test is ``slow`` when it carries
+``@pytest.mark.slow`` or belongs to a module of :data:`SLOW_MODULES`, whose tests compile
+generated C or integrate whole scenarios.
 
 Property-based tests draw the same examples on every run: a suite that must pass on a
 clean machine cannot depend on which examples a random seed happens to draw;
@@ -18,6 +24,69 @@ from core.scenario import Scenario, load_scenario
 settings.register_profile("repeatable", derandomize=True, print_blob=True)
 settings.register_profile("explore", derandomize=False, max_examples=500)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
+
+#: test modules whose tests compile generated C, integrate whole scenarios, start
+#: subprocesses or draw figures (``make test`` runs them; ``make check`` leaves them out)
+SLOW_MODULES = frozenset(
+    {
+        "test_agents",
+        "test_artifacts_trust",
+        "test_bench",
+        "test_bipartite",
+        "test_breakpoints",
+        "test_build_reuse",
+        "test_cache_portable",
+        "test_cli_knobs",
+        "test_closed_loop",
+        "test_console",
+        "test_console_page",
+        "test_console_replay",
+        "test_dag",
+        "test_definition1",
+        "test_fault_slots",
+        "test_faults",
+        "test_generated_codegen",
+        "test_generated_integrate",
+        "test_input_limits",
+        "test_native",
+        "test_parameters",
+        "test_planar",
+        "test_saturation",
+        "test_search",
+        "test_shipped_scenarios",
+        "test_sim_api",
+        "test_solver_interface",
+        "test_startup_caches",
+        "test_steps",
+        "test_study_inputs",
+        "test_sundials_messages",
+        "test_sweep_report",
+        "test_sweep_run",
+        "test_switching",
+        "test_synthesis_cli",
+        "test_theorem2_intervals",
+        "test_verify_lyapunov",
+        "test_verify_report",
+        "test_verify_rows",
+    }
+)
+
+#: single tests of quick modules that take tens of seconds (a large sample's statistics)
+SLOW_TESTS = frozenset({"test_truncated_normal_bounds_and_analytic_mean"})
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark every test of :data:`SLOW_MODULES`, and those of :data:`SLOW_TESTS`, ``slow``.
+
+    Parameters
+    ----------
+    config : pytest.Config
+    items : list of pytest.Item
+    """
+    for item in items:
+        module = item.module.__name__.rsplit(".", 1)[-1] if item.module is not None else ""
+        if module in SLOW_MODULES or item.originalname in SLOW_TESTS:
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture(scope="session")
