@@ -184,7 +184,7 @@ def test_step_peak_u_sees_only_the_seconds_after_each_step():
             df[f"u{i}_{r}"] = np.ones_like(t)
     df.loc[np.isclose(t, 6.5), "u3_2"] = -50.0  # 1.5 s after the release
     df.loc[np.isclose(t, 12.0), "u1_1"] = 80.0  # long after both steps
-    assert step_peak_u(sc, df) == 50.0
-    assert step_peak_u(sc, df, window=1.0) == 1.0
+    assert step_peak_u(sc, df) == pytest.approx(math.hypot(1.0, 50.0), rel=1e-15)  # ‖u_3‖
+    assert step_peak_u(sc, df, window=1.0) == pytest.approx(math.sqrt(2.0), rel=1e-15)
     paper = api.load(PAPER, None, variant="paper")
     assert math.isnan(step_peak_u(paper, df))
