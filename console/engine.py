@@ -194,6 +194,8 @@ class LoopBase:
         The settings at t = 0 (and after ``clear`` for a follower).
     x0 : ndarray
         The state at t = 0.
+    rise : float
+        Rise time (s) of the shaped changes of u0 (> 0).
     """
 
     def __init__(

@@ -45,7 +45,7 @@ from core.errors import UsageError, run_cli
 FPS = 30.0
 #: |u_i| is measured from this time on (the start-up transient before it is the loop's own)
 PEAK_FROM = 1.0
-#: the acceptance bound on the peak |u_i| after PEAK_FROM (issue 24)
+#: the bound on the peak |u_i| after PEAK_FROM a session must keep (torques of the order of 1e3)
 PEAK_BOUND = 1e3
 DEFAULT_SCENARIO = "scenarios/paper.toml"
 
@@ -219,7 +219,7 @@ def peak_torque(loop, t: np.ndarray, X: np.ndarray) -> tuple[float, float]:
     |u_i| is the closed loop's own torque output (``u``) at each state, with the runtime
     parameters of the loop right after the call that reached them: its ramps of u0 are
     those that ran in the call (a ramp that landed at its end is 0 up to it; one that
-    ended before it is in the base command), and these sessions change nothing else.
+    ended before it is in the base command), and a scripted session changes nothing else.
 
     Parameters
     ----------
@@ -288,7 +288,20 @@ def run_sessions(
 def report(
     results: Sequence[SessionResult], command: str, scenario: str, prov: str, rise: float
 ) -> str:
-    """The Markdown report: provenance, the command, totals and the worst sessions."""
+    """The Markdown report: provenance, the command, totals and the worst sessions.
+
+    Parameters
+    ----------
+    results : sequence of SessionResult
+    command : str
+        The command line that produced them.
+    scenario : str
+        The scenario file.
+    prov : str
+        The provenance line (:func:`core.provenance.provenance_line`).
+    rise : float
+        The rise time of the shaped changes of u0 (s).
+    """
     peaks = np.array([r.peak_u for r in results])
     fails = sum(r.failures for r in results)
     held = sum(r.held for r in results)
@@ -331,7 +344,16 @@ def report(
 
 
 def write_outputs(folder: Path, results: Sequence[SessionResult], text: str) -> None:
-    """``sessions.csv``, ``report.md`` and ``provenance.json`` in ``folder``."""
+    """``sessions.csv``, ``report.md`` and ``provenance.json`` in ``folder``.
+
+    Parameters
+    ----------
+    folder : Path
+        Created if missing.
+    results : sequence of SessionResult
+    text : str
+        The report (:func:`report`).
+    """
     from core.artifacts import atomic_write_text
     from core.provenance import write_provenance
 
@@ -347,7 +369,13 @@ def write_outputs(folder: Path, results: Sequence[SessionResult], text: str) -> 
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The command line (module docstring)."""
+    """The command line (module docstring).
+
+    Parameters
+    ----------
+    argv : list of str
+        The arguments after ``python -m console.sessions``.
+    """
     from core.provenance import provenance_line
 
     ap = argparse.ArgumentParser(prog="python -m console.sessions", description=__doc__)

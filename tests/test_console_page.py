@@ -164,8 +164,8 @@ def test_a_refused_replay_is_shown_with_the_servers_reason() -> None:
     reason = "the replay is not a valid scenario: graph: follower 1 cannot be reached"
 
     def recorder(snap) -> dict:
-        return {"folder": "out/x/record-1", "scenario": "", "rows": snap.rows, "t_end": 0.5,
-                "reason": reason}  # fmt: skip
+        reply = {"folder": "out/x/record-1", "scenario": "", "rows": snap.rows, "t_end": 0.5}
+        return {**reply, "reason": reason}
 
     hub = fake_hub(recorder=recorder)
     with browser_on(hub) as (port, browser, errors):
