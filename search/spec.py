@@ -62,7 +62,8 @@ class SearchSettings:
     baseline : int
         Evaluations of uniform random search in the same run.
     batch : int or None
-        Optimiser population per generation (default: 4 per worker, at least 6).
+        Optimiser population per generation (default: 4 per worker, at least 6; at least 4, the
+        least population CMA-ES recombines).
     sigma : float
         CMA-ES initial step size in the unit box.
     minimise_steps : int
@@ -183,7 +184,7 @@ def _settings(f: str, raw: Any, data: dict) -> SearchSettings:
     return SearchSettings(
         budget=ST._integer(f, t["budget"], "search.budget", 1, MAX_BUDGET),
         baseline=ST._integer(f, t["baseline"], "search.baseline", 0, MAX_BUDGET),
-        batch=None if batch is None else ST._integer(f, batch, "search.batch", 2, 4096),
+        batch=None if batch is None else ST._integer(f, batch, "search.batch", 4, 4096),
         sigma=float(sigma),
         minimise_steps=ST._integer(f, t.get("minimise_steps", 3), "search.minimise_steps", 0, 20),
         seed=ST._integer(f, seed, "search.seed", 0, 2**63 - 1),

@@ -19,11 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.errors import ScenarioError
 
-
-class FormulaError(ScenarioError):
-    """A formula that does not parse or names an unknown signal."""
+class FormulaError(ValueError):
+    """A formula that does not parse or names an unknown signal (one line; the search
+    file's loader reports it with the file and the field)."""
 
 
 @dataclass(frozen=True)

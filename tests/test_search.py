@@ -1,0 +1,218 @@
+"""The worst-case search (search/): loading errors, resume, a planted defect reported as a
+falsified guaranteed row with a minimised reproduction, and the Dask path.
+
+The base is test_sim_api's two-follower SMALL scenario with a 2 s horizon (its guaranteed
+rows include Theorem 2's comparison-lemma envelope); budgets are a few evaluations.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+import pytest
+from helpers import SMALL
+
+from core.scenario import load_scenario
+from search import evaluate as EV
+from search.minimise import MINIMISED, STATE
+from search.run import local_executor, run_search
+from search.spec import load_search
+from sweep.study import StudyError
+
+SEARCH = """
+name = "tiny"
+base = "small.toml"
+seed = 7
+
+[search]
+budget = {budget}
+baseline = {baseline}
+batch = 4
+minimise_steps = 2
+
+[[requirements]]
+name = "dev"
+formula = "always[1, 2](deviation <= 100)"
+scale = 100
+
+[[requirements]]
+name = "guaranteed"
+guaranteed = true
+
+[params]
+"followers[1].p0" = {{ uniform = [0.0, 3.0], size = 2 }}
+"followers[2].p0" = {{ uniform = [0.0, 3.0], size = 2 }}
+"""
+
+
+@pytest.fixture(scope="module")
+def build_dir(tmp_path_factory):
+    """One build cache for the module: the library is compiled once."""
+    return tmp_path_factory.mktemp("search-build")
+
+
+@pytest.fixture
+def root(tmp_path, monkeypatch, build_dir):
+    (tmp_path / "small.toml").write_text(SMALL.replace("horizon = 0.5", "horizon = 2.0"))
+    monkeypatch.setenv("HITL_BUILD_DIR", str(build_dir))
+    monkeypatch.delenv("DASK_SCHEDULER", raising=False)
+    return tmp_path
+
+
+def write(root, budget=4, baseline=4, text=None):
+    path = root / "s.toml"
+    path.write_text(text if text is not None else SEARCH.format(budget=budget, baseline=baseline))
+    return path
+
+
+class Counting:
+    """The local executor, counting the points it runs (and failing on call ``fail_at``)."""
+
+    def __init__(self, fail_at=None):
+        self.points, self.calls, self.fail_at = [], 0, fail_at
+
+    def __call__(self, search, points, folder):
+        self.calls += 1
+        if self.calls == self.fail_at:
+            raise KeyboardInterrupt
+        self.points += [(p["arm"], p["eval"]) for p in points]
+        return local_executor(search, points, folder)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        ("budget = 4", "budget = 0", "search.budget"),
+        ("budget = 4", "budget = 'x'", "search.budget"),
+        ("batch = 4", "batch = 4\nsteps = 2", "search.steps"),
+        ("scale = 100", "scale = -1", "requirements[1].scale"),
+        ("deviation <= 100", "deviaton <= 100", "requirements[1].formula"),
+        ("deviation <= 100", "deviation <=", "requirements[1].formula"),
+        ('name = "guaranteed"\n', 'name = "dev"\n', "requirements.name"),
+        ("guaranteed = true", "guaranteed = true\nformula = 'u <= 1'", "requirements[2]"),
+        ("guaranteed = true", "guaranteed = 1", "requirements[2].guaranteed"),
+        ('"followers[2].p0"', '"followers[3].p0"', 'params."followers[3].p0"'),
+        ("[search]", "[searc]", "searc"),
+    ],
+)
+def test_bad_fields_are_refused_in_one_line_naming_the_field(root, old, new, field):
+    text = SEARCH.format(budget=4, baseline=4)
+    assert old in text
+    path = write(root, text=text.replace(old, new, 1))
+    with pytest.raises(StudyError) as exc:
+        load_search(path)
+    msg = str(exc.value)
+    assert field in msg and "\n" not in msg, msg
+
+
+def test_missing_requirements_and_search_table(root):
+    text = SEARCH.format(budget=4, baseline=4)
+    with pytest.raises(StudyError, match="requirements"):
+        load_search(
+            write(
+                root,
+                text=text.split("[[requirements]]")[0]
+                + text.split("[params]")[1].join(["[params]", ""]),
+            )
+        )
+    with pytest.raises(StudyError, match="search"):
+        load_search(
+            write(
+                root,
+                text=text.replace("[search]", "[set]").replace(
+                    "budget = 4\nbaseline = 4\nbatch = 4\nminimise_steps = 2\n", ""
+                ),
+            )
+        )
+
+
+def test_rows_resume_and_extend(root):
+    text = SEARCH.format(budget=8, baseline=2)
+    first = Counting(fail_at=2)  # round 1 (4 search + 1 baseline), then interrupted
+    with pytest.raises(KeyboardInterrupt):
+        run_search(write(root, text=text), out_root=root / "out", executor=first)
+    results = root / "out/tiny/results.parquet"
+    part = pd.read_parquet(results)
+    assert sorted(zip(part["arm"], part["eval"], strict=True)) == sorted(first.points)
+    assert len(first.points) == 5
+    again = Counting()
+    run_search(write(root, text=text), out_root=root / "out", executor=again)
+    # only the points of round 2 are run (and then the minimisation, if any run violates)
+    rounds = [p for p in again.points if p[0] != "minimise"]
+    assert sorted(rounds) == [("baseline", 1)] + [("search", k) for k in range(4, 8)]
+    full = pd.read_parquet(results)
+    ucols = [c for c in full.columns if c.startswith("u:")]
+    a = part.set_index(["arm", "eval"]).sort_index()[ucols]
+    b = full.set_index(["arm", "eval"]).loc[a.index, ucols]
+    assert (a.to_numpy() == b.to_numpy()).all()  # committed rows unchanged
+    assert full["id"].is_unique and (full["status"] == "ok").all()
+    assert {"rob:dev", "rob:guaranteed", "robustness"} <= set(full.columns)
+    rob = full[["rob:dev", "rob:guaranteed"]].astype(float).min(axis=1)
+    assert (rob == full["robustness"].astype(float)).all()
+    # a rerun of a finished search runs nothing
+    idle = Counting()
+    run_search(write(root, text=text), out_root=root / "out", executor=idle)
+    assert idle.points == []
+    assert (root / "out/tiny/report.md").is_file() and (
+        root / "out/tiny/figures/robustness.png"
+    ).is_file()
+
+
+def _planted(factor):
+    """The bound table with Theorem 2's envelope bound multiplied by ``factor`` < 1 and its
+    verdict recomputed: a defect planted in a guaranteed row."""
+    real = EV.verify_table
+
+    def table(run):
+        t = real(run).copy()
+        hit = t["claim_id"].astype(str).str.startswith("t2.chi.envelope") & (
+            t["kind"] == "guaranteed"
+        )
+        assert hit.any()  # the row exists in this scenario
+        t.loc[hit, "bound"] = t.loc[hit, "bound"].astype(float) * factor
+        t.loc[hit, "holds"] = t.loc[hit, "observed"].astype(float) <= t.loc[hit, "bound"]
+        return t
+
+    return table
+
+
+def test_planted_defect_is_reported_first_with_a_minimised_reproduction(root, monkeypatch):
+    path = write(root, budget=4, baseline=4)
+    honest = run_search(path, out_root=root / "honest", executor=local_executor)
+    clean = pd.read_parquet(honest)
+    assert (clean["rob:guaranteed"].astype(float) >= 0).all()
+    assert "DEFECT" not in (honest.parent / "report.md").read_text()
+
+    monkeypatch.setattr(EV, "verify_table", _planted(0.01))
+    results = run_search(path, out_root=root / "out", executor=local_executor)
+    table = pd.read_parquet(results)
+    found = table[table["arm"] != "minimise"]
+    assert (found["rob:guaranteed"].astype(float) < 0).all()
+    assert found["worst_row:guaranteed"].str.contains("envelope").all()
+    report = (results.parent / "report.md").read_text()
+    body = report.split("\n## ")
+    assert body[1].startswith("DEFECT: a guaranteed row is falsified"), report
+    assert "envelope" in body[1] and MINIMISED in body[1]
+    state = json.loads((results.parent / STATE).read_text())
+    assert state["requirement"] == "guaranteed" and state["robustness"] < 0
+    # the reproduction is a scenario file the loader reads; evaluated again (planted
+    # defect still in place), it still falsifies the row
+    sc = load_scenario(results.parent / MINIMISED)
+    assert sc.N == 2
+    p0 = [list(map(float, f.p0)) for f in sc.followers]
+    base = load_scenario(root / "small.toml")
+    # the planted defect fails whatever p0 is: minimisation reverts both groups to the base
+    assert state["dropped"] == ["followers[1].p0", "followers[2].p0"]
+    assert p0 == [list(map(float, f.p0)) for f in base.followers]
+
+
+def test_the_dask_path_gives_the_rows_of_the_local_one(root):
+    path = write(root, budget=4, baseline=1)
+    dask = pd.read_parquet(run_search(path, out_root=root / "dask", workers=1))
+    local = pd.read_parquet(run_search(path, out_root=root / "local", executor=local_executor))
+    cols = ["arm", "eval", "status", "robustness", "rob:dev", "rob:guaranteed"]
+    key = ["arm", "eval"]
+    a = dask[cols].sort_values(key, ignore_index=True)
+    b = local[cols].sort_values(key, ignore_index=True)
+    pd.testing.assert_frame_equal(a, b)
