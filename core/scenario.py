@@ -16,25 +16,19 @@ including through :func:`dataclasses.replace`.
 
 from __future__ import annotations
 
-import csv
 import hashlib
-import io
 import math
-import os
-import stat
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
-from typing import Any, NamedTuple, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from core import methods
-from core.errors import ExpressionError, ScenarioError, ToolkitError, UsageError
-from core.expressions import Expr, parse_expression
+from core.errors import ExpressionError, ScenarioError, ToolkitError
+from core.expressions import Expr
 from core.faults import (
     FAULT,
     FAULT_TYPES,
@@ -48,6 +42,7 @@ from core.faults import (
     slotted_bias,
     slotted_health,
 )
+from core.files import FileRefused, read_regular_file  # noqa: F401
 from core.graph import (
     Switch,
     Topology,
@@ -58,6 +53,17 @@ from core.graph import (
     unreachable_followers,
 )
 from core.hold import shaped_breakpoints, shaped_hold
+from core.output_budget import (  # noqa: F401
+    DEFAULT_OUTPUT_BUDGET,
+    OUTPUT_BUDGET_ENV,
+    OUTPUT_BYTES_PER_VALUE,
+    check_output_size,
+    output_budget,
+    output_columns,
+    output_rows,
+)
+from core.reading import Dims, ReadingContext, frozen_array
+from core.rules import RULES, Problem, Rule  # noqa: F401
 from core.settings import (
     EITHER,
     NONNEG,
@@ -77,6 +83,8 @@ from core.settings import (
     zeros,
 )
 from core.shaping import DEFAULT_SHAPE, SHAPES, default_rise, shaped_steps
+from core.suprema import expression_sup, sample_times
+from core.traces import MAX_TRACE_BYTES, MAX_TRACE_ROWS, load_trace  # noqa: F401
 
 SIGN_MODES = ("exact", "sat", "tanh")
 GHAT_LAWS = ("paper", "sigma", "projection", "sigma+projection")
@@ -86,19 +94,10 @@ START_MODES = ("given", "formation")
 MAX_TABLE_ROWS = 1000  # rows of a piecewise g_i table
 MAX_FAULTS = 100  # [[followers.faults]] tables of one follower
 MAX_GRAPH_SWITCHES = 1000  # [[graph.switches]] tables (each topology is an N×N copy)
-MAX_TRACE_ROWS = 1_000_000  # rows of a CSV operator trace
-MAX_TRACE_BYTES = 64 * 2**20  # size of a CSV operator trace (read whole)
 
 
 MAX_SCENARIO_BYTES = 64 * 2**20  # size of a scenario file (read whole)
 MAX_HORIZON = 1e6  # s; far beyond any study here, and keeps time arithmetic finite
-#: peak memory per value of trajectory.csv while it is made (state table, outputs,
-#: DataFrame, CSV text): 84.5 B measured (2026-12-01, paper.toml at 2e4 and 2e5 rows,
-#: /usr/bin/time -v), rounded up for allocator slack
-OUTPUT_BYTES_PER_VALUE = 100
-#: default memory budget of the output stage, bytes; ``HITL_OUTPUT_BUDGET`` overrides it
-DEFAULT_OUTPUT_BUDGET = 4_000_000_000
-OUTPUT_BUDGET_ENV = "HITL_OUTPUT_BUDGET"
 
 # range checks beyond the sign, with the messages the loader has always given
 _G_MIN_RANGE = Check("≤ 1", lambda x: x <= 1.0, "{v} is outside (0, 1]", "0 < g_min <= 1")
@@ -392,130 +391,6 @@ def _near(a: float, b: float) -> bool:
     return a != b and abs(a - b) <= 1e-12 * max(1.0, abs(b))
 
 
-# --------------------------------------------------------------------------- rules
-Problem = tuple[str, str]  # (what is wrong, what is expected)
-
-
-@dataclass(frozen=True)
-class Rule:
-    """A rule between settings, checked once, by :meth:`Scenario.validate`.
-
-    Attributes
-    ----------
-    key : str
-        The setting an error names.
-    text : str
-        Its words in the type column of docs/scenario-format.md (``"< delta1"``);
-        empty for a rule that applies only in some cases.
-    broken : callable
-        ``(what is wrong, what is expected)`` for a scenario that breaks it, else None.
-    """
-
-    key: str
-    text: str
-    broken: Callable[[Scenario], Problem | None]
-
-
-def _delta_hat_below(k: int) -> Callable[[Scenario], Problem | None]:
-    def broken(s: Scenario) -> Problem | None:
-        hat, full = getattr(s.observer, f"delta{k}_hat"), getattr(s.observer, f"delta{k}")
-        if hat >= full:
-            return f"{hat} >= delta{k} = {full}", f"0 < delta{k}_hat < delta{k}"
-        return None
-
-    return broken
-
-
-def _phi0_above_floor(s: Scenario) -> Problem | None:
-    o = s.observer
-    if np.any(o.phi0 <= o.phi_min):
-        return "phi0 must exceed phi_min", f"phi0 > phi_min = {o.phi_min}"
-    return None
-
-
-def _sigma_for_sigma_laws(s: Scenario) -> Problem | None:
-    law = s.options.ghat_law
-    if "sigma" in law and np.any(s.controller.sigma <= 0):
-        return f"ghat_law {law!r} needs sigma > 0", "sigma > 0"
-    return None
-
-
-def _g_min_below_health(s: Scenario) -> Problem | None:
-    if "projection" not in s.options.ghat_law:
-        return None
-    g_min, worst = s.controller.g_min, min(fo.g.minimum for fo in s.followers)
-    if worst < g_min * (1 - 1e-12):
-        return (
-            f"{g_min:g} exceeds the smallest actuator health {worst:.4g}, so the "
-            f"projection of ghat onto [1, 1/g_min] excludes 1/g",
-            f"g_min <= {worst:.4g}, or ghat_law without projection",
-        )
-    return None
-
-
-def _exact_sign_needs_fixed_step(s: Scenario) -> Problem | None:
-    if s.options.sign == "exact" and not methods.is_fixed_step(s.integration.method):
-        return (
-            "'exact' makes variable-step integrators chatter and fail",
-            "sign = 'tanh' or 'sat', or integration.method = 'fixed'",
-        )
-    return None
-
-
-def _step_within_horizon(key: str) -> Callable[[Scenario], Problem | None]:
-    def broken(s: Scenario) -> Problem | None:
-        step, horizon = getattr(s.integration, key), s.integration.horizon
-        if step > horizon:
-            return f"{step} exceeds the horizon {horizon}", f"{key} <= horizon"
-        return None
-
-    return broken
-
-
-def _switches_fit(s: Scenario) -> Problem | None:
-    """A scenario made by ``replace`` keeps its graph switches inside the horizon and the graph."""
-    H, N = s.integration.horizon, s.N
-    for k, sw in enumerate(s.graph.switches):
-        agents = [sw.follower] + ([] if sw.neighbour is None else [sw.neighbour])
-        if not 0.0 < sw.time < H or max(agents) >= N:
-            return (
-                f"switch {k + 1} (t = {sw.time:g} s, {sw.link}) is outside (0, {H:g}) s "
-                f"or the {N} followers",
-                "switch times inside (0, horizon) and agents of the graph",
-            )
-    return None
-
-
-#: every rule between settings, in the order they are checked
-RULES: tuple[Rule, ...] = (
-    Rule("integration.output_step", "≤ horizon", _step_within_horizon("output_step")),
-    Rule("integration.fixed_step", "≤ horizon", _step_within_horizon("fixed_step")),
-    Rule("observer.delta1_hat", "< delta1", _delta_hat_below(1)),
-    Rule("observer.delta2_hat", "< delta2", _delta_hat_below(2)),
-    Rule("observer.phi0", "> phi_min", _phi0_above_floor),
-    Rule("controller.sigma", "", _sigma_for_sigma_laws),
-    Rule("controller.g_min", "", _g_min_below_health),
-    Rule("options.sign", "", _exact_sign_needs_fixed_step),
-    Rule("graph.switches", "", _switches_fit),
-)
-
-
-def type_text(section: str, name: str) -> str:
-    """The documented type of ``[section].name``: its shape, checks and rules.
-
-    Parameters
-    ----------
-    section : str
-        A key of :data:`SECTIONS` (``"observer"``) or of :data:`TABLES` (``"leader"``).
-    name : str
-        The setting (``"delta1_hat"``).
-    """
-    if section in TABLES:
-        return TABLES[section][name].type_text()
-    words = tuple(r.text for r in RULES if r.key == f"{section}.{name}" and r.text)
-    return settings_of(SECTIONS[section])[name].type_text(words)
-
-
 # --------------------------------------------------------------------------- schema
 # The tables read key by key (their values set the sizes, or need expressions,
 # g tables or CSV traces): each key declared once, with its default, shape and checks.
@@ -571,150 +446,20 @@ TABLES: dict[str, dict[str, Setting]] = {
 }
 
 
-class Dims(NamedTuple):
-    """Sizes every list is checked against: followers, coordinates, leader states, inputs."""
+def type_text(section: str, name: str) -> str:
+    """The documented type of ``[section].name``: its shape, checks and rules.
 
-    N: int
-    n: int
-    m: int
-    p: int
-
-
-class _Ctx:
-    """Carries the file name into every error."""
-
-    def __init__(self, file: str) -> None:
-        self.file = file
-
-    def err(self, key: str, problem: str, expected: str = "") -> ScenarioError:
-        return ScenarioError(self.file, key, problem, expected)
-
-    # -- structure
-    def table(
-        self, obj: Any, key: str, allowed: set[str], required: set[str] = frozenset()
-    ) -> dict:
-        if not isinstance(obj, dict):
-            raise self.err(key, f"is a {type(obj).__name__}", "a table")
-        for k in obj:
-            if k not in allowed:
-                raise self.err(
-                    f"{key}.{k}" if key else k,
-                    "unknown key",
-                    "one of " + ", ".join(sorted(allowed)),
-                )
-        for k in sorted(required):
-            if k not in obj:
-                raise self.err(f"{key}.{k}" if key else k, "missing", "a value")
-        return obj
-
-    # -- numbers
-    def number(self, v: Any, key: str, checks: tuple[Check, ...] = ()) -> float:
-        if isinstance(v, bool) or not isinstance(v, int | float):
-            raise self.err(key, f"{brief(v)} is not a number", "a finite number")
-        try:
-            x = float(v)
-        except OverflowError:  # TOML integers are unbounded in tomllib
-            x = math.inf
-        if not math.isfinite(x):
-            raise self.err(key, f"{brief(v)} is not finite", "a finite number")
-        for c in checks:
-            if not c.ok(x):
-                raise self.err(key, *c.error(x))
-        return x
-
-    def matrix(self, v: Any, key: str, shape: tuple[int | None, int | None]) -> np.ndarray:
-        want = f"a matrix of shape {_shape_txt(shape)}"
-        if not isinstance(v, list) or not v or not all(isinstance(r, list) for r in v):
-            raise self.err(key, "is not a list of rows", want)
-        ncols = {len(r) for r in v}
-        if len(ncols) != 1:
-            raise self.err(key, "rows have different lengths", want)
-        if 0 in ncols:
-            raise self.err(key, "has empty rows", want)
-        arr = np.array(
-            [[self.number(x, f"{key}[{i}][{j}]") for j, x in enumerate(r)] for i, r in enumerate(v)]
-        )
-        for ax, size in enumerate(shape):
-            if size is not None and arr.shape[ax] != size:
-                raise self.err(
-                    key, f"has shape {arr.shape[0]}x{arr.shape[1]}", f"shape {_shape_txt(shape)}"
-                )
-        arr.setflags(write=False)
-        return arr
-
-    def vector(
-        self, v: Any, key: str, length: int | None, checks: tuple[Check, ...] = ()
-    ) -> np.ndarray:
-        if not isinstance(v, list):
-            raise self.err(
-                key,
-                f"{brief(v)} is not a list",
-                f"a list of {length if length else 'some'} numbers",
-            )
-        if length is not None and len(v) != length:
-            raise self.err(key, f"has {len(v)} entries", f"{length} entries")
-        arr = np.array([self.number(x, f"{key}[{i}]", checks) for i, x in enumerate(v)])
-        arr.setflags(write=False)
-        return arr
-
-    def per_agent(self, v: Any, key: str, N: int, checks: tuple[Check, ...] = ()) -> np.ndarray:
-        """A scalar broadcast to N agents, or a list of N numbers."""
-        if isinstance(v, list):
-            return self.vector(v, key, N, checks)
-        arr = np.full(N, self.number(v, key, checks))
-        arr.setflags(write=False)
-        return arr
-
-    def per_agent_comp(
-        self, v: Any, key: str, N: int, n: int, checks: tuple[Check, ...] = ()
-    ) -> np.ndarray:
-        """Scalar, list of N scalars, or list of N lists of n numbers -> N×n."""
-        if not isinstance(v, list):
-            arr = np.full((N, n), self.number(v, key, checks))
-        else:
-            if len(v) != N:
-                raise self.err(
-                    key, f"has {len(v)} entries", f"a scalar or {N} entries (one per follower)"
-                )
-            rows = []
-            for i, x in enumerate(v):
-                if isinstance(x, list):
-                    rows.append(self.vector(x, f"{key}[{i}]", n, checks))
-                else:
-                    rows.append(np.full(n, self.number(x, f"{key}[{i}]", checks)))
-            arr = np.array(rows)
-        arr.setflags(write=False)
-        return arr
-
-    def choice(self, v: Any, key: str, options: tuple[str, ...]) -> str:
-        if not isinstance(v, str) or v not in options:
-            raise self.err(key, f"{brief(v)} is not allowed", "one of " + ", ".join(options))
-        return v
-
-    def boolean(self, v: Any, key: str) -> bool:
-        if not isinstance(v, bool):
-            raise self.err(key, f"{brief(v)} is not a boolean", "true or false")
-        return v
-
-    def expr(self, v: Any, key: str) -> Expr:
-        try:
-            return parse_expression(v, where=f"{self.file}: {key}")
-        except ExpressionError:
-            raise
-        except (ValueError, TypeError, RecursionError, MemoryError) as exc:  # never a traceback
-            raise self.err(
-                key, f"cannot parse expression ({type(exc).__name__})", "an expression of t"
-            ) from None
-
-
-def _shape_txt(shape: tuple[int | None, int | None]) -> str:
-    return "x".join("?" if s is None else str(s) for s in shape)
-
-
-def _freeze(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, dtype=float)
-    a.setflags(write=False)
-    return a
+    Parameters
+    ----------
+    section : str
+        A key of :data:`SECTIONS` (``"observer"``) or of :data:`TABLES` (``"leader"``).
+    name : str
+        The setting (``"delta1_hat"``).
+    """
+    if section in TABLES:
+        return TABLES[section][name].type_text()
+    words = tuple(r.text for r in RULES if r.key == f"{section}.{name}" and r.text)
+    return settings_of(SECTIONS[section])[name].type_text(words)
 
 
 # --------------------------------------------------------------------------- loader
@@ -737,7 +482,7 @@ def load_scenario(path: str | Path) -> Scenario:
         One line naming the file, the key, the problem and what is expected.
     """
     path = Path(path)
-    ctx = _Ctx(str(path))
+    ctx = ReadingContext(str(path))
     try:
         raw = read_regular_file(path, MAX_SCENARIO_BYTES)
     except OSError as exc:
@@ -783,7 +528,7 @@ def scenario_from_dict(data: dict[str, Any], *, path: str | Path, sha256: str) -
         Frozen, typed, validated.
     """
     path = Path(path)
-    ctx = _Ctx(str(path))
+    ctx = ReadingContext(str(path))
     try:
         return _build(ctx, data, path, sha256)
     except (ScenarioError, ExpressionError):
@@ -792,17 +537,17 @@ def scenario_from_dict(data: dict[str, Any], *, path: str | Path, sha256: str) -
         raise ctx.err("(file)", "nested too deeply", "a flat scenario table") from None
 
 
-def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
+def _build(ctx: ReadingContext, data: dict, path: Path, sha: str) -> Scenario:
     """Read every table of ``data`` in dependency order; :class:`Scenario` checks the rules."""
     ctx.table(data, "", set(TOP), required_keys(TOP))
-    name, desc = _name(ctx, data, path), _description(ctx, data)
+    name, desc = scenario_name(ctx, data, path), _description(ctx, data)
     # integration first: u0, g_i and f_i are checked over [0, horizon]
     integ = _section(ctx, Integration, data.get("integration", {}), "integration", None)
     tgrid = np.linspace(0.0, integ.horizon, 4001)
     leader = _leader(ctx, data["leader"], path, integ.horizon, tgrid)
     graph = _graph(ctx, data["graph"], integ.horizon)
     dims = Dims(N=graph.N, n=leader.n, m=leader.m, p=leader.p)
-    _check_output_size(ctx, integ, dims.N, dims.n, dims.m)
+    check_output_size(ctx, integ, dims.N, dims.n, dims.m)
     options = _section(ctx, Options, data.get("options", {}), "options", dims)
     followers = _followers(ctx, data["followers"], dims.n, dims.N, tgrid, options.fault_slots)
     return Scenario(
@@ -821,8 +566,18 @@ def _build(ctx: _Ctx, data: dict, path: Path, sha: str) -> Scenario:
     )
 
 
-def _name(ctx: _Ctx, data: dict, path: Path) -> str:
-    """``name``, by default the file's stem made into a plain folder name."""
+def scenario_name(ctx: ReadingContext, data: dict, path: Path) -> str:
+    """``name``, by default the file's stem made into a plain folder name.
+
+    Parameters
+    ----------
+    ctx : ReadingContext
+        The file being read (its name goes into every error).
+    data : dict
+        The parsed TOML table.
+    path : Path
+        The scenario file.
+    """
     stem = "".join(c if c.isascii() and (c.isalnum() or c in "-_.") else "_" for c in path.stem)
     name = data.get("name", stem.lstrip(".")[:100] or "scenario")
     if (
@@ -840,7 +595,7 @@ def _name(ctx: _Ctx, data: dict, path: Path) -> str:
     return name
 
 
-def _description(ctx: _Ctx, data: dict) -> str:
+def _description(ctx: ReadingContext, data: dict) -> str:
     desc = data.get("description", TOP["description"].default)
     if not isinstance(desc, str):
         raise ctx.err("description", "is not a string", "a string")
@@ -851,7 +606,9 @@ def _description(ctx: _Ctx, data: dict) -> str:
 _Section = TypeVar("_Section")  # one of the dataclasses of SECTIONS
 
 
-def _section(ctx: _Ctx, cls: type[_Section], raw: Any, key: str, dims: Dims | None) -> _Section:
+def _section(
+    ctx: ReadingContext, cls: type[_Section], raw: Any, key: str, dims: Dims | None
+) -> _Section:
     """A table of a declared section: every field read with its :class:`Setting`.
 
     Unknown keys are refused; an omitted key takes the field's default.
@@ -866,7 +623,7 @@ def _section(ctx: _Ctx, cls: type[_Section], raw: Any, key: str, dims: Dims | No
     return cls(**values)
 
 
-def _read(ctx: _Ctx, s: Setting, v: Any, key: str, dims: Mapping[str, int] | None) -> Any:
+def _read(ctx: ReadingContext, s: Setting, v: Any, key: str, dims: Mapping[str, int] | None) -> Any:
     """One TOML value read as setting ``s`` says (``"synthesize"``, ``"none"`` -> None where allowed).
 
     ``dims`` holds the sizes known so far by symbol (:class:`Dims` or a part of it);
@@ -897,7 +654,12 @@ def _read(ctx: _Ctx, s: Setting, v: Any, key: str, dims: Mapping[str, int] | Non
 
 
 def _key(
-    ctx: _Ctx, table: Mapping[str, Setting], raw: dict, prefix: str, name: str, dims: Mapping
+    ctx: ReadingContext,
+    table: Mapping[str, Setting],
+    raw: dict,
+    prefix: str,
+    name: str,
+    dims: Mapping,
 ) -> Any:
     """Key ``name`` of a table read key by key: its value, or its declared default, read."""
     s = table[name]
@@ -905,7 +667,7 @@ def _key(
     return _read(ctx, s, v, f"{prefix}.{name}", dims)
 
 
-def _controller(ctx: _Ctx, raw: Any, dims: Dims) -> Controller:
+def _controller(ctx: ReadingContext, raw: Any, dims: Dims) -> Controller:
     """The [controller] table: every gain is given (none can be synthesised)."""
     if isinstance(raw, dict):
         for k, v in raw.items():
@@ -919,7 +681,7 @@ def _controller(ctx: _Ctx, raw: Any, dims: Dims) -> Controller:
 
 
 # --------------------------------------------------------------------------- leader, graph
-def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) -> Leader:
+def _leader(ctx: ReadingContext, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) -> Leader:
     """The [leader] table, eq. (3); ‖u0‖ ≤ α is checked on [0, horizon]."""
     L = ctx.table(raw, "leader", set(LEADER), required_keys(LEADER))
     sizes: dict[str, int] = {}
@@ -954,7 +716,7 @@ def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) 
         u_peak = _u0_peak(ctx, u0, tgrid)
         where_u = "leader.u0"
     else:
-        u0, trace = None, _load_trace(ctx, path, L["u0_csv"], p, horizon)
+        u0, trace = None, load_trace(ctx, path, L["u0_csv"], p, horizon)
         # piecewise linear: the norm peaks at a sample (convexity)
         u_peak = float(np.sqrt((trace[:, 1:] ** 2).sum(axis=1)).max())
         where_u = "leader.u0_csv"
@@ -981,7 +743,7 @@ def _leader(ctx: _Ctx, raw: Any, path: Path, horizon: float, tgrid: np.ndarray) 
     )
 
 
-def _u0_expressions(ctx: _Ctx, raw: Any, p: int) -> tuple[Expr, ...]:
+def _u0_expressions(ctx: ReadingContext, raw: Any, p: int) -> tuple[Expr, ...]:
     """``leader.u0``: p expressions of t."""
     if not isinstance(raw, list) or len(raw) != p:
         got = f"has {len(raw)} entries" if isinstance(raw, list) else "is not a list"
@@ -989,10 +751,10 @@ def _u0_expressions(ctx: _Ctx, raw: Any, p: int) -> tuple[Expr, ...]:
     return tuple(ctx.expr(e, f"leader.u0[{k}]") for k, e in enumerate(raw))
 
 
-def _u0_peak(ctx: _Ctx, u0: tuple[Expr, ...], tgrid: np.ndarray) -> float:
+def _u0_peak(ctx: ReadingContext, u0: tuple[Expr, ...], tgrid: np.ndarray) -> float:
     """sup ‖u0(t)‖ on [0, horizon]; refused when not finite."""
-    ts = np.unique(np.concatenate([_times(e, tgrid) for e in u0]))
-    u_peak = _expr_sup("norm", u0, ts)
+    ts = np.unique(np.concatenate([sample_times(e, tgrid) for e in u0]))
+    u_peak = expression_sup("norm", u0, ts)
     if not math.isfinite(u_peak):
         raise ctx.err(
             "leader.u0", "is not finite somewhere on [0, horizon]", "a bounded operator input"
@@ -1000,7 +762,7 @@ def _u0_peak(ctx: _Ctx, u0: tuple[Expr, ...], tgrid: np.ndarray) -> float:
     return u_peak
 
 
-def _graph(ctx: _Ctx, raw: Any, horizon: float) -> Graph:
+def _graph(ctx: ReadingContext, raw: Any, horizon: float) -> Graph:
     """The [graph] table; every follower must be reachable from the leader (Assumption 1)."""
     G = ctx.table(raw, "graph", set(GRAPH), required_keys(GRAPH))
     A = _key(ctx, GRAPH, G, "graph", "adjacency", {})
@@ -1026,7 +788,7 @@ def _graph(ctx: _Ctx, raw: Any, horizon: float) -> Graph:
 
 
 def _switches(
-    ctx: _Ctx, raw: Any, A: np.ndarray, pin: np.ndarray, horizon: float
+    ctx: ReadingContext, raw: Any, A: np.ndarray, pin: np.ndarray, horizon: float
 ) -> tuple[Switch, ...]:
     """``[[graph.switches]]``: each event checked, then every topology it makes (Assumption 1)."""
     if not isinstance(raw, list) or not all(isinstance(x, dict) for x in raw):
@@ -1066,7 +828,9 @@ def _switches(
     return switches
 
 
-def _switch(ctx: _Ctx, raw: dict, key: str, N: int, horizon: float, h: np.ndarray | None) -> Switch:
+def _switch(
+    ctx: ReadingContext, raw: dict, key: str, N: int, horizon: float, h: np.ndarray | None
+) -> Switch:
     """One switch table: time in (0, horizon), 1-based indices, a finite weight of a valid sign."""
     names = ("time", "follower", "neighbour", "weight")
     ctx.table(raw, key, set(names), set(names))
@@ -1092,7 +856,7 @@ def _switch(ctx: _Ctx, raw: dict, key: str, N: int, horizon: float, h: np.ndarra
     return Switch(time=t, follower=i - 1, neighbour=None if j == 0 else j - 1, weight=w)
 
 
-def _index(ctx: _Ctx, v: Any, key: str, lo: int, hi: int, expected: str) -> int:
+def _index(ctx: ReadingContext, v: Any, key: str, lo: int, hi: int, expected: str) -> int:
     """A whole number in [lo, hi] (1-based agents, 0 for the leader)."""
     x = ctx.number(v, key)
     if x != int(x) or not lo <= x <= hi:
@@ -1101,7 +865,7 @@ def _index(ctx: _Ctx, v: Any, key: str, lo: int, hi: int, expected: str) -> int:
 
 
 def _followers(
-    ctx: _Ctx, F: Any, n: int, N: int, tgrid: np.ndarray, slots: int | None = None
+    ctx: ReadingContext, F: Any, n: int, N: int, tgrid: np.ndarray, slots: int | None = None
 ) -> tuple[Follower, ...]:
     """The [[followers]] tables, one per row of the adjacency matrix (``slots``: fault_slots)."""
     if not isinstance(F, list) or not all(isinstance(x, dict) for x in F):
@@ -1117,73 +881,8 @@ def _followers(
     return tuple(_follower(ctx, fo, i, n, tgrid, slots) for i, fo in enumerate(F))
 
 
-def output_columns(N: int, n: int, m: int) -> int:
-    """Number of columns of ``trajectory.csv`` (``generated.api.column_names``).
-
-    Parameters
-    ----------
-    N, n, m : int
-        Followers, follower coordinates, leader states.
-    """
-    # t, eta0, then per follower p q eta mu phi thetahat ghat u b et eeta chi V2, then V1
-    return 2 + m + N * (7 * n + 3 * m + 3)
-
-
-def output_rows(horizon: float, output_step: float) -> int:
-    """Number of rows of ``trajectory.csv``: the times ``0, h, ..., horizon``.
-
-    Parameters
-    ----------
-    horizon, output_step : float
-        ``integration.horizon`` and ``integration.output_step`` (s).
-    """
-    return round(horizon / output_step) + 1  # as generated.integrate.output_grid
-
-
-def output_budget() -> int:
-    """Memory budget of the output stage in bytes: ``$HITL_OUTPUT_BUDGET`` or the default.
-
-    Returns
-    -------
-    int
-        :data:`DEFAULT_OUTPUT_BUDGET` when the variable is unset or empty.
-
-    Raises
-    ------
-    UsageError
-        If the variable is not a positive number of bytes.
-    """
-    raw = os.environ.get(OUTPUT_BUDGET_ENV, "").strip()
-    if not raw:
-        return DEFAULT_OUTPUT_BUDGET
-    try:
-        value = float(raw)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0):
-        raise UsageError(
-            f"{OUTPUT_BUDGET_ENV}={raw[:40]!r} is not a number of bytes (e.g. "
-            f"{OUTPUT_BUDGET_ENV}=8e9, or unset for {DEFAULT_OUTPUT_BUDGET:.0e})"
-        )
-    return int(value)
-
-
-def _check_output_size(ctx: _Ctx, integ: Integration, N: int, n: int, m: int) -> None:
-    """Refuse, before any work, a trajectory whose making would exceed the memory budget."""
-    rows, cols = output_rows(integ.horizon, integ.output_step), output_columns(N, n, m)
-    need, budget = rows * cols * OUTPUT_BYTES_PER_VALUE, output_budget()
-    if need > budget:
-        raise ctx.err(
-            "integration.output_step",
-            f"{rows} output rows x {cols} columns need about {need / 1e9:.3g} GB of memory to "
-            f"write trajectory.csv, above the budget of {budget / 1e9:.3g} GB",
-            f"at most {budget // (cols * OUTPUT_BYTES_PER_VALUE)} rows: a larger output_step, a "
-            f"shorter horizon, or a larger budget {OUTPUT_BUDGET_ENV}=<bytes>",
-        )
-
-
 def _follower(
-    ctx: _Ctx, fo: dict, i: int, n: int, tgrid: np.ndarray, slots: int | None = None
+    ctx: ReadingContext, fo: dict, i: int, n: int, tgrid: np.ndarray, slots: int | None = None
 ) -> Follower:
     """One [[followers]] table (0-based ``i``; messages say ``followers[i+1]``)."""
     key = f"followers[{i + 1}]"
@@ -1213,7 +912,7 @@ def _follower(
     )
 
 
-def _model(ctx: _Ctx, fo: dict, key: str, n: int) -> tuple[str, dict[str, float]]:
+def _model(ctx: ReadingContext, fo: dict, key: str, n: int) -> tuple[str, dict[str, float]]:
     """A follower's ``model`` (a registered one with n coordinates) and its ``params``."""
     from core.models import REGISTRY
 
@@ -1245,7 +944,7 @@ def _model(ctx: _Ctx, fo: dict, key: str, n: int) -> tuple[str, dict[str, float]
 
 
 def _disturbance(
-    ctx: _Ctx,
+    ctx: ReadingContext,
     fo: dict,
     key: str,
     n: int,
@@ -1268,7 +967,7 @@ def _disturbance(
         )
     f = tuple(ctx.expr(e, f"{key}.f[{r}]") for r, e in enumerate(f_raw))
     f = faulted_bias(f, faults) if slots is None else slotted_bias(f, faults, slots)
-    worst = np.array([_expr_sup("abs", (e,), _times(e, tgrid)) for e in f])
+    worst = np.array([expression_sup("abs", (e,), sample_times(e, tgrid)) for e in f])
     for r, w in enumerate(worst):
         if not math.isfinite(w):
             raise ctx.err(
@@ -1277,7 +976,7 @@ def _disturbance(
                 "a bounded disturbance (Assumption 3)",
             )
     if "d" not in fo:  # the declared default: the sampled supremum
-        return f, _freeze(worst)
+        return f, frozen_array(worst)
     d = _key(ctx, FOLLOWER, fo, key, "d", {"n": n})
     if np.any(worst > d * (1 + 1e-9)):
         r = int(np.argmax(worst - d))
@@ -1290,100 +989,16 @@ def _disturbance(
 
 
 def _rows(
-    ctx: _Ctx, v: Any, key: str, N: int, k: int, checks: tuple[Check, ...] = ()
+    ctx: ReadingContext, v: Any, key: str, N: int, k: int, checks: tuple[Check, ...] = ()
 ) -> np.ndarray:
     """Scalar (all entries), one k-vector (every agent) or N k-vectors -> N×k."""
     if isinstance(v, list) and v and not isinstance(v[0], list):
         row = ctx.vector(v, key, k, checks)
-        return _freeze(np.tile(row, (N, 1)))
+        return frozen_array(np.tile(row, (N, 1)))
     return ctx.per_agent_comp(v, key, N, k, checks)
 
 
-def _times(e: Expr, tgrid: np.ndarray) -> np.ndarray:
-    """``tgrid`` plus both sides of the known breakpoints of ``e`` (so a step is not missed);
-    remembered for equal expressions and grids (read-only: a study asks again per sample)."""
-    return _times_of(e, np.ascontiguousarray(tgrid, dtype=float).tobytes())
-
-
-@lru_cache(maxsize=512)
-def _times_of(e: Expr, tgrid_bytes: bytes) -> np.ndarray:
-    tgrid = np.frombuffer(tgrid_bytes, dtype=float)
-    H = tgrid[-1]
-    extra = [x for b in e.breakpoints() if 0.0 <= b <= H for x in (b, b - 1e-9, b + 1e-9)]
-    ts = np.concatenate([tgrid, np.array(extra, dtype=float)])
-    out = np.unique(ts[(ts >= 0.0) & (ts <= H)])
-    out.setflags(write=False)
-    return out
-
-
-def _sample(e: Expr, ts: np.ndarray) -> np.ndarray:
-    """``e`` evaluated on the times ``ts`` as a float array of the same shape."""
-    return np.array(np.broadcast_to(e.numpy(ts), ts.shape), dtype=float)
-
-
-def _signal(kind: str, exprs: tuple[Expr, ...], t: np.ndarray) -> np.ndarray:
-    """``|e|``, ``-e`` or ``e`` of the one expression, or the Euclidean norm (``norm``) of all."""
-    if kind == "norm":
-        return np.sqrt(sum(_sample(e, t) ** 2 for e in exprs))
-    v = _sample(exprs[0], t)
-    return {"abs": np.abs, "neg": np.negative, "pos": np.positive}[kind](v)
-
-
-def _expr_sup(kind: str, exprs: tuple[Expr, ...], ts: np.ndarray) -> float:
-    """:func:`_sup` of :func:`_signal` over ``ts``, remembered for equal expressions and times.
-
-    A study's samples share most of their expressions (only the drawn ones change), and
-    each supremum's refinement costs milliseconds; the value depends only on the
-    expression trees and the times, so an equal key gives the identical number.
-    """
-    return _expr_sup_of(kind, exprs, np.ascontiguousarray(ts, dtype=float).tobytes())
-
-
-@lru_cache(maxsize=512)
-def _expr_sup_of(kind: str, exprs: tuple[Expr, ...], ts_bytes: bytes) -> float:
-    ts = np.frombuffer(ts_bytes, dtype=float)
-    return _sup(lambda t: _signal(kind, exprs, t), ts)
-
-
-def _sup(fun: Callable[[np.ndarray], np.ndarray], ts: np.ndarray) -> float:
-    """sup of ``fun`` over [ts[0], ts[-1]]: the sampled maximum, refined near its top peaks.
-
-    Sampling alone under-estimates a supremum between grid points; a bound such
-    as d_ir or alpha must not, so each near-maximal local peak is refined with a
-    bounded scalar search. Returns nan when ``fun`` is not finite on ``ts``.
-    """
-    with np.errstate(all="ignore"):
-        return _sup_impl(fun, ts)
-
-
-def _sup_impl(fun: Callable[[np.ndarray], np.ndarray], ts: np.ndarray) -> float:
-    v = fun(ts)
-    if not np.all(np.isfinite(v)):
-        return math.nan
-    top = float(v.max())
-    if float(v.min()) == top:  # constant: nothing to refine
-        return top
-    # strict local peaks of the samples (one side may tie), the highest few
-    left = np.concatenate([[-np.inf], v[:-1]])
-    right = np.concatenate([v[1:], [-np.inf]])
-    peaks = np.flatnonzero((v >= left) & (v >= right) & ((v > left) | (v > right)))
-    tol = 1e-3 * max(1.0, abs(top))
-    peaks = peaks[v[peaks] >= top - tol]
-    for k in peaks[np.argsort(-v[peaks])][:5]:
-        lo, hi = ts[max(k - 1, 0)], ts[min(k + 1, len(ts) - 1)]
-        if hi > lo:
-            res = minimize_scalar(
-                lambda x: -float(fun(np.array([x]))[0]),
-                bounds=(lo, hi),
-                method="bounded",
-                options={"xatol": 1e-12 * max(1.0, hi)},
-            )
-            if math.isfinite(res.fun):
-                top = max(top, -float(res.fun))
-    return top
-
-
-def _health(ctx: _Ctx, v: Any, key: str, tgrid: np.ndarray) -> Health:
+def _health(ctx: ReadingContext, v: Any, key: str, tgrid: np.ndarray) -> Health:
     """g_i(t): constant, table [[t_start, value], ...] or expression; checked in (0, 1]."""
     if isinstance(v, list):
         if not v or not all(isinstance(r, list) and len(r) == 2 for r in v):
@@ -1426,9 +1041,9 @@ def _health(ctx: _Ctx, v: Any, key: str, tgrid: np.ndarray) -> Health:
         lo = min(vals)
     else:
         expr = ctx.expr(v, key)
-        ts = _times(expr, tgrid)
-        lo = -_expr_sup("neg", (expr,), ts)
-        hi = _expr_sup("pos", (expr,), ts)
+        ts = sample_times(expr, tgrid)
+        lo = -expression_sup("neg", (expr,), ts)
+        hi = expression_sup("pos", (expr,), ts)
         if not (math.isfinite(lo) and math.isfinite(hi)):
             raise ctx.err(key, "is not finite somewhere on [0, horizon]", "a value in (0, 1]")
         if not (lo > 0.0 and hi <= 1.0 + 1e-12):
@@ -1442,7 +1057,7 @@ def _health(ctx: _Ctx, v: Any, key: str, tgrid: np.ndarray) -> Health:
     return Health(expr=expr, breakpoints=breaks, minimum=float(lo))
 
 
-def _faults(ctx: _Ctx, raw: Any, key: str, n: int, horizon: float) -> tuple[Fault, ...]:
+def _faults(ctx: ReadingContext, raw: Any, key: str, n: int, horizon: float) -> tuple[Fault, ...]:
     """A follower's ``[[followers.faults]]`` tables (docs/scenario-format.md, 'Faults')."""
     if not isinstance(raw, list) or not all(isinstance(x, dict) for x in raw):
         raise ctx.err(
@@ -1455,7 +1070,7 @@ def _faults(ctx: _Ctx, raw: Any, key: str, n: int, horizon: float) -> tuple[Faul
     return tuple(_fault(ctx, fa, f"{key}.faults[{k + 1}]", n, horizon) for k, fa in enumerate(raw))
 
 
-def _fault(ctx: _Ctx, raw: dict, key: str, n: int, horizon: float) -> Fault:
+def _fault(ctx: ReadingContext, raw: dict, key: str, n: int, horizon: float) -> Fault:
     """One fault table: its type, then exactly the keys of that type, each checked."""
     kind = raw.get("type")
     if not isinstance(kind, str) or kind not in FAULT_TYPES:
@@ -1488,7 +1103,7 @@ def _fault(ctx: _Ctx, raw: dict, key: str, n: int, horizon: float) -> Fault:
 
 
 def _faulted(
-    ctx: _Ctx,
+    ctx: ReadingContext,
     base: Health,
     faults: tuple[Fault, ...],
     key: str,
@@ -1512,8 +1127,8 @@ def _faulted(
     times = {t for t in fault_times(health, H, slots) if 0.0 < t < H}
     breaks = tuple(sorted(set(base.breakpoints) | times))
     extra = [x for b in breaks for x in (b, b - 1e-9, b + 1e-9)]
-    ts = np.unique(np.concatenate([_times(expr, tgrid), np.array(extra, dtype=float)]))
-    lo = -_expr_sup("neg", (expr,), ts[(ts >= 0.0) & (ts <= H)])
+    ts = np.unique(np.concatenate([sample_times(expr, tgrid), np.array(extra, dtype=float)]))
+    lo = -expression_sup("neg", (expr,), ts[(ts >= 0.0) & (ts <= H)])
     if not (math.isfinite(lo) and lo > 0.0):  # cannot happen with severities < 1
         raise ctx.err(f"{key}.faults", f"actuator health reaches {lo:.4g}", "severities below 1")
     return Health(expr=expr, breakpoints=breaks, minimum=float(lo))
@@ -1525,132 +1140,3 @@ def _balanced_sum(terms: list[tuple]) -> tuple:
         return terms[0]
     mid = len(terms) // 2
     return ("bin", "+", _balanced_sum(terms[:mid]), _balanced_sum(terms[mid:]))
-
-
-def _load_trace(ctx: _Ctx, scen_path: Path, rel: Any, p: int, horizon: float) -> np.ndarray:
-    """Recorded operator commands: CSV with columns t, u0_1..u0_p (see docs/scenario-format.md).
-
-    An optional header line and ``#`` comment lines are skipped. Time must be
-    strictly increasing and cover [0, horizon]; u0 is linear between rows.
-    """
-    key = "leader.u0_csv"
-    if not isinstance(rel, str) or not rel.strip():
-        raise ctx.err(key, "is not a path", "a CSV path relative to the scenario file")
-    try:
-        fpath = (scen_path.parent / rel).resolve()
-        text = read_regular_file(fpath, MAX_TRACE_BYTES).decode("utf-8")
-        rows: list[tuple[int, list[str]]] = []
-        reader = csv.reader(io.StringIO(text, newline=""))
-        for r in reader:
-            if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#"):
-                rows.append((reader.line_num, r))
-            if len(rows) > MAX_TRACE_ROWS:
-                raise ctx.err(key, f"{rel} has more than {MAX_TRACE_ROWS} rows", "a shorter trace")
-    except OSError as exc:
-        raise ctx.err(key, f"cannot read {rel}: {exc.strerror}", "an existing CSV file") from None
-    except FileRefused as exc:
-        raise ctx.err(
-            key,
-            f"{rel} {exc}",
-            f"a regular CSV file of at most {MAX_TRACE_BYTES >> 20} MiB: copy a recorded "
-            "stream to a file first, or use a shorter or coarser trace",
-        ) from None
-    except (UnicodeDecodeError, csv.Error, ValueError) as exc:  # binary file, NUL byte, bad path
-        raise ctx.err(
-            key, f"{rel} is not a readable CSV text file ({type(exc).__name__})", "UTF-8 CSV text"
-        ) from None
-    if rows and not _is_float(rows[0][1][0]):
-        rows = rows[1:]  # header
-    if len(rows) < 2:
-        raise ctx.err(
-            key, f"{rel} has fewer than two data rows", "columns t, u0_1..u0_p, two rows or more"
-        )
-    data = []
-    for line, r in rows:
-        if len(r) != 1 + p:
-            raise ctx.err(
-                key, f"{rel} line {line} has {len(r)} columns", f"{1 + p} columns: t and {p} inputs"
-            )
-        if not all(_is_float(x) for x in r):
-            raise ctx.err(key, f"{rel} line {line} is not numeric", "numbers")
-        vals = [float(x) for x in r]
-        if not all(map(math.isfinite, vals)):
-            raise ctx.err(key, f"{rel} line {line} is not finite", "finite numbers")
-        if data and vals[0] <= data[-1][0]:
-            raise ctx.err(
-                key,
-                f"{rel} line {line}: time {vals[0]:g} does not increase (previous {data[-1][0]:g})",
-                "a trace strictly increasing in time",
-            )
-        data.append(vals)
-    arr = np.array(data)
-    if arr[0, 0] > 0.0 or arr[-1, 0] < horizon:
-        raise ctx.err(
-            key,
-            f"{rel} covers [{arr[0, 0]:g}, {arr[-1, 0]:g}] but the horizon is [0, {horizon:g}]",
-            "a trace covering [0, integration.horizon] (or a shorter horizon)",
-        )
-    return _freeze(arr)
-
-
-class FileRefused(Exception):
-    """A path that is not a regular file of bounded size; the message says what it is."""
-
-
-_KINDS = (
-    (stat.S_ISDIR, "a directory"),
-    (stat.S_ISFIFO, "a named pipe (FIFO)"),
-    (stat.S_ISCHR, "a character device"),
-    (stat.S_ISBLK, "a block device"),
-    (stat.S_ISSOCK, "a socket"),
-)
-
-
-def read_regular_file(path: str | Path, limit: int) -> bytes:
-    """The bytes of a regular file of at most ``limit`` bytes, checked before reading.
-
-    The path is stat'ed before it is opened, so a FIFO (which would block), a device
-    such as ``/dev/zero`` (endless) or a directory is refused without being opened;
-    the open file is checked again and read no further than ``limit + 1`` bytes.
-
-    Parameters
-    ----------
-    path : str or Path
-        File to read (symbolic links are followed).
-    limit : int
-        Largest accepted size in bytes.
-
-    Raises
-    ------
-    FileRefused
-        Not a regular file, or larger than ``limit``.
-    OSError
-        The file cannot be opened or read.
-    """
-
-    def check(st: os.stat_result) -> None:
-        for is_kind, kind in _KINDS:
-            if is_kind(st.st_mode):
-                raise FileRefused(f"is {kind}, not a regular file")
-        if not stat.S_ISREG(st.st_mode):
-            raise FileRefused("is not a regular file")
-        if st.st_size > limit:
-            raise FileRefused(f"has {st.st_size} bytes, above the limit of {limit}")
-
-    check(os.stat(path))
-    # O_NONBLOCK: a file swapped for a FIFO after the stat cannot block the open
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    with os.fdopen(fd, "rb") as fh:
-        check(os.fstat(fd))
-        data = fh.read(limit + 1)
-    if len(data) > limit:  # grew after the stat
-        raise FileRefused(f"has more than {limit} bytes")
-    return data
-
-
-def _is_float(s: str) -> bool:
-    try:
-        float(s)
-    except (ValueError, OverflowError):
-        return False
-    return True

@@ -20,15 +20,9 @@ import numpy as np
 from core.errors import ExpressionError, ScenarioError
 from core.expressions import CONSTANTS, FUNCTIONS, parse_expression
 from core.faults import FAULT_TYPES
-from core.scenario import (
-    MAX_SCENARIO_BYTES,
-    FileRefused,
-    _Ctx,
-    load_scenario,
-    read_regular_file,
-    scenario_from_dict,
-)
-from core.scenario import _name as scenario_name
+from core.files import FileRefused, read_regular_file
+from core.reading import ReadingContext
+from core.scenario import MAX_SCENARIO_BYTES, load_scenario, scenario_from_dict, scenario_name
 from generated.overrides import set_path
 from sweep.graphs import random_graph, resize_followers
 
@@ -371,7 +365,7 @@ def _name(f: str, data: dict, path: Path) -> str:
     names the folder ``out/<name>/``, and at most :data:`MAX_NAME` characters."""
     name = data.get("name", path.stem)
     try:
-        scenario_name(_Ctx(f), {"name": name}, path)
+        scenario_name(ReadingContext(f), {"name": name}, path)
     except ScenarioError as exc:
         raise StudyError(f, "name", exc.problem, exc.expected) from None
     if len(name) > MAX_NAME:

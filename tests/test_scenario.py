@@ -140,7 +140,7 @@ def test_sup_bounds_are_not_undersampled(tmp_path):
 def test_remembered_supremum_is_the_refined_one(tmp_path):
     # the loader remembers sup |f| per (expression, times); a second load must hit that
     # memory and give the number a fresh refinement gives, to the bit
-    import core.scenario as S
+    import core.suprema as S
 
     text = set_line(paper_text(), "f", '["sin(7.3*t)", "0.5*cos(3.1*t + 0.2)"]')
     path = write(tmp_path, text, "ok.toml")
@@ -151,7 +151,7 @@ def test_remembered_supremum_is_the_refined_one(tmp_path):
     assert S._expr_sup_of.cache_info().hits > hits
     grid = np.linspace(0.0, first.integration.horizon, 4001)  # the loader's grid
     for r, e in enumerate(first.followers[0].f):
-        fresh = S._sup(lambda t, e=e: np.abs(e.numpy(t)), S._times(e, grid))
+        fresh = S.signal_sup(lambda t, e=e: np.abs(e.numpy(t)), S.sample_times(e, grid))
         assert again.followers[0].d[r] == first.followers[0].d[r] == fresh
 
 
