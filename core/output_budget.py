@@ -10,7 +10,7 @@ from core.errors import UsageError
 from core.reading import ReadingContext
 
 if TYPE_CHECKING:
-    from core.scenario import Integration
+    from core.model import Integration
 
 #: peak memory per value of trajectory.csv while it is made (state table, outputs,
 #: DataFrame, CSV text): 84.5 B measured (2026-12-01, paper.toml at 2e4 and 2e5 rows,

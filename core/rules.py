@@ -15,7 +15,7 @@ import numpy as np
 from core import methods
 
 if TYPE_CHECKING:
-    from core.scenario import Scenario
+    from core.model import Scenario
 
 Problem = tuple[str, str]  # (what is wrong, what is expected)
 
