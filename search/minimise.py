@@ -141,10 +141,12 @@ def minimise(
         k = state.steps
         state.steps += 1
         row = known.get(k)
-        if row is None or json.loads(row.get("dropped") or "[]") != sorted(dropped):
+        key = _point_key(vals, dropped)
+        if row is None or row.get("point") != key:  # a step of another minimisation
             point = {"arm": "minimise", "eval": k, "values": vals, "dropped": sorted(dropped)}
             row = executor(search, [point], folder_s)[0]
             row["dropped"] = json.dumps(sorted(dropped))
+            row["point"] = key
             nonlocal done
             done = commit_rows(results, done, [row], info)
         rob = row.get(f"rob:{req}")
@@ -170,6 +172,11 @@ def minimise(
     )
     atomic_write_text(folder / STATE, json.dumps(asdict(state), indent=1, default=str))
     return state
+
+
+def _point_key(values: dict, dropped: list[str]) -> str:
+    """The step's point as JSON: a committed step is reused only for the same point."""
+    return json.dumps({"values": values, "dropped": sorted(dropped)}, sort_keys=True, default=str)
 
 
 def _bisect(state: Minimised, d: Dimension, steps: int, violates: Any) -> None:

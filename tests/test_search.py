@@ -205,6 +205,10 @@ def test_planted_defect_is_reported_first_with_a_minimised_reproduction(root, mo
     # the planted defect fails whatever p0 is: minimisation reverts both groups to the base
     assert state["dropped"] == ["followers[1].p0", "followers[2].p0"]
     assert p0 == [list(map(float, f.p0)) for f in base.followers]
+    # a rerun reuses every committed evaluation, the minimisation's steps included
+    idle = Counting()
+    run_search(path, out_root=root / "out", executor=idle)
+    assert idle.points == []
 
 
 def test_the_dask_path_gives_the_rows_of_the_local_one(root):
