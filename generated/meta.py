@@ -24,7 +24,7 @@ from generated import solvers
 from generated.codegen import CodegenSettings, Library
 from generated.gains_cache import GainsInfo
 from generated.integrate import IntegratorSettings, Trajectory
-from generated.integrate import sundials_messages as count_sundials_messages
+from generated.sundials_log import sundials_messages as count_sundials_messages
 
 
 class MetaFileError(ToolkitError):
@@ -196,7 +196,7 @@ class RunMeta:
     sundials_messages : dict
         SUNDIALS' warnings and errors of the run (native method; kept out of the
         terminal, written to ``sundials.log`` next to meta.json):
-        :func:`generated.integrate.sundials_messages` (``count``, ``warnings``,
+        :func:`generated.sundials_log.sundials_messages` (``count``, ``warnings``,
         ``errors``, ``first``). Absent from older records: read back as none.
     """
 
