@@ -401,7 +401,10 @@ def test_page_drives_the_leader_and_followers_follow(tmp_path: Path) -> None:
             moved = loop.x[0] - x_start[0]
             assert loop.changes[0].kind == "u0" and loop.changes[0].values == (2.0,)
             assert loop.changes[1].kind == "u0" and loop.changes[1].values == (0.0,)
-            assert moved > 1.0  # at least u0 t²/2 = 1 for the 1 s the key was surely held
+            # the key was surely held 1 s and the check comes >= 0.5 s after its release:
+            # the ramp 2 S(τ/r) (r = 1) moves the leader 2 r² (1/4 − 1/10) = 0.3 in its
+            # first second, reaching velocity 1; u0 >= 0 after, so velocity >= 1 for 0.5 s
+            assert moved > 0.8
             # followers follow: each moved the same way by most of the leader's displacement
             dP = (loop.x[2:] - x_start[2:]).reshape(-1, 2)
             assert np.all(dP[:, 0] > 0.5 * moved) and np.all(np.abs(dP[:, 1]) < 0.1 * moved)
