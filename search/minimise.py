@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ from typing import Any
 import pandas as pd
 
 from core.artifacts import atomic_write_text
+from core.faults import FAULT_TYPES
 from search.space import Dimension, build_sample, dimensions, values_at
 from search.spec import SearchFile
 from sweep.run import commit_rows, read_results
@@ -161,17 +163,34 @@ def minimise(
             state.robustness = rob
             continue
         for d in (d for d in dims if d.group == g and d.neutral is not None):
-            _bisect(state, d, search.settings.minimise_steps, violates)
+            if _used(d, state.values):
+                _bisect(state, d, search.settings.minimise_steps, violates)
     state.changed = [
         d.name
         for d in dims
-        if d.group not in state.dropped and (d.neutral is None or state.values[d.name] != d.neutral)
+        if d.group not in state.dropped
+        and _used(d, state.values)
+        and (d.neutral is None or state.values[d.name] != d.neutral)
     ]
     _write(
         search, folder / MINIMISED, state.values, frozenset(state.dropped), "minimised reproduction"
     )
     atomic_write_text(folder / STATE, json.dumps(asdict(state), indent=1, default=str))
     return state
+
+
+def _used(d: Dimension, values: dict) -> bool:
+    """Whether the point's scenario uses ``d``: a fault key only for the types that take it
+    (an intermittent fault has no ``duration``), and a fault slot only within ``faults.count``."""
+    m = re.fullmatch(r"faults\[(\d+)\]\.(\w+)(\[\d+\])?", d.name)
+    if m is None:
+        return True
+    slot, key = int(m.group(1)), m.group(2)
+    if slot > int(values.get("faults.count", slot)):
+        return False
+    if key in ("follower", "type"):
+        return True
+    return key in FAULT_TYPES[values[f"faults[{slot}].type"]][1:]
 
 
 def _point_key(values: dict, dropped: list[str]) -> str:

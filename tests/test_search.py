@@ -1,7 +1,7 @@
 """The worst-case search (search/): loading errors, resume, a planted defect reported as a
 falsified guaranteed row with a minimised reproduction, and the Dask path.
 
-The base is test_sim_api's two-follower SMALL scenario with a 2 s horizon (its guaranteed
+The base is test_sim_api's two-follower SMALL scenario with a 1 s horizon (its guaranteed
 rows include Theorem 2's comparison-lemma envelope); budgets are a few evaluations.
 """
 
@@ -33,7 +33,7 @@ minimise_steps = 2
 
 [[requirements]]
 name = "dev"
-formula = "always[1, 2](deviation <= 100)"
+formula = "always[0.5, 1](deviation <= 100)"
 scale = 100
 
 [[requirements]]
@@ -54,7 +54,7 @@ def build_dir(tmp_path_factory):
 
 @pytest.fixture
 def root(tmp_path, monkeypatch, build_dir):
-    (tmp_path / "small.toml").write_text(SMALL.replace("horizon = 0.5", "horizon = 2.0"))
+    (tmp_path / "small.toml").write_text(SMALL.replace("horizon = 0.5", "horizon = 1.0"))
     monkeypatch.setenv("HITL_BUILD_DIR", str(build_dir))
     monkeypatch.delenv("DASK_SCHEDULER", raising=False)
     return tmp_path
