@@ -127,7 +127,8 @@ def _ramp_response(d: float, tau: np.ndarray, r: float) -> tuple[np.ndarray, np.
 def test_leader_follows_the_shaped_command_in_closed_form(recorded) -> None:
     """η0 of the double integrator under the recorded commands, each change of size d at
     time c ramped in as d S((t − c)/r): η0_2' = u0, η0_1' = η0_2, the responses to the
-    ramps superposed (:func:`_ramp_response`)."""
+    ramps superposed (:func:`_ramp_response`), to 100 error-test weights of the
+    integration (its global error; a quintic position is not integrated exactly by BDF)."""
     con, saved, logged, replay = recorded
     r = con.loop.rise
     ch = [(c.t, c.values[0]) for c in con.loop.changes if c.kind == "u0"]
@@ -138,8 +139,10 @@ def test_leader_follows_the_shaped_command_in_closed_form(recorded) -> None:
         dp, dv = _ramp_response(u - prev, t - tk, r)
         pos, vel, prev = pos + dp, vel + dv, u
     rtol, atol = con.loop.sc.integration.rtol, con.loop.sc.integration.atol
-    assert np.allclose(logged.eta0_1, pos, rtol=10 * rtol, atol=10 * atol)
-    assert np.allclose(logged.eta0_2, vel, rtol=10 * rtol, atol=10 * atol)
+    # CVODE's global error over ~100 restarted calls: measured up to 17 error-test weights
+    # (rtol |x| + atol); a ramp landing one quantum late moves η0_2 by ~1e-2, 1e4 weights
+    assert np.allclose(logged.eta0_1, pos, rtol=100 * rtol, atol=100 * atol)
+    assert np.allclose(logged.eta0_2, vel, rtol=100 * rtol, atol=100 * atol)
     assert len(ch) == 4 and pos[-1] != 0.0
     # the command is C¹: a jump of u0 would put a kink in η0_2 (its slope jumps by d)
     slope = np.diff(logged.eta0_2.to_numpy()) / np.diff(t)
