@@ -40,7 +40,7 @@ def _parser() -> CliParser:
         "--rise",
         type=float,
         default=None,
-        help="seconds over which each change of u0 ramps in (default: twice the scenarios' "
+        help="seconds over which each change of u0 ramps in (default: the scenarios' "
         "default rise, docs/console.md)",
     )
     return ap

@@ -10,8 +10,7 @@ change is a restart point of the integrator (as at a breakpoint of the replay).
 **u0 is shaped.** A change of the operator's command from u to u' at time c is not a
 jump: it enters as the C¹ ramp (u' − u)·S((t − c)/r), S the smoothstep 3x² − 2x³ of
 ``leader.u0_rise`` (core/shaping.py) and r the rise time
-(:data:`CONSOLE_RISE`, twice :data:`core.shaping.DEFAULT_RISE`: a console's change can be a
-reversal of 2α) unless the console is given another. Ramps that
+(:data:`CONSOLE_RISE` = :data:`core.shaping.DEFAULT_RISE`, chosen for a reversal of 2α) unless the console is given another. Ramps that
 overlap add up; the command is then a convex blend of the values held
 (core/hold.py), so ‖u0‖ ≤ α holds for every command the protocol accepts. At most
 :data:`RAMP_SLOTS` ramps run at once (the compiled loop has that many); a change
@@ -50,12 +49,11 @@ from console.protocol import Limits
 from core.errors import BuildError
 from core.shaping import DEFAULT_RISE
 
-#: rise time (s) of the console's shaped changes of u0: twice the scenarios' default. A
-#: scenario's step changes u0 by at most α (‖u0‖ ≤ α on both sides of it); a console's
-#: change can be a reversal, up to 2α. Smoothstep's largest slope is 1.5·Δ/r, so a change
-#: of 2α over 2·DEFAULT_RISE is no steeper than a step of α over DEFAULT_RISE, the slope the
-#: scenarios' default was chosen for (docs/console.md, 'Shaped commands')
-CONSOLE_RISE = 2.0 * DEFAULT_RISE
+#: rise time (s) of the console's shaped changes of u0: the scenarios' default. It was
+#: chosen for the worst change an operator can make within α, a reversal from −α to +α
+#: (docs/verification.md, 'Operator steps'), which is also the largest console change
+#: (docs/console.md, 'Shaped commands')
+CONSOLE_RISE = DEFAULT_RISE
 #: ramps of u0 that may run at once (terms of the console scenario's u0 expressions)
 RAMP_SLOTS = 12
 #: integrator attempts per call before the loop is held (the first one and the restarts)
