@@ -192,6 +192,7 @@ def evaluate(search: SearchFile, point: dict[str, Any], folder: str) -> dict[str
         "arm": point["arm"],
         "eval": point["eval"],
         "name": name,
+        "target": point.get("target", ""),
     }
     for k, x in enumerate(point.get("u") or ()):
         row[f"u:{k}"] = float(x)

@@ -37,7 +37,8 @@ Executor = Callable[[SearchFile, list[dict], str], list[dict]]
 
 
 def population(search: SearchFile, workers: int) -> int:
-    """CMA-ES points per generation: ``[search] batch``, else 4 per worker (at least 6).
+    """Each optimiser's points per generation: ``[search] batch``, else 4 per worker (at
+    least 6).
 
     Parameters
     ----------
@@ -148,7 +149,12 @@ def _loop(
     popsize: int,
     progress: bool,
 ) -> None:
-    """Rounds of one CMA-ES generation plus a proportional share of the baseline."""
+    """Rounds of one CMA-ES generation per requirement plus a share of the baseline.
+
+    Each requirement has its own optimiser, told that requirement's robustness: the least
+    robustness over requirements is flat wherever another requirement is the smaller one,
+    so one optimiser of the minimum follows whichever requirement happens to be least.
+    """
     from cmaes import CMA
 
     s = search.settings
@@ -156,22 +162,31 @@ def _loop(
     n = len(dims)
     done = read_results(results)
     known = _known(done)
-    cma = CMA(
-        mean=np.full(n, 0.5),
-        sigma=s.sigma,
-        bounds=np.tile([0.0, 1.0], (n, 1)),
-        seed=s.seed % (2**31),
-        population_size=popsize,
-    )
-    rounds = max(1, math.ceil(s.budget / popsize))
+    reqs = search.requirements
+    opts = [
+        CMA(
+            mean=np.full(n, 0.5),
+            sigma=s.sigma,
+            bounds=np.tile([0.0, 1.0], (n, 1)),
+            seed=(s.seed + j) % (2**31),
+            population_size=popsize,
+        )
+        for j in range(len(reqs))
+    ]
+    rounds = max(1, math.ceil(s.budget / (popsize * len(reqs))))
     per_round = math.ceil(s.baseline / rounds) if s.baseline else 0
     n_search = n_base = 0
     folder = str(results.parent.resolve())
     for r in range(rounds):
-        asked = [cma.ask() for _ in range(popsize)]
-        points = [_point("search", n_search + k, u, dims) for k, u in enumerate(asked)]
-        m = min(per_round, s.baseline - n_base)
-        base_u = uniform_points(s.seed, n_base, max(m, 0), n)
+        asked = [[cma.ask() for _ in range(popsize)] for cma in opts]
+        points = []
+        for j, us in enumerate(asked):
+            for k, u in enumerate(us):
+                p = _point("search", n_search + j * popsize + k, u, dims)
+                p["target"] = reqs[j].name
+                points.append(p)
+        m = max(min(per_round, s.baseline - n_base), 0)
+        base_u = uniform_points(s.seed, n_base, m, n)
         points += [_point("baseline", n_base + k, u, dims) for k, u in enumerate(base_u)]
         rows = {_key(p): known[_key(p)] for p in points if _key(p) in known}
         todo = [p for p in points if _key(p) not in rows]
@@ -179,11 +194,12 @@ def _loop(
             new = executor(search, todo, folder)
             done = commit_rows(results, done, new, info)
             rows.update({_key(x): x for x in new})
-        tell = [(u, _told(rows[("search", n_search + k)])) for k, u in enumerate(asked)]
-        # the last generation may exceed the budget: only its first points count
-        cma.tell(tell)
-        n_search += popsize
-        n_base += max(m, 0)
+        for j, (cma, us) in enumerate(zip(opts, asked, strict=True)):
+            col = f"rob:{reqs[j].name}"
+            got = [rows[("search", n_search + j * popsize + k)] for k in range(popsize)]
+            cma.tell([(u, _told(row, col)) for u, row in zip(us, got, strict=True)])
+        n_search += popsize * len(reqs)
+        n_base += m
         if progress:
             _progress(r + 1, rounds, done)
 
@@ -203,8 +219,8 @@ def _point(arm: str, k: int, u: np.ndarray, dims: tuple) -> dict:
     return {"arm": arm, "eval": k, "u": [float(x) for x in u], "values": values_at(dims, u)}
 
 
-def _told(row: dict) -> float:
-    rob = row.get("robustness")
+def _told(row: dict, column: str) -> float:
+    rob = row.get(column)
     if row.get("status") != "ok" or rob is None or not math.isfinite(float(rob)):
         return PENALTY
     return float(rob)

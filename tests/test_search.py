@@ -128,7 +128,9 @@ def test_missing_requirements_and_search_table(root):
 
 
 def test_rows_resume_and_extend(root):
-    text = SEARCH.format(budget=8, baseline=2)
+    # one requirement: one optimiser, rounds of 4 search points and 1 baseline point
+    text = SEARCH.format(budget=8, baseline=2).split('[[requirements]]\nname = "guaranteed"')
+    text = text[0] + "[params]" + text[1].split("[params]")[1]
     first = Counting(fail_at=2)  # round 1 (4 search + 1 baseline), then interrupted
     with pytest.raises(KeyboardInterrupt):
         run_search(write(root, text=text), out_root=root / "out", executor=first)
@@ -147,9 +149,9 @@ def test_rows_resume_and_extend(root):
     b = full.set_index(["arm", "eval"]).loc[a.index, ucols]
     assert (a.to_numpy() == b.to_numpy()).all()  # committed rows unchanged
     assert full["id"].is_unique and (full["status"] == "ok").all()
-    assert {"rob:dev", "rob:guaranteed", "robustness"} <= set(full.columns)
-    rob = full[["rob:dev", "rob:guaranteed"]].astype(float).min(axis=1)
-    assert (rob == full["robustness"].astype(float)).all()
+    assert {"rob:dev", "robustness"} <= set(full.columns) and "rob:guaranteed" not in full
+    assert (full["rob:dev"].astype(float) == full["robustness"].astype(float)).all()
+    assert set(full.loc[full["arm"] == "search", "target"]) == {"dev"}
     # a rerun of a finished search runs nothing
     idle = Counting()
     run_search(write(root, text=text), out_root=root / "out", executor=idle)
@@ -190,6 +192,9 @@ def test_planted_defect_is_reported_first_with_a_minimised_reproduction(root, mo
     found = table[table["arm"] != "minimise"]
     assert (found["rob:guaranteed"].astype(float) < 0).all()
     assert found["worst_row:guaranteed"].str.contains("envelope").all()
+    # one optimiser per requirement, each a generation of 4
+    targets = found.loc[found["arm"] == "search", "target"].value_counts().to_dict()
+    assert targets == {"dev": 4, "guaranteed": 4}
     report = (results.parent / "report.md").read_text()
     body = report.split("\n## ")
     assert body[1].startswith("DEFECT: a guaranteed row is falsified"), report
