@@ -29,7 +29,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import casadi as ca
 import numpy as np
@@ -79,6 +79,12 @@ from generated.trajectory_file import (
 )
 from symbolic.closed_loop import fix_parameters
 from synthesis.gains import Gains
+
+if TYPE_CHECKING:
+    import ctypes
+
+    from symbolic.cascade import Cascade
+    from symbolic.closed_loop import ClosedLoop
 
 #: the names other packages use, from this module or re-exported from the modules above
 __all__ = [
@@ -202,17 +208,17 @@ class Built:
         loaded library; None if it has none.
     """
 
-    closed_loop: Any
+    closed_loop: ClosedLoop
     library: Library
     dyn: ca.Function
     outputs: ca.Function
     form: str
     timings: dict[str, float] = field(default_factory=dict)
-    dag: tuple[Library, Any] | None = None
+    dag: tuple[Library, Cascade] | None = None
     p: np.ndarray = field(default_factory=lambda: np.zeros(0))
     dyn_p: ca.Function | None = None
     outputs_p: ca.Function | None = None
-    driver: Any = None
+    driver: ctypes.CDLL | None = None
 
 
 def _reuse(c: Compiled, sc: Scenario, gains: Gains, key: str) -> Built:
