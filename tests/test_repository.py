@@ -280,6 +280,7 @@ PACKAGES = (
     "verify",
     "sweep",
     "benchmarks",
+    "search",
     "console",
 )
 

@@ -59,9 +59,20 @@ def test_shipped_study_first_sample_reaches_a_short_horizon(path, roots, tmp_pat
     """A study is not a scenario: it loads, and its first sample (written as a scenario
     file, the way ``python -m sweep samples --write-scenarios`` does) runs, to its own
     horizon: a drawn fault onset or link loss may lie past a short one."""
-    first = next(samples(load_study(path), ids=[0]))
+    first = next(samples(_study(path), ids=[0]))
     assert first.reason is None, first.reason
     _reaches_a_short_horizon(write_scenario(first, tmp_path), roots, own_horizon=True)
+
+
+def _study(path: Path):
+    """The study of a study file, or of a search file (a study plus ``[search]``)."""
+    import tomllib
+
+    if "search" in tomllib.loads(path.read_text()):
+        from search.spec import load_search
+
+        return load_search(path).study
+    return load_study(path)
 
 
 def _reaches_a_short_horizon(path: Path, roots, own_horizon: bool = False) -> None:
