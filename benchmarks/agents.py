@@ -77,7 +77,15 @@ def _timed_runs(runs: int, f: Any) -> tuple[float, Any]:
 
 
 def paper_rows(runs: int, build_root: str | None) -> list[dict[str, Any]]:
-    """The paper scenario: whole-loop native against the per-agent driver."""
+    """The paper scenario: whole-loop native against the per-agent driver.
+
+    Parameters
+    ----------
+    runs : int
+        Timed repetitions of each integration.
+    build_root : str, optional
+        Where generated libraries are built (None: the default).
+    """
     from core.scenario import load_scenario
     from generated import agents, api
     from generated.codegen import CodegenSettings
@@ -107,7 +115,21 @@ def paper_rows(runs: int, build_root: str | None) -> list[dict[str, Any]]:
 def large_rows(
     N: int, horizon: float, threads: list[int], solvers: list[str], build_root: str | None
 ) -> list[dict[str, Any]]:
-    """N followers, acyclic and cyclic, per thread count and solver."""
+    """N followers, acyclic and cyclic, per thread count and solver.
+
+    Parameters
+    ----------
+    N : int
+        Number of followers.
+    horizon : float
+        Integration horizon (s).
+    threads : list of int
+        Thread counts to run (more than 1 builds with OpenMP).
+    solvers : list of str
+        Linear solvers (``forward`` is skipped on a cyclic graph, ``dense`` on large ones).
+    build_root : str, optional
+        Where generated libraries are built (None: the default).
+    """
     from benchmarks.bench import bench_gains, bench_scenario
     from generated import agents
     from generated.codegen import CodegenSettings
@@ -166,6 +188,13 @@ def _table(rows: list[dict[str, Any]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the benchmarks, print the rows and write ``agents.csv`` under ``--out``.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command-line arguments (None: ``sys.argv``).
+    """
     ap = argparse.ArgumentParser(prog="python -m benchmarks.agents", description=__doc__)
     ap.add_argument("--sizes", default="2000", help="comma-separated N of the large runs")
     ap.add_argument("--horizon", type=float, default=20.0)

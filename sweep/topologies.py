@@ -156,7 +156,17 @@ def run_study(path: str, count: int | None, workers: int, build_root: str | None
 
 
 def report(rows: list[dict], wall: float, path: str) -> str:
-    """The study's summary (Markdown)."""
+    """The study's summary (Markdown).
+
+    Parameters
+    ----------
+    rows : list of dict
+        One per sample, from :func:`run_study`.
+    wall : float
+        Wall time of the whole study (s).
+    path : str
+        The study file, named in the title.
+    """
     ran = [r for r in rows if r["status"] != "refused"]
     comp = [r for r in ran if r["status"] == "complete"]
     cyc = [r for r in ran if r["cyclic"]]
@@ -193,6 +203,13 @@ def _csv(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the study, write ``results.csv`` and ``report.md`` under ``--out`` and print the report.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command-line arguments (None: ``sys.argv``).
+    """
     ap = argparse.ArgumentParser(prog="python -m sweep.topologies", description=__doc__)
     ap.add_argument("study", nargs="?", default=STUDY)
     ap.add_argument("--count", type=int, default=None, help="only the first COUNT samples")

@@ -338,12 +338,46 @@ def theorem2_constants(
     e_bar, edot_bar = _lemma2_pair(chi_bar, lam)
 
     law = scenario.options.ghat_law
-    gamma = float(ctrl.gamma[agent])
-    g_lo, g_hi, gdot = health if health is not None else _run_health(scenario, agent)
-    ends = (g_lo, g_hi)  # the ĝ terms below are convex in g > 0: largest at an end
+    health = health if health is not None else _run_health(scenario, agent)
     # boundary layer: θ̂ᵀ(|χ| − χ∘sgn_ε χ) − ½k2‖θ̂‖² ≤ Σ_r (c_s ε|θ̂_r| − ½k2 θ̂_r²) ≤ n(c_s ε)²/(2k2)
     cs_eps = layer_constant(scenario.options.sign) * scenario.options.sign_width
     layer = scenario.n * cs_eps**2 / (2.0 * k2)
+    Om_v, gterm, rate_term, why_not = _variant_terms(scenario, agent, Omega, health)
+    provable = not why_not
+    chi_vv = chi_v + gterm + layer + rate_term if provable else chi_v
+    chi_bar_v = chi_bar_from(chi_vv, Om_v, lmin, delta) if provable else chi_bar
+    e_bar_v, edot_bar_v = _lemma2_pair(chi_bar_v, lam)
+    return Theorem2Constants(
+        lam_min_M=lmin,
+        lam_max_M=lmax,
+        Omega=Omega,
+        chi_v=chi_v,
+        chi_bar=chi_bar,
+        e_bar=e_bar,
+        edot_bar=edot_bar,
+        variant=law,
+        provable=provable,
+        Omega_var=Om_v,
+        chi_v_var=chi_vv,
+        chi_bar_var=chi_bar_v,
+        e_bar_var=e_bar_v,
+        edot_bar_var=edot_bar_v,
+        layer_term=layer if provable else 0.0,
+        ghat_term=gterm if provable else 0.0,
+        rate_term=rate_term if provable else 0.0,
+        why_not=why_not,
+    )
+
+
+def _variant_terms(
+    scenario: Scenario, agent: int, Omega: float, health: tuple[float, float, float]
+) -> tuple[float, float, float, str]:
+    """The ĝ law's variant of eq. (38): (Ω, ĝ term, ∂V2/∂t term, why not provable or '')."""
+    ctrl = scenario.controller
+    law = scenario.options.ghat_law
+    gamma = float(ctrl.gamma[agent])
+    g_lo, g_hi, gdot = health
+    ends = (g_lo, g_hi)  # the ĝ terms below are convex in g > 0: largest at an end
     Om_v, gterm, why_not = Omega, 0.0, ""
     band = BAND * (1.0 / ctrl.g_min - 1.0)
     lo, hi = 1.0 - band, 1.0 / ctrl.g_min + band  # ĝ's interval under the projection
@@ -375,30 +409,7 @@ def theorem2_constants(
             )
         else:  # ∂V2/∂t = (ġ/(2γ))(ĝ² − 1/g²), |ĝ² − 1/g²| ≤ max(ĝ², 1/g²)
             rate_term = gdot / (2.0 * gamma) * max(hi**2, 1.0 / g_lo**2)
-    provable = not why_not
-    chi_vv = chi_v + gterm + layer + rate_term if provable else chi_v
-    chi_bar_v = chi_bar_from(chi_vv, Om_v, lmin, delta) if provable else chi_bar
-    e_bar_v, edot_bar_v = _lemma2_pair(chi_bar_v, lam)
-    return Theorem2Constants(
-        lam_min_M=lmin,
-        lam_max_M=lmax,
-        Omega=Omega,
-        chi_v=chi_v,
-        chi_bar=chi_bar,
-        e_bar=e_bar,
-        edot_bar=edot_bar,
-        variant=law,
-        provable=provable,
-        Omega_var=Om_v,
-        chi_v_var=chi_vv,
-        chi_bar_var=chi_bar_v,
-        e_bar_var=e_bar_v,
-        edot_bar_var=edot_bar_v,
-        layer_term=layer if provable else 0.0,
-        ghat_term=gterm if provable else 0.0,
-        rate_term=rate_term if provable else 0.0,
-        why_not=why_not,
-    )
+    return Om_v, gterm, rate_term, why_not
 
 
 def _run_health(scenario: Scenario, agent: int) -> tuple[float, float, float]:

@@ -62,7 +62,13 @@ class Claim:
     depends: frozenset[Dep] = frozenset()
 
     def render(self, **fields: object) -> str:
-        """The claim's text with its fields filled."""
+        """The claim's text with its fields filled.
+
+        Parameters
+        ----------
+        **fields : object
+            Values for the ``{name}`` fields of the text (none: the text as registered).
+        """
         return self.text.format(**fields) if fields else self.text
 
 
@@ -93,7 +99,13 @@ def register(cid: str, text: str, kind: Kind, *depends: Dep) -> Claim:
 
 
 def get(cid: str) -> Claim:
-    """The claim with id ``cid`` (KeyError naming the known ids when there is none)."""
+    """The claim with id ``cid`` (KeyError naming the known ids when there is none).
+
+    Parameters
+    ----------
+    cid : str
+        The claim's registered id.
+    """
     try:
         return REGISTRY[cid]
     except KeyError:
@@ -101,7 +113,15 @@ def get(cid: str) -> Claim:
 
 
 def depends(cid: str, dep: Dep) -> bool:
-    """Whether claim ``cid`` depends on ``dep`` (False for an unknown id)."""
+    """Whether claim ``cid`` depends on ``dep`` (False for an unknown id).
+
+    Parameters
+    ----------
+    cid : str
+        The claim's registered id.
+    dep : Dep
+        The dependency to look for.
+    """
     c = REGISTRY.get(cid)
     return c is not None and dep in c.depends
 

@@ -162,6 +162,29 @@ def obtain_run(
     return Run(sc, res.frame, res.trajectory.x, res.meta, folder, simulated=True)
 
 
+def _lyapunov_checks(run: Run, gains, cfg: VerifyConfig):
+    """The exact V̇1, V̇2 inequality checks and the u0 dependence of ``run``'s closed loop."""
+    sc = run.scenario
+    cl = run.closed_loop if run.gains is not None else None
+    cl = cl or closed_loop(sc, gains)  # the symbolic loop is built once per structure
+    X = run.X if run.X is not None else states_from_frame(cl, sc, run.frame)
+    t = run.frame["t"].to_numpy(float)
+    rates = theorem1_rates(sc, gains)
+    t1 = [
+        check_theorem1(
+            cl, t, X, rates.supported, claim="dV1/dt <= -delta~ V1 (supported)", config=cfg
+        ),
+        check_theorem1(cl, t, X, rates.printed, claim="dV1/dt <= -delta~ V1 (printed)", config=cfg),
+    ]
+    if sc.observer.phi_min > 0:  # the inequality the proof gives with the floor
+        fl = theorem1_floor(sc, gains)
+        claim = "dV1/dt <= -delta~ V1 + c_phi (floor)"
+        t1.append(check_theorem1(cl, t, X, fl.rate, offset=fl.c_phi, claim=claim, config=cfg))
+    t2 = check_theorem2(cl, sc, t, X, config=cfg)
+    u0_dep = u0_dependence(cl, sc)
+    return t1, t2, u0_dep
+
+
 def verify_run(
     run: Run,
     *,
@@ -193,28 +216,9 @@ def verify_run(
     root = Path(out_root or OUT_ROOT)
     gains = run.gains if run.gains is not None else api.ensure_gains(sc, root)[0]
     notes = list(run.notes)
-    t1, t2 = [], []
-    u0_dep = None
+    t1, t2, u0_dep = [], [], None
     if lyapunov:
-        cl = run.closed_loop if run.gains is not None else None
-        cl = cl or closed_loop(sc, gains)  # the symbolic loop is built once per structure
-        X = run.X if run.X is not None else states_from_frame(cl, sc, run.frame)
-        t = run.frame["t"].to_numpy(float)
-        rates = theorem1_rates(sc, gains)
-        t1 = [
-            check_theorem1(
-                cl, t, X, rates.supported, claim="dV1/dt <= -delta~ V1 (supported)", config=cfg
-            ),
-            check_theorem1(
-                cl, t, X, rates.printed, claim="dV1/dt <= -delta~ V1 (printed)", config=cfg
-            ),
-        ]
-        if sc.observer.phi_min > 0:  # the inequality the proof gives with the floor
-            fl = theorem1_floor(sc, gains)
-            claim = "dV1/dt <= -delta~ V1 + c_phi (floor)"
-            t1.append(check_theorem1(cl, t, X, fl.rate, offset=fl.c_phi, claim=claim, config=cfg))
-        t2 = check_theorem2(cl, sc, t, X, config=cfg)
-        u0_dep = u0_dependence(cl, sc)
+        t1, t2, u0_dep = _lyapunov_checks(run, gains, cfg)
     else:
         notes.append("Lyapunov derivative checks skipped (--no-lyapunov)")
     if not run.meta.get("complete", True):

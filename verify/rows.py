@@ -41,7 +41,15 @@ KINDS = tuple(k.value for k in Kind)
 
 
 def win(a: float, b: float) -> str:
-    """A window ``[a, b] s`` as text."""
+    """A window ``[a, b] s`` as text.
+
+    Parameters
+    ----------
+    a : float
+        Its start (s).
+    b : float
+        Its end (s).
+    """
     return f"[{a:g}, {b:g}] s"
 
 

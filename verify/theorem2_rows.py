@@ -83,7 +83,13 @@ class IntervalWindow:
         return self.index == self.count - 1
 
     def bounds(self, t: np.ndarray) -> tuple[float, float]:
-        """The window (s): [first, last output time] when stated, else the interval."""
+        """The window (s): [first, last output time] when stated, else the interval.
+
+        Parameters
+        ----------
+        t : ndarray
+            The output times (s); the interval's end is clipped to the last one.
+        """
         if self.mask is not None:
             ts = t[self.mask]
             return float(ts[0]), float(ts[-1])
@@ -165,7 +171,15 @@ def envelope(c: Theorem2Constants, V2_start: float, dt: np.ndarray) -> np.ndarra
 
 
 def chi_envelope(c: Theorem2Constants, W: np.ndarray) -> np.ndarray:
-    """‖χ‖ ≤ sqrt(2W/λ_min(M)): ½λ_min(M)‖χ‖² ≤ ½χᵀMχ ≤ V2 ≤ W (eq. (39))."""
+    """‖χ‖ ≤ sqrt(2W/λ_min(M)): ½λ_min(M)‖χ‖² ≤ ½χᵀMχ ≤ V2 ≤ W (eq. (39)).
+
+    Parameters
+    ----------
+    c : Theorem2Constants
+        The constants (``lam_min_M`` is used).
+    W : ndarray
+        The comparison-lemma bound on V2 (negative values are taken as 0).
+    """
     return np.sqrt(2.0 * np.maximum(W, 0.0) / c.lam_min_M)
 
 
@@ -513,21 +527,7 @@ def definition1_rows(
         c = theorem2_constants(scenario, i, cfg)
         p, b = S.block(df, "p", i + 1, dm.n), S.block(df, "b", i + 1, dm.n)
         dev = np.linalg.norm(p - h[i] * y0 - b, axis=1)  # Definition 1 with the gauge h_i
-        note = f"h_i = {h[i]:+g}; bound as printed (31)"
-        if c.chi_bar > 0:
-            R.add(CL.DEF1_PAPER, CL.Kind.PAPER, c.chi_bar, dev[tail].max(), tw, note, agent=i)
-        else:
-            sp = Span(t, tail)
-            R.add(
-                CL.DEF1_PAPER,
-                CL.Kind.PAPER,
-                c.chi_bar,
-                dev[tail].max(),
-                tw,
-                f"{note}; {ZERO_NOTE}",
-                agent=i,
-                holds=_decays(sp, dev),
-            )
+        _definition1_paper(R, c, dev, t, tail, tw, f"h_i = {h[i]:+g}; bound as printed (31)", i)
         if _has_variant(scenario):
             ws = (
                 windows[i]
@@ -535,18 +535,8 @@ def definition1_rows(
                 else interval_windows(scenario, df, i, follower_pieces(scenario, i), cfg)
             )
             ok, why = theorem2_guaranteed(scenario, i)
-            for w in ws:
-                if fl is None:
-                    why_fl = "needs the synthesised gains and the V1, phi columns" + w.label()
-                    R.missing(CL.DEF1_ENV, w.bounds(t), why_fl, agent=i)
-                    R.missing(CL.DEF1_DERIVED, w.bounds(t), why_fl, agent=i)
-                    continue
-                lam = np.asarray(scenario.controller.Lambda[i], float)
-                _definition1_envelope(R, df, fl, w, t, k0, dev, i, ok and certified, why, lam)
-                if w.mask is None:
-                    R.missing(CL.DEF1_DERIVED, w.bounds(t), w.why + w.label(), agent=i)
-                else:
-                    _definition1_derived(R, df, fl, w, t, k0, dev, i, ok and certified, why)
+            lam = np.asarray(scenario.controller.Lambda[i], float)
+            _definition1_intervals(R, df, fl, ws, t, k0, dev, i, ok and certified, why, lam)
         fd = np.linalg.norm(p - h[i] * y0 - lead_b[:, i, :], axis=1)[tail]
         fd = fd[np.isfinite(fd)]
         if fd.size:
@@ -560,6 +550,60 @@ def definition1_rows(
                 "(no derived bound)",
                 agent=i,
             )
+
+
+def _definition1_paper(
+    R: Rows,
+    c: Theorem2Constants,
+    dev: np.ndarray,
+    t: np.ndarray,
+    tail: np.ndarray,
+    tw: tuple[float, float],
+    note: str,
+    i: int,
+) -> None:
+    """Follower ``i``'s row for the paper's limsup ‖p_i − h_i y0 − b_i‖ ≤ χ̄_si."""
+    if c.chi_bar > 0:
+        R.add(CL.DEF1_PAPER, CL.Kind.PAPER, c.chi_bar, dev[tail].max(), tw, note, agent=i)
+    else:
+        sp = Span(t, tail)
+        R.add(
+            CL.DEF1_PAPER,
+            CL.Kind.PAPER,
+            c.chi_bar,
+            dev[tail].max(),
+            tw,
+            f"{note}; {ZERO_NOTE}",
+            agent=i,
+            holds=_decays(sp, dev),
+        )
+
+
+def _definition1_intervals(
+    R: Rows,
+    df: S.Frame,
+    fl,  # noqa: ANN001 (verify.bounds.Theorem1Floor or None)
+    ws: list[IntervalWindow],
+    t: np.ndarray,
+    k0: int,
+    dev: np.ndarray,
+    i: int,
+    ok: bool,
+    why: str,
+    lam: np.ndarray,
+) -> None:
+    """Follower ``i``'s envelope and derived-bound rows, one pair per interval."""
+    for w in ws:
+        if fl is None:
+            why_fl = "needs the synthesised gains and the V1, phi columns" + w.label()
+            R.missing(CL.DEF1_ENV, w.bounds(t), why_fl, agent=i)
+            R.missing(CL.DEF1_DERIVED, w.bounds(t), why_fl, agent=i)
+            continue
+        _definition1_envelope(R, df, fl, w, t, k0, dev, i, ok, why, lam)
+        if w.mask is None:
+            R.missing(CL.DEF1_DERIVED, w.bounds(t), w.why + w.label(), agent=i)
+        else:
+            _definition1_derived(R, df, fl, w, t, k0, dev, i, ok, why)
 
 
 def _definition1_envelope(
