@@ -1,7 +1,7 @@
 """One evaluation: a point of the box simulated and verified as a study sample is, and its
 robustness per requirement (docs/search.md, 'Robustness').
 
-The run takes the study's in-memory path (:func:`sweep.run._run_in_memory`: gains, the
+The run takes the study's in-memory path (:func:`sweep.run.run_in_memory`: gains, the
 shared compiled library, integration, outputs) and the bound table of
 :func:`verify.pipeline.verify_run`, as ``make sweep`` does for each sample.
 """
@@ -180,7 +180,7 @@ def evaluate(search: SearchFile, point: dict[str, Any], folder: str) -> dict[str
     dict
         One flat row: arm, eval, ``u:<k>``, ``param:<key>``, status, robustness columns.
     """
-    from sweep.run import StudyPaths, _one_line, _run_in_memory, param_columns
+    from sweep.run import StudyPaths, one_line, param_columns, run_in_memory
 
     t0 = time.perf_counter()
     name = f"{search.name}-{point['arm']}-{point['eval']:04d}"
@@ -201,12 +201,12 @@ def evaluate(search: SearchFile, point: dict[str, Any], folder: str) -> dict[str
         row["status"] = f"refused: {sample.reason}"
     else:
         try:
-            run = _run_in_memory(sample, StudyPaths(Path(folder)))
+            run = run_in_memory(sample, StudyPaths(Path(folder)))
             row.update(robustness(search.requirements, sample, run, verify_table(run)))
             row["library"] = run.meta.get("library", {}).get("key", "")
             row["status"] = "ok"
         except Exception as exc:  # noqa: BLE001 - one point's failure is recorded
-            row["status"] = f"failed: {_one_line(exc)}"
+            row["status"] = f"failed: {one_line(exc)}"
     row["wall_s"] = time.perf_counter() - t0
     row["finished_utc"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
     return row

@@ -138,7 +138,7 @@ def run_sample(study_path: str, sample_id: int, folder: str, keep: bool = False)
             row.update(_simulate_and_verify(sample, paths, keep))
             row["status"] = "ok"
         except Exception as exc:  # noqa: BLE001 - any failure of one sample is recorded
-            row["status"] = f"failed: {_one_line(exc)}"
+            row["status"] = f"failed: {one_line(exc)}"
     row["wall_s"] = time.perf_counter() - t0
     row["finished_utc"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
     return row
@@ -165,7 +165,14 @@ def run_samples(
     return [run_sample(study_path, k, folder, keep) for k in sample_ids]
 
 
-def _one_line(exc: BaseException) -> str:
+def one_line(exc: BaseException) -> str:
+    """An exception as one line: its type and its text with whitespace collapsed, ≤ 500 chars.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The exception of a failed sample.
+    """
     text = " ".join(str(exc).split()) or "".join(traceback.format_exception_only(exc)).strip()
     return f"{type(exc).__name__}: {text}"[:500]
 
@@ -204,7 +211,7 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[
         t1 = time.perf_counter()
         v = P.verify_run(run, out_root=paths.runs)
     else:
-        run = _run_in_memory(sample, paths)
+        run = run_in_memory(sample, paths)
         t1 = time.perf_counter()
         v = P.verify_run(run)  # with the gains the run used (Run.gains): no file is read
     return {
@@ -256,9 +263,17 @@ def _run_written(sample: Sample, paths: StudyPaths) -> Any:
     return P.Run(sample.scenario, res.frame, res.trajectory.x, res.meta, res.csv_path.parent)
 
 
-def _run_in_memory(sample: Sample, paths: StudyPaths) -> Any:
+def run_in_memory(sample: Sample, paths: StudyPaths) -> Any:
     """The same steps as :func:`generated.api.run` (gains, build, integrate, outputs)
-    writing nothing; the run's folder is where ``--keep-runs`` would write it."""
+    writing nothing; the run's folder is where ``--keep-runs`` would write it.
+
+    Parameters
+    ----------
+    sample : Sample
+        The drawn sample (its scenario).
+    paths : StudyPaths
+        The study's folders.
+    """
     from generated import api
     from verify import pipeline as P
 
@@ -859,6 +874,6 @@ def _failed_row(sample_id: int, exc: BaseException) -> dict[str, Any]:
     """The row of a sample whose task raised (its worker died, or the task was lost)."""
     return {
         "id": sample_id,
-        "status": f"failed: {_one_line(exc)}",
+        "status": f"failed: {one_line(exc)}",
         "finished_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
     }

@@ -359,13 +359,13 @@ def test_checks_with_the_integrated_loop_equal_checks_that_bind_their_own(setup)
     the table equals, bit for bit, the one the checks get by binding the numbers themselves."""
     import dataclasses
 
-    from sweep.run import StudyPaths, _run_in_memory
+    from sweep.run import StudyPaths, run_in_memory
     from sweep.sampler import make_sample
     from verify.pipeline import verify_run
 
     root = setup["root"]
     sample = make_sample(load_study(root / "study.toml"), 1)
-    run = _run_in_memory(sample, StudyPaths(root / "bound"))
+    run = run_in_memory(sample, StudyPaths(root / "bound"))
     assert run.closed_loop is not None and run.gains is not None
     own = verify_run(dataclasses.replace(run, closed_loop=None)).table
     pd.testing.assert_frame_equal(verify_run(run).table, own, check_exact=True)
