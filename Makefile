@@ -36,10 +36,10 @@ endif
 
 all: demo
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[dev,native,console]"
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[dev,native,console]"
 	$(MAKE) chromium
 	touch $(STAMP)
 
