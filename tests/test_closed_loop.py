@@ -639,3 +639,26 @@ def test_ode_maps_only_the_state_derivative():
     ode = np.array(cl.ode(0.37, x)).ravel()
     flat = build_closed_loop(sc, hand_gains(sc), assembly="flat")
     np.testing.assert_allclose(ode, np.array(flat.ode(0.37, x)).ravel(), rtol=1e-12, atol=1e-9)
+
+
+def test_shaped_held_trace_matches_reference_on_its_ramps(tmp_path):
+    """A console replay: held rows whose jumps are smoothstep ramps, so u̇0 ≠ 0 on a ramp.
+
+    Evaluated inside the ramps, where a reference that took u̇0 = 0 for a held trace
+    differs from the closed loop through η̈0 (the observer's and formation's derivatives).
+    """
+    tr = tmp_path / "u0.csv"
+    tr.write_text("t,u\n0.0,0.0\n2.0,1.5\n5.0,-1.0\n9.0,0.0\n20.0,0.0\n")
+    rng = np.random.default_rng(11)
+    A, pin = random_graph(4, rng)
+    lines = f'u0_csv = "{tr.name}"\nu0_hold = true\nu0_rise = 0.75'
+    sc = write_scenario(tmp_path, A, pin, u0=lines)
+    assert sc.leader.u0_hold and sc.leader.u0_rise == 0.75
+    g = hand_gains(sc)
+    cl, ref = build_closed_loop(sc, g), Reference(sc, g)
+    for t in (2.3, 5.4, 9.2):  # mid-ramp: u̇0 = 6 x (1 − x) Δu / r with x in (0, 1)
+        u, ud, _, _ = ref.leader(t, np.zeros(sc.m))
+        assert abs(ud[0]) > 0.5
+        x = random_state(cl, rng)
+        got, want = np.array(cl.ode(t, x)).ravel(), ref.rhs(t, x)
+        assert np.allclose(got, want, rtol=1e-10, atol=1e-10 * max(np.abs(want).max(), 1.0))

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg as sla
 
+from core.hold import shaped_hold
 from core.scenario import Scenario
 from synthesis.gains import Gains
 from verify.lyapunov import sgn_eps
@@ -252,7 +253,10 @@ class Reference:
             ts = tr[:, 0]
             u = L.u0_numpy(t)
             j = np.searchsorted(ts, t, side="right") - 1
-            if L.u0_hold or t < ts[0] or t > ts[-1] or j >= len(ts) - 1:
+            if L.u0_hold and L.u0_rise > 0:  # each jump a smoothstep ramp: u̇0 ≠ 0 on it
+                cols = range(1, tr.shape[1])
+                ud = np.array([shaped_hold(ts, tr[:, k], L.u0_rise, t)[1] for k in cols])
+            elif L.u0_hold or t < ts[0] or t > ts[-1] or j >= len(ts) - 1:
                 ud = np.zeros(self.p)
             else:
                 ud = (tr[j + 1, 1:] - tr[j, 1:]) / (ts[j + 1] - ts[j])
