@@ -231,7 +231,11 @@ def _convert(n: ast.AST, text: str, where: str, depth: int) -> tuple:
         raise _reject(where, text, n.id)
     if isinstance(n, ast.UnaryOp) and isinstance(n.op, ast.USub | ast.UAdd):
         inner = _convert(n.operand, text, where, d)
-        return ("neg", inner) if isinstance(n.op, ast.USub) else inner
+        if isinstance(n.op, ast.UAdd):
+            return inner
+        # A negative number is one literal, not structure: scenarios that differ only in
+        # the sign of a number then share a compiled library.
+        return ("num", -inner[1]) if inner[0] == "num" else ("neg", inner)
     if isinstance(n, ast.BinOp) and type(n.op) in _BINOPS:
         return (
             "bin",

@@ -177,6 +177,21 @@ def test_literals_are_parameters_and_the_template_is_the_structure():
         assert float(f(tt, b.literals())) == pytest.approx(float(b.numpy(tt)), rel=1e-15)
 
 
+def test_a_negative_number_is_a_literal_not_structure():
+    # studies draw numbers of either sign: the sign must not change the compiled code
+    a = parse_expression("-1.47*step(t - 3) + 2*cos(t)", where=WHERE)
+    b = parse_expression("1.47*step(t - 3) + -2*cos(t)", where=WHERE)
+    assert a.literals() == (-1.47, 3.0, 2.0) and b.literals() == (1.47, 3.0, -2.0)
+    assert a.template() == b.template()
+    # a sign in front of anything but a number stays structure
+    assert parse_expression("-t", where=WHERE).template() == "(-t)"
+    assert parse_expression("t**-2", where=WHERE).literals() == ()
+    for tt in (0.0, 2.9, 3.0, 7.5):
+        assert float(a.numpy(tt)) == -1.47 * (tt >= 3) + 2 * math.cos(tt)
+        assert float(b.casadi(tt)) == 1.47 * (tt >= 3) - 2 * math.cos(tt)
+    assert parse_expression("(1.5)**-2", where=WHERE).numpy(0.0) == 1.5**-2
+
+
 @settings(max_examples=150, deadline=None)
 @given(st.text(max_size=60))
 def test_fuzz_text_only_toolkit_errors(text):

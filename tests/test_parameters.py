@@ -66,6 +66,26 @@ def test_bound_loop_is_the_reference_of_the_other_numbers(pair):
     np.testing.assert_array_equal(cl_b.layout.get(cl_b.x0, "p", 1), b.followers[1].p0)
 
 
+def test_the_sign_of_a_number_is_not_structure(pair, tmp_path):
+    # a study that draws signed sizes (operator steps, biases) shares one library
+    a, ga, _, _, cl_a = pair
+    flipped = {
+        "leader.u0": ["-1.5*cos(t)"],
+        "followers[1].f": ["-3*sin(3*t) + 0.5", "4*sin(-2*t) + -1"],
+    }
+    c = api.load(PAPER, overrides=flipped, variant="signs")
+    gc, _ = api.ensure_gains(c, tmp_path)
+    assert structure_key(c, gc) == structure_key(a, ga)
+    cl_c = bind(cl_a.parametric, c, gc)
+    ref = Reference(c, gc)
+    rng = np.random.default_rng(5)
+    for t in (0.0, 0.7, 3.1):
+        for x in states(cl_c, rng, k=2):
+            want = ref.rhs(t, x)
+            got = np.array(cl_c.ode(t, x)).ravel()
+            np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * np.max(np.abs(want)))
+
+
 def test_equal_keys_mean_equal_code(pair):
     a, ga, b, gb, cl_a = pair
     cl_b = build_closed_loop(b, gb)
