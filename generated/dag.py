@@ -32,9 +32,9 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from core.errors import IntegrationError
 from generated import native
 from generated.codegen import CodegenSettings, Library, build_library
+from generated.driver_probe import checked_state, probe_driver
 from generated.integrate import IntegratorSettings, Trajectory
 from symbolic.cascade import Cascade
 
@@ -125,13 +125,6 @@ def _problem(cas: Cascade) -> tuple[native.DagProblem, list[np.ndarray]]:
     return problem, [*ints, w, cpl, prm]
 
 
-def _state(cas: Cascade, x: np.ndarray) -> np.ndarray:
-    x = np.ascontiguousarray(x, dtype=float).ravel()
-    if x.size != cas.layout.nx:
-        raise IntegrationError(f"x: {x.size} entries, the closed loop has {cas.layout.nx} states")
-    return x
-
-
 def run(
     library: Path,
     cas: Cascade,
@@ -175,7 +168,7 @@ def run(
     """
     wall0 = time.perf_counter()
     lib = native.load(Path(library))
-    x = _state(cas, x0)
+    x = checked_state(x0, cas.layout.nx)
     call = native.DriverCall.of(x.size, t_out, settings, breakpoints)
     problem, _keep = _problem(cas)
     lib.hitl_dag_run(
@@ -216,24 +209,6 @@ def probe(
         Wrong sizes, or the driver failed (singular block, out of memory).
     """
     lib = native.load(Path(library))
-    x, b = _state(cas, x), _state(cas, b)
-    xdot, sol = np.zeros_like(x), np.zeros_like(x)
-    msg = ctypes.create_string_buffer(native.MSG_LEN)
+    x, b = checked_state(x, cas.layout.nx), checked_state(b, cas.layout.nx)
     problem, _keep = _problem(cas)
-    dp = native.dptr
-    ret = lib.hitl_dag_probe(
-        ctypes.byref(problem),
-        float(t),
-        dp(x),
-        float(gamma),
-        dp(b),
-        dp(xdot),
-        dp(sol),
-        msg,
-        native.MSG_LEN,
-    )
-    if ret != 0:
-        raise IntegrationError(
-            f"graph-ordered driver: {msg.value.decode(errors='replace') or 'solve failed'}"
-        )
-    return xdot, sol
+    return probe_driver(lib.hitl_dag_probe, problem, t, x, gamma, b, "graph-ordered driver")

@@ -326,7 +326,7 @@ def test_ours_is_what_make_sim_runs() -> None:
 
 def test_gmres_build_carries_the_jacobian_sparsity(tmp_path: Path) -> None:
     """The compiled matrix-free RHS reports A's pattern, not a dense Jacobian."""
-    from generated.codegen import renamed
+    from generated.csource import renamed
 
     A = np.diag(-np.arange(1.0, 7.0)) + np.diag(np.ones(5), -1)  # bidiagonal
     plan = choose_plan(100)

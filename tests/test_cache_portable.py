@@ -27,13 +27,9 @@ import numpy as np
 import pytest
 
 from generated import native
-from generated.codegen import (
-    LIBRARY_NAME,
-    MANIFEST_NAME,
-    CodegenSettings,
-    Toolchain,
-    build_library,
-)
+from generated.build_cache import LIBRARY_NAME, MANIFEST_NAME
+from generated.codegen import CodegenSettings, build_library
+from generated.compiler import Toolchain
 from generated.integrate import IntegratorSettings
 
 PY = sys.executable

@@ -15,13 +15,9 @@ from platformdirs import user_cache_dir
 from core.errors import BuildError
 from generated import codegen
 from generated.__main__ import main as gen_main
-from generated.codegen import (
-    CodegenSettings,
-    build_library,
-    check_dyn_signature,
-    compile_source,
-    renamed,
-)
+from generated.codegen import CodegenSettings, build_library
+from generated.compiler import compile_source
+from generated.csource import check_dyn_signature, renamed
 
 
 def dyn(name: str, c: float = 0.3) -> ca.Function:
@@ -276,7 +272,11 @@ def test_default_cache_is_outside_the_package_and_env_overrides_it(tmp_path, mon
     assert package not in root.resolve().parents and root.resolve() != package
     assert root == Path(user_cache_dir("hitl-formation")) / "build"
     env = subprocess.run(
-        [sys.executable, "-c", "from generated.codegen import DEFAULT_BUILD_ROOT as r; print(r)"],
+        [
+            sys.executable,
+            "-c",
+            "from generated.build_cache import DEFAULT_BUILD_ROOT as r; print(r)",
+        ],
         env={**os.environ, "XDG_CACHE_HOME": str(tmp_path / "xdg")},
         capture_output=True,
         text=True,

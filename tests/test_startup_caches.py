@@ -285,7 +285,7 @@ def test_model_key_changes_with_parameters_and_model():
 
 
 def test_the_cache_root_is_the_build_caches(monkeypatch, tmp_path):
-    from generated.codegen import default_build_root
+    from generated.build_cache import default_build_root
 
     monkeypatch.setenv("HITL_BUILD_DIR", str(tmp_path))
     assert cache.cache_root() == default_build_root() == tmp_path

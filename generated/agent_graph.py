@@ -1,0 +1,151 @@
+"""The graph as the per-agent driver reads it: CSR rows of L + B, an order, depth waves.
+
+One :class:`Topology` per graph of a scenario (the base graph, then one per switching
+time) is runtime data of :mod:`generated.agents`, never compiled in: follower i hears
+``idx[ptr[i]:ptr[i+1]]`` with the weights (L + B)_ij, and a topological order grouped
+into waves of equal depth lets the driver solve an acyclic graph's Newton systems by
+forward substitution; on a cycle each follower is a wave of its own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from core.graph import pinned_laplacian
+
+
+def topological_order(ptr: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, bool]:
+    """An order of the followers in which each comes after the ones it hears, if any.
+
+    Kahn's algorithm; when a cycle blocks it, the waiting follower with the fewest
+    unheard followers goes next (ties by index), so the order is still a good one for
+    the forward-substitution preconditioner.
+
+    Parameters
+    ----------
+    ptr, idx : ndarray
+        CSR: follower i hears ``idx[ptr[i]:ptr[i+1]]``.
+
+    Returns
+    -------
+    order : ndarray
+        N ints.
+    acyclic : bool
+        Whether no follower was placed before one it hears.
+    """
+    N = len(ptr) - 1
+    indeg = np.diff(ptr).astype(int)
+    listeners: list[list[int]] = [[] for _ in range(N)]
+    for i in range(N):
+        for j in idx[ptr[i] : ptr[i + 1]]:
+            listeners[int(j)].append(i)
+    done = np.zeros(N, bool)
+    order: list[int] = []
+    acyclic = True
+    ready = sorted(int(i) for i in np.flatnonzero(indeg == 0))
+    while len(order) < N:
+        if not ready:  # a cycle: break it at the follower with the fewest missing inputs
+            acyclic = False
+            wait = np.flatnonzero(~done)
+            ready = [int(wait[np.argmin(indeg[wait])])]
+        j = ready.pop(0)
+        if done[j]:
+            continue
+        done[j] = True
+        order.append(j)
+        for i in listeners[j]:
+            indeg[i] -= 1
+            if indeg[i] == 0 and not done[i]:
+                ready.append(i)
+        ready.sort()
+    return np.asarray(order, dtype=np.int32), acyclic
+
+
+@dataclass(frozen=True)
+class Topology:
+    """One topology as the driver reads it.
+
+    Attributes
+    ----------
+    t_start : float
+    ptr, idx, w : ndarray
+        CSR of the off-diagonal (L + B)_ij of each row (follower i hears idx).
+    cpl : ndarray
+        N × 2: (l̄_ii, a_i0 h_i).
+    order : ndarray
+        Sorted by depth on an acyclic topology (each follower after all it hears).
+    acyclic : bool
+    waves : ndarray
+        Pointers into ``order``: wave w (followers of depth w) is
+        ``order[waves[w]:waves[w+1]]``; one wave per follower on a cycle.
+    """
+
+    t_start: float
+    ptr: np.ndarray
+    idx: np.ndarray
+    w: np.ndarray
+    cpl: np.ndarray
+    order: np.ndarray
+    acyclic: bool
+    waves: np.ndarray
+
+
+def depth_waves(
+    ptr: np.ndarray, idx: np.ndarray, order: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``order`` regrouped by depth (1 + the largest depth of the followers heard).
+
+    Parameters
+    ----------
+    ptr, idx : ndarray
+        CSR of an acyclic topology.
+    order : ndarray
+        A topological order of it.
+
+    Returns
+    -------
+    (order, waves) : (ndarray, ndarray)
+        The followers sorted by (depth, position in ``order``) and the wave pointers.
+    """
+    depth = np.zeros(len(order), dtype=int)
+    for i in order:
+        js = idx[ptr[i] : ptr[i + 1]]
+        depth[i] = 1 + depth[js].max() if len(js) else 0
+    pos = np.empty(len(order), dtype=int)
+    pos[order] = np.arange(len(order))
+    new = np.asarray(sorted(order, key=lambda i: (depth[i], pos[i])), dtype=np.int32)
+    counts = np.bincount(depth, minlength=depth.max() + 1)
+    return new, np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+
+
+def topology(t_start: float, adjacency: np.ndarray, pinning: np.ndarray, h: np.ndarray) -> Topology:
+    """The driver's data of one graph (eq. (6)'s L + B and a0 ∘ h).
+
+    Parameters
+    ----------
+    t_start : float
+    adjacency : ndarray
+        N×N, a_ij (follower i hears j).
+    pinning : ndarray
+        N, a_i0.
+    h : ndarray
+        N gauge signs.
+    """
+    L_B = pinned_laplacian(np.asarray(adjacency, float), np.asarray(pinning, float)).toarray()
+    N = L_B.shape[0]
+    ptr, idx, w = [0], [], []
+    for i in range(N):
+        js = [int(j) for j in np.flatnonzero(L_B[i]) if j != i]
+        idx += js
+        w += [float(L_B[i, j]) for j in js]
+        ptr.append(len(idx))
+    p, q = np.asarray(ptr, np.int32), np.asarray(idx, np.int32)
+    order, acyclic = topological_order(p, q)
+    if acyclic:
+        order, waves = depth_waves(p, q, order)
+    else:
+        waves = np.arange(N + 1, dtype=np.int32)
+    cpl = np.column_stack([np.diag(L_B), np.asarray(pinning, float) * h]).astype(float)
+    return Topology(float(t_start), p, q, np.asarray(w, float), cpl, order, acyclic, waves)

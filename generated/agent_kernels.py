@@ -1,0 +1,195 @@
+"""The per-agent kernels: one follower model's compiled library, whatever the graph.
+
+:mod:`generated.agents` runs them; this module compiles, once per follower model and
+option set, the kernels of ONE agent (:func:`symbolic.cascade.agent_block`, as C):
+
+* ``ag_jet0``, ``ag_jet1``, ``ag_jet2``: the jets C0 η_i, C0 η̇_i, C0 η̈_i its listeners
+  sum (level l reads only the levels < l of the agent's own neighbour sum);
+* ``ag_rhs``: the agent's rates (and the leader's, eq. (3));
+* ``ag_jac``: their Jacobian block K = ∂(ẋ_b, jets)/∂(x_b, nb);
+* ``ag_faults``: every distinct fault expression of the scenario;
+
+and appends the driver ``generated/native/agents.c``. What is compiled in, and so is the
+library's identity (the cache key is the hash of the C source): the follower model and
+its physical parameters, the options, the leader (A0, B0, C0 and u0), the observer
+gains and UIO (``gains``), and the set of distinct fault expressions; never the graph,
+never N (:func:`kernel_key`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+
+import casadi as ca
+import numpy as np
+
+from core.scenario import Scenario
+from generated import native
+from generated.codegen import CodegenSettings, Library, build_library
+from symbolic.cascade import agent_block
+from symbolic.closed_loop import fault_function, make_layout, model_groups, observer_gains
+from synthesis.gains import Gains
+
+DRIVER = native.NATIVE_DIR / "agents.c"
+JET_NAMES = ("ag_jet0", "ag_jet1", "ag_jet2")
+RHS_NAME, JAC_NAME, FAULTS_NAME = "ag_rhs", "ag_jac", "ag_faults"
+#: compile flags of the kernel libraries: OpenMP threads over the agents of a pass
+OPENMP_FLAGS = ("-fopenmp",)
+
+
+def kernel_functions(
+    sc: Scenario, gains: Gains, model_index: int, *, cse: bool = True
+) -> list[ca.Function]:
+    """The kernels of one follower model (module docstring), as CasADi Functions.
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+        The observer gains and the UIO (compiled in).
+    model_index : int
+        0-based follower whose model and parameters the kernels use.
+    cse : bool
+        Common-subexpression elimination in the generated code.
+
+    Returns
+    -------
+    list of casadi.Function
+        ``ag_jet0..2``, ``ag_rhs``, ``ag_jac`` with inputs ``(t, xb, nb, cpl, prm, gf)``
+        and ``ag_faults(t)``.
+    """
+    lay = make_layout(sc.m, sc.n, 1, sc.options.derivatives == "filtered")
+    block = agent_block(sc, observer_gains(sc, gains), lay, model_index)
+    args = block.sx_in()
+    xbdot, jets = block.call(args)
+    n = sc.n
+    xb, nb = args[1], args[2]
+    K = ca.densify(ca.jacobian(ca.vertcat(xbdot, jets), ca.vertcat(xb, nb)))
+    opts = {"cse": True} if cse else {}
+    names = block.name_in()
+    fns = [
+        ca.Function(JET_NAMES[lev], args, [jets[lev * n : (lev + 1) * n]], names, ["jet"], opts)
+        for lev in range(3)
+    ]
+    fns.append(ca.Function(RHS_NAME, args, [xbdot, jets], names, ["xbdot", "jets"], opts))
+    fns.append(ca.Function(JAC_NAME, args, [jets, K], names, ["jets", "K"], opts))
+    faults, _ = fault_function(sc)
+    t = ca.SX.sym("t")
+    fns.append(ca.Function(FAULTS_NAME, [t], [faults(t)], ["t"], ["values"], opts))
+    return fns
+
+
+def kernel_settings(
+    settings: CodegenSettings | None = None, openmp: bool = False
+) -> CodegenSettings:
+    """``settings`` for the kernels: with OpenMP's flags for a threaded build.
+
+    Parameters
+    ----------
+    settings : CodegenSettings, optional
+    openmp : bool
+        Threads over the agents (``LinearSettings.threads`` > 1). A serial build has no
+        OpenMP region: at small N entering one costs more than the pass it runs.
+    """
+    s = settings or CodegenSettings()
+    extra = tuple(s.extra_cflags)
+    if openmp:
+        extra += tuple(f for f in OPENMP_FLAGS if f not in extra)
+    return dataclasses.replace(s, extra_cflags=extra, jacobian="sparse", expand=True)
+
+
+#: kernel libraries built in this process, by :func:`kernel_key`
+_BUILT: dict[str, Library] = {}
+#: the gains the kernels compile in (graph-independent: the leader's LMIs and the UIO)
+KERNEL_GAINS = ("A0", "B0", "C0", "Q", "Gamma", "Phi", "lambda1", "lambda2")
+
+
+def kernel_key(
+    sc: Scenario,
+    gains: Gains,
+    model_index: int,
+    settings: CodegenSettings | None = None,
+    openmp: bool = False,
+) -> str:
+    """SHA-256 of everything the kernels of one model compile in (never the graph, never N).
+
+    The follower model and its parameters, the leader, the observer's, controller's and
+    options' structural settings (:func:`symbolic.parameters.structure` without its
+    graph, followers and gains), the gains of :data:`KERNEL_GAINS`, the distinct fault
+    expressions in order, the driver sources and the compiler settings. Two scenarios
+    with equal keys compile to the same library: this process builds it once
+    (the build cache keys it again by its source).
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+    model_index : int
+    settings : CodegenSettings, optional
+    openmp : bool
+    """
+    from symbolic.parameters import structure
+
+    st = structure(sc, gains)
+    fo = sc.followers[model_index]
+    texts: list[str] = []
+    for f in sc.followers:
+        for e in (f.g.expr, *f.f):
+            if e.text not in texts:
+                texts.append(e.text)
+    desc = {
+        "structure": {k: v for k, v in st.items() if k not in ("graph", "followers", "gains")},
+        "gains": {k: np.asarray(getattr(gains, k), float).tolist() for k in KERNEL_GAINS},
+        "model": [fo.model, sorted(fo.params.items())],
+        "faults": texts,
+        "driver": hashlib.sha256(
+            (native.COMMON.read_text() + DRIVER.read_text()).encode()
+        ).hexdigest(),
+        "settings": repr(kernel_settings(settings, openmp)),
+    }
+    return hashlib.sha256(json.dumps(desc, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def build_models(
+    sc: Scenario, gains: Gains, settings: CodegenSettings | None = None, openmp: bool = False
+) -> tuple[list[Library], np.ndarray]:
+    """Compile (or reuse from the cache) one kernel library per follower model.
+
+    A model whose :func:`kernel_key` was built before in this process reuses that
+    library without building anything symbolic.
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+    settings : CodegenSettings, optional
+        Compiler, flags, cache root and ``cse``.
+    openmp : bool
+        A threaded build (:func:`kernel_settings`), needed for ``LinearSettings.threads``
+        above 1.
+
+    Returns
+    -------
+    libraries : list of Library
+        One per model group (:func:`symbolic.closed_loop.model_groups`), in group order.
+    model : ndarray
+        N ints: the library of each follower.
+    """
+    s = kernel_settings(settings, openmp)
+    groups = model_groups(sc)
+    model = np.zeros(sc.N, dtype=np.int32)
+    libs = []
+    for g, members in enumerate(groups):
+        model[members] = g
+        key = kernel_key(sc, gains, members[0], settings, openmp)
+        lib = _BUILT.get(key)
+        if lib is None or not lib.path.is_file():
+            fns = kernel_functions(sc, gains, members[0], cse=s.cse)
+            lib = build_library(fns, s, toolchain=native.toolchain(DRIVER))
+            _BUILT[key] = lib
+        else:
+            lib = dataclasses.replace(lib, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0)
+        libs.append(lib)
+    return libs, model

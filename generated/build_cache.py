@@ -1,0 +1,172 @@
+"""The build cache's folders: where the root is, what an entry holds, how entries come and go.
+
+A cache entry is ``<root>/<sha256 key>/`` with the generated C (:data:`SOURCE_NAME`), the
+library (:data:`LIBRARY_NAME`) and, written last, the manifest (:data:`MANIFEST_NAME`)
+that records the library's SHA-256; an entry without a valid manifest is never trusted.
+Builds happen in ``.tmp-*`` folders renamed into place (:func:`install_entry`), so an
+entry is either complete or absent. What is built and how it is keyed is
+:mod:`generated.codegen`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import tempfile
+from pathlib import Path
+
+from platformdirs import user_cache_dir
+
+from core import artifacts
+from core.artifacts import sha256_file
+
+#: default cache root: the user's cache folder (``$XDG_CACHE_HOME`` or ``~/.cache`` on
+#: Linux), outside the package, so an installed package never writes into site-packages;
+#: ``HITL_BUILD_DIR`` overrides it
+DEFAULT_BUILD_ROOT = Path(user_cache_dir("hitl-formation")) / "build"
+#: names of what a cache root holds: entries (64 hex digits), failed sources, the start-up
+#: caches of core/models/cache.py (gains, models), temp folders
+ENTRY_PATTERN = re.compile(r"[0-9a-f]{64}|failed|gains|models|\.tmp-.*")
+SOURCE_NAME = "model.c"
+LIBRARY_NAME = "model.so"
+MANIFEST_NAME = "manifest.json"
+#: temporary build folders: ``.tmp-<key[:12]>-<pid>-<random>``
+TMP_PREFIX = ".tmp-"
+
+
+def default_build_root() -> Path:
+    """The cache root without settings: ``$HITL_BUILD_DIR``, else :data:`DEFAULT_BUILD_ROOT`."""
+    env = os.environ.get("HITL_BUILD_DIR")
+    return Path(env) if env else DEFAULT_BUILD_ROOT
+
+
+def clear_cache(root: Path | None = None) -> list[Path]:
+    """Remove the build cache's entries, failed sources and temporary folders.
+
+    Only names the cache itself creates (:data:`ENTRY_PATTERN`) are removed, so a
+    root pointed at a folder with other content loses nothing else; the root itself
+    is removed when it is left empty.
+
+    Parameters
+    ----------
+    root : Path, optional
+        Default :func:`default_build_root`.
+
+    Returns
+    -------
+    list of Path
+        What was removed.
+    """
+    root = root if root is not None else default_build_root()
+    if not root.is_dir():
+        return []
+    removed = []
+    for d in sorted(root.iterdir()):
+        if d.is_dir() and not d.is_symlink() and ENTRY_PATTERN.fullmatch(d.name):
+            shutil.rmtree(d, ignore_errors=True)
+            removed.append(d)
+    if not any(root.iterdir()):
+        root.rmdir()
+    return removed
+
+
+def entry_problem(folder: Path, key: str) -> str | None:
+    """Why the cache entry ``folder`` cannot be loaded for ``key`` (None: it can).
+
+    The manifest must name ``key`` and record the SHA-256 of ``model.so``, and the
+    library's bytes must have that hash: a truncated or corrupt file, or a library
+    copied in from another build, is caught before it is ever loaded.
+
+    Parameters
+    ----------
+    folder : Path
+        ``<root>/<key>/``.
+    key : str
+        The key this build needs.
+    """
+    try:
+        info = json.loads((folder / MANIFEST_NAME).read_text())
+    except FileNotFoundError:
+        return "no manifest (incomplete entry)"
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return "manifest unreadable"
+    if not isinstance(info, dict) or not isinstance(info.get("library_sha256"), str):
+        return "manifest records no library SHA-256"
+    if info.get("key") != key:
+        return f"manifest is for key {str(info.get('key'))[:12]}…, not this build"
+    try:
+        digest = sha256_file(folder / LIBRARY_NAME)
+    except OSError:
+        return f"{LIBRARY_NAME} missing or unreadable"
+    if digest != info["library_sha256"]:
+        return f"{LIBRARY_NAME} does not have the SHA-256 its manifest records (truncated, corrupt or replaced)"
+    return None
+
+
+def remove_stale_builds(root: Path, min_age: float = artifacts.STALE_SECONDS) -> list[Path]:
+    """Remove ``.tmp-<key>-<pid>-*`` build folders whose process is gone.
+
+    A folder is stale when the PID in its name is not running, or (a name without a
+    PID) when it is older than ``min_age`` seconds. A live build's folder is kept
+    whatever its age (compiling N = 50 takes over ten minutes).
+
+    Parameters
+    ----------
+    root : Path
+        The cache root.
+    min_age : float
+        Age in seconds after which a folder without a PID counts as stale.
+
+    Returns
+    -------
+    list of Path
+        The folders removed.
+    """
+    removed = []
+    for d in root.glob(f"{TMP_PREFIX}*"):
+        m = re.fullmatch(re.escape(TMP_PREFIX) + r"[0-9a-f]+-(\d+)-.*", d.name)
+        if artifacts.stale_temp(d, int(m.group(1)) if m else None, min_age):
+            shutil.rmtree(d, ignore_errors=True)
+            removed.append(d)
+    return removed
+
+
+def install_entry(tmp: Path, folder: Path) -> None:
+    """Rename a complete build into place; a concurrent identical build may have won.
+
+    Parameters
+    ----------
+    tmp : Path
+        The complete build (manifest written).
+    folder : Path
+        ``<root>/<key>/``.
+    """
+    for _ in range(2):
+        try:
+            os.rename(tmp, folder)
+            return
+        except OSError:
+            if entry_problem(folder, folder.name) is None:  # complete entry, other process
+                shutil.rmtree(tmp, ignore_errors=True)
+                return
+            shutil.rmtree(folder, ignore_errors=True)  # incomplete or bad entry: never trusted
+    os.rename(tmp, folder)
+
+
+def discard_entry(folder: Path) -> None:
+    """Remove a cache entry: renamed to a temporary name first, so it vanishes at once.
+
+    Parameters
+    ----------
+    folder : Path
+        ``<root>/<key>/``.
+    """
+    prefix = f"{TMP_PREFIX}{folder.name[:12]}-{os.getpid()}-"
+    try:
+        aside = Path(tempfile.mkdtemp(dir=folder.parent, prefix=prefix))
+        os.rename(folder, aside)  # onto the empty folder just made
+    except OSError:  # another process moved or replaced it
+        return
+    shutil.rmtree(aside, ignore_errors=True)

@@ -1,0 +1,64 @@
+"""Loading compiled shared libraries: their dependencies first, by absolute path.
+
+A library of the build cache names the SUNDIALS libraries it links only by soname (no
+rpath, :class:`generated.compiler.Toolchain`), so the same entry loads from any checkout
+or environment once those are loaded (:func:`preload`); :func:`load_problem` says why a
+library would not load instead of failing on its first use.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+from collections.abc import Sequence
+from pathlib import Path
+
+
+@functools.lru_cache(maxsize=8)
+def preload(libraries: tuple[Path, ...]) -> None:
+    """Load shared libraries by absolute path, locally, once per process.
+
+    A library linked against them names them only by soname (no rpath); the dynamic
+    loader matches a NEEDED soname against the libraries already loaded, so loading
+    these first lets it load from any checkout or environment. Locally (RTLD_LOCAL):
+    loaded globally, their symbols would take precedence over those of the SUNDIALS
+    that CasADi's own CVODES and IDAS plugins bring, which have the same names.
+
+    Parameters
+    ----------
+    libraries : tuple of Path
+        In dependency order (a library before those that need it).
+
+    Raises
+    ------
+    OSError
+        If one cannot be loaded.
+    """
+    for lib in libraries:
+        ctypes.CDLL(str(lib), mode=ctypes.RTLD_LOCAL)
+
+
+def load_problem(path: Path, libraries: Sequence[Path] = ()) -> str | None:
+    """Why the shared library ``path`` cannot be loaded in this process (None: it can).
+
+    ``libraries`` are preloaded (:func:`preload`), then ``path`` is opened with every
+    symbol bound at once (ctypes' ``RTLD_NOW``) and closed again: a NEEDED library that
+    is not found, an unresolved symbol or bytes that are no shared library are reported
+    here instead of as a traceback of the first load.
+
+    Parameters
+    ----------
+    path : Path
+        The library.
+    libraries : sequence of Path
+        What it needs loaded first (:attr:`generated.compiler.Toolchain.libraries`).
+    """
+    try:
+        preload(tuple(libraries))
+        handle = ctypes.CDLL(str(path))._handle
+    except OSError as exc:
+        return str(exc).replace(f"{path}: ", "")
+    import _ctypes  # dlclose: the check keeps no mapping of the cache file
+
+    _ctypes.dlclose(handle)
+    return None
