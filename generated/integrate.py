@@ -157,7 +157,7 @@ class Trajectory:
         Last output time integrated successfully.
     message : str
         Empty when complete, else the reason (method, time reached, solver flag).
-    stats : dict
+    stats : dict of str to float
         ``steps``, ``rhs_evals``, ``jac_evals``, ``lin_setups``, ``error_test_fails``,
         ``newton_fails``, ``newton_iters``, ``jtimes_evals``, ``restarts``, ``integrator_calls``,
         ``wall_seconds`` and, for CVODES/IDAS, ``last_step`` (the last step size taken).
@@ -174,7 +174,7 @@ class Trajectory:
     status: Status
     t_reached: float
     message: str
-    stats: dict[str, Any] = field(default_factory=dict)
+    stats: dict[str, float] = field(default_factory=dict)
     sundials_log: str = ""
 
     @property

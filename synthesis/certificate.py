@@ -31,6 +31,7 @@ from synthesis.assumptions import (
     uio_matrices,
     uio_zeros,
 )
+from synthesis.certificate_record import CertificateRecord, CheckRecord
 from synthesis.gains import MATRIX_FIELDS, Gains
 from synthesis.lemma3 import DENSE_EIG_MAX_N, w_of
 from synthesis.lmi_matrices import lmi15_matrix, lmi16_matrix
@@ -110,7 +111,7 @@ class Check:
     involves: tuple[str, ...] = ()
     eq: str = ""
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> CheckRecord:
         """``{"name", "value", "margin", "passed", "detail", "involves", "eq"}``."""
         return {
             "name": self.name,
@@ -169,13 +170,13 @@ class Certificate:
         """True when no check failed (neither failures nor warnings)."""
         return all(c.passed for c in self.checks)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> CertificateRecord:
         """The ``certificate`` object of ``gains.json``.
 
         ``{"checks", "warnings", "failures", "passed", "tol", "given"}`` and, when
         notes were recorded, ``"notes"``.
         """
-        out: dict[str, Any] = {
+        out: CertificateRecord = {
             "checks": [c.to_json() for c in self.checks],
             "warnings": self.warnings(),
             "failures": self.failures(),

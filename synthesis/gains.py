@@ -17,7 +17,9 @@ import numpy as np
 
 from core.artifacts import atomic_write_text, sha256_bytes
 from core.errors import SynthesisError
+from core.json_types import JSONObject
 from core.scenario import Scenario
+from synthesis.certificate_record import CertificateRecord
 
 MATRIX_FIELDS = ("A0", "B0", "C0", "Gamma", "Phi", "Theta", "Omega", "T", "Q", "L_bar", "H", "Z")
 
@@ -52,14 +54,14 @@ class Gains:
         Lemma 3's constant, λ_min(Z^{-1/2}(L̄ᵀZ + ZL̄)Z^{-1/2}).
     lambda1, lambda2, alpha, k1 : float
         Observer gains, the input bound, and V1's constant.
-    certificate : dict
+    certificate : CertificateRecord
         The JSON form of a :class:`synthesis.certificate.Certificate`
         (:meth:`~synthesis.certificate.Certificate.to_json`): ``{"checks": [{"name",
         "value", "margin", "passed", "detail", "involves", "eq"}...], "warnings": [...],
         "failures": [...], "passed": bool, "tol": float, "given": [...], "notes": [...]}``.
         ``warnings`` are failed checks involving only scenario-given gains; ``failures``
         is empty in any file ``make synth`` writes.
-    info : dict
+    info : JSONObject
         Solver name, version and tolerance, strictness margin ε (``lmi_eps``), scenario
         SHA-256, the given gains, both Lemma 3 variants, the invariant zeros, and
         (Q given) the smallest λ̄1 for which the given Q satisfies LMI (15).
@@ -87,8 +89,8 @@ class Gains:
     lambda2: float
     alpha: float
     k1: float
-    certificate: dict[str, Any] = field(default_factory=dict)
-    info: dict[str, Any] = field(default_factory=dict)
+    certificate: CertificateRecord = field(default_factory=lambda: CertificateRecord())
+    info: JSONObject = field(default_factory=dict)
 
     @property
     def h(self) -> np.ndarray:

@@ -1,0 +1,38 @@
+"""The certificate as ``gains.json`` stores it: the JSON form of
+:class:`synthesis.certificate.Certificate`, typed for the readers of ``Gains.certificate``.
+"""
+
+from __future__ import annotations
+
+from typing import TypedDict
+
+from core.json_types import JSONValue
+
+
+class CheckRecord(TypedDict):
+    """One check (:meth:`synthesis.certificate.Check.to_json`); non-finite numbers are None."""
+
+    name: str
+    value: JSONValue
+    margin: float | None
+    passed: bool
+    detail: str
+    involves: list[str]
+    eq: str
+
+
+class CertificateRecord(TypedDict, total=False):
+    """Every check and what they add up to (:meth:`synthesis.certificate.Certificate.to_json`).
+
+    ``warnings`` are failed checks that involve only scenario-given gains, ``failures`` the
+    others; ``notes`` is present when the synthesis recorded notes. An empty record means
+    not yet certified.
+    """
+
+    checks: list[CheckRecord]
+    warnings: list[str]
+    failures: list[str]
+    passed: bool
+    tol: float
+    given: list[str]
+    notes: list[str]
