@@ -128,7 +128,8 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
 
 def _faults_status(results: Path, study: str) -> int:
     """Exit status 1 with one line on stderr when some sample failed, else 0."""
-    from sweep.run import faults_line, read_results
+    from sweep.results import read_results
+    from sweep.resume import faults_line
 
     line = faults_line(read_results(results), study)
     if line is None:

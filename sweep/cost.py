@@ -5,7 +5,7 @@ For each id in turn (the first one untimed, as a warm-up): the *lone run*, the s
 scenario file written and run as ``make sim`` then the checks would run it
 (:func:`benchmarks.lone.sample_times`: :func:`generated.api.run`'s integration + outputs
 seconds plus :func:`verify.pipeline.verify_run`), then the study's own
-:func:`sweep.run.run_sample` of the same id (its ``wall_s``, ``simulate_s``,
+:func:`sweep.worker.run_sample` of the same id (its ``wall_s``, ``simulate_s``,
 ``checks_s``). Alternating sample by sample keeps this machine's drift (tens of percent
 over minutes) out of the ratio, and one process keeps Dask and the second core out: what
 is left is the cost of the study's own steps (drawing and validating the sample, gains,
@@ -21,9 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from core.errors import UsageError
-from sweep.run import run_sample
 from sweep.sampler import samples, write_scenario
 from sweep.study import load_study
+from sweep.worker import run_sample
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """Stop the HTTP servers Dask starts in every scheduler and worker of a local cluster.
 
 Dask's scheduler and workers each listen on an HTTP port whatever their dashboard
-settings; a study's local cluster asks for no HTTP (:func:`sweep.run._local_client`).
+settings; a study's local cluster asks for no HTTP (:func:`sweep.cluster._local_client`).
 Imported only when that cluster starts (it imports :mod:`distributed`).
 """
 

@@ -23,8 +23,10 @@ from core.errors import ExpressionError, ScenarioError
 from core.faults import FAULT_TYPES
 from core.scenario import Scenario, scenario_from_dict
 from generated.overrides import set_path
+from sweep.distributions import Distribution
+from sweep.families import FaultFamily, LinkLosses, substitute
 from sweep.graphs import random_graph, resize_followers
-from sweep.study import Distribution, FaultFamily, LinkLosses, Study, substitute
+from sweep.study import Study
 
 
 @dataclass(frozen=True)

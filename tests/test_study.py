@@ -25,9 +25,10 @@ from hypothesis import strategies as st
 from core.errors import run_cli
 from core.scenario import load_scenario
 from sweep.__main__ import main
+from sweep.distributions import Distribution
 from sweep.graphs import random_graph
 from sweep.sampler import draw, samples, write_scenario
-from sweep.study import Distribution, load_study
+from sweep.study import load_study
 
 EXAMPLE = ROOT / "studies" / "example.toml"
 PAPER = (ROOT / "scenarios" / "paper.toml").as_posix()
@@ -489,7 +490,7 @@ def test_tail_switch_count_and_last_switch_follow_the_drawn_losses(tmp_path):
     tail window [10, 20] s of the 20-s horizon."""
     import pandas as pd
 
-    from sweep.run import topology_in_tail
+    from sweep.measures import topology_in_tail
 
     head = f'base = "{PAPER}"\ncount = 30\nseed = 11\n'
     frame = pd.DataFrame({"t": np.linspace(0.0, 20.0, 201)})

@@ -20,9 +20,10 @@ import pandas as pd
 from helpers import ROOT
 
 from sweep.report import fault_points, write_report
-from sweep.run import commit_rows, param_columns
+from sweep.results import commit_rows
 from sweep.sampler import samples
 from sweep.study import load_study
+from sweep.worker import param_columns
 
 FAULTS = ROOT / "studies" / "faults.toml"
 

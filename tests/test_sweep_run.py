@@ -185,7 +185,9 @@ def test_local_cluster_settings_reach_the_workers_and_the_scheduler():
     import dask
     import distributed  # noqa: F401 - loads the distributed.* defaults
 
-    from sweep.run import LOCAL_CLUSTER_CONFIG, _client, _close
+    from sweep.cluster import LOCAL_CLUSTER_CONFIG
+    from sweep.cluster import close_client as _close
+    from sweep.cluster import dask_client as _client
 
     keys = list(LOCAL_CLUSTER_CONFIG)
     assert (
@@ -339,7 +341,8 @@ class _Client:
 def test_a_crashing_chunk_is_rerun_sample_by_sample(tmp_path):
     """Only the sample whose task dies gets a failed row; every other id gets its own row
     once, and the chunk that held the crash is rerun one sample per task."""
-    from sweep.run import RunOptions, StudyPaths, _results, chunk_size
+    from sweep.results import StudyPaths
+    from sweep.run import RunOptions, _results, chunk_size
 
     client = _Client(crash=6)
     todo = list(range(20))
@@ -359,8 +362,9 @@ def test_checks_with_the_integrated_loop_equal_checks_that_bind_their_own(setup)
     the table equals, bit for bit, the one the checks get by binding the numbers themselves."""
     import dataclasses
 
-    from sweep.run import StudyPaths, run_in_memory
+    from sweep.results import StudyPaths
     from sweep.sampler import make_sample
+    from sweep.worker import run_in_memory
     from verify.pipeline import verify_run
 
     root = setup["root"]
@@ -455,7 +459,8 @@ def _listening_ports(pid: int) -> set[int]:
 def test_local_cluster_serves_no_http():
     """The study's local cluster listens only on Dask's own TCP ports (scheduler, nannies,
     workers), all on 127.0.0.1: no HTTP server, none on 8787, in any of its processes."""
-    from sweep.run import _client, _close
+    from sweep.cluster import close_client as _close
+    from sweep.cluster import dask_client as _client
 
     client = _client(None, 2)
     try:

@@ -23,7 +23,7 @@ import pytest
 import scipy.sparse as sp
 
 from core.graph import pinned_laplacian
-from sweep.run import summarize_table, tail_max_et
+from sweep.measures import summarize_table, tail_max_et
 from verify import lyapunov as L
 from verify import signals as S
 from verify.bounds import provable_entry_time, theorem2_constants
@@ -216,7 +216,7 @@ def test_theorem2_entry_of_unprovable_followers_is_lemma1_observed_time(monkeypa
     import types
 
     import verify.bounds as B
-    from sweep.run import theorem2_entry
+    from sweep.measures import theorem2_entry
 
     monkeypatch.setattr(
         B, "theorem2_constants", lambda sc, i, cfg: types.SimpleNamespace(provable=False)

@@ -1,0 +1,145 @@
+"""A study's outputs: its folders and the results table, one row per sample.
+
+Rows are committed to ``<study>/results.parquet`` by an atomic replace of the whole
+table (a temporary file, then ``os.replace``): an interrupted study leaves the last
+committed table, and a rerun resumes from it (:mod:`sweep.resume`).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+RESULTS = "results.parquet"
+#: columns every row has, in this order (then ``param:<key>`` and ``t2_entry:<i>``)
+BASE_COLUMNS = [
+    "id",
+    "seed",
+    "name",
+    "status",
+    "steps",
+    "wall_s",
+    "simulate_s",
+    "checks_s",
+    "library",
+    "tail_max_et",
+    "tail_switches",
+    "last_switch_t",
+    "formation_tail_max",
+    "observer_tail_max",
+    "t2_entry_source",
+    "peak_u_max",
+    "peak_u_late",
+    "step_recovery_s",
+    "step_pairs",
+    "step_pairs_late",
+    "step_pairs_undefined",
+    "step_deviation_max",
+    "step_peak_u",
+    "guaranteed_held",
+    "guaranteed_failed",
+    "consistency_held",
+    "n_guaranteed",
+    "n_consistency",
+    "finished_utc",
+]
+
+
+@dataclass(frozen=True)
+class StudyPaths:
+    """Where a study's outputs go: ``<out_root>/<study name>/``.
+
+    Attributes
+    ----------
+    folder : Path
+        The study's folder.
+    """
+
+    folder: Path
+
+    @property
+    def samples(self) -> Path:
+        """Folder of the written sample scenarios."""
+        return self.folder / "samples"
+
+    @property
+    def runs(self) -> Path:
+        """Output root of the simulations (``runs/<sample name>/``)."""
+        return self.folder / "runs"
+
+    @property
+    def results(self) -> Path:
+        """The results table."""
+        return self.folder / RESULTS
+
+
+def read_results(path: Path) -> pd.DataFrame:
+    """The committed rows (an empty table when the file does not exist).
+
+    Parameters
+    ----------
+    path : Path
+        ``results.parquet``.
+    """
+    if not path.is_file():
+        return pd.DataFrame(columns=BASE_COLUMNS)
+    return pd.read_parquet(path)
+
+
+def commit_rows(
+    path: Path, old: pd.DataFrame, rows: list[dict], info: dict[str, str]
+) -> pd.DataFrame:
+    """Write ``old`` plus ``rows`` as the whole table: a temporary file, then ``os.replace``.
+
+    Parameters
+    ----------
+    path : Path
+        ``results.parquet``.
+    old : DataFrame
+        The rows already committed.
+    rows : list of dict
+        New rows.
+    info : dict
+        Key-value metadata stored in the Parquet schema (date, command).
+
+    Returns
+    -------
+    DataFrame
+        The table written, sorted by id, one row per id (a new row replaces an old one
+        of the same id: a retried sample).
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    new = pd.DataFrame(rows)
+    frames = [f for f in (old, new) if len(f)]
+    table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=BASE_COLUMNS)
+    table = table.drop_duplicates("id", keep="last").sort_values("id", ignore_index=True)
+    table = _column_order(_uniform_types(table))
+    arrow = pa.Table.from_pandas(table, preserve_index=False)
+    meta = {**(arrow.schema.metadata or {}), **{k.encode(): v.encode() for k, v in info.items()}}
+    tmp = path.with_name(path.name + ".tmp")
+    pq.write_table(arrow.replace_schema_metadata(meta), tmp)
+    os.replace(tmp, path)
+    return table
+
+
+def _uniform_types(table: pd.DataFrame) -> pd.DataFrame:
+    """Object columns mixing types (e.g. a ``choice`` of numbers and strings) become text."""
+    for c in table.columns:
+        if table[c].dtype == object:
+            kinds = {type(x) for x in table[c] if x is not None and x == x}
+            if len(kinds) > 1:
+                table[c] = [None if x is None or x != x else str(x) for x in table[c]]
+    return table
+
+
+def _column_order(table: pd.DataFrame) -> pd.DataFrame:
+    for c in BASE_COLUMNS:
+        if c not in table.columns:
+            table[c] = None
+    rest = sorted(c for c in table.columns if c not in BASE_COLUMNS)
+    return table[BASE_COLUMNS + rest]

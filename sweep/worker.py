@@ -1,0 +1,196 @@
+"""One sample on a Dask worker: draw it, simulate it, verify it, return its result row.
+
+The run stays in memory (the steps of :func:`generated.api.run`, writing nothing) or, with
+``--keep-runs``, is that function on the written scenario file; the checks are the
+bound-vs-actual table of :func:`verify.pipeline.verify_run` (no figures). A sample's own
+fault (a refused draw, an exception) is its row's ``status``, never an error of the task.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import time
+import traceback
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from sweep.coverage import coverage_columns
+from sweep.measures import (
+    library_key,
+    step_recovery,
+    summarize_table,
+    tail_max_et,
+    theorem2_entry,
+    topology_in_tail,
+)
+from sweep.results import StudyPaths
+from sweep.sampler import Sample, make_sample, write_scenario
+from sweep.study import Study, load_study
+
+
+@lru_cache(maxsize=4)
+def _study(path: str) -> Study:
+    """The study, loaded once per worker process."""
+    return load_study(path)
+
+
+def run_sample(study_path: str, sample_id: int, folder: str, keep: bool = False) -> dict[str, Any]:
+    """Draw, simulate and verify one sample; never raises for a sample's own fault.
+
+    Parameters
+    ----------
+    study_path : str
+        The study file.
+    sample_id : int
+        0-based id.
+    folder : str
+        The study's output folder (:class:`StudyPaths`).
+    keep : bool
+        Also write the sample's scenario file (``samples/``) and its run (trajectory.csv,
+        meta.json, gains.json under ``runs/``); default: the run stays in memory.
+
+    Returns
+    -------
+    dict
+        One flat row (:data:`sweep.results.BASE_COLUMNS`, ``param:<key>``,
+        ``t2_entry:<i>``); ``status`` is ``ok``, ``refused: <loader's reason>`` or
+        ``failed: <one-line error>``.
+    """
+    t0 = time.perf_counter()
+    paths = StudyPaths(Path(folder))
+    sample = make_sample(_study(study_path), sample_id)
+    row: dict[str, Any] = {"id": sample.id, "seed": str(sample.seed), **param_columns(sample)}
+    row["name"] = sample.scenario_data.get("name", "")
+    if sample.scenario is None:
+        row["status"] = f"refused: {sample.reason}"
+    else:
+        try:
+            row.update(_simulate_and_verify(sample, paths, keep))
+            row["status"] = "ok"
+        except Exception as exc:  # noqa: BLE001 - any failure of one sample is recorded
+            row["status"] = f"failed: {one_line(exc)}"
+    row["wall_s"] = time.perf_counter() - t0
+    row["finished_utc"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+    return row
+
+
+def run_samples(
+    study_path: str, sample_ids: list[int], folder: str, keep: bool = False
+) -> list[dict[str, Any]]:
+    """:func:`run_sample` for each id in turn: one Dask task runs a chunk of samples, so
+    the scheduler's per-task cost is paid once per chunk (docs/studies.md, 'Execution').
+
+    Parameters
+    ----------
+    study_path, folder, keep
+        As for :func:`run_sample`.
+    sample_ids : list of int
+        The chunk's sample ids.
+
+    Returns
+    -------
+    list of dict
+        One row per id, in the order given.
+    """
+    return [run_sample(study_path, k, folder, keep) for k in sample_ids]
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception as one line: its type and its text with whitespace collapsed, ≤ 500 chars.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The exception of a failed sample.
+    """
+    text = " ".join(str(exc).split()) or "".join(traceback.format_exception_only(exc)).strip()
+    return f"{type(exc).__name__}: {text}"[:500]
+
+
+def param_columns(sample: Sample) -> dict[str, Any]:
+    """The drawn values as ``param:<key>`` columns; a list becomes ``param:<key>[k]`` (1-based).
+
+    Parameters
+    ----------
+    sample : Sample
+        A drawn sample.
+    """
+    out: dict[str, Any] = {}
+    for key, v in sample.params.items():
+        if isinstance(v, list):
+            out.update({f"param:{key}[{k + 1}]": _scalar(x) for k, x in enumerate(v)})
+        else:
+            out[f"param:{key}"] = _scalar(v)
+    return out
+
+
+def _scalar(v: Any) -> Any:
+    """A Parquet-friendly value: numbers and strings stay, anything else becomes JSON."""
+    if isinstance(v, bool | int | float | str):
+        return v
+    return json.dumps(v)
+
+
+def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[str, Any]:
+    """Run the sample (written to disk or in memory) and summarize its bounds table."""
+    from verify import pipeline as P
+
+    t0 = time.perf_counter()
+    if keep:
+        run = _run_written(sample, paths)
+        t1 = time.perf_counter()
+        v = P.verify_run(run, out_root=paths.runs)
+    else:
+        run = run_in_memory(sample, paths)
+        t1 = time.perf_counter()
+        v = P.verify_run(run)  # with the gains the run used (Run.gains): no file is read
+    return {
+        "simulate_s": t1 - t0,
+        "checks_s": time.perf_counter() - t1,
+        "steps": run.meta.get("steps"),
+        "library": library_key(run.meta),
+        **summarize_table(v.table),
+        **coverage_columns(v.table),
+        **theorem2_entry(v.table, sample.scenario, run.frame, v.config),
+        "tail_max_et": tail_max_et(run.frame, v.config.tail_fraction),
+        **topology_in_tail(sample.scenario, run.frame, v.config.tail_fraction),
+        **step_recovery(sample.scenario, run),
+    }
+
+
+def _run_written(sample: Sample, paths: StudyPaths) -> Any:
+    """``make sim`` of the written scenario file: samples/<name>.toml, runs/<name>/."""
+    from generated import api
+    from verify import pipeline as P
+
+    scenario_file = write_scenario(sample, paths.samples)
+    res = api.run(scenario_file, out_root=paths.runs, progress=False)
+    return P.Run(sample.scenario, res.frame, res.trajectory.x, res.meta, res.csv_path.parent)
+
+
+def run_in_memory(sample: Sample, paths: StudyPaths) -> Any:
+    """The same steps as :func:`generated.api.run` (gains, build, integrate, outputs)
+    writing nothing; the run's folder is where ``--keep-runs`` would write it.
+
+    Parameters
+    ----------
+    sample : Sample
+        The drawn sample (its scenario).
+    paths : StudyPaths
+        The study's folders.
+    """
+    from generated import api
+    from verify import pipeline as P
+
+    sc = sample.scenario
+    gains = api.scenario_gains(sc, f"gains of sample {sample.id}")
+    codegen = api.resolve_codegen(sc.N)
+    built = api.build(sc, gains, sc.integration.method, codegen)
+    traj = api.simulate(built, sc, api.integrator_settings(sc, sc.integration.method, codegen))
+    traj.raise_if_incomplete()
+    frame = api.trajectory_frame(built, sc, traj)
+    meta = {"steps": traj.stats.get("steps"), "library": {"key": built.library.key}}
+    folder = paths.runs / sc.name
+    return P.Run(sc, frame, traj.x, meta, folder, gains=gains, closed_loop=built.closed_loop)
