@@ -14,7 +14,8 @@ from __future__ import annotations
 import datetime as dt
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +24,7 @@ import pandas as pd
 
 from core.provenance import current_commit, machine
 from search.evaluate import evaluate_many
-from search.space import dimensions, uniform_points, values_at
+from search.space import dimensions, sobol_points, uniform_points, values_at
 from search.spec import SearchFile, load_search
 from sweep.run import commit_rows, read_results
 
@@ -56,7 +57,7 @@ def dask_executor(client: Any) -> Executor:
     Parameters
     ----------
     client : distributed.Client
-        From :func:`sweep.run._client` (the study's cluster).
+        From :func:`sweep.cluster.dask_client` (the study's cluster).
     """
 
     def run(search: SearchFile, points: list[dict], folder: str) -> list[dict]:
@@ -94,7 +95,8 @@ def run_search(
         Local Dask worker processes (default one per core; ``$DASK_SCHEDULER`` is used
         when set, as for studies).
     executor : callable, optional
-        Runs a batch of points (default: the Dask cluster of :func:`sweep.run._client`).
+        Runs a batch of points (default: the Dask cluster of
+        :func:`sweep.cluster.dask_client`).
     command : str, optional
         The command recorded with the results.
     progress : bool
@@ -113,9 +115,9 @@ def run_search(
     }
     client = None
     if executor is None:
-        from sweep.run import _client
+        from sweep.cluster import dask_client
 
-        client = _client(None, workers)
+        client = dask_client(None, workers)
         executor = dask_executor(client)
         threads = sum(client.nthreads().values())
     else:
@@ -127,10 +129,9 @@ def run_search(
         minimise(search, results, executor, info)
     finally:
         if client is not None:
-            cluster = client.cluster
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            from sweep.cluster import close_client
+
+            close_client(client, own_cluster=True)
     from search.report import write_report
 
     write_report(search, results)
@@ -141,6 +142,49 @@ def _key(row: Any) -> tuple[str, int]:
     return str(row["arm"]), int(row["eval"])
 
 
+@dataclass
+class _Rounds:
+    """One search's rounds: what is committed, what runs, and the baseline's pace."""
+
+    search: SearchFile
+    results: Path
+    executor: Executor
+    info: dict[str, str]
+    dims: tuple
+    progress: bool
+    done: pd.DataFrame = field(default_factory=pd.DataFrame)
+    known: dict[tuple[str, int], dict] = field(default_factory=dict)
+    n_search: int = 0
+    n_base: int = 0
+    count: int = 0
+
+    def run(self, points: list[dict], last: bool = False) -> dict[tuple[str, int], dict]:
+        """Run ``points`` (search arm) with the baseline's share; the rows by (arm, eval).
+
+        The baseline keeps pace with the search (``baseline / budget`` points per search
+        point); the last round adds whatever of it is left.
+        """
+        s = self.search.settings
+        self.n_search += len(points)
+        due = s.baseline if last else math.ceil(self.n_search * s.baseline / s.budget)
+        m = max(min(due, s.baseline) - self.n_base, 0)
+        base_u = uniform_points(s.seed, self.n_base, m, len(self.dims))
+        points = points + [
+            _point("baseline", self.n_base + k, u, self.dims) for k, u in enumerate(base_u)
+        ]
+        self.n_base += m
+        rows = {_key(p): self.known[_key(p)] for p in points if _key(p) in self.known}
+        todo = [p for p in points if _key(p) not in rows]
+        if todo:
+            new = self.executor(self.search, todo, str(self.results.parent.resolve()))
+            self.done = commit_rows(self.results, self.done, new, self.info)
+            rows.update({_key(x): x for x in new})
+        self.count += 1
+        if self.progress:
+            _progress(self.count, self.done)
+        return rows
+
+
 def _loop(
     search: SearchFile,
     results: Path,
@@ -149,59 +193,85 @@ def _loop(
     popsize: int,
     progress: bool,
 ) -> None:
-    """Rounds of one CMA-ES generation per requirement plus a share of the baseline.
+    """Exploration, then one local CMA-ES per requirement, with the baseline alongside.
 
-    Each requirement has its own optimiser, told that requirement's robustness: the least
-    robustness over requirements is flat wherever another requirement is the smaller one,
-    so one optimiser of the minimum follows whichever requirement happens to be least.
+    The first ``explore`` share of the budget is a scrambled Sobol' sequence, shared by all
+    requirements (every run scores every requirement). Each requirement then has its own
+    CMA-ES, started at its least robust explored point and told that requirement's
+    robustness: the least robustness over requirements is flat wherever another
+    requirement is the smaller one, so one optimiser of the minimum would follow whichever
+    requirement happens to be least. An optimiser that stops is restarted at the least
+    robust point found for its requirement.
     """
-    from cmaes import CMA
-
     s = search.settings
     dims = dimensions(search.study)
-    n = len(dims)
     done = read_results(results)
-    known = _known(done)
-    reqs = search.requirements
-    opts = [
-        CMA(
-            mean=np.full(n, 0.5),
-            sigma=s.sigma,
-            bounds=np.tile([0.0, 1.0], (n, 1)),
-            seed=(s.seed + j) % (2**31),
-            population_size=popsize,
-        )
-        for j in range(len(reqs))
-    ]
-    rounds = max(1, math.ceil(s.budget / (popsize * len(reqs))))
-    per_round = math.ceil(s.baseline / rounds) if s.baseline else 0
-    n_search = n_base = 0
-    folder = str(results.parent.resolve())
-    for r in range(rounds):
-        asked = [[cma.ask() for _ in range(popsize)] for cma in opts]
-        points = []
+    r = _Rounds(search, results, executor, info, dims, progress, done, _known(done))
+    n_explore = min(int(round(s.explore * s.budget)), s.budget)
+    explored: dict[tuple[str, int], dict] = {}
+    for k0 in range(0, n_explore, popsize * len(search.requirements)):
+        k1 = min(k0 + popsize * len(search.requirements), n_explore)
+        us = sobol_points(s.seed, k0, k1 - k0, len(dims))
+        pts = [_point("search", k0 + k, u, dims) | {"target": "explore"} for k, u in enumerate(us)]
+        explored.update(r.run(pts, last=k1 == s.budget))
+    _local(r, popsize, n_explore, explored)
+
+
+def _local(r: _Rounds, popsize: int, start: int, explored: dict) -> None:
+    """Generations of one CMA-ES per requirement until the budget is spent."""
+    s, reqs, n = r.search.settings, r.search.requirements, len(r.dims)
+    cols = [f"rob:{q.name}" for q in reqs]
+    best = [_least(explored.values(), c) for c in cols]
+    opts = [_cma(b, n, s.sigma, s.seed + j, popsize) for j, b in enumerate(best)]
+    k = start
+    while k < s.budget:
+        # the budget's last generation may be partial (at least 2 points per optimiser)
+        per = max(min(popsize, math.ceil((s.budget - k) / len(reqs))), 2)
+        asked = [[cma.ask() for _ in range(per)] for cma in opts]
+        pts = [
+            _point("search", k + j * per + i, u, r.dims) | {"target": reqs[j].name}
+            for j, us in enumerate(asked)
+            for i, u in enumerate(us)
+        ]
+        rows = r.run(pts, last=k + len(pts) >= s.budget)
         for j, us in enumerate(asked):
-            for k, u in enumerate(us):
-                p = _point("search", n_search + j * popsize + k, u, dims)
-                p["target"] = reqs[j].name
-                points.append(p)
-        m = max(min(per_round, s.baseline - n_base), 0)
-        base_u = uniform_points(s.seed, n_base, m, n)
-        points += [_point("baseline", n_base + k, u, dims) for k, u in enumerate(base_u)]
-        rows = {_key(p): known[_key(p)] for p in points if _key(p) in known}
-        todo = [p for p in points if _key(p) not in rows]
-        if todo:
-            new = executor(search, todo, folder)
-            done = commit_rows(results, done, new, info)
-            rows.update({_key(x): x for x in new})
-        for j, (cma, us) in enumerate(zip(opts, asked, strict=True)):
-            col = f"rob:{reqs[j].name}"
-            got = [rows[("search", n_search + j * popsize + k)] for k in range(popsize)]
-            cma.tell([(u, _told(row, col)) for u, row in zip(us, got, strict=True)])
-        n_search += popsize * len(reqs)
-        n_base += m
-        if progress:
-            _progress(r + 1, rounds, done)
+            got = [rows[("search", k + j * per + i)] for i in range(per)]
+            best[j] = _least([*got, *([best[j]] if best[j] else [])], cols[j])
+            if per == popsize:  # a partial generation is not told: nothing follows it
+                opts[j].tell([(u, _told(row, cols[j])) for u, row in zip(us, got, strict=True)])
+            if opts[j].should_stop():  # restart at the least robust point so far
+                opts[j] = _cma(best[j], n, s.sigma, s.seed + j + 7919 * (k + 1), popsize)
+        k += len(pts)
+
+
+def _cma(best: dict | None, n: int, sigma: float, seed: int, popsize: int) -> Any:
+    """A CMA-ES in the unit box, centred on ``best``'s coordinates (else the centre)."""
+    from cmaes import CMA
+
+    mean = np.clip(_coords(best), 1e-9, 1 - 1e-9) if best else np.full(n, 0.5)
+    return CMA(
+        mean=mean,
+        sigma=sigma,
+        bounds=np.tile([0.0, 1.0], (n, 1)),
+        seed=seed % (2**31),
+        population_size=popsize,
+    )
+
+
+def _coords(row: dict) -> np.ndarray:
+    keys = sorted((c for c in row if c.startswith("u:")), key=lambda c: int(c[2:]))
+    return np.array([float(row[c]) for c in keys])
+
+
+def _least(rows: Iterable[dict], column: str) -> dict | None:
+    """The ``ok`` row with the least ``column`` (ties: the first), or None."""
+    best = None
+    for row in rows:
+        if _told(row, column) < PENALTY and (
+            best is None or _told(row, column) < _told(best, column)
+        ):
+            best = row
+    return best
 
 
 def _known(done: pd.DataFrame) -> dict[tuple[str, int], dict]:
@@ -226,7 +296,7 @@ def _told(row: dict, column: str) -> float:
     return float(rob)
 
 
-def _progress(r: int, rounds: int, done: pd.DataFrame) -> None:
+def _progress(r: int, done: pd.DataFrame) -> None:
     ok = done[done["status"] == "ok"] if len(done) else done
     best = {
         arm: float(ok.loc[ok["arm"] == arm, "robustness"].min())
@@ -234,4 +304,4 @@ def _progress(r: int, rounds: int, done: pd.DataFrame) -> None:
         if len(ok) and (ok["arm"] == arm).any()
     }
     text = ", ".join(f"{a} min {v:.4g}" for a, v in best.items())
-    print(f"search: round {r}/{rounds}, {len(done)} evaluations; {text}", file=sys.stderr)
+    print(f"search: round {r}, {len(done)} evaluations; {text}", file=sys.stderr)

@@ -278,3 +278,27 @@ def uniform_points(seed: int, start: int, count: int, ndim: int) -> np.ndarray:
         for k in range(start, start + count)
     ]
     return np.array(rows).reshape(count, ndim)
+
+
+def sobol_points(seed: int, start: int, count: int, ndim: int) -> np.ndarray:
+    """Exploration points ``start .. start + count - 1`` of a scrambled Sobol' sequence
+    seeded from ``SeedSequence([seed, 2])``: a prefix of one fixed sequence, so a resumed
+    or extended search draws the same points, and a stream apart from the baseline's.
+
+    Parameters
+    ----------
+    seed : int
+        The search's seed.
+    start, count : int
+        Which points.
+    ndim : int
+        Dimensions of the box.
+    """
+    from scipy.stats import qmc
+
+    end = start + count
+    if count <= 0:
+        return np.zeros((0, ndim))
+    engine = qmc.Sobol(d=ndim, scramble=True, seed=np.random.default_rng([seed, 2]))
+    m = max(int(np.ceil(np.log2(end))), 0)
+    return engine.random_base2(m)[start:end]

@@ -15,12 +15,16 @@ from typing import Any
 
 from search.stl import FormulaError, Node, parse
 from sweep import study as ST
+from sweep.study_fields import read_integer, read_string, read_table
 
-SEARCH_KEYS = {"budget", "baseline", "batch", "sigma", "minimise_steps", "seed"}
+SEARCH_KEYS = {"budget", "baseline", "batch", "sigma", "explore", "minimise_steps", "seed"}
 REQUIREMENT_KEYS = {"name", "formula", "scale", "guaranteed", "claims"}
 #: signals a formula may name: the maxima over followers, and each follower's own (suffix i)
 SIGNALS = ("deviation", "et", "eeta", "u")
 MAX_BUDGET = 100_000
+#: defaults of ``[search] sigma`` and ``explore`` (docs/search.md, 'Running a search')
+SIGMA = 0.3
+EXPLORE = 0.3
 
 
 @dataclass(frozen=True)
@@ -66,6 +70,8 @@ class SearchSettings:
         least population CMA-ES recombines).
     sigma : float
         CMA-ES initial step size in the unit box.
+    explore : float
+        Share of the budget spent on the Sobol' exploration that starts the optimisers.
     minimise_steps : int
         Bisection steps per parameter when minimising the least robust run.
     seed : int
@@ -78,6 +84,7 @@ class SearchSettings:
     sigma: float
     minimise_steps: int
     seed: int
+    explore: float = EXPLORE
 
 
 @dataclass(frozen=True)
@@ -126,7 +133,7 @@ def load_search(path: str | Path) -> SearchFile:
     """
     path = Path(path)
     f = str(path)
-    data = ST._read_toml(path)
+    data = ST.read_study_file(path)
     search = data.pop("search", None)
     reqs = data.pop("requirements", None)
     if search is None:
@@ -135,7 +142,7 @@ def load_search(path: str | Path) -> SearchFile:
         raise _err(f, "requirements", "missing", "at least one [[requirements]] entry")
     settings = _settings(f, search, data)
     data.setdefault("count", max(1, settings.budget + settings.baseline))
-    study = _study(f, path, data)
+    study = ST.study_from_data(path, data)  # the study part, by the study's own checks
     if study.graph is not None:
         raise _err(f, "graph", "random graphs are not searchable", "a study without [graph]")
     if study.operator is not None and study.operator.traces:
@@ -152,49 +159,31 @@ def load_search(path: str | Path) -> SearchFile:
     return SearchFile(f, study, settings, out)
 
 
-def _study(f: str, path: Path, data: dict) -> ST.Study:
-    """The study part, checked by sweep.study's own checks (as :func:`load_study` does)."""
-    ST._table(f, data, "", ST.TOP_KEYS, {"base", "count", "seed"})
-    base, base_data = ST._base(f, path, data["base"])
-    study = ST.Study(
-        name=ST._name(f, data, path),
-        path=f,
-        description=ST._string(f, data.get("description", ""), "description"),
-        base=base,
-        base_data=base_data,
-        count=ST._integer(f, data["count"], "count", 1, ST.MAX_COUNT),
-        seed=ST._integer(f, data["seed"], "seed", 0, 2**63 - 1),
-        params=ST._params(f, data.get("params", {})),
-        graph=ST._graph(f, data["graph"]) if "graph" in data else None,
-        operator=ST._operator(f, path, data["operator"]) if "operator" in data else None,
-        fixed=ST._fixed(f, data.get("set", {})),
-        faults=ST._faults(f, data["faults"]) if "faults" in data else None,
-    )
-    ST._check_keys_apply(study)
-    return study
-
-
 def _settings(f: str, raw: Any, data: dict) -> SearchSettings:
-    t = ST._table(f, raw, "search", SEARCH_KEYS, {"budget", "baseline"})
+    t = read_table(f, raw, "search", SEARCH_KEYS, {"budget", "baseline"})
     batch = t.get("batch")
-    sigma = t.get("sigma", 0.3)
+    sigma = t.get("sigma", SIGMA)
     if isinstance(sigma, bool) or not isinstance(sigma, int | float) or not 0 < sigma <= 1:
         raise _err(f, "search.sigma", f"is {sigma!r}", "a number in (0, 1] (unit box)")
+    explore = t.get("explore", EXPLORE)
+    if isinstance(explore, bool) or not isinstance(explore, int | float) or not 0 <= explore <= 0.9:
+        raise _err(f, "search.explore", f"is {explore!r}", "a share of the budget in [0, 0.9]")
     seed = t.get("seed", data.get("seed", 0))
     return SearchSettings(
-        budget=ST._integer(f, t["budget"], "search.budget", 1, MAX_BUDGET),
-        baseline=ST._integer(f, t["baseline"], "search.baseline", 0, MAX_BUDGET),
-        batch=None if batch is None else ST._integer(f, batch, "search.batch", 4, 4096),
+        budget=read_integer(f, t["budget"], "search.budget", 1, MAX_BUDGET),
+        baseline=read_integer(f, t["baseline"], "search.baseline", 0, MAX_BUDGET),
+        batch=None if batch is None else read_integer(f, batch, "search.batch", 4, 4096),
         sigma=float(sigma),
-        minimise_steps=ST._integer(f, t.get("minimise_steps", 3), "search.minimise_steps", 0, 20),
-        seed=ST._integer(f, seed, "search.seed", 0, 2**63 - 1),
+        minimise_steps=read_integer(f, t.get("minimise_steps", 3), "search.minimise_steps", 0, 20),
+        seed=read_integer(f, seed, "search.seed", 0, 2**63 - 1),
+        explore=float(explore),
     )
 
 
 def _requirement(f: str, k: int, raw: dict, signals: set[str]) -> Requirement:
     key = f"requirements[{k}]"
-    t = ST._table(f, raw, key, REQUIREMENT_KEYS, {"name"})
-    name = ST._string(f, t["name"], f"{key}.name")
+    t = read_table(f, raw, key, REQUIREMENT_KEYS, {"name"})
+    name = read_string(f, t["name"], f"{key}.name")
     if not name or not all(c.isalnum() or c in "-_." for c in name):
         raise _err(f, f"{key}.name", f"is {name!r}", "letters, digits, '-', '_', '.'")
     guaranteed = t.get("guaranteed", False)
@@ -217,7 +206,7 @@ def _requirement(f: str, k: int, raw: dict, signals: set[str]) -> Requirement:
         raise _err(f, f"{key}.claims", f"is {claims!r}", "a list of claim ids")
     node = None
     if formula is not None:
-        formula = ST._string(f, formula, f"{key}.formula")
+        formula = read_string(f, formula, f"{key}.formula")
         try:
             node = parse(formula, signals)
         except FormulaError as exc:

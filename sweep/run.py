@@ -32,9 +32,7 @@ from sweep.study import load_study
 from sweep.worker import one_line, param_columns, run_in_memory, run_samples  # noqa: F401
 
 # The names above marked F401 are re-exported: search/ and docs/studies.md,
-# docs/verification.md, docs/search.md reach them as sweep.run.<name>. _client is the
-# private name search/run.py still calls; the public one is sweep.cluster.dask_client.
-_client = dask_client
+# docs/verification.md, docs/search.md reach them as sweep.run.<name>.
 
 
 @dataclass(frozen=True)

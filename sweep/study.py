@@ -130,8 +130,22 @@ def load_study(path: str | Path) -> Study:
     StudyError
         One line naming the file, the key, the problem and the fix.
     """
+    return study_from_data(path, read_study_file(path))
+
+
+def study_from_data(path: str | Path, data: dict) -> Study:
+    """The study of a file's table (:func:`read_study_file`), completely validated.
+
+    Search files (docs/search.md) read their own tables first and pass the rest here.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file the table came from (names it in errors, resolves ``base``).
+    data : dict
+        Its top-level table: :data:`TOP_KEYS` only.
+    """
     path = Path(path)
-    data = _read_toml(path)
     f = str(path)
     read_table(f, data, "", TOP_KEYS, {"base", "count", "seed"})
     base, base_data = _base(f, path, data["base"])
@@ -151,6 +165,18 @@ def load_study(path: str | Path) -> Study:
     )
     _check_keys_apply(study)
     return study
+
+
+def read_study_file(path: str | Path) -> dict:
+    """A study (or search) file's table, read within the file limits.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML file: regular, at most :data:`MAX_STUDY_BYTES`, UTF-8, nested at most
+        :data:`MAX_DEPTH` deep.
+    """
+    return _read_toml(Path(path))
 
 
 def _read_toml(path: Path) -> dict:
@@ -334,8 +360,3 @@ def _check_faults(study: Study, data: dict) -> None:
                 ) from None
         except ExpressionError:
             pass
-
-
-# the private names search/spec.py reads (it builds a study with a [search] table on top)
-_table, _string, _integer = read_table, read_string, read_integer
-_graph, _operator, _faults = graph_family, operator_family, fault_family

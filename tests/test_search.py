@@ -128,10 +128,12 @@ def test_missing_requirements_and_search_table(root):
 
 
 def test_rows_resume_and_extend(root):
-    # one requirement: one optimiser, rounds of 4 search points and 1 baseline point
+    # one requirement: 4 explored points and 1 baseline point, then one CMA-ES generation
+    # of 4 points and the last baseline point
     text = SEARCH.format(budget=8, baseline=2).split('[[requirements]]\nname = "guaranteed"')
     text = text[0] + "[params]" + text[1].split("[params]")[1]
-    first = Counting(fail_at=2)  # round 1 (4 search + 1 baseline), then interrupted
+    text = text.replace("batch = 4\n", "batch = 4\nexplore = 0.5\n")
+    first = Counting(fail_at=2)  # round 1 (4 explored + 1 baseline), then interrupted
     with pytest.raises(KeyboardInterrupt):
         run_search(write(root, text=text), out_root=root / "out", executor=first)
     results = root / "out/tiny/results.parquet"
@@ -151,7 +153,8 @@ def test_rows_resume_and_extend(root):
     assert full["id"].is_unique and (full["status"] == "ok").all()
     assert {"rob:dev", "robustness"} <= set(full.columns) and "rob:guaranteed" not in full
     assert (full["rob:dev"].astype(float) == full["robustness"].astype(float)).all()
-    assert set(full.loc[full["arm"] == "search", "target"]) == {"dev"}
+    targets = full[full["arm"] == "search"].sort_values("eval")["target"].tolist()
+    assert targets == ["explore"] * 4 + ["dev"] * 4
     # a rerun of a finished search runs nothing
     idle = Counting()
     run_search(write(root, text=text), out_root=root / "out", executor=idle)
@@ -192,9 +195,10 @@ def test_planted_defect_is_reported_first_with_a_minimised_reproduction(root, mo
     found = table[table["arm"] != "minimise"]
     assert (found["rob:guaranteed"].astype(float) < 0).all()
     assert found["worst_row:guaranteed"].str.contains("envelope").all()
-    # one optimiser per requirement, each a generation of 4
+    # round(0.3 * 4) = 1 explored point, then one optimiser per requirement, each a last
+    # (partial) generation of 2 for the 3 evaluations left
     targets = found.loc[found["arm"] == "search", "target"].value_counts().to_dict()
-    assert targets == {"dev": 4, "guaranteed": 4}
+    assert targets == {"explore": 1, "dev": 2, "guaranteed": 2}
     report = (results.parent / "report.md").read_text()
     body = report.split("\n## ")
     assert body[1].startswith("DEFECT: a guaranteed row is falsified"), report
@@ -225,3 +229,38 @@ def test_the_dask_path_gives_the_rows_of_the_local_one(root):
     a = dask[cols].sort_values(key, ignore_index=True)
     b = local[cols].sort_values(key, ignore_index=True)
     pd.testing.assert_frame_equal(a, b)
+
+
+def test_the_optimiser_descends_where_random_search_does_not(root):
+    # an objective with a known minimum (no simulation): robustness = distance of the
+    # point from c in the unit box. CMA-ES started at the best explored point must get
+    # closer to c than the exploration and than twice as many uniform points.
+    from search.run import _loop
+    from search.space import sobol_points
+
+    c = [0.9, 0.15, 0.7, 0.35]
+
+    def bowl(search, points, folder):
+        out = []
+        for p in points:
+            d = sum((a - b) ** 2 for a, b in zip(p["u"], c, strict=True)) ** 0.5
+            row = {"id": EV.row_id(p["arm"], p["eval"]), "arm": p["arm"], "eval": p["eval"]}
+            row |= {f"u:{k}": x for k, x in enumerate(p["u"])}
+            out.append(row | {"target": p.get("target", ""), "status": "ok", "rob:dev": d})
+        return [r | {"robustness": r["rob:dev"]} for r in out]
+
+    text = SEARCH.format(budget=120, baseline=240).split('[[requirements]]\nname = "guaranteed"')
+    text = text[0] + "[params]" + text[1].split("[params]")[1]
+    search = load_search(write(root, text=text.replace("batch = 4\n", "batch = 4\nsigma = 0.1\n")))
+    results = root / "bowl.parquet"
+    _loop(search, results, bowl, {}, popsize=8, progress=False)
+    rows = pd.read_parquet(results)
+    arm = rows.groupby(["arm", "target"])["robustness"].min().to_dict()
+    assert (rows["arm"] == "search").sum() == 120 and (rows["arm"] == "baseline").sum() == 240
+    assert arm[("search", "dev")] < arm[("search", "explore")]
+    assert arm[("search", "dev")] < arm[("baseline", "")] / 2
+    # the explored points are the Sobol' prefix of the seed
+    explored = rows[rows["target"] == "explore"].sort_values("eval")
+    want = sobol_points(7, 0, len(explored), 4)
+    assert len(explored) == 36
+    assert (explored[[f"u:{k}" for k in range(4)]].to_numpy() == want).all()
