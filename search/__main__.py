@@ -1,4 +1,5 @@
-"""``python -m search run FILE [--workers N] [--out DIR]``: run or continue a search
+"""``python -m search run FILE [--workers N] [--out DIR] [--seed K] [--budget N]
+[--baseline N]``: run or continue a search
 (docs/search.md); ``python -m search check FILE``: load and validate it only."""
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ def main(argv: list[str]) -> int:
     rp.add_argument("file", help="the search TOML file")
     rp.add_argument("--out", default=None, help="output root (default out/ or $HITL_OUT)")
     rp.add_argument("--workers", type=int, default=None, help="local worker processes")
+    for key in ("seed", "budget", "baseline"):
+        rp.add_argument(f"--{key}", type=int, default=None, help=f"replace [search] {key}")
     cp = sub.add_parser("check", help="load and validate a search file")
     cp.add_argument("file", help="the search TOML file")
     args = ap.parse_args(argv)
@@ -41,6 +44,9 @@ def main(argv: list[str]) -> int:
         out_root=args.out or OUT_ROOT,
         workers=args.workers,
         command=" ".join(["python -m search", *argv]),
+        overrides={
+            k: v for k in ("seed", "budget", "baseline") if (v := getattr(args, k)) is not None
+        },
     )
     print(f"results: {path}")
     print(f"report: {path.parent / 'report.md'}")

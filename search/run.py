@@ -82,6 +82,7 @@ def run_search(
     executor: Executor | None = None,
     command: str | None = None,
     progress: bool = True,
+    overrides: dict[str, int] | None = None,
 ) -> Path:
     """Run (or continue) a search and write its report; return ``results.parquet``.
 
@@ -101,8 +102,11 @@ def run_search(
         The command recorded with the results.
     progress : bool
         Print a progress line per round on stderr.
+    overrides : dict, optional
+        ``[search]`` values replacing the file's (``seed``, ``budget``, ``baseline``),
+        checked as the file's are.
     """
-    search = load_search(path)
+    search = load_search(path, overrides)
     folder = Path(out_root) / search.name
     folder.mkdir(parents=True, exist_ok=True)
     results = folder / RESULTS
@@ -173,7 +177,7 @@ class _Rounds:
             _point("baseline", self.n_base + k, u, self.dims) for k, u in enumerate(base_u)
         ]
         self.n_base += m
-        rows = {_key(p): self.known[_key(p)] for p in points if _key(p) in self.known}
+        rows = {_key(p): self.known[_key(p)] for p in points if _recorded(self.known, p)}
         todo = [p for p in points if _key(p) not in rows]
         if todo:
             new = self.executor(self.search, todo, str(self.results.parent.resolve()))
@@ -283,6 +287,13 @@ def _known(done: pd.DataFrame) -> dict[tuple[str, int], dict]:
         if not str(row.get("status", "")).startswith("failed"):
             out[_key(row)] = row
     return out
+
+
+def _recorded(known: dict[tuple[str, int], dict], p: dict) -> bool:
+    """Whether ``p`` has a committed row of the same arm, index and coordinates (a row of
+    another seed or space, under the same name, is run again and replaced)."""
+    row = known.get(_key(p))
+    return row is not None and np.array_equal(_coords(row), np.asarray(p["u"], dtype=float))
 
 
 def _point(arm: str, k: int, u: np.ndarray, dims: tuple) -> dict:

@@ -118,13 +118,20 @@ def _err(f: str, key: str, problem: str, fix: str) -> ST.StudyError:
     return ST.StudyError(f, key, problem, fix)
 
 
-def load_search(path: str | Path) -> SearchFile:
+#: ``[search]`` keys a command line may replace (``python -m search run --seed``)
+OVERRIDABLE = ("seed", "budget", "baseline")
+
+
+def load_search(path: str | Path, overrides: dict[str, int] | None = None) -> SearchFile:
     """Load and validate a search file.
 
     Parameters
     ----------
     path : str or Path
         The TOML file.
+    overrides : dict, optional
+        Values of :data:`OVERRIDABLE` keys replacing the file's ``[search]`` values before
+        they are checked (a seed sweep runs one file).
 
     Raises
     ------
@@ -138,6 +145,11 @@ def load_search(path: str | Path) -> SearchFile:
     reqs = data.pop("requirements", None)
     if search is None:
         raise _err(f, "search", "missing", "a [search] table with budget and baseline")
+    for key, value in (overrides or {}).items():
+        if key not in OVERRIDABLE:
+            raise _err(f, f"search.{key}", "cannot be overridden", f"one of {OVERRIDABLE}")
+        if isinstance(search, dict):
+            search = {**search, key: value}
     if not reqs:
         raise _err(f, "requirements", "missing", "at least one [[requirements]] entry")
     settings = _settings(f, search, data)

@@ -231,27 +231,38 @@ def test_the_dask_path_gives_the_rows_of_the_local_one(root):
     pd.testing.assert_frame_equal(a, b)
 
 
+C = [0.9, 0.15, 0.7, 0.35]
+
+
+def bowl(search, points, folder):
+    """An executor with a known minimum (no simulation): robustness is the distance of the
+    point from :data:`C` in the unit box."""
+    out = []
+    for p in points:
+        d = sum((a - b) ** 2 for a, b in zip(p["u"], C, strict=True)) ** 0.5
+        row = {"id": EV.row_id(p["arm"], p["eval"]), "arm": p["arm"], "eval": p["eval"]}
+        row |= {f"u:{k}": x for k, x in enumerate(p["u"])}
+        row |= {"target": p.get("target", ""), "status": "ok", "rob:dev": d, "robustness": d}
+        out.append(row)
+    bowl.points += [(p["arm"], p["eval"]) for p in points]
+    return out
+
+
+def one_requirement(budget, baseline, extra=""):
+    text = SEARCH.format(budget=budget, baseline=baseline)
+    text = text.split('[[requirements]]\nname = "guaranteed"')
+    text = text[0] + "[params]" + text[1].split("[params]")[1]
+    return text.replace("batch = 4\n", "batch = 4\n" + extra)
+
+
 def test_the_optimiser_descends_where_random_search_does_not(root):
-    # an objective with a known minimum (no simulation): robustness = distance of the
-    # point from c in the unit box. CMA-ES started at the best explored point must get
-    # closer to c than the exploration and than twice as many uniform points.
+    # CMA-ES started at the best explored point must get closer to C than the
+    # exploration and than twice as many uniform points
     from search.run import _loop
     from search.space import sobol_points
 
-    c = [0.9, 0.15, 0.7, 0.35]
-
-    def bowl(search, points, folder):
-        out = []
-        for p in points:
-            d = sum((a - b) ** 2 for a, b in zip(p["u"], c, strict=True)) ** 0.5
-            row = {"id": EV.row_id(p["arm"], p["eval"]), "arm": p["arm"], "eval": p["eval"]}
-            row |= {f"u:{k}": x for k, x in enumerate(p["u"])}
-            out.append(row | {"target": p.get("target", ""), "status": "ok", "rob:dev": d})
-        return [r | {"robustness": r["rob:dev"]} for r in out]
-
-    text = SEARCH.format(budget=120, baseline=240).split('[[requirements]]\nname = "guaranteed"')
-    text = text[0] + "[params]" + text[1].split("[params]")[1]
-    search = load_search(write(root, text=text.replace("batch = 4\n", "batch = 4\nsigma = 0.1\n")))
+    bowl.points = []
+    search = load_search(write(root, text=one_requirement(120, 240, "sigma = 0.1\n")))
     results = root / "bowl.parquet"
     _loop(search, results, bowl, {}, popsize=8, progress=False)
     rows = pd.read_parquet(results)
@@ -264,3 +275,24 @@ def test_the_optimiser_descends_where_random_search_does_not(root):
     want = sobol_points(7, 0, len(explored), 4)
     assert len(explored) == 36
     assert (explored[[f"u:{k}" for k in range(4)]].to_numpy() == want).all()
+
+
+def test_a_rerun_with_another_seed_runs_its_own_points(root):
+    # rows under the same name but of another seed are not told as this seed's
+    from search.run import _known, _loop
+
+    path = write(root, text=one_requirement(16, 8))
+    results = root / "seeds.parquet"
+    bowl.points = []
+    _loop(load_search(path), results, bowl, {}, popsize=4, progress=False)
+    first = len(bowl.points)
+    bowl.points = []
+    _loop(load_search(path, {"seed": 8}), results, bowl, {}, popsize=4, progress=False)
+    assert len(bowl.points) == first == 24  # every point again: other coordinates
+    rows = pd.read_parquet(results)
+    assert len(rows) == 24 and rows["id"].is_unique
+    bowl.points = []
+    _loop(load_search(path, {"seed": 8}), results, bowl, {}, popsize=4, progress=False)
+    assert bowl.points == [] and len(_known(rows)) == 24
+    with pytest.raises(StudyError, match="search.batch"):
+        load_search(path, {"batch": 8})
