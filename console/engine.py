@@ -7,27 +7,21 @@ between two integrator calls takes effect at the *end* of the next call, a multi
 of the quantum ``h`` (one frame of latency), and the next call starts there: every
 change is a restart point of the integrator (as at a breakpoint of the replay).
 
-**u0 is shaped.** A change of the operator's command from u to u' at time c is not a
-jump: it enters as the C¹ ramp (u' − u)·S((t − c)/r), S the smoothstep 3x² − 2x³ of
-``leader.u0_rise`` (core/shaping.py) and r the rise time
-(:data:`CONSOLE_RISE` = :data:`core.shaping.DEFAULT_RISE`, chosen for a reversal of 2α) unless the console is given another. Ramps that
-overlap add up; the command is then a convex blend of the values held
-(core/hold.py), so ‖u0‖ ≤ α holds for every command the protocol accepts. At most
-:data:`RAMP_SLOTS` ramps run at once (the compiled loop has that many); a change
-asked for while all run waits for the oldest to end. The end of a ramp (c + r, where
-its curvature jumps) is a breakpoint of the call that crosses it.
+**u0 is shaped** (:mod:`console.ramps`): a change of the operator's command enters as a
+C¹ smoothstep ramp over the rise time, at most :data:`RAMP_SLOTS` at once; the end of a
+ramp is a breakpoint of the call that crosses it.
 
 Health, bias and links enter as steps: at the end of the call, through
 ``a + (b − a)·step(t − t_end)``, exactly as the replay's health table, bias faults
 and graph switches (right-continuous steps) bring them in.
 
-**Failures.** When the integrator stops inside a call, the loop restarts it from the
-last state reached with a smaller first step (:meth:`LoopBase.integrate`'s
-``attempt``), up to :data:`MAX_ATTEMPTS` times; each failure is an :class:`Event`
-(the session's log, the record's ``events.csv``, the page). If every attempt fails the
-loop is *held* at the last good state (``failure`` says why); ``resume`` tries again
-from there and :meth:`LoopBase.reset` goes back to t = 0. Nothing is ever retried in
-a loop without the clock advancing or the loop being held.
+**Failures** (:mod:`console.recovery`): a call the integrator stops inside is restarted
+from the last state reached, up to :data:`MAX_ATTEMPTS` attempts, each failure an
+:class:`Event`; then the loop is *held* there until :meth:`LoopBase.resume` or
+:meth:`LoopBase.reset`.
+
+The operator's numbers and their changes are :mod:`console.changes`; what the page
+draws and the logged states' columns are :mod:`console.frames`.
 
 :class:`LiveLoop` integrates the compiled closed loop, whose numbers are a runtime
 vector ``p`` (``symbolic.parameters``): the console scenario writes u0_k as
@@ -40,107 +34,31 @@ Nothing is regenerated or recompiled while the console runs.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from console.changes import Change, Settings, pending_changes
+from console.frames import desired_formation, page_signals, state_columns, state_table
 from console.protocol import Limits
+from console.ramps import CONSOLE_RISE, RAMP_SLOTS, Ramp, command_at, fold_finished, u0_literals
+from console.recovery import MAX_ATTEMPTS, Event, restart_settings, run_attempts
 from core.errors import BuildError
-from core.shaping import DEFAULT_RISE
 
-#: rise time (s) of the console's shaped changes of u0: the scenarios' default. It was
-#: chosen for the worst change an operator can make within α, a reversal from −α to +α
-#: (docs/verification.md, 'Operator steps'), which is also the largest console change
-#: (docs/console.md, 'Shaped commands')
-CONSOLE_RISE = DEFAULT_RISE
-#: ramps of u0 that may run at once (terms of the console scenario's u0 expressions)
-RAMP_SLOTS = 12
-#: integrator attempts per call before the loop is held (the first one and the restarts)
-MAX_ATTEMPTS = 4
-#: first step (s) of the first restart after a failure; each further restart takes 1/100 of it
-FIRST_STEP = 1e-6
-
-
-@dataclass(frozen=True)
-class Change:
-    """One change the operator made, at simulated time ``t``.
-
-    Attributes
-    ----------
-    t : float
-        When it took effect (a multiple of the quantum).
-    kind : str
-        ``u0``, ``health``, ``bias`` or ``link``.
-    follower : int or None
-        0-based follower (``health``, ``bias``, ``link``).
-    neighbour : int or None
-        ``link``: 0-based neighbour, -1 for the leader.
-    values : tuple of float
-        ``u0``: the command; ``health``: (g,); ``bias``: the n components; ``link``:
-        (weight,) after the change (0 for a cut).
-    """
-
-    t: float
-    kind: str
-    follower: int | None = None
-    neighbour: int | None = None
-    values: tuple[float, ...] = ()
-
-
-@dataclass(frozen=True)
-class Event:
-    """Something the integrator did that the operator is told about.
-
-    Attributes
-    ----------
-    t : float
-        Simulated time it happened at (the last good state's).
-    kind : str
-        ``failure`` (an attempt stopped; the loop restarts), ``recovered`` (a restart
-        reached the end of the call), ``held`` (every attempt failed) or ``resumed``.
-    text : str
-        One line: the integrator's reason, or what was done.
-    """
-
-    t: float
-    kind: str
-    text: str
-
-
-@dataclass(frozen=True)
-class Ramp:
-    """One shaped change of u0: ``d · S((t − c)/r)``.
-
-    Attributes
-    ----------
-    c : float
-        Its start (the time the change landed).
-    d : ndarray, shape (p,)
-        The change.
-    r : float
-        Its rise time (s).
-    """
-
-    c: float
-    d: np.ndarray
-    r: float
-
-    @property
-    def end(self) -> float:
-        """Where it reaches its full size (its curvature jumps)."""
-        return self.c + self.r
-
-
-def smoothstep(x: np.ndarray | float) -> np.ndarray:
-    """3x² − 2x³ on [0, 1], 0 below, 1 above (core.expressions' ``smoothstep``).
-
-    Parameters
-    ----------
-    x : float or ndarray
-    """
-    x = np.clip(np.asarray(x, dtype=float), 0.0, 1.0)
-    return x * x * (3.0 - 2.0 * x)
+#: the names other modules import from here (they live in the modules named above)
+__all__ = [
+    "CONSOLE_RISE",
+    "MAX_ATTEMPTS",
+    "RAMP_SLOTS",
+    "Advance",
+    "Change",
+    "Event",
+    "LiveLoop",
+    "LoopBase",
+    "Settings",
+    "desired_formation",
+]
 
 
 @dataclass
@@ -163,20 +81,6 @@ class Advance:
     x: np.ndarray
     failure: str = ""
     steps: int = 0
-
-
-@dataclass
-class Settings:
-    """The operator's current numbers (what the parameter vector carries)."""
-
-    u0: np.ndarray
-    health: np.ndarray
-    bias: np.ndarray  # N x n
-    weights: dict[tuple[int, int], float] = field(default_factory=dict)  # (i, j) -> a_ij / a_i0
-
-    def copy(self) -> Settings:
-        """An independent copy."""
-        return Settings(self.u0.copy(), self.health.copy(), self.bias.copy(), dict(self.weights))
 
 
 class LoopBase:
@@ -242,18 +146,11 @@ class LoopBase:
         t : float or ndarray
             Time(s); shape (p,) for a scalar, (len(t), p) for an array.
         """
-        t = np.asarray(t, dtype=float)
-        u = np.broadcast_to(self.u0_base, (*t.shape, self.u0_base.size)).copy()
-        for rp in self.ramps:
-            u = u + smoothstep((t - rp.c) / rp.r)[..., None] * rp.d
-        return u
+        return command_at(self.u0_base, self.ramps, t)
 
     def _fold_ramps(self) -> None:
         """Add the ramps that ended by now to the base command (they are constant on)."""
-        done = [rp for rp in self.ramps if rp.end <= self.t]
-        for rp in done:
-            self.u0_base = self.u0_base + rp.d
-        self.ramps = [rp for rp in self.ramps if rp.end > self.t]
+        self.u0_base, self.ramps = fold_finished(self.u0_base, self.ramps, self.t)
 
     @property
     def t(self) -> float:
@@ -331,19 +228,8 @@ class LoopBase:
         t : float
             The time they are dated (when they land).
         """
-        old, new = self.settings, self.target
-        out = []
-        if np.any(old.u0 != new.u0) and len(self.ramps) < RAMP_SLOTS:
-            out.append(Change(t, "u0", values=tuple(map(float, new.u0))))
-        for i in range(self.limits.N):
-            if old.health[i] != new.health[i]:
-                out.append(Change(t, "health", i, values=(float(new.health[i]),)))
-            if np.any(old.bias[i] != new.bias[i]):
-                out.append(Change(t, "bias", i, values=tuple(map(float, new.bias[i]))))
-        for (i, j), w in sorted(new.weights.items()):
-            if old.weights[(i, j)] != w:
-                out.append(Change(t, "link", i, j, (float(w),)))
-        return out
+        room = len(self.ramps) < RAMP_SLOTS
+        return pending_changes(self.settings, self.target, self.limits.N, room, t)
 
     def parameters_changed(self) -> None:
         """Hook: the settings or the switch time changed (subclasses rebuild p)."""
@@ -375,7 +261,7 @@ class LoopBase:
         changes = self.pending(t_end)
         self.switch_at = t_end if any(c.kind != "u0" for c in changes) else None
         self.parameters_changed()
-        ts, xs, steps, why = self._attempts(ks)
+        ts, xs, steps, why = run_attempts(self, ks)
         if why:
             self.failure = why
         else:
@@ -383,44 +269,6 @@ class LoopBase:
         self.switch_at = None
         self.parameters_changed()
         return Advance(np.array(ts), np.array(xs).reshape(len(ts), self.x.size), why, steps)
-
-    def _attempts(self, ks: np.ndarray) -> tuple[list[float], list[np.ndarray], int, str]:
-        """Integrate to ``ks[-1]`` quanta, restarting after a failure; what was reached.
-
-        Returns the times and states reached (after the start), the steps taken and,
-        when every attempt failed, why (else ``""``).
-        """
-        ts: list[float] = []
-        xs: list[np.ndarray] = []
-        steps = 0
-        for attempt in range(MAX_ATTEMPTS):
-            rest = ks[ks >= self.k]
-            t_out = rest * self.quantum
-            breaks = [rp.end for rp in self.ramps if t_out[0] < rp.end < t_out[-1]]
-            res = self.integrate(self.x, t_out, sorted(breaks), attempt)
-            reached = len(res.t)  # includes t_out[0]
-            if reached > 1:
-                self.k = int(rest[reached - 1])
-                self.x = np.asarray(res.x[-1], dtype=float).copy()
-                ts.extend(float(v) for v in res.t[1:])
-                xs.extend(np.asarray(r, dtype=float) for r in res.x[1:])
-            steps += res.steps
-            self.steps += res.steps
-            if not res.failure:
-                if attempt:
-                    self.events.append(
-                        Event(self.t, "recovered", f"attempt {attempt + 1} reached t = {self.t:g}")
-                    )
-                return ts, xs, steps, ""
-            self.events.append(Event(self.t, "failure", res.failure))
-            if self.k > int(rest[0]):  # progress was made: restarts begin there
-                self.restarts.append(self.t)
-        why = (
-            f"held at t = {self.t:g} s: {MAX_ATTEMPTS} integrator attempts failed "
-            f"({self.events[-1].text}); resume retries from here, reset starts again at t = 0"
-        )
-        self.events.append(Event(self.t, "held", why))
-        return ts, xs, steps, why
 
     def _land(self, changes: list[Change], t_end: float) -> None:
         """Apply the changes that land at the end of a completed call."""
@@ -481,34 +329,7 @@ class LoopBase:
         return X
 
 
-def desired_formation(y0: np.ndarray, eta0dot: np.ndarray, b0: np.ndarray) -> np.ndarray:
-    """The paper's formation slots y0 + R(τ0) b_i0, τ0 the heading of the leader's η̇0.
-
-    R(τ) is the planar rotation; where η̇0 has no heading (its first two components are
-    zero) or n ≠ 2, the slots are y0 + b_i0.
-
-    Parameters
-    ----------
-    y0 : ndarray, shape (n,)
-        The leader's output.
-    eta0dot : ndarray, shape (m,)
-        The leader's η̇0 (its first two components set τ0).
-    b0 : ndarray, shape (N, n)
-        The formation vectors b_i0.
-    """
-    b0 = np.asarray(b0, dtype=float)
-    if b0.shape[1] != 2 or eta0dot.size < 2 or math.hypot(eta0dot[0], eta0dot[1]) == 0.0:
-        return y0 + b0
-    tau = math.atan2(eta0dot[1], eta0dot[0])
-    c, s = math.cos(tau), math.sin(tau)
-    R = np.array([[c, -s], [s, c]])
-    return y0 + b0 @ R.T
-
-
 # --------------------------------------------------------------------------- the real loop
-#: the state columns of trajectory.csv, per follower, in order (generated.trajectory_file)
-AGENT_COLUMNS = (("p", "n"), ("q", "n"), ("eta", "m"), ("mu", "m"), ("phi", ""))
-AGENT_COLUMNS += (("thetahat", "n"), ("ghat", ""))
 
 
 class LiveLoop(LoopBase):
@@ -532,7 +353,7 @@ class LiveLoop(LoopBase):
     def __init__(
         self, sc: Any, gains: Any, built: Any, bias_max: float, rise: float = CONSOLE_RISE
     ) -> None:
-        from generated import api
+        from generated import api, solvers
         from symbolic.parameters import layout_of
 
         if built.outputs_p is None or built.dag is not None:
@@ -543,6 +364,7 @@ class LiveLoop(LoopBase):
             )
         self.sc, self.gains, self.built = sc, gains, built
         self.settings_int = api.integrator_settings(sc)
+        self.method = solvers.get(sc.integration.method)  # what the method does, asked once
         self.p0 = np.asarray(built.p, dtype=float)
         lay = layout_of(sc)
         # u0_k: a + Σ_j d_j*smoothstep((t - c_j)/r_j), literals a, then (d_j, c_j, r_j)
@@ -603,12 +425,8 @@ class LiveLoop(LoopBase):
             p[k : k + 3] = (a, 0.0, 0.0) if c is None else (a, b - a, c)
 
         for k, sl in enumerate(self.u0_slices):
-            p[sl.start] = self.u0_base[k]
-            for j in range(RAMP_SLOTS):
-                rp = self.ramps[j] if j < len(self.ramps) else None
-                # an unused slot: no change (d = 0) with the console's rise time
-                ramp = (0.0, 0.0, self.rise) if rp is None else (rp.d[k], rp.c, rp.r)
-                p[sl.start + 1 + 3 * j : sl.start + 4 + 3 * j] = ramp
+            # an unused slot: no change (d = 0) with the console's rise time
+            p[sl] = u0_literals(self.u0_base[k], self.ramps, k, self.rise)
         for i, idx in enumerate(self.idx_g):
             put(idx, old.health[i], new.health[i])
             for r, k in enumerate(self.idx_f[i]):
@@ -640,7 +458,7 @@ class LiveLoop(LoopBase):
         if self._bound is None:
             p = self.param_vector()
             b = dataclasses.replace(self.built, p=p)
-            if self.sc.integration.method != "native":  # CasADi's integrators call dyn
+            if self.method.integrates_dyn:  # it calls dyn, so dyn must carry the new p
                 b = dataclasses.replace(b, dyn=fix_parameters(self.built.dyn_p, p))
             self._bound = b
         return self._bound
@@ -651,13 +469,9 @@ class LiveLoop(LoopBase):
     ) -> Advance:
         """The compiled loop from ``x0`` at ``t_out[0]`` (a restart, as at a breakpoint).
 
-        The first attempt uses the scenario's settings. The k-th restart after a failure
-        (``attempt`` = k >= 1) starts again from ``x0``, the last state reached, with
-        10^k × ``max_steps`` and a smaller first step: through CasADi's CVODES
-        (``integration.method = "cvodes"``) a first step of :data:`FIRST_STEP` / 100^(k−1)
-        s; the native driver lets CVODE choose its first step, so there the first output
-        interval is cut by 10^k − 1 restarts (each a fresh CVODE start, whose first step
-        CVODE chooses from the tolerances and the right-hand side at that point).
+        The first attempt uses the scenario's settings; the k-th restart after a failure
+        (``attempt`` = k >= 1) starts again from ``x0``, the last state reached, with the
+        settings of :func:`console.recovery.restart_settings`.
 
         Parameters
         ----------
@@ -670,19 +484,12 @@ class LiveLoop(LoopBase):
         attempt : int
             0, or the restart after a failure.
         """
-        import dataclasses
-
         from generated.api import integrate_built
 
-        s = self.settings_int
-        if attempt:
-            s = dataclasses.replace(s, max_steps=int(s.max_steps * 10**attempt))
-            if self.sc.integration.method == "native":
-                cuts = t_out[0] + (t_out[1] - t_out[0]) * np.arange(1, 10**attempt) / 10**attempt
-                breaks = sorted(set(breaks) | {float(c) for c in cuts})
-            else:
-                h0 = FIRST_STEP / 100.0 ** (attempt - 1)
-                s = dataclasses.replace(s, extra_options=(*s.extra_options, ("step0", h0)))
+        # a method that integrates dyn does so through CasADi, whose options take a first
+        # step; the native C drivers take none (CVODE chooses it)
+        first_step = self.method.integrates_dyn
+        s, breaks = restart_settings(self.settings_int, t_out, breaks, attempt, first_step)
         traj = integrate_built(self.bound(), x0, t_out, s, breaks)
         fail = "" if traj.complete else traj.message
         return Advance(traj.t, traj.x, fail, int(traj.stats.get("steps", 0) or 0))
@@ -697,33 +504,12 @@ class LiveLoop(LoopBase):
         """
         b = self.bound()
         out = b.outputs_p.call({"t": self.t, "x": x, "p": b.p})
-        o = {k: np.asarray(v, dtype=float) for k, v in out.items()}
-        y0 = o["y0"].ravel()
-        P = np.array([x[self.layout.slices[("p", i)]] for i in range(self.sc.N)])
-        b = o["b"].reshape(self.sc.N, -1)  # the offsets the controllers track (blended)
-        norm = lambda a: np.linalg.norm(a.reshape(self.sc.N, -1), axis=1).tolist()  # noqa: E731
-        return {
-            "y0": y0.tolist(),
-            "p": P.tolist(),
-            "slots": (y0 + b).tolist(),
-            "u0_now": self.u0_at(self.t).tolist(),
-            "et": norm(o["et"]),
-            "est": norm(o["ebar"]),
-            "ghat": o["ghat"].ravel().tolist(),
-            "unorm": norm(o["u"]),
-        }
+        return page_signals(out, x, self.layout, self.sc.N, self.u0_at(self.t))
 
     # ---------------------------------------------------------------- log
     def state_columns(self) -> list[str]:
         """Names of :meth:`state_table`'s columns (those of trajectory.csv)."""
-        m, n = self.sc.m, self.sc.n
-        size = {"m": m, "n": n, "": 1}
-        cols = [f"eta0_{k}" for k in range(1, m + 1)]
-        for i in range(1, self.sc.N + 1):
-            for name, dim in AGENT_COLUMNS:
-                k = size[dim]
-                cols += [f"{name}{i}"] if dim == "" else [f"{name}{i}_{r}" for r in range(1, k + 1)]
-        return cols
+        return state_columns(self.sc.N, self.sc.n, self.sc.m)
 
     def state_table(self, X: np.ndarray) -> np.ndarray:
         """Logged states as :meth:`state_columns`'s columns.
@@ -733,8 +519,4 @@ class LiveLoop(LoopBase):
         X : ndarray, shape (K, nx)
             States, one row per time.
         """
-        sl = self.layout.slices
-        blocks = [X[:, sl["eta0"]]]
-        for i in range(self.sc.N):
-            blocks += [X[:, sl[(name, i)]] for name, _ in AGENT_COLUMNS]
-        return np.hstack(blocks)
+        return state_table(X, self.layout, self.sc.N)
