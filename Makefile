@@ -99,6 +99,7 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.study
 	$(PY) -m benchmarks.remedies
 	$(PY) -m benchmarks.agents
+	$(PY) -m benchmarks.search
 
 clean:
 	rm -rf out generated/build .pytest_cache

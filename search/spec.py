@@ -23,7 +23,7 @@ REQUIREMENT_KEYS = {"name", "formula", "scale", "guaranteed", "claims"}
 SIGNALS = ("deviation", "et", "eeta", "u")
 MAX_BUDGET = 100_000
 #: defaults of ``[search] sigma`` and ``explore`` (docs/search.md, 'Running a search')
-SIGMA = 0.3
+SIGMA = 0.1
 EXPLORE = 0.3
 
 
