@@ -536,7 +536,8 @@ def definition1_rows(
             )
             ok, why = theorem2_guaranteed(scenario, i)
             lam = np.asarray(scenario.controller.Lambda[i], float)
-            _definition1_intervals(R, df, fl, ws, t, k0, dev, i, ok and certified, why, lam)
+            f = _Follower(R, df, fl, t, k0, dev, i, ok and certified, why, lam)
+            _definition1_intervals(f, ws)
         fd = np.linalg.norm(p - h[i] * y0 - lead_b[:, i, :], axis=1)[tail]
         fd = fd[np.isfinite(fd)]
         if fd.size:
@@ -579,75 +580,77 @@ def _definition1_paper(
         )
 
 
-def _definition1_intervals(
-    R: Rows,
-    df: S.Frame,
-    fl,  # noqa: ANN001 (verify.bounds.Theorem1Floor or None)
-    ws: list[IntervalWindow],
-    t: np.ndarray,
-    k0: int,
-    dev: np.ndarray,
-    i: int,
-    ok: bool,
-    why: str,
-    lam: np.ndarray,
-) -> None:
+@dataclass(frozen=True)
+class _Follower:
+    """What follower ``i``'s Definition 1 interval rows read: the trajectory, Theorem 1's
+    floor, the deviation and whether Theorem 2 guarantees the rows."""
+
+    R: Rows
+    df: S.Frame
+    fl: object  # verify.bounds.Theorem1Floor
+    t: np.ndarray
+    k0: int
+    dev: np.ndarray
+    i: int
+    ok: bool
+    why: str
+    lam: np.ndarray
+
+    def c0_bound(self, mask: np.ndarray, ks: int) -> tuple[np.ndarray, int]:
+        """‖C0 ē_ηi‖ ≤ B_η(t) on ``mask`` (Theorem 1 with the φ floor), and the sample V1's
+        comparison lemma starts from: the tail start or the window's start, whichever is
+        earlier (V1 is continuous through health switches and steps of u0)."""
+        fl, t = self.fl, self.t
+        kv = min(self.k0, ks)
+        V1b = fl.v1_bound(float(S.column(self.df, "V1")[kv]), t[mask] - t[kv])
+        phi_cols = [f"phi{j + 1}" for j in range(fl.h.size)]
+        phi = np.asfortranarray(S.take(self.df, phi_cols)[mask])
+        return fl.c0_error_bound(V1b, phi)[:, self.i], kv
+
+
+def _definition1_intervals(f: _Follower, ws: list[IntervalWindow]) -> None:
     """Follower ``i``'s envelope and derived-bound rows, one pair per interval."""
     for w in ws:
-        if fl is None:
+        if f.fl is None:
             why_fl = "needs the synthesised gains and the V1, phi columns" + w.label()
-            R.missing(CL.DEF1_ENV, w.bounds(t), why_fl, agent=i)
-            R.missing(CL.DEF1_DERIVED, w.bounds(t), why_fl, agent=i)
+            f.R.missing(CL.DEF1_ENV, w.bounds(f.t), why_fl, agent=f.i)
+            f.R.missing(CL.DEF1_DERIVED, w.bounds(f.t), why_fl, agent=f.i)
             continue
-        _definition1_envelope(R, df, fl, w, t, k0, dev, i, ok, why, lam)
+        _definition1_envelope(f, w)
         if w.mask is None:
-            R.missing(CL.DEF1_DERIVED, w.bounds(t), w.why + w.label(), agent=i)
+            f.R.missing(CL.DEF1_DERIVED, w.bounds(f.t), w.why + w.label(), agent=f.i)
         else:
-            _definition1_derived(R, df, fl, w, t, k0, dev, i, ok, why)
+            _definition1_derived(f, w)
 
 
-def _definition1_envelope(
-    R: Rows,
-    df: S.Frame,
-    fl,  # noqa: ANN001 (verify.bounds.Theorem1Floor)
-    w: IntervalWindow,
-    t: np.ndarray,
-    k0: int,
-    dev: np.ndarray,
-    i: int,
-    ok: bool,
-    why: str,
-    lam: np.ndarray,
-) -> None:
+def _definition1_envelope(f: _Follower, w: IntervalWindow) -> None:
     """‖p_i − h_i y0 − b_i‖ ≤ ‖B_e(t)‖ + ‖C0 ē_ηi‖ bound from t_s, with the χ envelope.
 
     ė_r = −λ_r e_r + χ_r with |χ_r| ≤ c(t) = max over [t_s, t] of the χ envelope gives
     |e_r(t)| ≤ max(|e_r(t_s)|, c(t)/λ_r) (the interval [−c/λ_r, c/λ_r] attracts).
     """
+    t, i, lam = f.t, f.i, f.lam
     if w.env is None:
         win = (w.piece.start, min(w.piece.end, float(t[-1])))
-        R.missing(CL.DEF1_ENV, win, (w.why or "no start sample") + w.label(), agent=i)
+        f.R.missing(CL.DEF1_ENV, win, (w.why or "no start sample") + w.label(), agent=i)
         return
-    c = w.c
-    et = S.block(df, "et", i + 1, lam.size)
+    et = S.block(f.df, "et", i + 1, lam.size)
     ks = int(np.argmax(w.env))
-    cmax = np.maximum.accumulate(chi_envelope(c, w.W))  # running max of the χ envelope
+    cmax = np.maximum.accumulate(chi_envelope(w.c, w.W))  # running max of the χ envelope
     Be = np.linalg.norm(np.maximum(np.abs(et[ks])[None, :], cmax[:, None] / lam[None, :]), axis=1)
-    kv = min(k0, ks)
-    V1b = fl.v1_bound(float(S.column(df, "V1")[kv]), t[w.env] - t[kv])
-    phi = np.asfortranarray(S.take(df, [f"phi{j + 1}" for j in range(fl.h.size)])[w.env])
-    bound = Be + fl.c0_error_bound(V1b, phi)[:, i]
-    obs = dev[w.env]
+    Bn, kv = f.c0_bound(w.env, ks)
+    bound = Be + Bn
+    obs = f.dev[w.env]
     ts = t[w.env]
     note = (
         f"pointwise; |e_ti| from the chi envelope (T2, V2 from t_s = {ts[0]:g} s) + "
         f"|C0 ebar_eta_i| (T1 with the phi floor, V1 from t = {t[kv]:g} s)"
         + w.label()
-        + ("" if ok else f"; not guaranteed: {why}")
+        + ("" if f.ok else f"; not guaranteed: {f.why}")
     )
-    R.add(
+    f.R.add(
         CL.DEF1_ENV,
-        CL.Kind.GUARANTEED if ok else CL.Kind.INFO,
+        CL.Kind.GUARANTEED if f.ok else CL.Kind.INFO,
         float(bound.max()),
         float(obs.max()),
         (float(ts[0]), float(ts[-1])),
@@ -657,46 +660,30 @@ def _definition1_envelope(
     )
 
 
-def _definition1_derived(
-    R: Rows,
-    df: S.Frame,
-    fl,  # noqa: ANN001 (verify.bounds.Theorem1Floor)
-    w: IntervalWindow,
-    t: np.ndarray,
-    k0: int,
-    dev: np.ndarray,
-    i: int,
-    ok: bool,
-    why: str,
-) -> None:
+def _definition1_derived(f: _Follower, w: IntervalWindow) -> None:
     """‖p_i − h_i y0 − b_i‖ ≤ ‖e_ti‖ + ‖C0 ē_ηi‖ on one interval, each bounded by its theorem."""
-    win = w.mask
-    c = w.c
-    et = S.block(df, "et", i + 1, c.e_bar_var.size)
+    win, c, t = w.mask, w.c, f.t
+    et = S.block(f.df, "et", f.i + 1, c.e_bar_var.size)
     ks = int(np.argmax(win))
     # Theorem 2 provable variant from t_s: |e_r| ≤ max(χ̄/λ_r, |e_r(t_s)|) (as _provable_rows)
     Be = float(np.linalg.norm(np.maximum(c.e_bar_var, np.abs(et[ks]))))
-    # Theorem 1 with the floor: comparison lemma for V1 from the tail start or the window's
-    # start, whichever is earlier (V1 is continuous through health switches and steps of u0)
-    kv = min(k0, ks)
-    V1b = fl.v1_bound(float(S.column(df, "V1")[kv]), t[win] - t[kv])
-    phi = np.asfortranarray(S.take(df, [f"phi{j + 1}" for j in range(fl.h.size)])[win])
-    Bn = fl.c0_error_bound(V1b, phi)[:, i]
+    Bn, kv = f.c0_bound(win, ks)
     bound = Be + Bn
-    ok = ok and math.isfinite(w.tc)
+    ok = f.ok and math.isfinite(w.tc)
     note = (
         f"pointwise; |e_ti| <= {Be:.3g} (T2 provable) + |C0 ebar_eta_i| <= {float(Bn.max()):.3g}"
         f" (T1 with the phi floor, V1 from t = {t[kv]:g} s)" + w.label()
     )
     if not ok:
-        note += f"; not guaranteed: {why if math.isfinite(w.tc) else 'no comparison-lemma time'}"
-    R.add(
+        why = f.why if math.isfinite(w.tc) else "no comparison-lemma time"
+        note += f"; not guaranteed: {why}"
+    f.R.add(
         CL.DEF1_DERIVED,
         CL.Kind.GUARANTEED if ok else CL.Kind.INFO,
         float(bound.max()),
-        float(dev[win].max()),
+        float(f.dev[win].max()),
         w.bounds(t),
         note,
-        agent=i,
-        holds=bool(np.all(dev[win] <= bound)),
+        agent=f.i,
+        holds=bool(np.all(f.dev[win] <= bound)),
     )
