@@ -107,9 +107,20 @@ def seed_run(file: Path, seed: int, budget: int, baseline: int, out: Path, worke
     """
     folder = _fresh(out)
     wall = _search(
-        [str(file), "--seed", str(seed), "--budget", str(budget), "--baseline", str(baseline),
-         "--workers", str(workers), "--out", str(folder)]
-    )  # fmt: skip
+        [
+            str(file),
+            "--seed",
+            str(seed),
+            "--budget",
+            str(budget),
+            "--baseline",
+            str(baseline),
+            "--workers",
+            str(workers),
+            "--out",
+            str(folder),
+        ]
+    )
     rows = _results(folder)
     ok = rows[rows["status"] == "ok"]
     arm = {a: ok.loc[ok["arm"] == a, "robustness"].astype(float) for a in ("search", "baseline")}
@@ -141,9 +152,20 @@ def timed_run(file: Path, seed: int, budget: int, out: Path, workers: int) -> di
     """
     folder = _fresh(out)
     wall = _search(
-        [str(file), "--seed", str(seed), "--budget", str(budget), "--baseline", "0",
-         "--workers", str(workers), "--out", str(folder)]
-    )  # fmt: skip
+        [
+            str(file),
+            "--seed",
+            str(seed),
+            "--budget",
+            str(budget),
+            "--baseline",
+            "0",
+            "--workers",
+            str(workers),
+            "--out",
+            str(folder),
+        ]
+    )
     rows = _results(folder)
     search = rows[rows["arm"] == "search"]
     return {

@@ -101,7 +101,7 @@ def run_search(
     command : str, optional
         The command recorded with the results.
     progress : bool
-        Print a progress line per round on stderr.
+        Show a progress bar over the evaluations on stderr (each arm's least robustness).
     overrides : dict, optional
         ``[search]`` values replacing the file's (``seed``, ``budget``, ``baseline``),
         checked as the file's are.
@@ -155,12 +155,11 @@ class _Rounds:
     executor: Executor
     info: dict[str, str]
     dims: tuple
-    progress: bool
     done: pd.DataFrame = field(default_factory=pd.DataFrame)
     known: dict[tuple[str, int], dict] = field(default_factory=dict)
     n_search: int = 0
     n_base: int = 0
-    count: int = 0
+    bar: Any = None  # a tqdm bar over the evaluations, when progress is shown
 
     def run(self, points: list[dict], last: bool = False) -> dict[tuple[str, int], dict]:
         """Run ``points`` (search arm) with the baseline's share; the rows by (arm, eval).
@@ -183,9 +182,9 @@ class _Rounds:
             new = self.executor(self.search, todo, str(self.results.parent.resolve()))
             self.done = commit_rows(self.results, self.done, new, self.info)
             rows.update({_key(x): x for x in new})
-        self.count += 1
-        if self.progress:
-            _progress(self.count, self.done)
+        if self.bar is not None:
+            self.bar.update(len(points))
+            self.bar.set_postfix_str(_least_text(self.done), refresh=False)
         return rows
 
 
@@ -210,15 +209,25 @@ def _loop(
     s = search.settings
     dims = dimensions(search.study)
     done = read_results(results)
-    r = _Rounds(search, results, executor, info, dims, progress, done, _known(done))
+    r = _Rounds(search, results, executor, info, dims, done, _known(done))
+    if progress:
+        from tqdm import tqdm
+
+        r.bar = tqdm(total=s.budget + s.baseline, desc="search", unit="eval", file=sys.stderr)
     n_explore = min(int(round(s.explore * s.budget)), s.budget)
     explored: dict[tuple[str, int], dict] = {}
-    for k0 in range(0, n_explore, popsize * len(search.requirements)):
-        k1 = min(k0 + popsize * len(search.requirements), n_explore)
-        us = sobol_points(s.seed, k0, k1 - k0, len(dims))
-        pts = [_point("search", k0 + k, u, dims) | {"target": "explore"} for k, u in enumerate(us)]
-        explored.update(r.run(pts, last=k1 == s.budget))
-    _local(r, popsize, n_explore, explored)
+    try:
+        for k0 in range(0, n_explore, popsize * len(search.requirements)):
+            k1 = min(k0 + popsize * len(search.requirements), n_explore)
+            us = sobol_points(s.seed, k0, k1 - k0, len(dims))
+            pts = [
+                _point("search", k0 + k, u, dims) | {"target": "explore"} for k, u in enumerate(us)
+            ]
+            explored.update(r.run(pts, last=k1 == s.budget))
+        _local(r, popsize, n_explore, explored)
+    finally:
+        if r.bar is not None:
+            r.bar.close()
 
 
 def _local(r: _Rounds, popsize: int, start: int, explored: dict) -> None:
@@ -307,12 +316,12 @@ def _told(row: dict, column: str) -> float:
     return float(rob)
 
 
-def _progress(r: int, done: pd.DataFrame) -> None:
+def _least_text(done: pd.DataFrame) -> str:
+    """Each arm's least robustness so far, for the progress bar."""
     ok = done[done["status"] == "ok"] if len(done) else done
     best = {
         arm: float(ok.loc[ok["arm"] == arm, "robustness"].min())
         for arm in ("search", "baseline")
         if len(ok) and (ok["arm"] == arm).any()
     }
-    text = ", ".join(f"{a} min {v:.4g}" for a, v in best.items())
-    print(f"search: round {r}, {len(done)} evaluations; {text}", file=sys.stderr)
+    return ", ".join(f"{a} min {v:.4g}" for a, v in best.items())
