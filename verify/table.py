@@ -38,7 +38,9 @@ from synthesis.gains import Gains
 from verify import claims as CL
 from verify import signals as S
 from verify.bounds import VerifyConfig
+from verify.checks import CheckInput, registered_rows
 from verify.claims import BUG_KINDS
+from verify.effort import STARTUP  # noqa: F401 - report, pipeline and tests read it here
 from verify.intervals import follower_pieces
 from verify.lyapunov import InequalityCheck
 from verify.rows import COLUMNS, KINDS, Rows, Span, failed_mask, held_mask, win
@@ -76,8 +78,6 @@ __all__ = [
 
 #: Fig. 13: the entering level is this factor times the larger of both runs' tail suprema
 FIG13_LEVEL_FACTOR = 3.0
-#: peak |u_i| is also reported after this start-up time (s): the t = 0 peak dominates
-STARTUP = 1.0
 #: a logged |u_ir| within this relative distance of u_max_i is at the limit
 SATURATION_RTOL = 1e-9
 #: the note's start on rows the saturation invalidates
@@ -142,7 +142,7 @@ def bounds_table(
     theorem1_lyapunov_rows(R, theorem1 or [], scenario, span, gains=gains)
     theorem2_rows(R, scenario, df, span, theorem2 or [], windows, config=cfg)
     definition1_rows(R, scenario, df, gains=gains, config=cfg, windows=windows)
-    effort_rows(R, df, dm.N, dm.n)
+    registered_rows(R, CheckInput(scenario, df, gains, cfg, span, windows))  # verify/checks.py
     if ablation is not None:
         ablation = S.Columns.of(ablation)
         for i in range(dm.N):
@@ -387,44 +387,6 @@ def theorem1_lyapunov_rows(
             holds=chk.ok,
             larger_is_better=True,
         )
-
-
-def effort_rows(R: Rows, df: S.Frame, N: int, n: int) -> None:
-    """Peak ‖u_i‖ (Euclidean, logged torques) over the run and after :data:`STARTUP` (info).
-
-    Parameters
-    ----------
-    R : Rows
-        Rows to append to.
-    df : DataFrame
-        The trajectory; followers without ``u`` columns end the rows.
-    N, n : int
-        Number of followers and of outputs.
-    """
-    df = S.Columns.of(df)
-    t = S.column(df, "t")
-    for i in range(N):
-        if not S.has(df, f"u{i + 1}_1"):
-            return
-        un = S.agent_norm(df, "u", i + 1, n)
-        for label, mask in (
-            ("", np.ones_like(t, bool)),
-            (f" after t = {STARTUP:g} s", t >= STARTUP),
-        ):
-            if not mask.any():
-                continue
-            k = int(np.flatnonzero(mask)[np.argmax(un[mask])])
-            R.add(
-                CL.PEAK_U_LATE if label else CL.PEAK_U,
-                CL.Kind.INFO,
-                math.inf,  # a measurement: no bound
-                float(un[k]),
-                (float(t[mask][0]), float(t[-1])),
-                f"at t = {t[k]:.4g} s; Euclidean norm of the logged u_i",
-                agent=i,
-                holds=True,
-                text={"startup": STARTUP},
-            )
 
 
 def ablation_rows(
