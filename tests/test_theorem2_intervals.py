@@ -353,6 +353,10 @@ def test_the_headline_never_says_a_bare_pass_without_tracking_rows(paper_scenari
     best = max(range(sc.N), key=lambda i: et[i][tail].max())
     assert nums[1].agent == best + 1 and nums[1].value == pytest.approx(et[best][tail].max())
     assert nums[1].t == pytest.approx(t[tail][np.argmax(et[best][tail])])
+    assert nums[2].what == "peak |u_i| after t = 1 s" and nums[2].window[0] == pytest.approx(1.0)
+    # a start-up longer than the horizon: the whole run, and the label says so
+    whole = run_numbers(sc, df, gauge(sc), 0.5, 1e3)[2]
+    assert whole.window[0] == 0.0 and "over the run (horizon shorter than 1000 s)" in whole.text()
     # a failing row: FAIL, with the count
     bad = tb.copy()
     k = bad.index[bad["kind"] == "guaranteed"][0]

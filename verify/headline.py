@@ -217,12 +217,14 @@ def run_numbers(
             else np.full(len(t), np.nan)
         )
     late = t >= startup
-    if not late.any():
+    effort = f"peak |u_i| after t = {startup:g} s"
+    if not late.any():  # a horizon shorter than the start-up: the whole run, said so
         late = np.ones_like(t, bool)
+        effort = f"peak |u_i| over the run (horizon shorter than {startup:g} s)"
     return [
         _worst("worst formation deviation |p_i - h_i y0 - b_i|", t, tail, dev),
         _worst("worst tracking error |e_ti|", t, tail, et),
-        _worst(f"peak |u_i| after t = {startup:g} s", t, late, un),
+        _worst(effort, t, late, un),
     ]
 
 
