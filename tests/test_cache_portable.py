@@ -7,7 +7,9 @@
   environment's libraries (preloaded before the entry is loaded);
 - an entry that checks out (key, SHA-256) but cannot be loaded here, a native library
   whose NEEDED library is missing or bytes that are no shared library, is rebuilt with
-  one line on stderr, never a traceback; a rebuilt entry runs.
+  one line on stderr, never a traceback; a rebuilt entry runs;
+- the per-agent kernel libraries (generated/agents.py) built from one checkout of the
+  packages, that checkout then deleted, are cache hits from another and give the same bits.
 
 The ODE is the two-state rotation x' = (x1, -x0) (x0 = (1, 0): x(t) = (cos t, -sin t)),
 compiled with -O0 into temporary build roots (about a second per build).
@@ -16,6 +18,7 @@ compiled with -O0 into temporary build roots (about a second per build).
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -173,3 +176,68 @@ def test_casadi_entry_that_is_no_shared_library_is_rebuilt(tmp_path, capsys):
     assert len(err) == 1 and LINE.fullmatch(err[0]), err
     assert not again.cache_hit
     np.testing.assert_allclose(np.array(again.function("sq")([2.0, 3.0])).ravel(), [4.0, 9.0])
+
+
+#: builds (or reuses) the per-agent kernels of SMALL in the build root argv[1] and runs
+#: 0.1 s on them, from whichever checkout is on PYTHONPATH; prints the libraries' paths,
+#: whether they were cache hits, and x(0.1)
+AGENTS_SCRIPT = """
+import json, sys
+from pathlib import Path
+from core.scenario import load_scenario
+from generated import agents
+from generated.api import ensure_gains
+from generated.codegen import CodegenSettings
+from generated.integrate import IntegratorSettings, output_grid
+
+root, scenario, out = sys.argv[1:4]
+sc = load_scenario(scenario)
+gains, _ = ensure_gains(sc, Path(out))
+libs, model = agents.build_models(sc, gains, CodegenSettings(optimization="-O0", build_root=root))
+t_out = output_grid(0.1, 0.01)
+tr = agents.run([lib.path for lib in libs], agents.problem(sc, gains, model),
+                agents.initial_state(sc), t_out, IntegratorSettings(method="native"),
+                breakpoints=[b for b in sc.breakpoints() if b < 0.1])
+print(json.dumps({"paths": [str(l.path) for l in libs], "hits": [l.cache_hit for l in libs],
+                  "complete": tr.complete, "x": tr.x[-1].tolist()}))
+"""
+
+
+def _checkout(where: Path) -> Path:
+    """A copy of the packages the agents path imports: a checkout of its own."""
+    for pkg in ("core", "synthesis", "symbolic", "generated"):
+        shutil.copytree(ROOT / pkg, where / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    return where
+
+
+def _agents_run(checkout: Path, root: Path, scenario: Path, out: Path) -> dict:
+    r = subprocess.run(
+        [PY, "-c", AGENTS_SCRIPT, str(root), str(scenario), str(out)],
+        cwd=checkout,
+        env={**os.environ, "PYTHONPATH": str(checkout)},
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    return json.loads(r.stdout.splitlines()[-1])
+
+
+@pytest.mark.slow
+def test_agent_kernels_built_in_a_deleted_checkout_run_from_another(tmp_path):
+    from helpers import SMALL
+
+    scenario = tmp_path / "small.toml"
+    scenario.write_text(SMALL)
+    root = tmp_path / "build"
+    first = _checkout(tmp_path / "checkout-a")
+    built = _agents_run(first, root, scenario, tmp_path / "out-a")
+    assert built["complete"] and not any(built["hits"])
+    for path in map(Path, built["paths"]):
+        assert not [p for p in run_paths(path) if p.startswith("/")]
+        assert str(first) not in path.read_bytes().decode("latin-1")
+        assert str(first) not in (path.parent / MANIFEST_NAME).read_text()
+    shutil.rmtree(first)
+    ran = _agents_run(_checkout(tmp_path / "checkout-b"), root, scenario, tmp_path / "out-b")
+    assert all(ran["hits"]) and ran["paths"] == built["paths"]  # same keys: entries used
+    assert ran["x"] == built["x"]  # the same compiled kernels: the same bits
