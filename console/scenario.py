@@ -3,7 +3,7 @@
 From the file the console is started on, :func:`console_table` keeps everything but:
 
 * ``leader.u0 = ["0.0 + 0.0*smoothstep((t - 0.0)/1.0) + ...", ...]``: per input a number a
-  and :data:`console.engine.RAMP_SLOTS` shaped changes d_j·smoothstep((t − c_j)/r_j), whose
+  and :data:`console.ramps.RAMP_SLOTS` shaped changes d_j·smoothstep((t − c_j)/r_j), whose
   literals are runtime parameters (``expr:leader.u0[k]``) the console sets: a the command
   with every finished ramp, (d_j, c_j, r_j) a change of size d_j landing at time c_j and
   rising over r_j seconds (a trace ``u0_csv``, ``u0_rise`` and ``u0_shape`` are dropped:
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from console.engine import RAMP_SLOTS
+from console.ramps import RAMP_SLOTS
 from core.errors import ScenarioError
 from core.scenario import Scenario, load_scenario, scenario_from_dict
 from sweep.sampler import scenario_toml
