@@ -172,7 +172,8 @@ def _control(sc: Scenario, model: ELModel, sym: _AgentSymbols, r: dict[str, Any]
 def _dynamics(model: ELModel, sym: _AgentSymbols, r: dict[str, Any], c: dict) -> dict:
     """Eq. (2) as an ODE (q̇) and as a DAE residual, the agent's rates and V2 (eq. (32))."""
     S, P, g = sym.S, sym.P, sym.g
-    M, Cm, G = model.M(S["p"]), model.C(S["p"], S["q"]), model.G(S["p"])
+    M, Cm = model.M(S["p"]), model.C(S["p"], S["q"])
+    G = model.forces(S["p"], S["q"])  # G, and the dissipative D beside it (core/models)
     force = g * c["u"] + sym.f - Cm @ S["q"] - G  # eq. (2): M p̈ = g u + f − C q − G
     qdot = ca.solve(M, force)
     res = M @ sym.inputs["a"] - force  # eq. (2) as a DAE residual: M a + C q + G − g u − f

@@ -87,7 +87,7 @@ def controller_function(
     b, bdot, bddot = (ca.SX.sym(s, n) for s in ("b", "bdot", "bddot"))
     thetahat, ghat = ca.SX.sym("thetahat", n), ca.SX.sym("ghat")
     Lam, k1 = ca.SX.sym("Lambda", n), ca.SX.sym("k1", n)
-    M, Cm, G = model.M(p), model.C(p, q), model.G(p)
+    M, Cm, G = model.M(p), model.C(p, q), model.forces(p, q)  # G, and D with dissipation
     et = p - C0 @ eta - b  # eq. (28)
     etdot = q - C0 @ etadot - bdot  # eq. (28)
     chi = etdot + Lam * et  # eq. (28): χ_si = ė_ti + Λ_i e_ti

@@ -120,3 +120,33 @@ def test_adding_a_model_is_one_registration():
         assert float(np.array(mdl.G([0.5])).ravel()[0]) == pytest.approx(np.sin(0.5))
     finally:
         REGISTRY.pop(name, None)
+
+
+def test_dissipation_is_checked_and_enters_as_dr_dq():
+    from core.models.derive import check_dissipation
+
+    x, y, v, w = sp.symbols("x y v w", real=True)
+    # viscous friction with a state-dependent coefficient: D = dR/dq, dD/dq >= 0
+    R = sp.Rational(1, 2) * (2 + sp.cos(x)) * v**2 + sp.Rational(1, 2) * w**2
+    D = sp.Matrix([sp.diff(R, v), sp.diff(R, w)])
+    assert check_dissipation(D, [x, y], [v, w], "ok").startswith("sampled")
+    assert check_dissipation(sp.Matrix([3 * v, w]), [x, y], [v, w], "ok") == "exact"
+    with pytest.raises(ScenarioError, match="dissipation: dD/dq has eigenvalue"):
+        check_dissipation(sp.Matrix([-v, w]), [x, y], [v, w], "bad")  # negative friction
+    with pytest.raises(ScenarioError, match="not symmetric"):
+        check_dissipation(sp.Matrix([w, 0]), [x, y], [v, w], "bad")  # not a gradient
+
+    def lag(prm):
+        p, q = sp.symbols("th", real=True), sp.symbols("w", real=True)
+        c = sp.nsimplify(prm["c"])
+        return sp.Rational(1, 2) * q**2, -sp.cos(p), [p], [q], sp.Rational(1, 2) * c * q**2
+
+    name = "_test_damped_pendulum"
+    try:
+        register(ModelSpec(name=name, n=1, defaults={"c": 0.7}, lagrangian=lag))
+        mdl = build_model(name)
+        assert float(np.array(mdl.D([0.5], [2.0])).ravel()[0]) == pytest.approx(1.4)
+        assert mdl.checks["dissipation"] == "exact"
+        assert build_model("two_link").D is None  # no Rayleigh function: no dissipation
+    finally:
+        REGISTRY.pop(name, None)

@@ -129,7 +129,7 @@ def _two_link(prm: dict[str, float]):
 
 
 def _generic_model(name: str, prm: dict[str, float]):
-    """Other models: numpy lambdas of the model's sympy M, C, G."""
+    """Other models: numpy lambdas of the model's sympy M, C, G (+ D, its dissipation)."""
     import sympy as sp
 
     from core.models import build_model
@@ -138,7 +138,10 @@ def _generic_model(name: str, prm: dict[str, float]):
     syms = list(mod.sympy_p) + list(mod.sympy_q)
     fM = sp.lambdify(syms, mod.sympy_M, "numpy")
     fC = sp.lambdify(syms, mod.sympy_C, "numpy")
-    fG = sp.lambdify(syms, mod.sympy_G, "numpy")
+    # the dissipative force D(p, q) enters eq. (2) beside G: the "G" returned is G + D
+    fG = sp.lambdify(
+        syms, mod.sympy_G if mod.sympy_D is None else mod.sympy_G + mod.sympy_D, "numpy"
+    )
 
     def mcg(p: np.ndarray, q: np.ndarray):
         out = []

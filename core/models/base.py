@@ -35,7 +35,8 @@ class ModelSpec:
     lagrangian : callable
         ``lagrangian(params: dict[str, sympy.Symbol | float]) -> (T, V, p, q)``:
         kinetic energy, potential energy, coordinate symbols and velocity
-        symbols (sympy).
+        symbols (sympy); ``(T, V, p, q, R)`` adds Rayleigh's dissipation function
+        R(p, q) (e.g. ½ Σ c_k q_k² for viscous friction), whose ∂R/∂q enters eq. (2).
     description : str
         One line for the README and summaries.
     nonnegative : frozenset[str]
@@ -46,7 +47,7 @@ class ModelSpec:
     name: str
     n: int
     defaults: Mapping[str, float]
-    lagrangian: Callable[[Mapping[str, Any]], tuple[Any, Any, Any, Any]]
+    lagrangian: Callable[[Mapping[str, Any]], tuple[Any, ...]]
     description: str = ""
     nonnegative: frozenset[str] = frozenset()
 
@@ -65,6 +66,10 @@ class ELModel:
         ``(p, q) -> C(p, q)`` (n×n), Christoffel form, Property 2 holds.
     G : casadi.Function
         ``p -> G(p)`` (n).
+    D : casadi.Function or None
+        ``(p, q) -> D(p, q)`` (n), the dissipative force ∂R/∂q of the model's Rayleigh
+        function R (None: no dissipation); it enters eq. (2) beside G:
+        M p̈ + C ṗ + G + D = g u + f.
     M_bounds : tuple[float, float]
         (inf λ_min(M), sup λ_max(M)) over the configuration space, as needed
         by Theorem 2's bounds (exact when M is constant; otherwise a dense grid
@@ -73,7 +78,7 @@ class ELModel:
         How Property 1 and Property 2 were established (``"exact"`` or
         ``"sampled"`` with the reason), for summaries and reports.
     symbolic : callable, optional
-        ``() -> (M, C, G, p, q)``: the sympy expressions and symbols the Functions
+        ``() -> (M, C, G, p, q, D)``: the sympy expressions and symbols the Functions
         came from, derived on first use (a model read from the derivation cache
         never needs sympy unless asked); also as ``sympy_M`` ... ``sympy_q``.
     """
@@ -85,10 +90,9 @@ class ELModel:
     C: ca.Function
     G: ca.Function
     M_bounds: tuple[float, float]
+    D: ca.Function | None = None
     checks: Mapping[str, str] = field(default_factory=dict)
-    symbolic: Callable[[], tuple[Any, Any, Any, Any, Any]] | None = field(
-        repr=False, default=None, compare=False
-    )
+    symbolic: Callable[[], tuple[Any, ...]] | None = field(repr=False, default=None, compare=False)
 
     def _sym(self, i: int) -> Any:
         return self.symbolic()[i] if self.symbolic is not None else None
@@ -117,6 +121,21 @@ class ELModel:
     def sympy_q(self) -> Any:
         """The velocity symbols."""
         return self._sym(4)
+
+    @property
+    def sympy_D(self) -> Any:
+        """sympy D(p, q) = ∂R/∂q (None without dissipation)."""
+        return self._sym(5)
+
+    def forces(self, p: Any, q: Any) -> Any:
+        """G(p) + D(p, q): the forces besides inertia and Coriolis in eq. (2) (CasADi).
+
+        Parameters
+        ----------
+        p, q : casadi.SX or MX
+            Coordinates and velocities.
+        """
+        return self.G(p) if self.D is None else self.G(p) + self.D(p, q)
 
 
 def register(spec: ModelSpec) -> ModelSpec:

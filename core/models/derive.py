@@ -290,21 +290,71 @@ def _file_sha256(path: str) -> str:
 
 @lru_cache(maxsize=64)
 def _symbolic(name: str, items: tuple[tuple[str, float], ...]) -> tuple[Any, ...]:
-    """(M, C, G, p, q) in sympy, eq. (2), derived from the model's Lagrangian."""
-    T, V, p, q = REGISTRY[name].lagrangian(dict(items))
+    """(M, C, G, p, q, D) in sympy, eq. (2), derived from the model's Lagrangian; D is the
+    dissipative force ∂R/∂q of a Rayleigh function R the Lagrangian may return fifth (None
+    without)."""
+    import sympy as sp
+
+    out = REGISTRY[name].lagrangian(dict(items))
+    T, V, p, q = out[:4]
     M, C, G = euler_lagrange_matrices(T, V, p, q)
-    return M, C, G, p, q
+    D = sp.Matrix([sp.simplify(sp.diff(out[4], qk)) for qk in q]) if len(out) > 4 else None
+    return M, C, G, p, q, D
+
+
+def check_dissipation(D: sp.Matrix, p: list[sp.Symbol], q: list[sp.Symbol], name: str) -> str:
+    """The force D(p, q) = ∂R/∂q dissipates: its Jacobian ∂D/∂q = ∂²R/∂q² is positive
+    semidefinite, exactly when constant, else on a grid of p and q (``"sampled"``).
+
+    Parameters
+    ----------
+    D : sympy.Matrix
+        The dissipative force.
+    p, q : list of sympy.Symbol
+        Generalised coordinates and velocities.
+    name : str
+        Model name, for the error message.
+
+    Raises
+    ------
+    ScenarioError
+        Naming the model and the smallest eigenvalue found.
+    """
+    import sympy as sp
+
+    H = sp.simplify(D.jacobian(q))
+    if not (H - H.T).is_zero_matrix:
+        raise ScenarioError(
+            "model", name, "dissipation: dD/dq is not symmetric", "D = dR/dq of a Rayleigh R(q)"
+        )
+    syms = [s for s in (*p, *q) if s in H.free_symbols]
+    how = "exact" if not syms else "sampled (dD/dq depends on the state)"
+    f = sp.lambdify(syms, H, "numpy")
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-np.pi, np.pi, size=(200 if syms else 1, len(syms)))
+    low = min(float(np.linalg.eigvalsh(np.array(f(*pt), dtype=float)).min()) for pt in pts)
+    if low < -1e-12:
+        raise ScenarioError(
+            "model",
+            name,
+            f"dissipation: dD/dq has eigenvalue {low:.6g} < 0",
+            "a Rayleigh function R with a positive semidefinite Hessian in q",
+        )
+    return how
 
 
 def _derive(name: str, items: tuple[tuple[str, float], ...]) -> dict[str, Any]:
     """The derivation's results as a JSON body: Functions serialized by CasADi, numbers."""
-    M, C, G, p, q = _symbolic(name, items)
+    M, C, G, p, q, D = _symbolic(name, items)
     checks = check_properties(M, C, p, q, name)
     funcs = {
         "M": _to_casadi(M, [p], ["p"], "M"),
         "C": _to_casadi(C, [p, q], ["p", "q"], "C"),
         "G": _to_casadi(G, [p], ["p"], "G"),
     }
+    if D is not None:
+        checks["dissipation"] = check_dissipation(D, p, q, name)
+        funcs["D"] = _to_casadi(D, [p, q], ["p", "q"], "D")
     return {
         "name": name,
         "params": [[k, v] for k, v in items],
@@ -319,6 +369,7 @@ _SIGNATURES = {
     "M": (lambda n: [("p", n, 1)], lambda n: (n, n)),
     "C": (lambda n: [("p", n, 1), ("q", n, 1)], lambda n: (n, n)),
     "G": (lambda n: [("p", n, 1)], lambda n: (n, 1)),
+    "D": (lambda n: [("p", n, 1), ("q", n, 1)], lambda n: (n, 1)),  # only with dissipation
 }
 
 
@@ -330,14 +381,21 @@ def _model_from(
     checks, bounds, fs = body.get("checks"), cache.finite_pair(body.get("M_bounds")), {}
     if body.get("name") != name or body.get("params") != [[k, v] for k, v in items]:
         return None
-    if not isinstance(checks, dict) or set(checks) != {"property1", "property2"}:
+    if not isinstance(checks, dict) or not {"property1", "property2"} <= set(checks):
         return None
     if not all(isinstance(v, str) for v in checks.values()) or bounds is None:
         return None
     stored = body.get("functions")
-    if not isinstance(stored, dict) or set(stored) != set(_SIGNATURES):
+    want = {"M", "C", "G"} | ({"D"} if "dissipation" in checks else set())
+    if (
+        not isinstance(stored, dict)
+        or set(stored) != want
+        or set(checks) - {*want, "property1", "property2", "dissipation"}
+    ):
         return None
     for k, (ins, out) in _SIGNATURES.items():
+        if k not in want:
+            continue
         if not isinstance(stored[k], str):
             return None
         try:  # CasADi's own format (no eval); the body's checksum already matched
@@ -365,6 +423,7 @@ def _model(
         M=fs["M"],
         C=fs["C"],
         G=fs["G"],
+        D=fs.get("D"),
         M_bounds=bounds,
         checks=checks,
         symbolic=partial(_symbolic, name, items),
