@@ -25,6 +25,7 @@ import json
 import casadi as ca
 import numpy as np
 
+from core.memo import MEMO
 from core.scenario import Scenario
 from generated import native
 from generated.codegen import CodegenSettings, Library, build_library
@@ -100,8 +101,8 @@ def kernel_settings(
     return dataclasses.replace(s, extra_cflags=extra, jacobian="sparse", expand=True)
 
 
-#: kernel libraries built in this process, by :func:`kernel_key`
-_BUILT: dict[str, Library] = {}
+#: kernel libraries built in this process, by :func:`kernel_key` (core/memo.py)
+_BUILT = MEMO.namespace("agent-kernels", 64)
 #: the gains the kernels compile in (graph-independent: the leader's LMIs and the UIO)
 KERNEL_GAINS = ("A0", "B0", "C0", "Q", "Gamma", "Phi", "lambda1", "lambda2")
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from core.artifacts import OUT_ROOT, sha256_file
 from core.errors import SynthesisError
+from core.memo import MEMO
 from core.models import cache
 from core.scenario import Scenario
 
@@ -34,7 +35,7 @@ class GainsInfo:
 
 
 #: gains synthesized in this process, by :func:`synthesis_inputs` key
-_SYNTHESIZED: dict[str, Gains] = {}
+_SYNTHESIZED = MEMO.namespace("synthesized-gains", 256)  # core/memo.py
 #: observer settings synthesis does not read (the observer's runtime numbers)
 _NOT_SYNTHESIS = ("alpha1", "alpha1_bar", "phi0", "phi_min")
 #: build-cache sub-folder of synthesized gains, ``<cache root>/gains/<synthesis_inputs>.json``

@@ -24,6 +24,7 @@ from typing import Any
 import casadi as ca
 
 from core.errors import BuildError
+from core.memo import MEMO
 from generated.codegen import (
     MANIFEST_NAME,
     TMP_PREFIX,
@@ -166,7 +167,7 @@ class Compiled:
 
 
 #: compiled builds of this process by (structure key, method, codegen settings)
-BUILDS: dict[tuple, Compiled] = {}
+BUILDS = MEMO.namespace("compiled-builds", 32)  # core/memo.py
 
 
 def current(c: Compiled) -> Compiled | None:

@@ -11,7 +11,6 @@ from __future__ import annotations
 import io
 import math
 import threading
-from collections import OrderedDict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -20,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from core.errors import BuildError
+from core.memo import MEMO
 from core.scenario import Scenario
 from generated.integrate import Trajectory
 
@@ -71,9 +71,9 @@ _OUTPUT_ALIASES = {
 
 #: mapped outputs Functions by (id of the Function, K): the Function, its map and an
 #: evaluation buffer of the map
-_MAPS: OrderedDict[tuple[int, int], tuple[ca.Function, ca.Function, Any, Any]] = OrderedDict()
 #: how many mapped Functions are kept (one per structure and horizon in use)
 _MAPS_KEPT = 4
+_MAPS = MEMO.namespace("mapped-outputs", _MAPS_KEPT)  # core/memo.py
 #: one evaluation at a time uses a kept buffer
 _MAPS_LOCK = threading.Lock()
 
@@ -85,15 +85,12 @@ def _mapped(f: ca.Function, K: int) -> tuple[ca.Function, Any, Any]:
     is not reused while the entry lives). Call with :data:`_MAPS_LOCK` held.
     """
     key = (id(f), K)
-    if key in _MAPS:
-        _MAPS.move_to_end(key)
-        return _MAPS[key][1:]
-    shared = [nm == "p" for nm in f.name_in()]
-    F = f.map(K, shared, [False] * f.n_out())
-    _MAPS[key] = (f, F, *F.buffer())
-    while len(_MAPS) > _MAPS_KEPT:
-        _MAPS.popitem(last=False)
-    return _MAPS[key][1:]
+    entry = _MAPS.get(key)
+    if entry is None:
+        shared = [nm == "p" for nm in f.name_in()]
+        F = f.map(K, shared, [False] * f.n_out())
+        entry = _MAPS[key] = (f, F, *F.buffer())
+    return entry[1:]
 
 
 def evaluate_outputs(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:

@@ -36,9 +36,11 @@ import numpy as np
 
 from core.artifacts import atomic_write_text
 from core.errors import run_cli
+from core.memo import MEMO
 
 STUDY = "studies/topologies.toml"
-_STATE: dict[str, Any] = {}
+#: the study's base gains and codegen settings, set once per process (core/memo.py)
+_STATE = MEMO.namespace("topologies-state", 2)
 
 
 def sample_gains(base: Any, sc: Any) -> tuple[Any, float, bool]:

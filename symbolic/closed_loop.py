@@ -19,7 +19,6 @@ slices and back.
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -28,6 +27,7 @@ import casadi as ca
 import numpy as np
 
 from core.errors import ScenarioError, SynthesisError
+from core.memo import MEMO
 from core.scenario import Scenario
 from symbolic.agent import AGENT_INPUTS, AGENT_OUTPUTS, agent_function, saturated  # noqa: F401
 from symbolic.derivatives import flow_jets
@@ -416,17 +416,14 @@ def build_closed_loop(scenario: Scenario, gains: Gains, *, assembly: str = "map"
     return bind(parametric, sc, gains, lay, assembly, blocks)
 
 
-#: parametric loops built in this process, by (structure key, assembly), newest last
-_PARAMETRIC: OrderedDict[tuple[str, str], Parametric] = OrderedDict()
 #: how many structures' parametric loops a process keeps
 PARAMETRIC_KEPT = 4
+#: parametric loops built in this process, by (structure key, assembly) (core/memo.py)
+_PARAMETRIC = MEMO.namespace("parametric-loops", PARAMETRIC_KEPT)
 
 
 def _remember_parametric(key: tuple[str, str], par: Parametric) -> None:
     _PARAMETRIC[key] = par
-    _PARAMETRIC.move_to_end(key)
-    while len(_PARAMETRIC) > PARAMETRIC_KEPT:
-        _PARAMETRIC.popitem(last=False)
 
 
 def forget_parametric() -> None:

@@ -24,6 +24,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from core.graph import m_matrix_violation
+from core.memo import MEMO
 from synthesis.assumptions import (
     ZERO_RTOL,
     _rank,
@@ -591,15 +592,13 @@ def certify(g: Gains, *, tol: float | None = None, given: tuple[str, ...] = ()) 
         given = tuple(g.info.get("given", ()))
     key = (numbers_digest(g), tol, tuple(given))
     if key not in _CERTIFIED:
-        if len(_CERTIFIED) >= 64:
-            _CERTIFIED.pop(next(iter(_CERTIFIED)))
         _CERTIFIED[key] = _certify(g, tol, tuple(given))
     return _CERTIFIED[key]
 
 
 #: certificates of this process by (numbers, tolerance, given): a study re-certifies the
 #: same gains for every sample, and a certificate depends on nothing else
-_CERTIFIED: dict[tuple[str, float, tuple[str, ...]], Certificate] = {}
+_CERTIFIED = MEMO.namespace("certificates", 64)
 
 
 def numbers_digest(g: Gains) -> str:

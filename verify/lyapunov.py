@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import hashlib
 import sys
-from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,6 +32,7 @@ import casadi as ca
 import numpy as np
 
 from core.errors import BuildError
+from core.memo import MEMO
 from core.scenario import Scenario
 from verify.bounds import VerifyConfig, VerifyError
 
@@ -232,7 +232,7 @@ class FastFunctions:
     key: str = ""
 
 
-_FAST: OrderedDict[str, FastFunctions] = OrderedDict()
+_FAST = MEMO.namespace("verify-functions", CACHE_SIZE)  # core/memo.py
 
 
 def clear_cache() -> None:
@@ -244,12 +244,9 @@ def clear_cache() -> None:
     _LAST_EVALUATION.clear()
 
 
-def _remember(cache: OrderedDict, key: str, value: Any) -> Any:
-    """Put ``value`` in the LRU ``cache`` under ``key`` (at most :data:`CACHE_SIZE` entries)."""
+def _remember(cache: Any, key: str, value: Any) -> Any:
+    """Put ``value`` in ``cache`` (a :mod:`core.memo` namespace) under ``key``."""
     cache[key] = value
-    cache.move_to_end(key)
-    while len(cache) > CACHE_SIZE:
-        cache.popitem(last=False)
     return value
 
 
@@ -379,7 +376,7 @@ def evaluate_p(
 
 #: the last evaluation with its Functions and inputs: one run's three Theorem 1 checks
 #: evaluate the same V1 and V̇1 (inputs compared bit for bit, never by identity)
-_LAST_EVALUATION: dict[str, tuple] = {}
+_LAST_EVALUATION = MEMO.namespace("verify-last-evaluation", 1)  # core/memo.py
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
