@@ -80,15 +80,19 @@ def _search(args: list[str]) -> float:
     return time.perf_counter() - t0
 
 
-def _results(folder: Path) -> pd.DataFrame:
-    (found,) = folder.glob("*/results.parquet")
-    return pd.read_parquet(found)
-
-
-def _fresh(folder: Path) -> Path:
-    shutil.rmtree(folder, ignore_errors=True)
-    folder.mkdir(parents=True)
-    return folder
+def _fresh_run(
+    file: Path, seed: int, budget: int, baseline: int, out: Path, workers: int
+) -> tuple[float, pd.DataFrame]:
+    """``python -m search run`` with these ``[search]`` values in an emptied ``out``: its
+    wall time and its results.parquet."""
+    shutil.rmtree(out, ignore_errors=True)
+    out.mkdir(parents=True)
+    args = {"--seed": seed, "--budget": budget, "--baseline": baseline, "--workers": workers}
+    wall = _search(
+        [str(file), *(x for kv in args.items() for x in map(str, kv)), "--out", str(out)]
+    )
+    (found,) = out.glob("*/results.parquet")
+    return wall, pd.read_parquet(found)
 
 
 def seed_run(file: Path, seed: int, budget: int, baseline: int, out: Path, workers: int) -> SeedRun:
@@ -105,23 +109,7 @@ def seed_run(file: Path, seed: int, budget: int, baseline: int, out: Path, worke
     workers : int
         Local worker processes.
     """
-    folder = _fresh(out)
-    wall = _search(
-        [
-            str(file),
-            "--seed",
-            str(seed),
-            "--budget",
-            str(budget),
-            "--baseline",
-            str(baseline),
-            "--workers",
-            str(workers),
-            "--out",
-            str(folder),
-        ]
-    )
-    rows = _results(folder)
+    wall, rows = _fresh_run(file, seed, budget, baseline, out, workers)
     ok = rows[rows["status"] == "ok"]
     arm = {a: ok.loc[ok["arm"] == a, "robustness"].astype(float) for a in ("search", "baseline")}
     return SeedRun(
@@ -150,23 +138,7 @@ def timed_run(file: Path, seed: int, budget: int, out: Path, workers: int) -> di
     workers : int
         Local worker processes.
     """
-    folder = _fresh(out)
-    wall = _search(
-        [
-            str(file),
-            "--seed",
-            str(seed),
-            "--budget",
-            str(budget),
-            "--baseline",
-            "0",
-            "--workers",
-            str(workers),
-            "--out",
-            str(folder),
-        ]
-    )
-    rows = _results(folder)
+    wall, rows = _fresh_run(file, seed, budget, 0, out, workers)
     search = rows[rows["arm"] == "search"]
     return {
         "wall_s": wall,
