@@ -7,7 +7,8 @@ recent; a write that takes a namespace past its capacity evicts its least recent
 entry. Nothing else evicts: no time limit, no memory limit, no effect of one namespace on
 another. One lock guards every namespace (Dask runs tasks in worker threads; the console
 steps its loop in a thread of its own). ``MEMO.clear()`` empties all of them (tests, and a
-process that wants its memory back).
+process that wants its memory back). A pure function is remembered with the decorator
+``@MEMO.memoize("name", capacity)``: its namespace is keyed by the call's arguments.
 
 The on-disk build cache (compiled libraries, derivations; ``generated/build_cache.py``) is
 a different thing: shared by processes and checkouts, keyed by content hashes.
@@ -15,10 +16,14 @@ a different thing: shared by processes and checkouts, keyed by content hashes.
 
 from __future__ import annotations
 
+import functools
 import threading
 from collections import OrderedDict
-from collections.abc import Hashable, Iterator
-from typing import Any
+from collections.abc import Callable, Hashable, Iterator
+from typing import Any, ParamSpec, TypeVar
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
 
 #: the value ``get``/``pop`` return for a missing key unless given another
 _MISSING = object()
@@ -147,6 +152,40 @@ class ProcessCache:
                     f"memo namespace {name!r}: declared with capacity {ns.capacity}, not {capacity}"
                 )
             return ns
+
+    def memoize(self, name: str, capacity: int) -> Callable[[Callable[_P, _R]], Callable[_P, _R]]:
+        """Decorator: remember a pure function's results in namespace ``name``.
+
+        The key is the positional arguments and the sorted keyword arguments (all must be
+        hashable). The lock is not held while the function runs: two threads asking for
+        the same missing key may both compute it, and the later write wins (the values
+        are equal, the function being pure). The wrapper's ``cache_clear()`` empties
+        the namespace, ``namespace`` is the namespace itself.
+
+        Parameters
+        ----------
+        name : str
+            The namespace's name.
+        capacity : int
+            Most results kept.
+        """
+        ns = self.namespace(name, capacity)
+
+        def decorate(fn: Callable[_P, _R]) -> Callable[_P, _R]:
+            @functools.wraps(fn)
+            def remembered(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+                key = (args, tuple(sorted(kwargs.items()))) if kwargs else args
+                value = ns.get(key, _MISSING)
+                if value is _MISSING:
+                    value = fn(*args, **kwargs)
+                    ns[key] = value
+                return value
+
+            remembered.cache_clear = ns.clear  # type: ignore[attr-defined]
+            remembered.namespace = ns  # type: ignore[attr-defined]
+            return remembered
+
+        return decorate
 
     def clear(self) -> None:
         """Empty every namespace."""
