@@ -10,13 +10,13 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import NamedTuple, Protocol
 
 import numpy as np
 import scipy.sparse as sp
 
 from core.errors import SynthesisError
+from core.memo import MEMO
 
 
 # --------------------------------------------------------------------------- Assumption 1
@@ -253,7 +253,7 @@ def pinned_laplacian(adjacency: np.ndarray | sp.spmatrix, pinning: np.ndarray) -
     return _pinned_laplacian(akey, (b.shape, b.dtype.str, b.tobytes())).copy()
 
 
-@lru_cache(maxsize=32)
+@MEMO.memoize("pinned-laplacians", 32)
 def _pinned_laplacian(akey: tuple, bkey: tuple) -> sp.csr_matrix:
     """``L + B`` from the byte keys of :func:`pinned_laplacian` (callers receive copies)."""
     if akey[0] == "csr":

@@ -9,7 +9,6 @@ the source.
 
 from __future__ import annotations
 
-import functools
 import os
 import shutil
 import subprocess
@@ -21,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 from core import artifacts
 from core.errors import BuildError
+from core.memo import MEMO
 from generated.build_cache import LIBRARY_NAME, SOURCE_NAME
 
 if TYPE_CHECKING:  # codegen imports this module
@@ -54,7 +54,7 @@ class Toolchain:
     key: Mapping[str, Any] = field(default_factory=dict)
 
 
-@functools.lru_cache(maxsize=8)
+@MEMO.memoize("compiler-identities", 8)
 def compiler_identity(compiler: str) -> str:
     """Resolved path and first ``--version`` line of ``compiler`` (part of the cache key).
 

@@ -7,7 +7,6 @@ import hashlib
 import json
 import time
 from dataclasses import dataclass
-from functools import lru_cache
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -73,7 +72,7 @@ def synthesis_inputs(sc: Scenario) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-@lru_cache(maxsize=1)
+@MEMO.memoize("synthesis-code-sha256", 1)
 def synthesis_code() -> str:
     """SHA-256 of the code synthesis runs: ``synthesis/*.py``, ``core/graph.py`` and versions.
 

@@ -32,7 +32,6 @@ with (``hitl_struct_size``) and :func:`load` refuses one that differs from the m
 from __future__ import annotations
 
 import ctypes
-import functools
 import hashlib
 import importlib.util
 import time
@@ -44,6 +43,7 @@ import casadi as ca
 import numpy as np
 
 from core.errors import BuildError, IntegrationError
+from core.memo import MEMO
 from generated.codegen import CodegenSettings, Library, Toolchain, build_library, preload
 from generated.integrate import (
     IntegratorSettings,
@@ -154,7 +154,7 @@ def _sha256_file(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-@functools.lru_cache(maxsize=2)
+@MEMO.memoize("native-toolchain", 2)
 def toolchain(driver: Path = DRIVER) -> Toolchain:
     """The driver source, the vendored headers and scikit-sundae's SUNDIALS libraries.
 
@@ -276,7 +276,7 @@ def build(ode_dyn: ca.Function, settings: CodegenSettings | None = None) -> Libr
     return build_library(functions, settings, toolchain=toolchain())
 
 
-@functools.lru_cache(maxsize=16)
+@MEMO.memoize("native-libraries", 16)
 def load(path: Path) -> ctypes.CDLL:
     """Load a native (whole-loop or graph-ordered) library once per path and check it.
 

@@ -8,7 +8,6 @@ of them are unchanged and ``trajectory.csv`` is the file meta.json describes.
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 from pathlib import Path
@@ -18,6 +17,7 @@ import casadi as ca
 import numpy as np
 
 from core.artifacts import sha256_file
+from core.memo import MEMO
 from core.scenario import Scenario
 from generated.trajectory_file import INCOMPLETE_MARK, data_rows
 
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 CODE_PACKAGES = ("symbolic", "synthesis", "generated")
 
 
-@functools.lru_cache(maxsize=1)
+@MEMO.memoize("code-sha256", 1)
 def code_sha256() -> str:
     """SHA-256 of the sources that shape a trajectory (git-independent).
 

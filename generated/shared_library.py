@@ -9,12 +9,13 @@ library would not load instead of failing on its first use.
 from __future__ import annotations
 
 import ctypes
-import functools
 from collections.abc import Sequence
 from pathlib import Path
 
+from core.memo import MEMO
 
-@functools.lru_cache(maxsize=8)
+
+@MEMO.memoize("preloaded-libraries", 8)
 def preload(libraries: tuple[Path, ...]) -> None:
     """Load shared libraries by absolute path, locally, once per process.
 

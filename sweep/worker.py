@@ -12,10 +12,10 @@ import datetime as dt
 import json
 import time
 import traceback
-from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from core.memo import MEMO
 from sweep.coverage import coverage_columns
 from sweep.measures import (
     library_key,
@@ -30,7 +30,7 @@ from sweep.sampler import Sample, make_sample, write_scenario
 from sweep.study import Study, load_study
 
 
-@lru_cache(maxsize=4)
+@MEMO.memoize("worker-studies", 4)
 def _study(path: str) -> Study:
     """The study, loaded once per worker process."""
     return load_study(path)

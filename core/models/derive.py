@@ -13,7 +13,7 @@ import hashlib
 import inspect
 import json
 from collections.abc import Mapping
-from functools import lru_cache, partial
+from functools import partial
 from importlib.metadata import version
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -22,6 +22,7 @@ import casadi as ca
 import numpy as np
 
 from core.errors import ScenarioError
+from core.memo import MEMO
 from core.models import cache
 from core.models.base import REGISTRY, ELModel, ModelSpec
 
@@ -288,7 +289,7 @@ def _file_sha256(path: str) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-@lru_cache(maxsize=64)
+@MEMO.memoize("model-derivations", 64)
 def _symbolic(name: str, items: tuple[tuple[str, float], ...]) -> tuple[Any, ...]:
     """(M, C, G, p, q, D) in sympy, eq. (2), derived from the model's Lagrangian; D is the
     dissipative force ∂R/∂q of a Rayleigh function R the Lagrangian may return fifth (None
@@ -430,7 +431,7 @@ def _model(
     )
 
 
-@lru_cache(maxsize=64)
+@MEMO.memoize("model-builds", 64)
 def _build_cached(name: str, items: tuple[tuple[str, float], ...]) -> ELModel:
     key = model_key(name, items)
     body = cache.read_entry(CACHE_KIND, key) if key is not None else None
