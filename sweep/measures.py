@@ -93,6 +93,28 @@ def topology_in_tail(sc: Any, frame: pd.DataFrame, tail_fraction: float) -> dict
     }
 
 
+def effort_over_demand(ids: list[str], agents: list[Any], observed: np.ndarray) -> float:
+    """Largest ratio over followers of peak |u_i| after the start-up to the peak the slot
+    demands (:mod:`verify.demanded_effort`); NaN without both rows.
+
+    Parameters
+    ----------
+    ids, agents : list
+        The table's claim ids and agents, row by row.
+    observed : ndarray
+        Its observed values.
+    """
+    from verify import claims as CL
+    from verify.demanded_effort import DEMANDED_LATE
+
+    def by_agent(cid: str) -> dict[Any, float]:
+        return {a: float(o) for c, a, o in zip(ids, agents, observed, strict=True) if c == cid}
+
+    late, demand = by_agent(CL.PEAK_U_LATE.id), by_agent(DEMANDED_LATE.id)
+    ratios = [late[a] / demand[a] for a in late if demand.get(a, 0.0) > 0.0]
+    return max(ratios) if ratios else math.nan
+
+
 def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
     """The row's numbers from a bounds table (:func:`verify.table.bounds_table`).
 
@@ -109,6 +131,7 @@ def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
     from types import SimpleNamespace
 
     from verify import claims as CL
+    from verify.demanded_effort import DEMANDED_LATE
 
     # plain lists: a few comparisons per row cost less than pandas' methods
     claims, kinds = table["claim"].tolist(), table["kind"].tolist()
@@ -132,6 +155,8 @@ def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
         "observer_tail_max": max_observed(CL.T1_TAIL.id),
         "peak_u_max": max_observed(CL.PEAK_U.id),
         "peak_u_late": max_observed(CL.PEAK_U_LATE.id),
+        "demanded_u_late": max_observed(DEMANDED_LATE.id),
+        "effort_over_demand": effort_over_demand(ids, agents, observed),
         "guaranteed_held": all(holds[k] for k in g),
         "guaranteed_failed": "; ".join(
             _label(SimpleNamespace(claim=claims[k], agent=agents[k])) for k in failed

@@ -18,6 +18,14 @@ MEDIANS = [
     ("observer_tail_max", "observer |ebar_eta_i|, tail sup (max over followers)"),
     ("peak_u_max", "peak |u_i| (max over followers)"),
     ("peak_u_late", "peak |u_i| after t = 1 s (max over followers)"),
+    (
+        "demanded_u_late",
+        "peak |u_i*| after t = 1 s, the torque the slot demands (max over followers)",
+    ),
+    (
+        "effort_over_demand",
+        "peak |u_i| after t = 1 s over the peak the slot demands (max over followers)",
+    ),
     ("step_peak_u", "peak |u_i| within 2 s after an operator step (max over followers)"),
     (
         "step_recovery_s",
@@ -32,7 +40,14 @@ MEDIANS = [
 ]
 
 #: columns whose largest value over the ok samples is reported too (a promise for every sample)
-WORST = ("peak_u_late", "step_peak_u", "step_recovery_s", "step_deviation_max")
+WORST = (
+    "peak_u_late",
+    "demanded_u_late",
+    "effort_over_demand",
+    "step_peak_u",
+    "step_recovery_s",
+    "step_deviation_max",
+)
 
 
 def status_counts(table: pd.DataFrame) -> dict[str, int]:

@@ -36,8 +36,8 @@ def joint_speed_rows(R, inp: CheckInput) -> None:
         q = S.agent_norm(inp.df, "q", i + 1, dm.n)
         R.add(SPEED, CL.Kind.INFO, math.inf, float(q.max()), (float(t[0]), float(t[-1])), agent=i)
 '''
-ANCHOR = 'MODULES: tuple[str, ...] = ("verify.effort",)'
-LINE = 'MODULES: tuple[str, ...] = ("verify.effort", "verify.joint_speed")'
+ANCHOR = 'MODULES: tuple[str, ...] = ("verify.effort", "verify.demanded_effort")'
+LINE = ANCHOR.replace(")", ', "verify.joint_speed")')
 
 
 def _follow_the_recipe(root):

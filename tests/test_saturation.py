@@ -115,7 +115,7 @@ def test_report_marks_the_rows_saturation_invalidates(saturated_run, tmp_path):
         rows = tb[tb["claim"].str.startswith(prefix)]
         assert not rows.empty and rows.index.isin(marked.index).all(), prefix
     unmarked = tb[~tb.index.isin(marked.index)]
-    assert unmarked["claim"].str.startswith(("T1 ", "peak |u_i|", "Formation")).all()
+    assert unmarked["claim"].str.startswith(("T1 ", "peak |u_i|", "peak |u_i*|", "Formation")).all()
     assert "saturation" in " ".join(saturation_statement(tb))
     # an unsaturated run of the same scenario: no row marked, no sentence
     free = simulate_paper({"integration.horizon": 1.0}, "test-saturation-free", tmp_path, r.t, TOL)

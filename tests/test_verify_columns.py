@@ -160,6 +160,9 @@ def test_summarize_table_by_hand():
         ("t1.tail", "T1 |ebar_eta_i| -> 0 (tail sup)", "1", "info", 1e-3, True),
         ("effort.peak", "peak |u_i|", "1", "info", 40.0, True),
         ("effort.peak_late", "peak |u_i| after t = 1 s", "1", "info", 90.0, True),
+        ("effort.peak_late", "peak |u_i| after t = 1 s", "2", "info", 50.0, True),
+        ("effort.demanded_late", "peak |u_i*| after t = 1 s", "1", "info", 60.0, True),
+        ("effort.demanded_late", "peak |u_i*| after t = 1 s", "2", "info", 100.0, True),
         ("t2.chi.provable", "T2 provable", "2", "guaranteed", 1.0, False),
         ("t1.dv1.supported", "T1 dV1/dt", "all", "guaranteed", 1.0, False),
         ("def1.derived", "Def. 1 derived", "4", "guaranteed", 1.0, True),
@@ -176,6 +179,8 @@ def test_summarize_table_by_hand():
         "observer_tail_max": 1e-3,
         "peak_u_max": 40.0,
         "peak_u_late": 90.0,
+        "demanded_u_late": 100.0,
+        "effort_over_demand": 1.5,  # follower 1: 90 / 60 (follower 2: 50 / 100)
         "guaranteed_held": False,
         "guaranteed_failed": "T2 provable (follower 2); T1 dV1/dt",
         "consistency_held": True,

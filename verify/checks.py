@@ -21,7 +21,7 @@ from verify.rows import Rows, Span
 from verify.theorem2_rows import IntervalWindow
 
 #: the modules whose import registers checks: a new check adds its module here
-MODULES: tuple[str, ...] = ("verify.effort",)
+MODULES: tuple[str, ...] = ("verify.effort", "verify.demanded_effort")
 
 
 @dataclass(frozen=True)
