@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import PAPER
+from helpers import PAPER, two_link_closed_form
 
 from core.models import REGISTRY
 from verify import demanded_effort as DE
@@ -16,16 +16,7 @@ ARM = REGISTRY["two_link"].defaults
 
 def closed_form_torque(p, q, a, prm=ARM):
     """M a + C q + G of the arm, from the closed forms of docs/reading.md ('Followers')."""
-    m1, m2, r1, r2, J1, J2, g0 = (prm[k] for k in ("m1", "m2", "r1", "r2", "J1", "J2", "g0"))
-    c2 = np.cos(p[1])
-    m11 = (m1 + m2) * r1**2 + m2 * r2**2 + 2 * m2 * r1 * r2 * c2 + J1
-    m12 = m2 * r2**2 + m2 * r1 * r2 * c2
-    m22 = m2 * r2**2 + J2
-    c = m2 * r1 * r2 * np.sin(p[1])
-    M = np.array([[m11, m12], [m12, m22]])
-    C = np.array([[-c * q[1], -c * (q[0] + q[1])], [c * q[0], 0.0]])
-    cos12 = np.cos(p[0] + p[1])
-    G = g0 * np.array([(m1 + m2) * r1 * np.cos(p[0]) + m2 * r2 * cos12, m2 * r2 * cos12])
+    M, C, G = two_link_closed_form(p, q, **prm)
     return M @ a + C @ q + G
 
 
