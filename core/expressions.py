@@ -15,13 +15,13 @@ import ast
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from core.errors import ExpressionError
+from core.memo import MEMO
 
 #: accepted function names and their arity
 FUNCTIONS: dict[str, tuple[int, ...]] = {
@@ -115,7 +115,7 @@ class Expr:
         return not _mentions_t(self.node)
 
 
-@lru_cache(maxsize=1024)
+@MEMO.memoize("expression-literals", 1024)
 def _literals_of(e: Expr) -> tuple[float, ...]:
     """:meth:`Expr.literals`, remembered (asked for at every binding of a study's sample to
     its compiled library). These caches are keyed by the whole :class:`Expr`, its text
@@ -125,13 +125,13 @@ def _literals_of(e: Expr) -> tuple[float, ...]:
     return tuple(out)
 
 
-@lru_cache(maxsize=1024)
+@MEMO.memoize("expression-templates", 1024)
 def _template_of(e: Expr) -> str:
     """:meth:`Expr.template`, remembered (part of every structure key)."""
     return _template(e.node)
 
 
-@lru_cache(maxsize=1024)
+@MEMO.memoize("expression-breakpoints", 1024)
 def _breakpoints_of(e: Expr) -> tuple[float, ...]:
     """:meth:`Expr.breakpoints`, remembered: a scenario asks for the same expressions'
     breakpoints several times, and a study's samples share most trees."""
@@ -435,7 +435,7 @@ def _eval(node: tuple, t: Any, be: _Backend, lits: Any = None) -> Any:
     return getattr(be, node[1])(*args)
 
 
-@lru_cache(maxsize=1024)
+@MEMO.memoize("expression-numpy", 1024)
 def _numpy_function(e: Expr) -> Callable[[Any], Any]:
     """``e`` as nested numpy closures: the operations of :func:`_eval` with its numpy
     backend, in the same order (identical values), without walking the tree per call."""

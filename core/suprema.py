@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
 from core.expressions import Expr
+from core.memo import MEMO
 
 
 def sample_times(e: Expr, tgrid: np.ndarray) -> np.ndarray:
@@ -31,7 +31,7 @@ def sample_times(e: Expr, tgrid: np.ndarray) -> np.ndarray:
     return _times_of(e, np.ascontiguousarray(tgrid, dtype=float).tobytes())
 
 
-@lru_cache(maxsize=512)
+@MEMO.memoize("signal-sample-times", 512)
 def _times_of(e: Expr, tgrid_bytes: bytes) -> np.ndarray:
     tgrid = np.frombuffer(tgrid_bytes, dtype=float)
     H = tgrid[-1]
@@ -88,7 +88,7 @@ def expression_sup(kind: str, exprs: tuple[Expr, ...], ts: np.ndarray) -> float:
     return _expr_sup_of(kind, exprs, np.ascontiguousarray(ts, dtype=float).tobytes())
 
 
-@lru_cache(maxsize=512)
+@MEMO.memoize("signal-suprema", 512)
 def _expr_sup_of(kind: str, exprs: tuple[Expr, ...], ts_bytes: bytes) -> float:
     ts = np.frombuffer(ts_bytes, dtype=float)
     return signal_sup(lambda t: signal_values(kind, exprs, t), ts)

@@ -115,3 +115,38 @@ def test_no_module_level_cache_dict_outside_the_cache_object():
 def test_the_grep_catches_planted_caches():
     planted = "_SEEN: dict[str, int] = {}\nBIG = OrderedDict()\nx = f({})\n    _inner = {}\n"
     assert _module_level_dicts(planted) == {"_SEEN", "BIG"}
+
+
+FUNCTOOLS_CACHE = re.compile(
+    r"lru_cache|functools\.cache\b|^\s*@cache\b|from functools import[^\n]*\bcache\b", re.M
+)
+
+
+def test_no_functools_cache_outside_the_cache_object():
+    # a functools cache would be a second eviction rule and a second clear
+    found = []
+    for pkg in (*PACKAGES, "benchmarks"):
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            if FUNCTOOLS_CACHE.search(path.read_text()):
+                found.append(path.relative_to(ROOT).as_posix())
+    assert found == [], f"functools caches (use core.memo.MEMO.memoize): {found}"
+    planted = "from functools import lru_cache\n\n@lru_cache(maxsize=4)\ndef f(x): ...\n"
+    assert FUNCTOOLS_CACHE.search(planted) and FUNCTOOLS_CACHE.search("@cache\ndef g(): ...")
+    assert not FUNCTOOLS_CACHE.search("from core.models import cache\n")
+
+
+def test_memoize_remembers_by_arguments_and_evicts_like_any_namespace():
+    cache, calls = ProcessCache(), []
+
+    @cache.memoize("squares", 2)
+    def square(x: float, *, shift: float = 0.0) -> float:
+        calls.append(x)
+        return x * x + shift
+
+    assert [square(2.0), square(2.0), square(3.0), square(2.0, shift=1.0)] == [4.0, 4.0, 9.0, 5.0]
+    assert calls == [2.0, 3.0, 2.0]  # the repeated call was remembered
+    assert len(square.namespace) == 2  # capacity 2: the least recent, square(2.0), went
+    square(2.0)
+    assert calls == [2.0, 3.0, 2.0, 2.0]
+    square.cache_clear()
+    assert len(square.namespace) == 0

@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 import pandas as pd
 
 from core.errors import ToolkitError
+from core.memo import MEMO
 from core.models import build_model
 from core.scenario import Scenario
 from symbolic.adaptive import BAND
@@ -126,7 +126,7 @@ class Theorem2Constants:
     why_not: str = ""
 
 
-@lru_cache(maxsize=8)
+@MEMO.memoize("layer-constants", 8)
 def layer_constant(sign: str) -> float:
     """c_s = sup_x (|x| − x sgn_1(x)): then |χ| − χ sgn_ε(χ) ≤ c_s ε for every χ.
 
