@@ -8,7 +8,6 @@ meta.json) and returns its columns of the row (:data:`sweep.results.BASE_COLUMNS
 from __future__ import annotations
 
 import math
-import re
 from typing import Any
 
 import numpy as np
@@ -39,25 +38,23 @@ def library_key(meta: dict[str, Any]) -> str:
 
 
 def tail_max_et(frame: pd.DataFrame, tail_fraction: float) -> float:
-    """max_i sup over the tail window of the Euclidean norm |e_ti| (columns ``et<i>_<r>``).
+    """max_i sup over the tail window of the Euclidean norm |e_ti| (block ``Signal.ET``).
 
     Parameters
     ----------
     frame : DataFrame
-        The trajectory.
+        The trajectory (its e_ti: n columns per follower).
     tail_fraction : float
         The asymptotic window: the last fraction of the horizon.
     """
     from verify import signals as S
 
-    frame = S.Columns.of(frame)  # one conversion, then columns by position
-    t = S.column(frame, "t")
+    view = S.TrajectoryView.of(frame)  # one conversion, then columns by position
+    t = view.t
     tail = S.tail_mask(t, tail_fraction)
     best = -math.inf
-    for i in range(1, S.dims(frame).N + 1):
-        pattern = re.compile(rf"et{i}_\d+")
-        cols = [c for c in frame.names if pattern.fullmatch(c)]
-        e = np.linalg.norm(np.asfortranarray(S.take(frame, cols)[tail]), axis=1)
+    for i in range(1, view.dims.N + 1):
+        e = np.linalg.norm(np.asfortranarray(view.block(S.Signal.ET, i)[tail]), axis=1)
         best = max(best, float(e.max()))
     return best
 
@@ -201,14 +198,17 @@ def theorem2_entry(
         ``Lemma 1 observed`` or both, comma-separated).
     """
     from verify.bounds import provable_entry_time, theorem2_constants
+    from verify.signals import TrajectoryView
 
     out: dict[str, Any] = {}
     sources: set[str] = set()
-    lem = None
+    lem = view = None
     for i in range(scenario.N):
         c = theorem2_constants(scenario, i, config)
         if c.provable:
-            out[f"t2_entry:{i + 1}"] = provable_entry_time(c, frame, i, config.lemma1_delta)
+            if view is None:  # one conversion for every follower
+                view = TrajectoryView.of(frame)
+            out[f"t2_entry:{i + 1}"] = provable_entry_time(c, view, i, config.lemma1_delta)
             sources.add("comparison lemma")
         else:
             if lem is None:  # the table is searched only when some follower needs it
@@ -241,7 +241,9 @@ def step_recovery(sc: Any, run: Any) -> dict[str, Any]:
         (:func:`verify.operator_steps.step_peak_u`).
     """
     from verify.operator_steps import recoveries, recovery_summary, step_peak_u
+    from verify.signals import TrajectoryView
     from verify.table import gauge
 
-    items = recoveries(sc, run.frame, gauge(sc, run.gains))
-    return {**recovery_summary(items), "step_peak_u": step_peak_u(sc, run.frame)}
+    view = TrajectoryView.of(run.frame)  # one conversion for both
+    items = recoveries(sc, view, gauge(sc, run.gains))
+    return {**recovery_summary(items), "step_peak_u": step_peak_u(sc, view)}

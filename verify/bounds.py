@@ -246,7 +246,7 @@ def provable_entry_time(
     ----------
     c : Theorem2Constants
         Of follower ``agent`` (:func:`theorem2_constants`).
-    df : DataFrame or verify.signals.Columns
+    df : DataFrame, verify.signals.Columns or verify.signals.TrajectoryView
         The trajectory.
     agent : int
         0-based follower.
@@ -257,8 +257,8 @@ def provable_entry_time(
     """
     from verify import signals as S
 
-    col = f"V2_{agent + 1}"
-    V2_0 = float(S.column(df, col)[row]) if S.has(df, col) else math.nan
+    view, i = S.TrajectoryView.of(df), agent + 1
+    V2_0 = float(view.scalar(S.Signal.V2, i)[row]) if view.has(S.Signal.V2, i) else math.nan
     return comparison_reaching_time(c.Omega_var, c.chi_v_var, V2_0, delta)
 
 

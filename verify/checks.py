@@ -49,6 +49,11 @@ class CheckInput:
     span: Span
     windows: list[list[IntervalWindow]]
 
+    @property
+    def view(self) -> S.TrajectoryView:
+        """The trajectory's named blocks (:class:`verify.signals.TrajectoryView` of ``df``)."""
+        return S.TrajectoryView.of(self.df)
+
 
 RowBuilder = Callable[[Rows, CheckInput], None]
 _CHECKS: list[RowBuilder] = []

@@ -54,19 +54,20 @@ def inverse_dynamics(model: str, params: tuple[tuple[str, float], ...]) -> ca.Fu
     return ca.Function("inverse_dynamics", [p, q, a], [tau])
 
 
-def demanded_effort(scenario: Scenario, df: S.Frame, h: np.ndarray) -> np.ndarray:
+def demanded_effort(scenario: Scenario, df: S.FrameOrView, h: np.ndarray) -> np.ndarray:
     """‖u_i*(t)‖ per output time and follower, (K, N) (module docstring).
 
     Parameters
     ----------
     scenario : Scenario
-    df : DataFrame
+    df : DataFrame, Columns or TrajectoryView
         The trajectory (``t`` and the leader's ``eta0_k``).
     h : ndarray
         The gauge.
     """
-    t = S.column(df, "t")
-    s = slots(scenario, df, h)  # (K, N, n)
+    view = S.TrajectoryView.of(df)
+    t = view.t
+    s = slots(scenario, view, h)  # (K, N, n)
     sd = np.gradient(s, t, axis=0, edge_order=2)
     sdd = np.gradient(sd, t, axis=0, edge_order=2)
     out = np.empty(s.shape[:2])
@@ -91,11 +92,11 @@ def demanded_effort_check(R: Rows, inp: CheckInput) -> None:
         The table's inputs; a trajectory shorter than three samples or ending before the
         start-up gives no rows.
     """
-    t = S.column(inp.df, "t")
+    t = inp.view.t
     late = t >= STARTUP
     if len(t) < 3 or not late.any():
         return
-    un = demanded_effort(inp.scenario, inp.df, gauge(inp.scenario, inp.gains))
+    un = demanded_effort(inp.scenario, inp.view, gauge(inp.scenario, inp.gains))
     for i in range(inp.scenario.N):
         k = int(np.flatnonzero(late)[np.argmax(un[late, i])])
         R.add(

@@ -16,24 +16,24 @@ from verify.rows import Rows
 STARTUP = 1.0
 
 
-def effort_rows(R: Rows, df: S.Frame, N: int, n: int) -> None:
+def effort_rows(R: Rows, df: S.FrameOrView, N: int, n: int) -> None:
     """Peak ‖u_i‖ (Euclidean, logged torques) over the run and after :data:`STARTUP` (info).
 
     Parameters
     ----------
     R : Rows
         Rows to append to.
-    df : DataFrame
+    df : DataFrame, Columns or TrajectoryView
         The trajectory; followers without ``u`` columns end the rows.
     N, n : int
         Number of followers and of outputs.
     """
-    df = S.Columns.of(df)
-    t = S.column(df, "t")
+    view = S.TrajectoryView.of(df)
+    t = view.t
     for i in range(N):
-        if not S.has(df, f"u{i + 1}_1"):
+        if not view.has(S.Signal.U, i + 1):
             return
-        un = S.agent_norm(df, "u", i + 1, n)
+        un = view.norm(S.Signal.U, i + 1, n)
         for label, mask in (
             ("", np.ones_like(t, bool)),
             (f" after t = {STARTUP:g} s", t >= STARTUP),
@@ -65,5 +65,5 @@ def effort_check(R: Rows, inp: CheckInput) -> None:
     inp : CheckInput
         The table's inputs.
     """
-    dm = S.dims(inp.df)
-    effort_rows(R, inp.df, dm.N, dm.n)
+    dm = inp.view.dims
+    effort_rows(R, inp.view, dm.N, dm.n)

@@ -49,18 +49,18 @@ def _ring_order(offsets: np.ndarray) -> np.ndarray:
     return np.argsort(np.arctan2(offsets[:, 1], offsets[:, 0]))
 
 
-def _formation_axes(ax, df: pd.DataFrame, C0: np.ndarray, k: int, N: int, n: int) -> None:  # noqa: ANN001
-    t = df["t"].to_numpy(float)
-    y0 = S.leader_output(df, C0)
+def _formation_axes(ax, view: S.TrajectoryView, C0: np.ndarray, k: int, N: int) -> None:  # noqa: ANN001
+    t = view.t
+    y0 = view.leader_output(C0)
     ax.plot(
         y0[: k + 1, 0], y0[: k + 1, 1], "k-", lw=0.8, alpha=0.5, label="leader output y0 (path)"
     )
     ax.plot(y0[k, 0], y0[k, 1], "k*", ms=12, label="leader y0 = C0 eta0")
-    P = np.array([S.block(df, "p", i + 1, n)[k] for i in range(N)])
-    slots = np.array([y0[k] + S.block(df, "b", i + 1, n)[k] for i in range(N)])
+    P = np.array([view.block(S.Signal.P, i + 1)[k] for i in range(N)])
+    slots = np.array([y0[k] + view.block(S.Signal.B, i + 1)[k] for i in range(N)])
     for i in range(N):
         c = COLORS[i % len(COLORS)]
-        ax.plot(*S.block(df, "p", i + 1, n)[: k + 1, :2].T, "-", color=c, lw=0.6, alpha=0.4)
+        ax.plot(*view.block(S.Signal.P, i + 1)[: k + 1, :2].T, "-", color=c, lw=0.6, alpha=0.4)
         ax.plot(P[i, 0], P[i, 1], "o", color=c, ms=7, label=f"follower {i + 1} p_{i + 1}")
         ax.plot(slots[i, 0], slots[i, 1], "s", mfc="none", color=c, ms=9)
     order = _ring_order(slots - y0[k])
@@ -95,20 +95,20 @@ def formation_snapshots(
     -------
     list of Path
     """
-    dm = S.dims(df)
-    t = df["t"].to_numpy(float)
+    view = S.TrajectoryView.of(df)
+    dm, t = view.dims, view.t
     times = tuple(x for x in times if x <= t[-1] + 1e-9) or (float(t[-1]),)
     out: list[Path] = []
     for j, when in enumerate(times):
         fig, ax = plt.subplots(figsize=(5.5, 5))
-        _formation_axes(ax, df, C0, _index_at(t, when), dm.N, dm.n)
+        _formation_axes(ax, view, C0, _index_at(t, when), dm.N)
         ax.legend(fontsize=7, loc="best")
         out += _save(fig, folder, f"fig{3 + j:02d}_formation_t{when:g}")
     cols = 4
     rows = int(np.ceil(len(times) / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 4 * rows), squeeze=False)
     for ax, when in zip(axes.flat, times, strict=False):
-        _formation_axes(ax, df, C0, _index_at(t, when), dm.N, dm.n)
+        _formation_axes(ax, view, C0, _index_at(t, when), dm.N)
     for ax in list(axes.flat)[len(times) :]:
         ax.axis("off")
     h, lab = axes.flat[0].get_legend_handles_labels()
@@ -119,14 +119,13 @@ def formation_snapshots(
     return out
 
 
-def _per_agent_plot(df, prefix, width, ylabel, title, folder, stem, log=False) -> list[Path]:  # noqa: ANN001
-    dm = S.dims(df)
-    t = df["t"].to_numpy(float)
+def _per_agent_plot(view, sig, width, ylabel, title, folder, stem, log=False) -> list[Path]:  # noqa: ANN001
+    dm, t = view.dims, view.t
     fig, axes = plt.subplots(width, 1, figsize=(7, 2.6 * width), sharex=True, squeeze=False)
     for r in range(width):
         ax = axes[r, 0]
         for i in range(dm.N):
-            y = S.block(df, prefix, i + 1, width)[:, r]
+            y = view.block(sig, i + 1, width)[:, r]
             c = COLORS[i % len(COLORS)]
             ax.plot(t, np.abs(y) if log else y, color=c, lw=1.1, label=f"follower {i + 1}")
         if log:
@@ -151,10 +150,11 @@ def estimation_errors(df: pd.DataFrame, folder: Path) -> list[Path]:
     folder : Path
         Folder the figure files are written to.
     """
-    dm = S.dims(df)
+    view = S.TrajectoryView.of(df)
+    dm = view.dims
     out = _per_agent_plot(
-        df,
-        "eeta",
+        view,
+        S.Signal.EETA,
         dm.m,
         "ebar_eta,{r} (state units)",
         "Fig. 11: estimation errors ebar_eta_i = eta_i - eta0",
@@ -162,8 +162,8 @@ def estimation_errors(df: pd.DataFrame, folder: Path) -> list[Path]:
         "fig11_estimation_errors",
     )
     out += _per_agent_plot(
-        df,
-        "eeta",
+        view,
+        S.Signal.EETA,
         dm.m,
         "|ebar_eta,{r}| (log)",
         "Fig. 11 (log scale)",
@@ -185,10 +185,11 @@ def tracking_errors(df: pd.DataFrame, folder: Path) -> list[Path]:
     folder : Path
         Folder the figure files are written to.
     """
-    dm = S.dims(df)
+    view = S.TrajectoryView.of(df)
+    dm = view.dims
     out = _per_agent_plot(
-        df,
-        "et",
+        view,
+        S.Signal.ET,
         dm.n,
         f"e_t,{{r}} ({POS_UNIT})",
         "Fig. 12: tracking errors e_ti = p_i - C0 eta_i - b_i",
@@ -196,8 +197,8 @@ def tracking_errors(df: pd.DataFrame, folder: Path) -> list[Path]:
         "fig12_tracking_errors",
     )
     out += _per_agent_plot(
-        df,
-        "et",
+        view,
+        S.Signal.ET,
         dm.n,
         f"|e_t,{{r}}| ({POS_UNIT}, log)",
         "Fig. 12 (log scale)",
@@ -221,22 +222,23 @@ def ablation_comparison(df: pd.DataFrame, ablation: pd.DataFrame, folder: Path) 
     folder : Path
         Folder the figure files are written to.
     """
-    dm = S.dims(df)
+    fv, av = S.TrajectoryView.of(df), S.TrajectoryView.of(ablation)
+    dm = fv.dims
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
     for ax, log in zip(axes, (False, True), strict=True):
         for i in range(dm.N):
             c = COLORS[i % len(COLORS)]
             ax.plot(
-                df["t"],
-                S.agent_norm(df, "et", i + 1, dm.n),
+                fv.t,
+                fv.norm(S.Signal.ET, i + 1, dm.n),
                 "-",
                 color=c,
                 lw=1.2,
                 label=f"FTC (29), follower {i + 1}",
             )
             ax.plot(
-                ablation["t"],
-                S.agent_norm(ablation, "et", i + 1, dm.n),
+                av.t,
+                av.norm(S.Signal.ET, i + 1, dm.n),
                 "--",
                 color=c,
                 lw=1.2,
@@ -315,12 +317,12 @@ def animation(
         return None, "animation skipped: Pillow is not importable"
     from matplotlib.animation import FuncAnimation, PillowWriter
 
-    dm = S.dims(df)
-    t = df["t"].to_numpy(float)
+    view = S.TrajectoryView.of(df)
+    dm, t = view.dims, view.t
     idx = np.unique(np.linspace(0, len(t) - 1, frames).round().astype(int))
-    y0 = S.leader_output(df, C0)
-    P = np.stack([S.block(df, "p", i + 1, dm.n)[:, :2] for i in range(dm.N)], axis=1)
-    B = np.stack([S.block(df, "b", i + 1, dm.n)[:, :2] for i in range(dm.N)], axis=1)
+    y0 = view.leader_output(C0)
+    P = np.stack([view.block(S.Signal.P, i + 1)[:, :2] for i in range(dm.N)], axis=1)
+    B = np.stack([view.block(S.Signal.B, i + 1)[:, :2] for i in range(dm.N)], axis=1)
     slots = y0[:, None, :2] + B
     allpts = np.concatenate([P.reshape(-1, 2), slots.reshape(-1, 2)])
     lo, hi = allpts.min(axis=0) - 1, allpts.max(axis=0) + 1

@@ -183,7 +183,7 @@ def _worst(what: str, t: np.ndarray, mask: np.ndarray, per_agent: list[np.ndarra
 
 
 def run_numbers(
-    scenario, df: S.Frame, h: np.ndarray, tail_fraction: float, startup: float
+    scenario, df: S.FrameOrView, h: np.ndarray, tail_fraction: float, startup: float
 ) -> list[Worst]:  # noqa: ANN001
     """The three numbers: worst formation deviation and tracking error on the tail, peak ‖u_i‖
     after ``startup``.
@@ -201,20 +201,18 @@ def run_numbers(
     startup : float
         Peak effort is taken from this time on (s).
     """
-    df = S.Columns.of(df)
-    dm = S.dims(df)
-    t = S.column(df, "t")
+    view = S.TrajectoryView.of(df)
+    dm = view.dims
+    t = view.t
     tail = S.tail_mask(t, tail_fraction)
-    y0 = S.leader_output(df, scenario.leader.C0)
+    y0 = view.leader_output(scenario.leader.C0)
     dev, et, un = [], [], []
     for i in range(dm.N):
-        p, b = S.block(df, "p", i + 1, dm.n), S.block(df, "b", i + 1, dm.n)
+        p, b = view.block(S.Signal.P, i + 1), view.block(S.Signal.B, i + 1)
         dev.append(np.linalg.norm(p - h[i] * y0 - b, axis=1))
-        et.append(S.agent_norm(df, "et", i + 1, dm.n))
+        et.append(view.norm(S.Signal.ET, i + 1))
         un.append(
-            S.agent_norm(df, "u", i + 1, dm.n)
-            if S.has(df, f"u{i + 1}_1")
-            else np.full(len(t), np.nan)
+            view.norm(S.Signal.U, i + 1) if view.has(S.Signal.U, i + 1) else np.full(len(t), np.nan)
         )
     late = t >= startup
     effort = f"peak |u_i| after t = {startup:g} s"

@@ -87,7 +87,7 @@ def formation_rule(d: np.ndarray, b0: np.ndarray, eps: float) -> np.ndarray:
     return np.stack([q * (d1 * bx - d2 * by) + kappa * bx, q * (d2 * bx + d1 * by) + kappa * by], 1)
 
 
-def slots(scenario: Scenario, df: S.Frame, h: np.ndarray) -> np.ndarray:
+def slots(scenario: Scenario, df: S.FrameOrView, h: np.ndarray) -> np.ndarray:
     """Every follower's slot s_i = h_i y0 + b(h_i η̇0, b_i0) per output time, (K, N, n).
 
     Parameters
@@ -99,8 +99,9 @@ def slots(scenario: Scenario, df: S.Frame, h: np.ndarray) -> np.ndarray:
         The gauge.
     """
     L, N = scenario.leader, scenario.N
-    t = S.column(df, "t")
-    eta0 = S.take(df, [f"eta0_{k}" for k in range(1, L.m + 1)])
+    view = S.TrajectoryView.of(df)
+    t = view.t
+    eta0 = view.leader(L.m)
     y0 = eta0 @ np.asarray(L.C0, float).T  # (K, n)
     b0 = np.array([fo.b0 for fo in scenario.followers], float)  # (N, n)
     out = h[None, :, None] * y0[:, None, :] + b0[None, :, :]
@@ -113,7 +114,7 @@ def slots(scenario: Scenario, df: S.Frame, h: np.ndarray) -> np.ndarray:
     return out
 
 
-def deviation(scenario: Scenario, df: S.Frame, h: np.ndarray) -> np.ndarray:
+def deviation(scenario: Scenario, df: S.FrameOrView, h: np.ndarray) -> np.ndarray:
     """‖p_i − s_i‖ per output time and follower, (K, N) (:func:`slots`).
 
     Parameters
@@ -125,8 +126,9 @@ def deviation(scenario: Scenario, df: S.Frame, h: np.ndarray) -> np.ndarray:
         The gauge.
     """
     N, n = scenario.N, scenario.n
-    p = np.stack([S.take(df, [f"p{i}_{r}" for r in range(1, n + 1)]) for i in range(1, N + 1)], 1)
-    return np.linalg.norm(p - slots(scenario, df, h), axis=2)
+    view = S.TrajectoryView.of(df)
+    p = np.stack([view.block(S.Signal.P, i, n) for i in range(1, N + 1)], 1)
+    return np.linalg.norm(p - slots(scenario, view, h), axis=2)
 
 
 def recovery_time(t: np.ndarray, dev: np.ndarray, start: float, end: float, level: float) -> float:
@@ -200,7 +202,7 @@ def classify(time: float, window: float, limit: float) -> str:
 
 def recoveries(
     scenario: Scenario,
-    df: S.Frame,
+    df: S.FrameOrView,
     h: np.ndarray,
     level: float = RECOVERY_LEVEL,
     limit: float = RECOVERY_LIMIT,
@@ -217,13 +219,14 @@ def recoveries(
     level, limit : float
         Defaults :data:`RECOVERY_LEVEL`, :data:`RECOVERY_LIMIT`.
     """
-    t = S.column(df, "t")
+    view = S.TrajectoryView.of(df)
+    t = view.t
     horizon = float(t[-1]) + 1e-12  # the last output time is inside the last window
     starts = [s for s in step_starts(scenario) if s < horizon]
     pinned = [i for i, b in enumerate(scenario.graph.pinning) if b > 0]
     if not starts or not pinned:
         return []
-    dev = deviation(scenario, df, h)
+    dev = deviation(scenario, view, h)
     ends = [*starts[1:], horizon]
     out = []
     for a, b in zip(starts, ends, strict=True):
@@ -262,7 +265,7 @@ def recovery_summary(items: list[StepRecovery]) -> dict[str, float | int]:
     }
 
 
-def step_peak_u(scenario: Scenario, df: S.Frame, window: float = RECOVERY_LIMIT) -> float:
+def step_peak_u(scenario: Scenario, df: S.FrameOrView, window: float = RECOVERY_LIMIT) -> float:
     """The largest ‖u_i‖ of any follower within ``window`` seconds after a step's onset.
 
     Separates what a step costs from the torque the leader's speed asks for anyway (the
@@ -281,7 +284,8 @@ def step_peak_u(scenario: Scenario, df: S.Frame, window: float = RECOVERY_LIMIT)
     float
         NaN without a step inside the output times.
     """
-    t = S.column(df, "t")
+    view = S.TrajectoryView.of(df)
+    t = view.t
     near = np.zeros(len(t), bool)
     for a in step_starts(scenario):
         near |= (t >= a) & (t <= a + window)
@@ -290,14 +294,13 @@ def step_peak_u(scenario: Scenario, df: S.Frame, window: float = RECOVERY_LIMIT)
     N, n = scenario.N, scenario.n
     # the Euclidean norm per follower, as the table's row `peak |u_i| after t = 1 s`
     norms = [
-        np.linalg.norm(S.take(df, [f"u{i}_{r}" for r in range(1, n + 1)])[near], axis=1).max()
-        for i in range(1, N + 1)
+        np.linalg.norm(view.block(S.Signal.U, i, n)[near], axis=1).max() for i in range(1, N + 1)
     ]
     return float(max(norms))
 
 
 def worst_recovery(
-    scenario: Scenario, df: S.Frame, h: np.ndarray, level: float = RECOVERY_LEVEL
+    scenario: Scenario, df: S.FrameOrView, h: np.ndarray, level: float = RECOVERY_LEVEL
 ) -> float:
     """The longest recovery time of a pinned follower over the steps where it is defined.
 

@@ -20,6 +20,7 @@ import pandas as pd
 
 from core.artifacts import OUT_ROOT
 from core.scenario import Scenario
+from verify import signals as S
 from verify.bounds import VerifyConfig, VerifyError, theorem1_floor, theorem1_rates
 from verify.intervals import u0_dependence
 from verify.lyapunov import check_theorem1, closed_loop
@@ -71,24 +72,20 @@ def states_from_frame(cl: Any, sc: Scenario, df: pd.DataFrame) -> np.ndarray:
         If the layout has states the CSV does not store (the derivative filters).
     """
     lay = cl.layout
-    X = np.full((len(df), lay.nx), np.nan)
-    cols = {"eta0": [f"eta0_{k}" for k in range(1, sc.m + 1)]}
+    view = S.TrajectoryView.of(df)
+    X = np.full((len(view), lay.nx), np.nan)
     for key, sl in lay.slices.items():
-        if key == "eta0":
-            names = cols["eta0"]
-        else:
-            name, i = key
-            width = sl.stop - sl.start
-            if name in ("phi", "ghat"):
-                names = [f"{name}{i + 1}"]
+        try:
+            if key == "eta0":
+                X[:, sl] = view.leader(sc.m)
             else:
-                names = [f"{name}{i + 1}_{r}" for r in range(1, width + 1)]
-        if not all(c in df.columns for c in names):
+                name, i = key
+                X[:, sl] = view.block(S.Signal.named(name), i + 1, sl.stop - sl.start)
+        except VerifyError:  # a state the CSV does not store, or one of its columns missing
             raise VerifyError(
                 f"trajectory.csv does not store state {key!r}: re-simulate (verify demo) "
                 "to check the Lyapunov inequalities"
-            )
-        X[:, sl] = df[names].to_numpy(float)
+            ) from None
     return X
 
 

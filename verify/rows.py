@@ -186,7 +186,7 @@ class Span:
     tail: np.ndarray
 
     @classmethod
-    def of(cls, df: S.Frame, cfg: VerifyConfig) -> Span:
+    def of(cls, df: S.FrameOrView, cfg: VerifyConfig) -> Span:
         """The span of a trajectory.
 
         Parameters
@@ -196,7 +196,7 @@ class Span:
         cfg : VerifyConfig
             Its tail fraction sets the tail.
         """
-        t = S.column(df, "t")
+        t = S.TrajectoryView.of(df).t
         return cls(t, S.tail_mask(t, cfg.tail_fraction))
 
     @property

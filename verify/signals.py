@@ -3,13 +3,15 @@
 Column format (agents 1-based): ``t``, ``eta0_k``; per follower i: ``p{i}_{r}``,
 ``q{i}_{r}``, ``eta{i}_{k}``, ``mu{i}_{k}``, ``phi{i}``, ``thetahat{i}_{r}``,
 ``ghat{i}``, ``u{i}_{r}``, ``b{i}_{r}``, ``et{i}_{r}``, ``eeta{i}_{k}``,
-``chi{i}_{r}``, ``V2_{i}``; and ``V1``.
+``chi{i}_{r}``, ``V2_{i}``; and ``V1``. :class:`Signal` names each per-follower block
+and :class:`TrajectoryView` reads them, so consumers never spell a column name.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from enum import Enum
 
 import numpy as np
 import pandas as pd
@@ -145,28 +147,6 @@ def _count(cols: set[str], pattern: str) -> int:
     return k
 
 
-def block(df: Frame, prefix: str, i: int, width: int) -> np.ndarray:
-    """Columns ``{prefix}{i}_{1..width}`` (i 1-based) as a (K, width) array.
-
-    Parameters
-    ----------
-    df : DataFrame or Columns
-        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
-        component).
-    prefix : str
-        Signal name, e.g. ``"p"`` or ``"et"``.
-    i : int
-        1-based agent number.
-    width : int
-        Number of components.
-    """
-    names = [f"{prefix}{i}_{r}" for r in range(1, width + 1)]
-    missing = [c for c in names if not has(df, c)]
-    if missing:
-        raise VerifyError(f"trajectory: column {missing[0]!r} is missing (re-run the simulation)")
-    return take(df, names)
-
-
 def has(df: Frame, name: str) -> bool:
     """Whether column ``name`` exists.
 
@@ -211,22 +191,6 @@ def take(df: Frame, names: list[str]) -> np.ndarray:
     if isinstance(df, Columns):
         return df.take(names)
     return df[names].to_numpy(dtype=float)
-
-
-def leader_output(df: Frame, C0: np.ndarray) -> np.ndarray:
-    """y0 = C0 η0 along the trajectory, (K, n).
-
-    Parameters
-    ----------
-    df : DataFrame or Columns
-        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
-        component).
-    C0 : ndarray
-        n×m leader output matrix.
-    """
-    m = C0.shape[1]
-    eta0 = take(df, [f"eta0_{k}" for k in range(1, m + 1)])
-    return eta0 @ np.asarray(C0, dtype=float).T
 
 
 def tail_start(t: np.ndarray, fraction: float) -> float:
@@ -299,14 +263,306 @@ def decay_rate(t: np.ndarray, y: np.ndarray, floor: float = 1e-300) -> float:
     return float(-slope)
 
 
-def agent_norm(df: Frame, prefix: str, i: int, width: int) -> np.ndarray:
-    """Euclidean norm over components of ``{prefix}{i}_*`` at each sample.
+def leader_column(k: int) -> str:
+    """The name of column ``k`` (1-based) of the leader's state η0.
+
+    Parameters
+    ----------
+    k : int
+        1-based state component.
+    """
+    return f"eta0_{k}"
+
+
+class Signal(Enum):
+    """A per-follower block of the trajectory: its column pattern and its width rule.
+
+    The value is ``(pattern, rule)``. ``pattern`` names column r of follower i (both
+    1-based; a one-column signal has no ``{r}``); ``rule`` is how many columns the block
+    has: ``"n"`` (one per output), ``"m"`` (one per leader state) or ``"1"``. The
+    adaptive estimate θ̂_i has one entry per output channel, so its width is n (the
+    columns :func:`generated.trajectory_file.column_names` writes).
+    """
+
+    P = ("p{i}_{r}", "n")
+    Q = ("q{i}_{r}", "n")
+    ETA = ("eta{i}_{r}", "m")
+    MU = ("mu{i}_{r}", "m")
+    PHI = ("phi{i}", "1")
+    THETAHAT = ("thetahat{i}_{r}", "n")
+    GHAT = ("ghat{i}", "1")
+    U = ("u{i}_{r}", "n")
+    B = ("b{i}_{r}", "n")
+    ET = ("et{i}_{r}", "n")
+    EETA = ("eeta{i}_{r}", "m")
+    CHI = ("chi{i}_{r}", "n")
+    V2 = ("V2_{i}", "1")
+
+    @property
+    def pattern(self) -> str:
+        """Column r of follower i as a format string (fields ``i`` and ``r``)."""
+        return self.value[0]
+
+    @property
+    def rule(self) -> str:
+        """The width rule: ``"n"``, ``"m"`` or ``"1"``."""
+        return self.value[1]
+
+    @property
+    def stem(self) -> str:
+        """The pattern before the follower's number (``"p"``, ``"V2_"``)."""
+        return self.pattern.partition("{")[0]
+
+    def width(self, dm: Dims) -> int:
+        """Number of columns per follower for trajectory sizes ``dm``.
+
+        Parameters
+        ----------
+        dm : Dims
+            The trajectory's sizes.
+        """
+        return {"n": dm.n, "m": dm.m, "1": 1}[self.rule]
+
+    def column(self, i: int, r: int = 1) -> str:
+        """The name of column ``r`` of follower ``i`` (``r`` is ignored for one column).
+
+        Parameters
+        ----------
+        i : int
+            1-based follower.
+        r : int
+            1-based component.
+        """
+        return self.pattern.format(i=i, r=r)
+
+    def columns(self, i: int, width: int) -> list[str]:
+        """The names of follower ``i``'s block, ``width`` components (one for a scalar).
+
+        Parameters
+        ----------
+        i : int
+            1-based follower.
+        width : int
+            Number of components.
+        """
+        if self.rule == "1":
+            return [self.column(i)]
+        return [self.column(i, r) for r in range(1, width + 1)]
+
+    @classmethod
+    def named(cls, stem: str) -> Signal:
+        """The signal whose columns start with ``stem`` (a closed-loop state's name).
+
+        Parameters
+        ----------
+        stem : str
+            E.g. ``"p"``, ``"thetahat"``.
+
+        Raises
+        ------
+        VerifyError
+            If no signal has that stem (the trajectory does not store it).
+        """
+        for sig in cls:
+            if sig.stem == stem:
+                return sig
+        raise VerifyError(f"trajectory: no signal {stem!r} is stored (re-run the simulation)")
+
+
+@dataclass(frozen=True)
+class TrajectoryView:
+    """A trajectory's named blocks, read by :class:`Signal` and 1-based follower.
+
+    Built once per trajectory (:meth:`of`). Every accessor selects through
+    :meth:`Columns.take` or :meth:`Columns.col`, so its arrays are those the column
+    helpers give (the same numbers in the same column-major layout). A missing column
+    raises the one-line :class:`VerifyError` naming it.
+
+    Attributes
+    ----------
+    columns : Columns
+        The trajectory's columns.
+    """
+
+    columns: Columns
+    _memo: dict[str, Dims] = field(default_factory=dict, compare=False, repr=False)
+
+    @classmethod
+    def of(cls, df: Frame | TrajectoryView) -> TrajectoryView:
+        """The view of ``df`` (``df`` itself when it already is one).
+
+        Parameters
+        ----------
+        df : DataFrame, Columns or TrajectoryView
+            A trajectory in the ``trajectory.csv`` format.
+        """
+        if isinstance(df, TrajectoryView):
+            return df
+        return cls(Columns.of(df))
+
+    def __len__(self) -> int:
+        return len(self.columns)
+
+    @property
+    def t(self) -> np.ndarray:
+        """Output times, (K,)."""
+        return self._col("t")
+
+    @property
+    def dims(self) -> Dims:
+        """N, n and m read from the column names (:func:`dims`; its errors)."""
+        if "dims" not in self._memo:
+            self._memo["dims"] = dims(self.columns)
+        return self._memo["dims"]
+
+    def leader(self, width: int | None = None) -> np.ndarray:
+        """The leader's state η0, (K, width).
+
+        Parameters
+        ----------
+        width : int, optional
+            Number of states (default m of :attr:`dims`).
+        """
+        m = self.dims.m if width is None else width
+        return self._take([leader_column(k) for k in range(1, m + 1)])
+
+    def leader_output(self, C0: np.ndarray) -> np.ndarray:
+        """y0 = C0 η0 along the trajectory, (K, n).
+
+        Parameters
+        ----------
+        C0 : ndarray
+            n×m leader output matrix.
+        """
+        eta0 = self.leader(C0.shape[1])
+        return eta0 @ np.asarray(C0, dtype=float).T
+
+    def block(self, sig: Signal, i: int, width: int | None = None) -> np.ndarray:
+        """Follower ``i``'s block of ``sig``, (K, width).
+
+        Parameters
+        ----------
+        sig : Signal
+            The block.
+        i : int
+            1-based follower.
+        width : int, optional
+            Number of components (default the signal's width rule on :attr:`dims`).
+        """
+        if width is None:
+            width = 1 if sig.rule == "1" else sig.width(self.dims)
+        return self._take(sig.columns(i, width))
+
+    def norm(self, sig: Signal, i: int, width: int | None = None) -> np.ndarray:
+        """Euclidean norm over the components of follower ``i``'s ``sig`` per sample, (K,).
+
+        Parameters
+        ----------
+        sig : Signal
+            The block.
+        i : int
+            1-based follower.
+        width : int, optional
+            As :meth:`block`.
+        """
+        return np.linalg.norm(self.block(sig, i, width), axis=1)
+
+    def scalar(self, sig: Signal, i: int) -> np.ndarray:
+        """Follower ``i``'s one-column signal ``sig``, (K,).
+
+        Parameters
+        ----------
+        sig : Signal
+            A signal of width rule ``"1"``.
+        i : int
+            1-based follower.
+        """
+        return self._col(_scalar(sig).column(i))
+
+    def scalars(self, sig: Signal, count: int | None = None) -> np.ndarray:
+        """The one-column signal ``sig`` of followers 1..count side by side, (K, count).
+
+        Parameters
+        ----------
+        sig : Signal
+            A signal of width rule ``"1"``.
+        count : int, optional
+            Number of followers (default N of :attr:`dims`).
+        """
+        N = self.dims.N if count is None else count
+        return self._take([_scalar(sig).column(i) for i in range(1, N + 1)])
+
+    def has(self, sig: Signal, i: int) -> bool:
+        """Whether the trajectory logs follower ``i``'s ``sig`` (its first column).
+
+        Parameters
+        ----------
+        sig : Signal
+            The block.
+        i : int
+            1-based follower.
+        """
+        return self.columns.has(sig.column(i))
+
+    def V1(self) -> np.ndarray:
+        """The observer's Lyapunov function V1, (K,)."""
+        return self._col("V1")
+
+    def has_V1(self) -> bool:
+        """Whether the trajectory logs V1."""
+        return self.columns.has("V1")
+
+    def _col(self, name: str) -> np.ndarray:
+        self._need([name])
+        return self.columns.col(name)
+
+    def _take(self, names: list[str]) -> np.ndarray:
+        self._need(names)
+        return self.columns.take(names)
+
+    def _need(self, names: list[str]) -> None:
+        missing = [c for c in names if not self.columns.has(c)]
+        if missing:
+            raise VerifyError(
+                f"trajectory: column {missing[0]!r} is missing (re-run the simulation)"
+            )
+
+
+def _scalar(sig: Signal) -> Signal:
+    """``sig``, which must be a one-column signal."""
+    if sig.rule != "1":
+        raise ValueError(f"Signal.{sig.name} has {sig.rule} columns per follower: use block()")
+    return sig
+
+
+def block(df: Frame, prefix: str, i: int, width: int) -> np.ndarray:
+    """Columns ``{prefix}{i}_{1..width}`` (i 1-based) as a (K, width) array.
+
+    :meth:`TrajectoryView.block` of the signal named ``prefix``; the packages read the view.
 
     Parameters
     ----------
     df : DataFrame or Columns
-        A trajectory in the ``trajectory.csv`` format (column ``t`` and one column per signal
-        component).
+        A trajectory in the ``trajectory.csv`` format.
+    prefix : str
+        Signal name, e.g. ``"p"`` or ``"et"``.
+    i : int
+        1-based agent number.
+    width : int
+        Number of components.
+    """
+    return TrajectoryView.of(df).block(Signal.named(prefix), i, width)
+
+
+def agent_norm(df: Frame, prefix: str, i: int, width: int) -> np.ndarray:
+    """Euclidean norm over components of ``{prefix}{i}_*`` at each sample.
+
+    :meth:`TrajectoryView.norm` of the signal named ``prefix``; the packages read the view.
+
+    Parameters
+    ----------
+    df : DataFrame or Columns
+        A trajectory in the ``trajectory.csv`` format.
     prefix : str
         Signal name, e.g. ``"et"``.
     i : int
@@ -314,4 +570,8 @@ def agent_norm(df: Frame, prefix: str, i: int, width: int) -> np.ndarray:
     width : int
         Number of components.
     """
-    return np.linalg.norm(block(df, prefix, i, width), axis=1)
+    return TrajectoryView.of(df).norm(Signal.named(prefix), i, width)
+
+
+#: what the readers of a trajectory accept: a frame, its columns or its view
+FrameOrView = Frame | TrajectoryView

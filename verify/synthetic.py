@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from verify.signals import Signal, leader_column
+
 
 def synthetic_trajectory(
     N: int = 5,
@@ -51,7 +53,7 @@ def synthetic_trajectory(
     cols: dict[str, np.ndarray] = {"t": t}
     eta0 = np.stack([2 - 2 * np.cos(t), 2 * np.sin(t)], axis=1)
     for k in range(2):
-        cols[f"eta0_{k + 1}"] = eta0[:, k]
+        cols[leader_column(k + 1)] = eta0[:, k]
     V1 = np.zeros_like(t)
     tau = np.pi / 2 - t  # the paper's formation angle for this leader
     R = np.stack([[np.cos(tau), -np.sin(tau)], [np.sin(tau), np.cos(tau)]])  # 2×2×K
@@ -66,20 +68,24 @@ def synthetic_trajectory(
         chi = etd + Lambda * et
         p = eta @ C0.T + b + et
         q = np.gradient(p, t, axis=0)
+        blocks = {
+            Signal.P: p,
+            Signal.Q: q,
+            Signal.ETA: eta,
+            Signal.MU: np.zeros_like(eta),
+            Signal.THETAHAT: np.repeat((1.0 - np.exp(-t))[:, None], 2, axis=1),
+            Signal.U: -20 * chi,
+            Signal.B: b,
+            Signal.ET: et,
+            Signal.EETA: ebar,
+            Signal.CHI: chi,
+        }
         for r in range(2):
-            cols[f"p{i + 1}_{r + 1}"] = p[:, r]
-            cols[f"q{i + 1}_{r + 1}"] = q[:, r]
-            cols[f"eta{i + 1}_{r + 1}"] = eta[:, r]
-            cols[f"mu{i + 1}_{r + 1}"] = np.zeros_like(t)
-            cols[f"thetahat{i + 1}_{r + 1}"] = 1.0 - np.exp(-t)
-            cols[f"u{i + 1}_{r + 1}"] = -20 * chi[:, r]
-            cols[f"b{i + 1}_{r + 1}"] = b[:, r]
-            cols[f"et{i + 1}_{r + 1}"] = et[:, r]
-            cols[f"eeta{i + 1}_{r + 1}"] = ebar[:, r]
-            cols[f"chi{i + 1}_{r + 1}"] = chi[:, r]
-        cols[f"phi{i + 1}"] = np.exp(-2 * t)
-        cols[f"ghat{i + 1}"] = 1.0 + 0.05 * (1 - np.exp(-t))
-        cols[f"V2_{i + 1}"] = 0.5 * 8.0 * np.sum(chi**2, axis=1) + 1.0
+            for sig, x in blocks.items():
+                cols[sig.column(i + 1, r + 1)] = x[:, r]
+        cols[Signal.PHI.column(i + 1)] = np.exp(-2 * t)
+        cols[Signal.GHAT.column(i + 1)] = 1.0 + 0.05 * (1 - np.exp(-t))
+        cols[Signal.V2.column(i + 1)] = 0.5 * 8.0 * np.sum(chi**2, axis=1) + 1.0
         V1 += np.sum(ebar**2, axis=1)
     cols["V1"] = V1
     return pd.DataFrame(cols)

@@ -128,26 +128,27 @@ def bounds_table(
         Columns :data:`COLUMNS`.
     """
     cfg = config or VerifyConfig()
-    df = S.Columns.of(df)  # converted once: every row below reads columns of this array
-    dm = S.dims(df)
+    view = S.TrajectoryView.of(df)  # converted once: every row below reads this array
+    dm = view.dims
     _check_dims(scenario, dm)
-    span = Span.of(df, cfg)
+    span = Span.of(view, cfg)
     dep = np.ones(dm.N, bool) if u0_dep is None else np.asarray(u0_dep, bool)
     windows = [
-        interval_windows(scenario, df, i, follower_pieces(scenario, i, bool(dep[i])), cfg)
+        interval_windows(scenario, view, i, follower_pieces(scenario, i, bool(dep[i])), cfg)
         for i in range(dm.N)
     ]
     R = Rows()
-    theorem1_rows(R, scenario, df, span, gains=gains, config=cfg)
+    theorem1_rows(R, scenario, view, span, gains=gains, config=cfg)
     theorem1_lyapunov_rows(R, theorem1 or [], scenario, span, gains=gains)
-    theorem2_rows(R, scenario, df, span, theorem2 or [], windows, config=cfg)
-    definition1_rows(R, scenario, df, gains=gains, config=cfg, windows=windows)
-    registered_rows(R, CheckInput(scenario, df, gains, cfg, span, windows))  # verify/checks.py
+    theorem2_rows(R, scenario, view, span, theorem2 or [], windows, config=cfg)
+    definition1_rows(R, scenario, view, gains=gains, config=cfg, windows=windows)
+    inp = CheckInput(scenario, view.columns, gains, cfg, span, windows)
+    registered_rows(R, inp)  # verify/checks.py
     if ablation is not None:
-        ablation = S.Columns.of(ablation)
+        other = S.TrajectoryView.of(ablation)
         for i in range(dm.N):
-            ablation_rows(R, df, ablation, i, dm.n, cfg)
-    table = mark_saturation(R.frame(), saturation_window(scenario, df))
+            ablation_rows(R, view, other, i, dm.n, cfg)
+    table = mark_saturation(R.frame(), saturation_window(scenario, view))
     return mark_switching(table, scenario)
 
 
@@ -190,7 +191,7 @@ def mark_switching(table: pd.DataFrame, scenario: Scenario) -> pd.DataFrame:
     return out
 
 
-def saturation_window(scenario: Scenario, df: S.Frame) -> tuple[float, float] | None:
+def saturation_window(scenario: Scenario, df: S.FrameOrView) -> tuple[float, float] | None:
     """First and last output time at which some logged |u_ir| is at its limit u_max_i.
 
     The logged ``u`` columns hold the applied, clipped torque, so the limit is met
@@ -211,15 +212,14 @@ def saturation_window(scenario: Scenario, df: S.Frame) -> tuple[float, float] | 
     u_max = scenario.controller.u_max
     if u_max is None:
         return None
-    df = S.Columns.of(df)
-    dm = S.dims(df)
-    hit = np.zeros(len(df), dtype=bool)
-    for i in range(dm.N):
-        u = np.abs(S.block(df, "u", i + 1, dm.n))
+    view = S.TrajectoryView.of(df)
+    hit = np.zeros(len(view), dtype=bool)
+    for i in range(view.dims.N):
+        u = np.abs(view.block(S.Signal.U, i + 1))
         hit |= np.any(u >= u_max[i] * (1.0 - SATURATION_RTOL), axis=1)
     if not hit.any():
         return None
-    t = S.column(df, "t")[hit]
+    t = view.t[hit]
     return float(t[0]), float(t[-1])
 
 
@@ -259,7 +259,7 @@ def _check_dims(scenario: Scenario, dm: S.Dims) -> None:
 def theorem1_rows(
     R: Rows,
     scenario: Scenario,
-    df: S.Frame,
+    df: S.FrameOrView,
     span: Span,
     *,
     gains: Gains | None = None,
@@ -281,14 +281,13 @@ def theorem1_rows(
     config : VerifyConfig, optional
     """
     cfg = config or VerifyConfig()
-    df = S.Columns.of(df)
-    dm = S.dims(df)
+    view = S.TrajectoryView.of(df)
     t, tail = span.t, span.tail
     floor = scenario.observer.phi_min > 0
-    for i in range(dm.N):
-        if not S.has(df, f"eeta{i + 1}_1"):
+    for i in range(view.dims.N):
+        if not view.has(S.Signal.EETA, i + 1):
             break
-        e = S.agent_norm(df, "eeta", i + 1, dm.m)
+        e = view.norm(S.Signal.EETA, i + 1)
         if gains is not None:
             from verify.bounds import theorem1_rates
 
@@ -390,7 +389,7 @@ def theorem1_lyapunov_rows(
 
 
 def ablation_rows(
-    R: Rows, df: S.Frame, ablation: S.Frame, i: int, n: int, cfg: VerifyConfig
+    R: Rows, df: S.FrameOrView, ablation: S.FrameOrView, i: int, n: int, cfg: VerifyConfig
 ) -> None:
     """Fig. 13 (the ablation (42) converges more slowly) for follower ``i``.
 
@@ -412,8 +411,9 @@ def ablation_rows(
     cfg : VerifyConfig
         Its tail fraction sets the tail suprema.
     """
-    t, ta = S.column(df, "t"), S.column(ablation, "t")
-    ft, ab = S.agent_norm(df, "et", i + 1, n), S.agent_norm(ablation, "et", i + 1, n)
+    fv, av = S.TrajectoryView.of(df), S.TrajectoryView.of(ablation)
+    t, ta = fv.t, av.t
+    ft, ab = fv.norm(S.Signal.ET, i + 1, n), av.norm(S.Signal.ET, i + 1, n)
     tail, abt = S.tail_mask(t, cfg.tail_fraction), S.tail_mask(ta, cfg.tail_fraction)
     sup_ft, sup_ab = float(ft[tail].max()), float(ab[abt].max())
     full = (float(t[0]), float(t[-1]))

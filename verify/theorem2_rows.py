@@ -103,7 +103,7 @@ class IntervalWindow:
 
 
 def interval_windows(
-    scenario: Scenario, df: S.Frame, agent: int, pieces: list[Piece], cfg: VerifyConfig
+    scenario: Scenario, df: S.FrameOrView, agent: int, pieces: list[Piece], cfg: VerifyConfig
 ) -> list[IntervalWindow]:
     """Follower ``agent``'s intervals with their constants, comparison-lemma times and windows.
 
@@ -119,9 +119,10 @@ def interval_windows(
     cfg : VerifyConfig
         Lemma 1's δ.
     """
-    t = S.column(df, "t")
-    col = f"V2_{agent + 1}"
-    V2 = S.column(df, col) if S.has(df, col) else None
+    view = S.TrajectoryView.of(df)
+    t = view.t
+    col = S.Signal.V2.column(agent + 1)
+    V2 = view.scalar(S.Signal.V2, agent + 1) if view.has(S.Signal.V2, agent + 1) else None
     out = []
     for k, p in enumerate(pieces):
         c = theorem2_constants(scenario, agent, cfg, health=(p.g_lo, p.g_hi, p.gdot))
@@ -186,7 +187,7 @@ def chi_envelope(c: Theorem2Constants, W: np.ndarray) -> np.ndarray:
 def theorem2_rows(
     R: Rows,
     scenario: Scenario,
-    df: S.Frame,
+    df: S.FrameOrView,
     span: Span,
     checks: list[InequalityCheck],
     windows: list[list[IntervalWindow]],
@@ -212,10 +213,10 @@ def theorem2_rows(
     """
     cfg = config or VerifyConfig()
     _consistency_rows(R, scenario, checks, span.full)
-    df = S.Columns.of(df)
-    dm = S.dims(df)
+    view = S.TrajectoryView.of(df)
+    dm = view.dims
     for i in range(dm.N):
-        _theorem2_agent_rows(R, scenario, df, span, i, dm.n, windows[i], cfg)
+        _theorem2_agent_rows(R, scenario, view, span, i, dm.n, windows[i], cfg)
 
 
 def _consistency_rows(
@@ -299,7 +300,7 @@ def _tail_row(R: Rows, claim, bound: float, x: np.ndarray, span: Span, i: int, r
 def _theorem2_agent_rows(
     R: Rows,
     scenario: Scenario,
-    df: S.Frame,
+    view: S.TrajectoryView,
     span: Span,
     i: int,
     n: int,
@@ -309,8 +310,8 @@ def _theorem2_agent_rows(
     """Theorem 2's rows for follower ``i`` (``n`` outputs): (31), Lemma 2, provable, Lemma 1."""
     c = theorem2_constants(scenario, i, cfg)
     lam = np.asarray(scenario.controller.Lambda[i], float)
-    chi = S.block(df, "chi", i + 1, n)
-    et = S.block(df, "et", i + 1, n)
+    chi = view.block(S.Signal.CHI, i + 1, n)
+    et = view.block(S.Signal.ET, i + 1, n)
     etd = chi - et * lam  # ė_t = χ − Λ e_t, eq. (28)
     chin = np.linalg.norm(chi, axis=1)
     _paper_rows(R, c, span, chin, et, etd, i)
@@ -318,8 +319,8 @@ def _theorem2_agent_rows(
     if _has_variant(scenario):
         for w in windows:
             _provable_rows(R, w, span.t, chin, et, i, ok, why)
-    if S.has(df, f"V2_{i + 1}"):
-        _lemma1_row(R, c, span, S.column(df, f"V2_{i + 1}"), i, cfg)
+    if view.has(S.Signal.V2, i + 1):
+        _lemma1_row(R, c, span, view.scalar(S.Signal.V2, i + 1), i, cfg)
 
 
 def _has_variant(scenario: Scenario) -> bool:
@@ -437,7 +438,7 @@ def gauge(scenario: Scenario, gains: Gains | None = None) -> np.ndarray:
     return np.asarray(find_gauge(A, np.asarray(scenario.graph.pinning, float)), float)
 
 
-def leader_formation(scenario: Scenario, df: S.Frame, h: np.ndarray) -> np.ndarray:
+def leader_formation(scenario: Scenario, df: S.FrameOrView, h: np.ndarray) -> np.ndarray:
     """R(τ_i⁰) b_i0 with τ_i⁰ the angle of h_i η̇0, η̇0 = A0 η0 + B0 u0(t) (eq. (3)): (K, N, n).
 
     The formation the paper defines (section 7), referenced to the leader's own state
@@ -454,12 +455,13 @@ def leader_formation(scenario: Scenario, df: S.Frame, h: np.ndarray) -> np.ndarr
     h : ndarray
         The gauge.
     """
-    t = S.column(df, "t")
+    view = S.TrajectoryView.of(df)
+    t = view.t
     L = scenario.leader
     b0 = np.array([fo.b0 for fo in scenario.followers], float)  # (N, n)
     if scenario.n != 2 or L.m < 2:
         return np.broadcast_to(b0, (len(t), *b0.shape)).copy()
-    eta0 = S.take(df, [f"eta0_{k}" for k in range(1, L.m + 1)])
+    eta0 = view.leader(L.m)
     d = eta0 @ np.asarray(L.A0, float).T + (np.asarray(L.B0, float) @ L.u0_numpy(t)).T  # eq. (3)
     d = d[:, :2]
     c, s = d[:, 0], d[:, 1]
@@ -479,7 +481,7 @@ def leader_formation(scenario: Scenario, df: S.Frame, h: np.ndarray) -> np.ndarr
 def definition1_rows(
     R: Rows,
     scenario: Scenario,
-    df: S.Frame,
+    df: S.FrameOrView,
     *,
     gains: Gains | None = None,
     config: VerifyConfig | None = None,
@@ -510,33 +512,33 @@ def definition1_rows(
     from verify.intervals import follower_pieces
 
     cfg = config or VerifyConfig()
-    df = S.Columns.of(df)
-    dm = S.dims(df)
-    t = S.column(df, "t")
+    view = S.TrajectoryView.of(df)
+    dm = view.dims
+    t = view.t
     tail = S.tail_mask(t, cfg.tail_fraction)
     k0 = int(np.argmax(tail))
     tw = (float(t[k0]), float(t[-1]))
     h = gauge(scenario, gains)
-    y0 = S.leader_output(df, scenario.leader.C0)
+    y0 = view.leader_output(scenario.leader.C0)
     certified = gains is not None and bool(gains.certificate.get("passed", True))
-    phi_cols = [f"phi{i + 1}" for i in range(dm.N)]
-    derivable = gains is not None and S.has(df, "V1") and all(S.has(df, c) for c in phi_cols)
+    phis = all(view.has(S.Signal.PHI, i + 1) for i in range(dm.N))
+    derivable = gains is not None and view.has_V1() and phis
     fl = theorem1_floor(scenario, gains) if derivable else None
-    lead_b = leader_formation(scenario, df, h)
+    lead_b = leader_formation(scenario, view, h)
     for i in range(dm.N):
         c = theorem2_constants(scenario, i, cfg)
-        p, b = S.block(df, "p", i + 1, dm.n), S.block(df, "b", i + 1, dm.n)
+        p, b = view.block(S.Signal.P, i + 1), view.block(S.Signal.B, i + 1)
         dev = np.linalg.norm(p - h[i] * y0 - b, axis=1)  # Definition 1 with the gauge h_i
         _definition1_paper(R, c, dev, t, tail, tw, f"h_i = {h[i]:+g}; bound as printed (31)", i)
         if _has_variant(scenario):
             ws = (
                 windows[i]
                 if windows is not None
-                else interval_windows(scenario, df, i, follower_pieces(scenario, i), cfg)
+                else interval_windows(scenario, view, i, follower_pieces(scenario, i), cfg)
             )
             ok, why = theorem2_guaranteed(scenario, i)
             lam = np.asarray(scenario.controller.Lambda[i], float)
-            f = _Follower(R, df, fl, t, k0, dev, i, ok and certified, why, lam)
+            f = _Follower(R, view, fl, t, k0, dev, i, ok and certified, why, lam)
             _definition1_intervals(f, ws)
         fd = np.linalg.norm(p - h[i] * y0 - lead_b[:, i, :], axis=1)[tail]
         fd = fd[np.isfinite(fd)]
@@ -586,7 +588,7 @@ class _Follower:
     floor, the deviation and whether Theorem 2 guarantees the rows."""
 
     R: Rows
-    df: S.Frame
+    view: S.TrajectoryView
     fl: object  # verify.bounds.Theorem1Floor
     t: np.ndarray
     k0: int
@@ -602,9 +604,8 @@ class _Follower:
         earlier (V1 is continuous through health switches and steps of u0)."""
         fl, t = self.fl, self.t
         kv = min(self.k0, ks)
-        V1b = fl.v1_bound(float(S.column(self.df, "V1")[kv]), t[mask] - t[kv])
-        phi_cols = [f"phi{j + 1}" for j in range(fl.h.size)]
-        phi = np.asfortranarray(S.take(self.df, phi_cols)[mask])
+        V1b = fl.v1_bound(float(self.view.V1()[kv]), t[mask] - t[kv])
+        phi = np.asfortranarray(self.view.scalars(S.Signal.PHI, fl.h.size)[mask])
         return fl.c0_error_bound(V1b, phi)[:, self.i], kv
 
 
@@ -634,7 +635,7 @@ def _definition1_envelope(f: _Follower, w: IntervalWindow) -> None:
         win = (w.piece.start, min(w.piece.end, float(t[-1])))
         f.R.missing(CL.DEF1_ENV, win, (w.why or "no start sample") + w.label(), agent=i)
         return
-    et = S.block(f.df, "et", i + 1, lam.size)
+    et = f.view.block(S.Signal.ET, i + 1, lam.size)
     ks = int(np.argmax(w.env))
     cmax = np.maximum.accumulate(chi_envelope(w.c, w.W))  # running max of the χ envelope
     Be = np.linalg.norm(np.maximum(np.abs(et[ks])[None, :], cmax[:, None] / lam[None, :]), axis=1)
@@ -663,7 +664,7 @@ def _definition1_envelope(f: _Follower, w: IntervalWindow) -> None:
 def _definition1_derived(f: _Follower, w: IntervalWindow) -> None:
     """‖p_i − h_i y0 − b_i‖ ≤ ‖e_ti‖ + ‖C0 ē_ηi‖ on one interval, each bounded by its theorem."""
     win, c, t = w.mask, w.c, f.t
-    et = S.block(f.df, "et", f.i + 1, c.e_bar_var.size)
+    et = f.view.block(S.Signal.ET, f.i + 1, c.e_bar_var.size)
     ks = int(np.argmax(win))
     # Theorem 2 provable variant from t_s: |e_r| ≤ max(χ̄/λ_r, |e_r(t_s)|) (as _provable_rows)
     Be = float(np.linalg.norm(np.maximum(c.e_bar_var, np.abs(et[ks]))))
