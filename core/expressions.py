@@ -21,6 +21,7 @@ import casadi as ca
 import numpy as np
 
 from core.errors import ExpressionError
+from core.expression_tree import BinOp, Call, Neg, Node, Num, Time, Visitor, visit
 from core.memo import MEMO
 
 #: accepted function names and their arity
@@ -50,14 +51,29 @@ MAX_DEPTH = 40
 
 @dataclass(frozen=True)
 class Expr:
-    """A parsed expression of ``t`` (an immutable tree of tuples).
+    """A parsed expression of ``t``: its text and its immutable tree.
 
-    ``node`` is one of ``("num", value)``, ``("t",)``, ``("neg", a)``,
-    ``("bin", op, a, b)`` or ``("call", name, args)``.
+    ``node`` is a :data:`~core.expression_tree.Node` (:class:`~core.expression_tree.Num`,
+    :class:`~core.expression_tree.Time`, :class:`~core.expression_tree.Neg`,
+    :class:`~core.expression_tree.BinOp` or :class:`~core.expression_tree.Call`).
     """
 
     text: str
-    node: tuple
+    node: Node
+
+    def __hash__(self) -> int:
+        # the dataclass hash of (text, node), remembered: hashing the tree visits every
+        # node, and an Expr is a memo key asked for at every numpy evaluation
+        h = self.__dict__.get("_hash")
+        if h is None:
+            h = hash((self.text, self.node))
+            object.__setattr__(self, "_hash", h)
+        return h
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the fields only: string hashes are salted per process, so a remembered hash
+        # must not travel to a worker
+        return {"text": self.text, "node": self.node}
 
     def casadi(self, t: Any, lits: Any = None) -> Any:
         """Evaluate with CasADi operations on a symbol or number ``t``.
@@ -112,7 +128,7 @@ class Expr:
 
     def is_constant(self) -> bool:
         """True when the expression does not mention ``t``."""
-        return not _mentions_t(self.node)
+        return not visit(self.node, _MENTIONS_T)
 
 
 @MEMO.memoize("expression-literals", 1024)
@@ -120,24 +136,24 @@ def _literals_of(e: Expr) -> tuple[float, ...]:
     """:meth:`Expr.literals`, remembered (asked for at every binding of a study's sample to
     its compiled library). These caches are keyed by the whole :class:`Expr`, its text
     too: a tree alone would not tell 0.0 from -0.0, which Python's equality identifies."""
-    out: list[float] = []
-    _collect_literals(e.node, out)
-    return tuple(out)
+    walk = _Literals()
+    visit(e.node, walk)
+    return tuple(walk.out)
 
 
 @MEMO.memoize("expression-templates", 1024)
 def _template_of(e: Expr) -> str:
     """:meth:`Expr.template`, remembered (part of every structure key)."""
-    return _template(e.node)
+    return visit(e.node, _TEMPLATE)
 
 
 @MEMO.memoize("expression-breakpoints", 1024)
 def _breakpoints_of(e: Expr) -> tuple[float, ...]:
     """:meth:`Expr.breakpoints`, remembered: a scenario asks for the same expressions'
     breakpoints several times, and a study's samples share most trees."""
-    out: list[float] = []
-    _collect_breaks(e.node, out)
-    return tuple(sorted(set(out)))
+    walk = _Breaks()
+    visit(e.node, walk)
+    return tuple(sorted(set(walk.out)))
 
 
 def parse_expression(text: Any, *, where: str = "expression") -> Expr:
@@ -168,7 +184,7 @@ def parse_expression(text: Any, *, where: str = "expression") -> Expr:
             raise ExpressionError(
                 f"{where}: non-finite number {_short(str(text))} (expected a finite value)"
             )
-        return Expr(repr(value), ("num", value))
+        return Expr(repr(value), Num(value))
     if not isinstance(text, str):
         raise ExpressionError(
             f"{where}: {type(text).__name__} is not an expression "
@@ -206,7 +222,7 @@ def _reject(where: str, text: str, token: str) -> ExpressionError:
     )
 
 
-def _convert(n: ast.AST, text: str, where: str, depth: int) -> tuple:
+def _convert(n: ast.AST, text: str, where: str, depth: int) -> Node:
     if depth > MAX_DEPTH:
         raise ExpressionError(f"{where}: expression nested deeper than {MAX_DEPTH} levels")
     d = depth + 1
@@ -222,12 +238,12 @@ def _convert(n: ast.AST, text: str, where: str, depth: int) -> tuple:
                 f"{where}: {_short(text)}: number {_snippet(text, n)!r} is too large "
                 "(expected a finite float)"
             )
-        return ("num", v)
+        return Num(v)
     if isinstance(n, ast.Name):
         if n.id == "t":
-            return ("t",)
+            return Time()
         if n.id in CONSTANTS:
-            return ("num", CONSTANTS[n.id])
+            return Num(CONSTANTS[n.id])
         raise _reject(where, text, n.id)
     if isinstance(n, ast.UnaryOp) and isinstance(n.op, ast.USub | ast.UAdd):
         inner = _convert(n.operand, text, where, d)
@@ -235,10 +251,9 @@ def _convert(n: ast.AST, text: str, where: str, depth: int) -> tuple:
             return inner
         # A negative number is one literal, not structure: scenarios that differ only in
         # the sign of a number then share a compiled library.
-        return ("num", -inner[1]) if inner[0] == "num" else ("neg", inner)
+        return Num(-inner.value) if isinstance(inner, Num) else Neg(inner)
     if isinstance(n, ast.BinOp) and type(n.op) in _BINOPS:
-        return (
-            "bin",
+        return BinOp(
             _BINOPS[type(n.op)],
             _convert(n.left, text, where, d),
             _convert(n.right, text, where, d),
@@ -256,7 +271,7 @@ def _convert(n: ast.AST, text: str, where: str, depth: int) -> tuple:
                 f"{where}: {_short(text)}: {name} takes {FUNCTIONS[name][0]} argument(s), "
                 f"got {len(n.args)} (expected e.g. {name}({', '.join(['t'] * FUNCTIONS[name][0])}))"
             )
-        return ("call", name, tuple(_convert(a, text, where, d) for a in n.args))
+        return Call(name, tuple(_convert(a, text, where, d) for a in n.args))
     raise _reject(where, text, _token(n, text))
 
 
@@ -304,17 +319,26 @@ def _snippet(text: str, n: ast.AST) -> str:
     return seg if len(seg) <= 30 else seg[:27] + "..."
 
 
-def _mentions_t(node: tuple) -> bool:
-    kind = node[0]
-    if kind == "t":
-        return True
-    if kind == "num":
+class _MentionsT(Visitor[bool]):
+    """Whether the tree mentions ``t`` (stops at the first ``t``)."""
+
+    def num(self, node: Num) -> bool:
         return False
-    if kind == "neg":
-        return _mentions_t(node[1])
-    if kind == "bin":
-        return _mentions_t(node[2]) or _mentions_t(node[3])
-    return any(_mentions_t(a) for a in node[2])
+
+    def time(self, node: Time) -> bool:
+        return True
+
+    def neg(self, node: Neg) -> bool:
+        return visit(node.arg, self)
+
+    def binop(self, node: BinOp) -> bool:
+        return visit(node.left, self) or visit(node.right, self)
+
+    def call(self, node: Call) -> bool:
+        return any(visit(a, self) for a in node.args)
+
+
+_MENTIONS_T = _MentionsT()
 
 
 def _hermite(s: Any) -> Any:
@@ -374,54 +398,83 @@ _NUMPY = _Backend(
 )
 
 
-def _is_exponent_literal(node: tuple) -> bool:
-    return node[0] == "bin" and node[1] == "**" and node[3][0] == "num"
+def _literal_exponent(node: BinOp) -> float | None:
+    """The number of ``x ** number`` (structure, not a literal), else None."""
+    return node.right.value if node.op == "**" and isinstance(node.right, Num) else None
 
 
-def _collect_literals(node: tuple, out: list[float]) -> None:
-    kind = node[0]
-    if kind == "num":
-        out.append(node[1])
-    elif kind == "neg":
-        _collect_literals(node[1], out)
-    elif kind == "bin":
-        _collect_literals(node[2], out)
-        if not _is_exponent_literal(node):
-            _collect_literals(node[3], out)
-    elif kind == "call":
-        for a in node[2]:
-            _collect_literals(a, out)
+class _Literals(Visitor[None]):
+    """Collects the numbers in walk order into ``out``, skipping literal exponents."""
+
+    def __init__(self) -> None:
+        self.out: list[float] = []
+
+    def num(self, node: Num) -> None:
+        self.out.append(node.value)
+
+    def time(self, node: Time) -> None:
+        return None
+
+    def neg(self, node: Neg) -> None:
+        visit(node.arg, self)
+
+    def binop(self, node: BinOp) -> None:
+        visit(node.left, self)
+        if _literal_exponent(node) is None:
+            visit(node.right, self)
+
+    def call(self, node: Call) -> None:
+        for a in node.args:
+            visit(a, self)
 
 
-def _template(node: tuple) -> str:
-    kind = node[0]
-    if kind == "num":
+class _Template(Visitor[str]):
+    """The tree as text with every literal written ``#`` (literal exponents stay numbers)."""
+
+    def num(self, node: Num) -> str:
         return "#"
-    if kind == "t":
+
+    def time(self, node: Time) -> str:
         return "t"
-    if kind == "neg":
-        return f"(-{_template(node[1])})"
-    if kind == "bin":
-        right = repr(node[3][1]) if _is_exponent_literal(node) else _template(node[3])
-        return f"({_template(node[2])}{node[1]}{right})"
-    return f"{node[1]}({','.join(_template(a) for a in node[2])})"
+
+    def neg(self, node: Neg) -> str:
+        return f"(-{visit(node.arg, self)})"
+
+    def binop(self, node: BinOp) -> str:
+        e = _literal_exponent(node)
+        right = visit(node.right, self) if e is None else repr(e)
+        return f"({visit(node.left, self)}{node.op}{right})"
+
+    def call(self, node: Call) -> str:
+        return f"{node.name}({','.join(visit(a, self) for a in node.args)})"
 
 
-def _eval(node: tuple, t: Any, be: _Backend, lits: Any = None) -> Any:
-    """Evaluate ``node``; ``lits`` (an iterator) supplies the literals in walk order."""
-    kind = node[0]
-    if kind == "num":
-        if lits is not None:
-            return next(lits)
-        return node[1] + 0 * t if be is _NUMPY else node[1]
-    if kind == "t":
-        return t
-    if kind == "neg":
-        return -_eval(node[1], t, be, lits)
-    if kind == "bin":
-        a = _eval(node[2], t, be, lits)
-        b = node[3][1] if _is_exponent_literal(node) else _eval(node[3], t, be, lits)
-        op = node[1]
+_TEMPLATE = _Template()
+
+
+class _Eval(Visitor[Any]):
+    """The tree's value at ``t`` with the operations of backend ``be``; ``lits`` (an
+    iterator) supplies the literals in walk order (left operand before right)."""
+
+    def __init__(self, t: Any, be: _Backend, lits: Any = None) -> None:
+        self.t, self.be, self.lits = t, be, lits
+
+    def num(self, node: Num) -> Any:
+        if self.lits is not None:
+            return next(self.lits)
+        return node.value + 0 * self.t if self.be is _NUMPY else node.value
+
+    def time(self, node: Time) -> Any:
+        return self.t
+
+    def neg(self, node: Neg) -> Any:
+        return -visit(node.arg, self)
+
+    def binop(self, node: BinOp) -> Any:
+        a = visit(node.left, self)
+        e = _literal_exponent(node)
+        b = visit(node.right, self) if e is None else e
+        op = node.op
         if op == "+":
             return a + b
         if op == "-":
@@ -431,37 +484,52 @@ def _eval(node: tuple, t: Any, be: _Backend, lits: Any = None) -> Any:
         if op == "/":
             return a / b
         return a**b
-    args = [_eval(a, t, be, lits) for a in node[2]]
-    return getattr(be, node[1])(*args)
+
+    def call(self, node: Call) -> Any:
+        args = [visit(a, self) for a in node.args]
+        return getattr(self.be, node.name)(*args)
+
+
+def _eval(node: Node, t: Any, be: _Backend, lits: Any = None) -> Any:
+    """Evaluate ``node``; ``lits`` (an iterator) supplies the literals in walk order."""
+    return visit(node, _Eval(t, be, lits))
 
 
 @MEMO.memoize("expression-numpy", 1024)
 def _numpy_function(e: Expr) -> Callable[[Any], Any]:
     """``e`` as nested numpy closures: the operations of :func:`_eval` with its numpy
     backend, in the same order (identical values), without walking the tree per call."""
-    return _closure(e.node)
+    return visit(e.node, _CLOSURE)
 
 
-def _closure(node: tuple) -> Callable[[Any], Any]:
-    kind = node[0]
-    if kind == "num":
-        v = node[1]
+class _Closure(Visitor[Callable[[Any], Any]]):
+    """The tree as nested numpy closures of ``t`` (the operations of :class:`_Eval`)."""
+
+    def num(self, node: Num) -> Callable[[Any], Any]:
+        v = node.value
         return lambda t: v + 0 * t
-    if kind == "t":
-        return lambda t: t
-    if kind == "neg":
-        f = _closure(node[1])
-        return lambda t: -f(t)
-    if kind == "bin":
-        fa = _closure(node[2])
-        if _is_exponent_literal(node):
-            e = node[3][1]
-            return lambda t: fa(t) ** e
-        return _BIN_CLOSURES[node[1]](fa, _closure(node[3]))
-    fn = getattr(_NUMPY, node[1])
-    args = tuple(_closure(a) for a in node[2])
-    return lambda t: fn(*[g(t) for g in args])
 
+    def time(self, node: Time) -> Callable[[Any], Any]:
+        return lambda t: t
+
+    def neg(self, node: Neg) -> Callable[[Any], Any]:
+        f = visit(node.arg, self)
+        return lambda t: -f(t)
+
+    def binop(self, node: BinOp) -> Callable[[Any], Any]:
+        fa = visit(node.left, self)
+        e = _literal_exponent(node)
+        if e is not None:
+            return lambda t: fa(t) ** e
+        return _BIN_CLOSURES[node.op](fa, visit(node.right, self))
+
+    def call(self, node: Call) -> Callable[[Any], Any]:
+        fn = getattr(_NUMPY, node.name)
+        args = tuple(visit(a, self) for a in node.args)
+        return lambda t: fn(*[g(t) for g in args])
+
+
+_CLOSURE = _Closure()
 
 _BIN_CLOSURES = {
     "+": lambda fa, fb: lambda t: fa(t) + fb(t),
@@ -472,37 +540,47 @@ _BIN_CLOSURES = {
 }
 
 
-def _collect_breaks(node: tuple, out: list[float]) -> None:
-    kind = node[0]
-    if kind in ("num", "t"):
-        return
-    if kind == "neg":
-        _collect_breaks(node[1], out)
-        return
-    if kind == "bin":
-        _collect_breaks(node[2], out)
-        _collect_breaks(node[3], out)
-        return
-    name, args = node[1], node[2]
-    for a in args:
-        _collect_breaks(a, out)
-    if name in ("step", "abs", "prefilter"):  # jump / kink / curvature jump where it is 0
-        cand = [args[0]]
-    elif name == "smoothstep":  # curvature jumps where the argument is 0 and 1
-        cand = [args[0], ("bin", "-", args[0], ("num", 1.0))]
-    elif name == "sat":  # kinks where the argument is -1 and +1
-        cand = [("bin", "-", args[0], ("num", 1.0)), ("bin", "+", args[0], ("num", 1.0))]
-    elif name in ("min", "max"):  # kink where the arguments cross
-        cand = [("bin", "-", args[0], args[1])]
-    else:
-        cand = []
-    for a in cand:
-        root = _affine_root(a)
-        if root is not None and root > 0:
-            out.append(root)
+class _Breaks(Visitor[None]):
+    """Collects into ``out`` the times t > 0 where a call jumps or kinks (affine locations)."""
+
+    def __init__(self) -> None:
+        self.out: list[float] = []
+
+    def num(self, node: Num) -> None:
+        return None
+
+    def time(self, node: Time) -> None:
+        return None
+
+    def neg(self, node: Neg) -> None:
+        visit(node.arg, self)
+
+    def binop(self, node: BinOp) -> None:
+        visit(node.left, self)
+        visit(node.right, self)
+
+    def call(self, node: Call) -> None:
+        name, args = node.name, node.args
+        for a in args:
+            visit(a, self)
+        cand: list[Node]
+        if name in ("step", "abs", "prefilter"):  # jump / kink / curvature jump where it is 0
+            cand = [args[0]]
+        elif name == "smoothstep":  # curvature jumps where the argument is 0 and 1
+            cand = [args[0], BinOp("-", args[0], Num(1.0))]
+        elif name == "sat":  # kinks where the argument is -1 and +1
+            cand = [BinOp("-", args[0], Num(1.0)), BinOp("+", args[0], Num(1.0))]
+        elif name in ("min", "max"):  # kink where the arguments cross
+            cand = [BinOp("-", args[0], args[1])]
+        else:
+            cand = []
+        for a in cand:
+            root = _affine_root(a)
+            if root is not None and root > 0:
+                self.out.append(root)
 
 
-def _affine_root(node: tuple) -> float | None:
+def _affine_root(node: Node) -> float | None:
     """Zero of ``node`` if it is affine in t (checked at three points), else None."""
     try:
         with np.errstate(all="ignore"):

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.expression_tree import BinOp, Call, Neg, Node, Num, Time, Visitor, visit
 from core.expressions import Expr
 from core.settings import NONNEG, POSITIVE, REQUIRED, Check, Derived, Setting, declare
 
@@ -129,7 +130,7 @@ class Fault:
         starts = (self.onset + k * self.period for k in range(count))
         return tuple((on, on + self.duty * self.period) for on in starts)
 
-    def factor(self, horizon: float) -> tuple:
+    def factor(self, horizon: float) -> Node:
         """The node of the health factor h(t) in [1 - severity, 1] (not for a bias fault).
 
         Parameters
@@ -140,12 +141,12 @@ class Fault:
         if self.type == "abrupt":
             lost = _step_at(self.onset)
         elif self.type == "ramp":  # 0 before onset, linear to 1 at onset + duration
-            rise = ("bin", "/", ("bin", "-", ("t",), ("num", self.onset)), ("num", self.duration))
-            lost = ("call", "min", (("call", "max", (rise, ("num", 0.0))), ("num", 1.0)))
+            rise = BinOp("/", BinOp("-", Time(), Num(self.onset)), Num(self.duration))
+            lost = Call("min", (Call("max", (rise, Num(0.0))), Num(1.0)))
         else:
-            pulses = [("bin", "-", _step_at(on), _step_at(off)) for on, off in self.pulses(horizon)]
-            lost = balanced("+", pulses) if pulses else ("num", 0.0)
-        return ("bin", "-", ("num", 1.0), ("bin", "*", ("num", self.severity), lost))
+            pulses = [BinOp("-", _step_at(on), _step_at(off)) for on, off in self.pulses(horizon)]
+            lost = balanced("+", pulses) if pulses else Num(0.0)
+        return BinOp("-", Num(1.0), BinOp("*", Num(self.severity), lost))
 
     def describe(self) -> str:
         """One readable line: the type and its parameters."""
@@ -193,7 +194,7 @@ def faulted_health(base: Expr, faults: tuple[Fault, ...], horizon: float) -> Exp
     factors = [fa.factor(horizon) for fa in faults if not fa.is_bias]
     if not factors:
         return base
-    return _expr(("bin", "*", base.node, balanced("*", factors)))
+    return _expr(BinOp("*", base.node, balanced("*", factors)))
 
 
 def faulted_bias(base: tuple[Expr, ...], faults: tuple[Fault, ...]) -> tuple[Expr, ...]:
@@ -211,8 +212,8 @@ def faulted_bias(base: tuple[Expr, ...], faults: tuple[Fault, ...]) -> tuple[Exp
         return base
     out = []
     for r, e in enumerate(base):
-        steps = [("bin", "*", ("num", fa.amplitude[r]), _step_at(fa.onset)) for fa in biases]
-        out.append(_expr(("bin", "+", e.node, balanced("+", steps))))
+        steps = [BinOp("*", Num(fa.amplitude[r]), _step_at(fa.onset)) for fa in biases]
+        out.append(_expr(BinOp("+", e.node, balanced("+", steps))))
     return tuple(out)
 
 
@@ -290,7 +291,7 @@ def slots_of(faults: tuple[Fault, ...], count: int) -> tuple[Slot, ...]:
     return tuple(Slot.of(fa) for fa in faults) + (Slot(),) * (count - len(faults))
 
 
-def slot_activation(slot: Slot) -> tuple:
+def slot_activation(slot: Slot) -> Node:
     """The node of act(t) in [0, 1]: how much of the slot acts at time t.
 
     act(t) = step(x) · min(1, x₊/(|D| + z_D) + z_D) · (1 − step(mod(x₊, |P| + z_P) − (c P + z_P)))
@@ -309,18 +310,18 @@ def slot_activation(slot: Slot) -> tuple:
     ----------
     slot : Slot
     """
-    x = ("bin", "-", ("t",), ("num", slot.onset))
-    x_pos = ("call", "max", (x, ("num", 0.0)))
-    dur = ("call", "abs", (("num", slot.duration),))
-    dur_zero = ("call", "step", (("neg", dur),))
-    rise = ("bin", "+", ("bin", "/", x_pos, ("bin", "+", dur, dur_zero)), dur_zero)
-    ramp = ("bin", "*", ("call", "step", (x,)), ("call", "min", (("num", 1.0), rise)))
-    per = ("call", "abs", (("num", slot.period),))
-    per_zero = ("call", "step", (("neg", per),))
-    phase = ("call", "mod", (x_pos, ("bin", "+", per, per_zero)))
-    on_len = ("bin", "+", ("bin", "*", ("num", slot.duty), ("num", slot.period)), per_zero)
-    gate = ("bin", "-", ("num", 1.0), ("call", "step", (("bin", "-", phase, on_len),)))
-    return ("bin", "*", ramp, gate)
+    x = BinOp("-", Time(), Num(slot.onset))
+    x_pos = Call("max", (x, Num(0.0)))
+    dur = Call("abs", (Num(slot.duration),))
+    dur_zero = Call("step", (Neg(dur),))
+    rise = BinOp("+", BinOp("/", x_pos, BinOp("+", dur, dur_zero)), dur_zero)
+    ramp = BinOp("*", Call("step", (x,)), Call("min", (Num(1.0), rise)))
+    per = Call("abs", (Num(slot.period),))
+    per_zero = Call("step", (Neg(per),))
+    phase = Call("mod", (x_pos, BinOp("+", per, per_zero)))
+    on_len = BinOp("+", BinOp("*", Num(slot.duty), Num(slot.period)), per_zero)
+    gate = BinOp("-", Num(1.0), Call("step", (BinOp("-", phase, on_len),)))
+    return BinOp("*", ramp, gate)
 
 
 def slotted_health(base: Expr, faults: tuple[Fault, ...], count: int) -> Expr:
@@ -339,10 +340,9 @@ def slotted_health(base: Expr, faults: tuple[Fault, ...], count: int) -> Expr:
     if not slots:
         return base
     factors = [
-        ("bin", "-", ("num", 1.0), ("bin", "*", ("num", sl.severity), slot_activation(sl)))
-        for sl in slots
+        BinOp("-", Num(1.0), BinOp("*", Num(sl.severity), slot_activation(sl))) for sl in slots
     ]
-    return _expr(("bin", "*", base.node, balanced("*", factors)))
+    return _expr(BinOp("*", base.node, balanced("*", factors)))
 
 
 def slotted_bias(base: tuple[Expr, ...], faults: tuple[Fault, ...], count: int) -> tuple[Expr, ...]:
@@ -363,10 +363,8 @@ def slotted_bias(base: tuple[Expr, ...], faults: tuple[Fault, ...], count: int) 
     acts = [slot_activation(sl) for sl in slots]
     out = []
     for r, e in enumerate(base):
-        terms = [
-            ("bin", "*", ("num", sl.bias(r)), act) for sl, act in zip(slots, acts, strict=True)
-        ]
-        out.append(_expr(("bin", "+", e.node, balanced("+", terms))))
+        terms = [BinOp("*", Num(sl.bias(r)), act) for sl, act in zip(slots, acts, strict=True)]
+        out.append(_expr(BinOp("+", e.node, balanced("+", terms))))
     return tuple(out)
 
 
@@ -425,48 +423,61 @@ def _generic_switches(fault: Fault, horizon: float) -> tuple[float, ...]:
     return tuple(float(x) for x in out)
 
 
-def balanced(op: str, terms: list[tuple]) -> tuple:
+def balanced(op: str, terms: list[Node]) -> Node:
     """``terms`` joined by ``op`` (``"+"`` or ``"*"``) as a balanced tree (shallow for long lists).
 
     Parameters
     ----------
     op : str
         An associative operator.
-    terms : list of tuple
+    terms : list of Node
         Expression nodes, at least one.
     """
     if len(terms) == 1:
         return terms[0]
     mid = len(terms) // 2
-    return ("bin", op, balanced(op, terms[:mid]), balanced(op, terms[mid:]))
+    return BinOp(op, balanced(op, terms[:mid]), balanced(op, terms[mid:]))
 
 
-def node_text(node: tuple) -> str:
+def node_text(node: Node) -> str:
     """The node as fully parenthesised text that parses back to the same function.
 
     The text names the expression (the closed loop shares evaluations of equal texts).
 
     Parameters
     ----------
-    node : tuple
+    node : Node
         An :class:`~core.expressions.Expr` node.
     """
-    kind = node[0]
-    if kind == "num":
-        return repr(node[1]) if node[1] >= 0 else f"({node[1]!r})"
-    if kind == "t":
+    return visit(node, _TEXT)
+
+
+class _Text(Visitor[str]):
+    """:func:`node_text`: negative numbers in parentheses, spaces around operators."""
+
+    def num(self, node: Num) -> str:
+        return repr(node.value) if node.value >= 0 else f"({node.value!r})"
+
+    def time(self, node: Time) -> str:
         return "t"
-    if kind == "neg":
-        return f"(-{node_text(node[1])})"
-    if kind == "bin":
-        return f"({node_text(node[2])} {node[1]} {node_text(node[3])})"
-    return f"{node[1]}({', '.join(node_text(a) for a in node[2])})"
+
+    def neg(self, node: Neg) -> str:
+        return f"(-{visit(node.arg, self)})"
+
+    def binop(self, node: BinOp) -> str:
+        return f"({visit(node.left, self)} {node.op} {visit(node.right, self)})"
+
+    def call(self, node: Call) -> str:
+        return f"{node.name}({', '.join(visit(a, self) for a in node.args)})"
 
 
-def _expr(node: tuple) -> Expr:
+_TEXT = _Text()
+
+
+def _expr(node: Node) -> Expr:
     return Expr(node_text(node), node)
 
 
-def _step_at(t0: float) -> tuple:
+def _step_at(t0: float) -> Node:
     """``step(t - t0)``: 0 before ``t0``, 1 from ``t0`` on."""
-    return ("call", "step", (("bin", "-", ("t",), ("num", t0)),))
+    return Call("step", (BinOp("-", Time(), Num(t0)),))

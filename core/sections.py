@@ -14,6 +14,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from core.errors import ToolkitError
+from core.expression_tree import BinOp, Call, Node, Num, Time
 from core.expressions import Expr
 from core.faults import (
     FAULT,
@@ -551,8 +552,8 @@ def _health(ctx: ReadingContext, v: Any, key: str, tgrid: np.ndarray) -> Health:
                 )
         vals = [b for _, b in rows]
         # g(t) = g_0 + Σ_k (g_k − g_{k−1}) step(t − t_k), built as a node tree (no text parsing)
-        terms = [("num", vals[0])] + [
-            ("bin", "*", ("num", b - a), ("call", "step", (("bin", "-", ("t",), ("num", t0)),)))
+        terms: list[Node] = [Num(vals[0])] + [
+            BinOp("*", Num(b - a), Call("step", (BinOp("-", Time(), Num(t0)),)))
             for (t0, b), a in zip(rows[1:], vals, strict=False)
         ]
         text = repr(vals[0]) + "".join(
@@ -656,9 +657,9 @@ def _faulted(
     return Health(expr=expr, breakpoints=breaks, minimum=float(lo))
 
 
-def _balanced_sum(terms: list[tuple]) -> tuple:
+def _balanced_sum(terms: list[Node]) -> Node:
     """A sum as a balanced tree, so long tables stay shallow for the recursive evaluators."""
     if len(terms) == 1:
         return terms[0]
     mid = len(terms) // 2
-    return ("bin", "+", _balanced_sum(terms[:mid]), _balanced_sum(terms[mid:]))
+    return BinOp("+", _balanced_sum(terms[:mid]), _balanced_sum(terms[mid:]))

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+from core.expression_tree import BinOp, Call, Neg, Node, Num, Time, Visitor, visit
 from core.expressions import Expr
 from core.faults import node_text
 
@@ -46,7 +47,7 @@ def has_steps(u0: Iterable[Expr]) -> bool:
     u0 : iterable of Expr
         The leader's command, one expression per input.
     """
-    return any(_mentions(e.node, "step") for e in u0)
+    return any(visit(e.node, _Mentions("step")) for e in u0)
 
 
 def default_rise(u0: Iterable[Expr]) -> float:
@@ -80,7 +81,7 @@ def shaped_steps(e: Expr, rise: float, shape: str = DEFAULT_SHAPE) -> Expr:
     """
     if shape not in SHAPES:
         raise ValueError(f"shape {shape!r} is not one of {SHAPES}")
-    node = _shape(e.node, float(rise), shape)
+    node = visit(e.node, _Shape(float(rise), shape))
     return e if node == e.node else Expr(node_text(node), node)
 
 
@@ -98,51 +99,83 @@ def step_onsets(u0: Iterable[Expr]) -> list[float]:
     """
     out: set[float] = set()
     for e in u0:
-        for atom in _atoms(e.node):
+        for atom in visit(e.node, _ATOMS):
             kinks = Expr(node_text(atom), atom).breakpoints()
             if kinks:
                 out.add(round(min(kinks), 12))
     return sorted(out)
 
 
-def _atoms(node: tuple) -> list[tuple]:
-    """The outermost step-like atoms of ``node`` (a shaped step's inner sat is its own)."""
-    kind = node[0]
-    if kind in ("num", "t"):
+class _Atoms(Visitor[list[Node]]):
+    """The outermost step-like atoms of a tree (a shaped step's inner sat is its own)."""
+
+    def num(self, node: Num) -> list[Node]:
         return []
-    if kind == "neg":
-        return _atoms(node[1])
-    if kind == "bin":
-        return _atoms(node[2]) + _atoms(node[3])
-    if node[1] in _STEP_ATOMS:
-        return [node]
-    return [a for arg in node[2] for a in _atoms(arg)]
+
+    def time(self, node: Time) -> list[Node]:
+        return []
+
+    def neg(self, node: Neg) -> list[Node]:
+        return visit(node.arg, self)
+
+    def binop(self, node: BinOp) -> list[Node]:
+        return visit(node.left, self) + visit(node.right, self)
+
+    def call(self, node: Call) -> list[Node]:
+        if node.name in _STEP_ATOMS:
+            return [node]
+        return [a for arg in node.args for a in visit(arg, self)]
 
 
-def _mentions(node: tuple, name: str) -> bool:
-    kind = node[0]
-    if kind in ("num", "t"):
+_ATOMS = _Atoms()
+
+
+class _Mentions(Visitor[bool]):
+    """Whether a tree calls the function ``name``."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def num(self, node: Num) -> bool:
         return False
-    if kind == "neg":
-        return _mentions(node[1], name)
-    if kind == "bin":
-        return _mentions(node[2], name) or _mentions(node[3], name)
-    return node[1] == name or any(_mentions(a, name) for a in node[2])
+
+    def time(self, node: Time) -> bool:
+        return False
+
+    def neg(self, node: Neg) -> bool:
+        return visit(node.arg, self)
+
+    def binop(self, node: BinOp) -> bool:
+        return visit(node.left, self) or visit(node.right, self)
+
+    def call(self, node: Call) -> bool:
+        return node.name == self.name or any(visit(a, self) for a in node.args)
 
 
-def _shape(node: tuple, rise: float, shape: str) -> tuple:
-    kind = node[0]
-    if kind in ("num", "t"):
+class _Shape(Visitor[Node]):
+    """A tree with every ``step(x)`` replaced by its shaped form over ``rise`` seconds."""
+
+    def __init__(self, rise: float, shape: str) -> None:
+        self.rise, self.shape = rise, shape
+
+    def num(self, node: Num) -> Node:
         return node
-    if kind == "neg":
-        return ("neg", _shape(node[1], rise, shape))
-    if kind == "bin":
-        return ("bin", node[1], _shape(node[2], rise, shape), _shape(node[3], rise, shape))
-    args = tuple(_shape(a, rise, shape) for a in node[2])
-    if node[1] != "step":
-        return ("call", node[1], args)
-    x = ("bin", "/", args[0], ("num", rise))
-    if shape == "ramp":  # (sat(2x/T − 1) + 1)/2: 0 before, x/T on [0, T], 1 after
-        inner = ("bin", "-", ("bin", "*", ("num", 2.0), x), ("num", 1.0))
-        return ("bin", "*", ("num", 0.5), ("bin", "+", ("call", "sat", (inner,)), ("num", 1.0)))
-    return ("call", shape, (x,))
+
+    def time(self, node: Time) -> Node:
+        return node
+
+    def neg(self, node: Neg) -> Node:
+        return Neg(visit(node.arg, self))
+
+    def binop(self, node: BinOp) -> Node:
+        return BinOp(node.op, visit(node.left, self), visit(node.right, self))
+
+    def call(self, node: Call) -> Node:
+        args = tuple(visit(a, self) for a in node.args)
+        if node.name != "step":
+            return Call(node.name, args)
+        x = BinOp("/", args[0], Num(self.rise))
+        if self.shape == "ramp":  # (sat(2x/T − 1) + 1)/2: 0 before, x/T on [0, T], 1 after
+            inner = BinOp("-", BinOp("*", Num(2.0), x), Num(1.0))
+            return BinOp("*", Num(0.5), BinOp("+", Call("sat", (inner,)), Num(1.0)))
+        return Call(self.shape, (x,))

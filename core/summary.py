@@ -11,6 +11,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from core.errors import ScenarioError
+from core.expression_tree import Node
 from core.faults import node_text
 from core.models import REGISTRY, ELModel, build_model
 from core.scenario import Follower, Scenario
@@ -201,10 +202,10 @@ def _health_text(fo: Follower, slots: int | None = None) -> str:
     e = fo.g.expr
     lost = any(not fa.is_bias for fa in fo.faults)
     if slots:  # e = g_file * product of the generic form's slots (options.fault_slots)
-        g = _text(e.node[2]) + (" x the faults below" if lost else "")
+        g = _text(e.node.left) + (" x the faults below" if lost else "")
         g += f" (generic form, {slots} fault slots)"
     elif lost:  # e = g_file * product of fault factors
-        g = f"{_text(e.node[2])} x the faults below"
+        g = f"{_text(e.node.left)} x the faults below"
     else:
         g = e.text if not e.is_constant() else _num(fo.g.minimum)
     if fo.g.breakpoints:
@@ -218,13 +219,13 @@ def _bias_texts(fo: Follower, slots: int | None = None) -> list[str]:
     """f_ir as written in the file, plus the bias faults listed below."""
     biased = any(fa.is_bias for fa in fo.faults)
     if slots and not biased:  # e = f_file + the generic form's slots, each adding 0
-        return [_text(e.node[2]) for e in fo.f]
+        return [_text(e.node.left) for e in fo.f]
     if not biased:
         return [e.text for e in fo.f]
-    return [f"{_text(e.node[2])} + biases below" for e in fo.f]
+    return [f"{_text(e.node.left)} + biases below" for e in fo.f]
 
 
-def _text(node: tuple) -> str:
+def _text(node: Node) -> str:
     """A node's text without the outer parentheses the fault composition adds."""
     text = node_text(node)
     return text[1:-1] if text.startswith("(") and text.endswith(")") else text

@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
+import inspect
 import math
+import pickle
+import re
+import typing
 
 import casadi as ca
 import numpy as np
 import pytest
+from helpers import PACKAGES, ROOT
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from core.errors import ExpressionError, ToolkitError
+from core.expression_tree import METHODS, BinOp, Call, Neg, Node, Num, Time, Visitor, visit
 from core.expressions import FUNCTIONS, parse_expression
 
 WHERE = "scn.toml: followers[2].f[0]"
@@ -223,11 +229,136 @@ def test_remembered_literals_keep_the_sign_of_zero():
     # trees equal under Python's 0.0 == -0.0 but written differently stay apart
     from core.expressions import Expr
 
-    pos = Expr("0.0 + t", ("bin", "+", ("num", 0.0), ("t",)))
-    neg = Expr("-0.0 + t", ("bin", "+", ("num", -0.0), ("t",)))
+    pos = Expr("0.0 + t", BinOp("+", Num(0.0), Time()))
+    neg = Expr("-0.0 + t", BinOp("+", Num(-0.0), Time()))
+    assert pos.node == neg.node and hash(pos.node) == hash(neg.node)  # why the text is keyed
     assert math.copysign(1.0, pos.literals()[0]) == 1.0
     assert math.copysign(1.0, neg.literals()[0]) == -1.0
     assert math.copysign(1.0, pos.literals()[0]) == 1.0  # asked again, after neg
     e = parse_expression("3*step(t - 2) + 0.5", where=WHERE)
     assert e.literals() == (3.0, 2.0, 0.5) and e.template() == "((#*step((t-#)))+#)"
     assert e.breakpoints() == (2.0,)
+
+
+def test_an_expression_is_a_key_by_value_and_travels_without_its_hash():
+    # workers get pickled expressions; their string hashes are salted differently
+    a = parse_expression("2*cos(t) + step(t - 1)", where=WHERE)
+    b = parse_expression("2*cos(t) + step(t - 1)", where=WHERE)
+    assert a == b and a is not b and hash(a) == hash(b) == hash((a.text, a.node))
+    back = pickle.loads(pickle.dumps(a))
+    assert "_hash" not in vars(back) and back == a and hash(back) == hash(a)
+    assert back.node == a.node and isinstance(back.node, BinOp)
+
+
+# --------------------------------------------------------------------------- the tree
+def test_every_node_class_has_its_visitor_method():
+    assert set(typing.get_args(Node)) == set(METHODS) == {Num, Time, Neg, BinOp, Call}
+    assert Visitor.__abstractmethods__ == set(METHODS.values())
+    # the walks of the packages implement every method (an abstract one cannot exist)
+    import core.faults  # noqa: F401
+    import core.shaping  # noqa: F401
+    import verify.reference  # noqa: F401
+
+    walks = [c for c in Visitor.__subclasses__() if c.__module__.split(".")[0] in PACKAGES]
+    assert {"_Template", "_Eval", "_Closure", "_Text", "_Shape", "_Dual"} <= {
+        c.__qualname__ for c in walks
+    }
+    assert [c for c in walks if inspect.isabstract(c)] == []
+
+
+def test_a_visitor_missing_a_method_fails_loudly():
+    class NoCall(Visitor[int]):
+        def num(self, node: Num) -> int:
+            return 0
+
+        def time(self, node: Time) -> int:
+            return 0
+
+        def neg(self, node: Neg) -> int:
+            return 0
+
+        def binop(self, node: BinOp) -> int:
+            return 0
+
+    with pytest.raises(TypeError, match="call"):
+        NoCall()
+    with pytest.raises(TypeError, match="not an expression node"):
+        visit(("num", 1.0), _Parts())  # a tree of tuples is no tree
+
+
+class _Parts(Visitor[str]):
+    """The template and the literals, rebuilt here from the documented rules."""
+
+    def __init__(self) -> None:
+        self.literals: list[float] = []
+
+    def num(self, node: Num) -> str:
+        self.literals.append(node.value)
+        return "#"
+
+    def time(self, node: Time) -> str:
+        return "t"
+
+    def neg(self, node: Neg) -> str:
+        return "(-" + visit(node.arg, self) + ")"
+
+    def binop(self, node: BinOp) -> str:
+        left = visit(node.left, self)
+        if node.op == "**" and isinstance(node.right, Num):  # a literal exponent is structure
+            return f"({left}**{node.right.value!r})"
+        return f"({left}{node.op}{visit(node.right, self)})"
+
+    def call(self, node: Call) -> str:
+        return node.name + "(" + ",".join(visit(a, self) for a in node.args) + ")"
+
+
+@pytest.mark.parametrize(
+    "text",
+    [*PAPER, *OTHERS, "-1.47*step(t - 3) + 2*cos(t)", "t**-2 - (1.5)**t", "-(t + pi)"],
+)
+def test_a_visit_reproduces_template_and_literals(text):
+    e = parse_expression(text, where=WHERE)
+    parts = _Parts()
+    assert visit(e.node, parts) == e.template()
+    assert tuple(parts.literals) == e.literals()
+
+
+#: dispatch on a tree of tuples: indexing a node, comparing its kind, a kind-tagged tuple
+TUPLE_DISPATCH = re.compile(
+    r"\bnode\w*\[\d+\]"
+    r"|\bkind\s*(?:==|in)\s*\(?\s*\"(?:num|t|neg|bin|call)\""
+    r"|(?<![\w)\]])\(\s*\"(?:num|neg|bin|call)\"\s*,"
+    r"|\(\s*\"t\"\s*,\s*\)"
+)
+
+
+def test_no_module_dispatches_on_a_tuple_tree():
+    found = []
+    for pkg in (*PACKAGES, "search"):
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            for k, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+                if TUPLE_DISPATCH.search(line):
+                    found.append(f"{path.relative_to(ROOT).as_posix()}:{k}: {line.strip()}")
+    assert found == [], "tuple-tree dispatch (use core.expression_tree.Visitor):\n" + "\n".join(
+        found
+    )
+
+
+@pytest.mark.parametrize(
+    ("line", "bad"),
+    [
+        ("    kind = node[0]", True),
+        ('    if kind == "bin":', True),
+        ('    if kind in ("num", "t"):', True),
+        ('    return ("call", name, tuple(args))', True),
+        ('    x = ("bin", "-", ("t",), ("num", t0))', True),
+        ('    return ("t",)', True),
+        ('    for need in ("t", "eta0_1", "p1_1"):', False),
+        ('    lo = -expression_sup("neg", (expr,), ts)', False),
+        ('    return {"abs": np.abs, "neg": np.negative}[kind](v)', False),
+        ('    a = float(self.take(kind="num"))', False),
+        ('    return Call("step", (BinOp("-", Time(), Num(t0)),))', False),
+    ],
+)
+def test_the_tuple_dispatch_grep_can_fail(line, bad):
+    assert bool(TUPLE_DISPATCH.search(line)) is bad

@@ -21,6 +21,7 @@ import pytest
 from helpers import ROOT, SCENARIOS
 
 from core.errors import ScenarioError
+from core.expression_tree import BinOp, Call, Neg, Node, Num, Time, Visitor, visit
 from core.expressions import Expr
 from core.faults import Fault, Slot, fault_times, slot_activation
 from core.scenario import Scenario, load_scenario, scenario_from_dict
@@ -149,18 +150,28 @@ def _casadi(e: Expr, ts: np.ndarray, parametric: bool) -> np.ndarray:
     return np.array(fun.map(ts.size)(ts.reshape(1, -1), np.array(e.literals()))).ravel()
 
 
-def _shape(node: tuple) -> tuple:
-    """The node with every number erased: what the compiled code depends on."""
-    kind = node[0]
-    if kind == "num":
-        return ("num",)
-    if kind == "t":
+class _Erased(Visitor[Node]):
+    """The tree with every number erased (written 0): what the compiled code depends on."""
+
+    def num(self, node: Num) -> Node:
+        return Num(0.0)
+
+    def time(self, node: Time) -> Node:
         return node
-    if kind == "neg":
-        return ("neg", _shape(node[1]))
-    if kind == "bin":
-        return ("bin", node[1], _shape(node[2]), _shape(node[3]))
-    return ("call", node[1], tuple(_shape(a) for a in node[2]))
+
+    def neg(self, node: Neg) -> Node:
+        return Neg(visit(node.arg, self))
+
+    def binop(self, node: BinOp) -> Node:
+        return BinOp(node.op, visit(node.left, self), visit(node.right, self))
+
+    def call(self, node: Call) -> Node:
+        return Call(node.name, tuple(visit(a, self) for a in node.args))
+
+
+def _shape(node: Node) -> Node:
+    """The node with every number erased: what the compiled code depends on."""
+    return visit(node, _Erased())
 
 
 # --------------------------------------------------------------------------- each type

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg as sla
 
+from core.expression_tree import BinOp, Call, Neg, Node, Num, Time, Visitor, visit
 from core.hold import shaped_hold
 from core.scenario import Scenario
 from synthesis.gains import Gains
@@ -34,19 +35,30 @@ def _mv(Mx: np.ndarray, vx: np.ndarray) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- expressions
-def _dual(node: tuple, t: float) -> tuple[float, float]:
+def _dual(node: Node, t: float) -> tuple[float, float]:
     """Value and d/dt of an expression tree (forward dual numbers, written out by hand)."""
-    kind = node[0]
-    if kind == "num":
-        return float(node[1]), 0.0
-    if kind == "t":
-        return float(t), 1.0
-    if kind == "neg":
-        a, da = _dual(node[1], t)
+    return visit(node, _Dual(t))
+
+
+class _Dual(Visitor[tuple[float, float]]):
+    """:func:`_dual` at time ``t``: each node's value and derivative from its children's."""
+
+    def __init__(self, t: float) -> None:
+        self.t = t
+
+    def num(self, node: Num) -> tuple[float, float]:
+        return float(node.value), 0.0
+
+    def time(self, node: Time) -> tuple[float, float]:
+        return float(self.t), 1.0
+
+    def neg(self, node: Neg) -> tuple[float, float]:
+        a, da = visit(node.arg, self)
         return -a, -da
-    if kind == "bin":
-        (a, da), (b, db) = _dual(node[2], t), _dual(node[3], t)
-        op = node[1]
+
+    def binop(self, node: BinOp) -> tuple[float, float]:
+        (a, da), (b, db) = visit(node.left, self), visit(node.right, self)
+        op = node.op
         if op == "+":
             return a + b, da + db
         if op == "-":
@@ -58,7 +70,13 @@ def _dual(node: tuple, t: float) -> tuple[float, float]:
         val = a**b
         dval = b * a ** (b - 1) * da if db == 0 else val * (db * math.log(a) + b * da / a)
         return val, dval
-    name, args = node[1], [_dual(x, t) for x in node[2]]
+
+    def call(self, node: Call) -> tuple[float, float]:
+        return _dual_call(node.name, [visit(x, self) for x in node.args])
+
+
+def _dual_call(name: str, args: list[tuple[float, float]]) -> tuple[float, float]:
+    """Value and derivative of the function ``name`` at its arguments' duals."""
     (a, da) = args[0]
     if name == "sin":
         return math.sin(a), math.cos(a) * da
