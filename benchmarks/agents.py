@@ -4,7 +4,7 @@
 
 * the paper scenario (N = 5): the whole-loop native driver against the per-agent
   driver, median of ``--runs`` integrations each, and their ratio;
-* N followers (default 2,000) of the benchmark scenario (:func:`benchmarks.bench.
+* N followers (default 2,000) of the benchmark scenario (:func:`benchmarks.scenarios.
   bench_scenario`) on its random acyclic graph and on the same graph with random extra
   links until the mean in-degree is 3 (cyclic), with 1 and 2 threads;
 * the Newton solvers side by side (forward substitution, dense LU, GMRES) where each
@@ -130,7 +130,7 @@ def large_rows(
     build_root : str, optional
         Where generated libraries are built (None: the default).
     """
-    from benchmarks.bench import bench_gains, bench_scenario
+    from benchmarks.scenarios import bench_gains, bench_scenario
     from generated import agents
     from generated.codegen import CodegenSettings
     from generated.integrate import IntegratorSettings, output_grid

@@ -68,20 +68,14 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.catalogue import (  # noqa: F401  (re-exported: the benchmark's public names)
-    BENCH_METHODS,
+from benchmarks.catalogue import (
     CHEAP_BUILDS,
     METHODS,
-    OUTPUT_STEP,
     SIZES,
     BenchError,
-    BenchMethod,
-    integration_method,
     ours_method,
 )
-from benchmarks.scenarios import BENCH_SEED, PAPER, bench_gains, bench_scenario, random_graph  # noqa: F401
-from benchmarks.tables import (  # noqa: F401
-    COLUMNS,
+from benchmarks.tables import (
     finish,
     markdown,
     plot,

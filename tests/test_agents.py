@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from benchmarks.bench import bench_gains, bench_scenario
+from benchmarks.scenarios import bench_gains, bench_scenario
 from core.errors import IntegrationError
 from core.graph import Switch
 from core.scenario import Graph, load_scenario
