@@ -146,7 +146,10 @@ def table(records: list[dict[str, Any]]) -> str:
     widths = [max(len(row[k]) for row in rows) for k in range(len(head))]
     lines = ["  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) for row in rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(lines) + "\n(* = ours: what make sim runs for N, benchmarks.catalogue.ours_method)"
+    return (
+        "\n".join(lines)
+        + "\n(* = ours: what make sim runs for N, benchmarks.catalogue.ours_method)"
+    )
 
 
 def markdown(records: list[dict[str, Any]]) -> str:
