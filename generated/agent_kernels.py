@@ -8,6 +8,10 @@ option set, the kernels of ONE agent (:func:`symbolic.cascade.agent_block`, as C
 * ``ag_rhs``: the agent's rates (and the leader's, eq. (3));
 * ``ag_jac``: their Jacobian block K = ∂(ẋ_b, jets)/∂(x_b, nb);
 * ``ag_faults``: every distinct fault expression of the scenario;
+* ``ag_nfac``, ``ag_nsol``, ``ag_gmat``: the agent's part of CVODE's Newton systems on
+  the structural pattern of K (:func:`newton_functions`): the LU of D = I + c A_ss without
+  pivoting, unrolled (:mod:`generated.sparse_lu`), the solve x = D⁻¹ (b − c (A_s0 x0 +
+  B_s s)) with its jets C_0 x0 + C_s x + E s, and G = E − c C_s D⁻¹ B_s;
 
 and appends the driver ``generated/native/agents.c``. What is compiled in, and so is the
 library's identity (the cache key is the hash of the C source): the follower model and
@@ -29,6 +33,7 @@ from core.memo import MEMO
 from core.scenario import Scenario
 from generated import native
 from generated.codegen import CodegenSettings, Library, build_library
+from generated.sparse_lu import sparse_lu
 from symbolic.cascade import agent_block
 from symbolic.closed_loop import fault_function, make_layout, model_groups, observer_gains
 from synthesis.gains import Gains
@@ -36,6 +41,7 @@ from synthesis.gains import Gains
 DRIVER = native.NATIVE_DIR / "agents.c"
 JET_NAMES = ("ag_jet0", "ag_jet1", "ag_jet2")
 RHS_NAME, JAC_NAME, FAULTS_NAME = "ag_rhs", "ag_jac", "ag_faults"
+NFAC_NAME, NSOL_NAME, GMAT_NAME = "ag_nfac", "ag_nsol", "ag_gmat"
 #: compile flags of the kernel libraries: OpenMP threads over the agents of a pass
 OPENMP_FLAGS = ("-fopenmp",)
 
@@ -67,7 +73,8 @@ def kernel_functions(
     xbdot, jets = block.call(args)
     n = sc.n
     xb, nb = args[1], args[2]
-    K = ca.densify(ca.jacobian(ca.vertcat(xbdot, jets), ca.vertcat(xb, nb)))
+    K_sparse = ca.jacobian(ca.vertcat(xbdot, jets), ca.vertcat(xb, nb))
+    K = ca.densify(K_sparse)
     opts = {"cse": True} if cse else {}
     names = block.name_in()
     fns = [
@@ -79,7 +86,69 @@ def kernel_functions(
     faults, _ = fault_function(sc)
     t = ca.SX.sym("t")
     fns.append(ca.Function(FAULTS_NAME, [t], [faults(t)], ["t"], ["values"], opts))
-    return fns
+    return fns + newton_functions(K_sparse.sparsity(), sc.m, 3 * n, opts)
+
+
+def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[ca.Function]:
+    """One agent's part of the Newton systems (I + c J) x = b on K's structural ``pattern``.
+
+    K's rows are (leader's rates, agent's rates, jets), its columns (leader's state,
+    agent's state, neighbour sums): blocks A_s0, A_ss, B_s and C_0, C_s, E
+    (generated/native/agents.c, header). The kernels take K dense, as the driver stores
+    it, and read only its structural nonzeros; D = I + c A_ss is factorised without
+    pivoting (the driver checks the pivots, as the whole-loop driver does).
+
+    * ``ag_nfac(c, K) -> (LU, pivots)``;
+    * ``ag_nsol(c, K, LU, x0, s, b) -> (x, dj)``: x = D⁻¹ (b − c (A_s0 x0 + B_s s)),
+      dj = C_0 x0 + C_s x + E s;
+    * ``ag_gmat(c, K, LU) -> G``: G = E − c C_s D⁻¹ B_s (dense n3 × n3).
+
+    Parameters
+    ----------
+    pattern : casadi.Sparsity
+        Structural pattern of K (k × k, k = m + na + n3).
+    m, n3 : int
+        Leader states and jets per agent.
+    opts : dict
+        CasADi Function options (``cse``).
+    """
+    k = pattern.size1()
+    na = k - m - n3
+    st, jt = slice(m, m + na), slice(m + na, k)
+    Kd = ca.SX.sym("K", k, k)  # the driver's dense K: only the structural entries are read
+    sub = ca.SX(pattern, ca.vertcat(*[Kd[r, c] for r, c in _entries(pattern)]))
+    c = ca.SX.sym("c")
+    A_s0, A_ss, B_s = sub[st, :m], sub[st, st], sub[st, jt]
+    C_0, C_s, E = sub[jt, :m], sub[jt, st], sub[jt, jt]
+    lu = sparse_lu(A_ss.sparsity() + ca.Sparsity.diag(na), "ag_dlu", cse=bool(opts))
+    D = ca.project(ca.SX.eye(na) + c * A_ss, lu.pattern)
+    LU, pivots = lu.factor(D)
+    LUs = ca.SX.sym("LU", LU.sparsity())
+    x0, s, b = ca.SX.sym("x0", m), ca.SX.sym("s", n3), ca.SX.sym("b", na)
+    x = lu.solve(LUs, b - c * (A_s0 @ x0 + B_s @ s))
+    dj = C_0 @ x0 + C_s @ x + E @ s
+    cols = [lu.solve(LUs, ca.densify(B_s[:, q])) for q in range(n3)]
+    G = ca.densify(E - c * C_s @ ca.horzcat(*cols))
+    return [
+        ca.Function(NFAC_NAME, [c, Kd], [LU, pivots], ["c", "K"], ["LU", "pivots"], opts),
+        ca.Function(
+            NSOL_NAME,
+            [c, Kd, LUs, x0, s, b],
+            [x, dj],
+            ["c", "K", "LU", "x0", "s", "b"],
+            ["x", "dj"],
+            opts,
+        ),
+        ca.Function(GMAT_NAME, [c, Kd, LUs], [G], ["c", "K", "LU"], ["G"], opts),
+    ]
+
+
+def _entries(pattern: ca.Sparsity) -> list[tuple[int, int]]:
+    """(row, column) of each structural nonzero, in CasADi's column-major order."""
+    colind, row = pattern.colind(), pattern.row()
+    return [
+        (row[q], col) for col in range(pattern.size2()) for q in range(colind[col], colind[col + 1])
+    ]
 
 
 def kernel_settings(

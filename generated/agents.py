@@ -33,8 +33,11 @@ from generated import native
 from generated.agent_graph import Topology, topology
 from generated.agent_kernels import (
     FAULTS_NAME,
+    GMAT_NAME,
     JAC_NAME,
     JET_NAMES,
+    NFAC_NAME,
+    NSOL_NAME,
     RHS_NAME,
     build_models,
     kernel_key,
@@ -152,6 +155,12 @@ class Kernels(ctypes.Structure):
         ("jet_work", _FN * 3),
         ("rhs_work", _FN),
         ("jac_work", _FN),
+        ("nfac", _FN),
+        ("nsol", _FN),
+        ("gmat", _FN),
+        ("nfac_work", _FN),
+        ("nsol_work", _FN),
+        ("gmat_work", _FN),
     ]
 
 
@@ -237,6 +246,9 @@ def _kernels(lib: ctypes.CDLL) -> Kernels:
         k.jet_work[lev] = _fn(lib, name + "_work")
     k.rhs, k.rhs_work = _fn(lib, RHS_NAME), _fn(lib, RHS_NAME + "_work")
     k.jac, k.jac_work = _fn(lib, JAC_NAME), _fn(lib, JAC_NAME + "_work")
+    k.nfac, k.nfac_work = _fn(lib, NFAC_NAME), _fn(lib, NFAC_NAME + "_work")
+    k.nsol, k.nsol_work = _fn(lib, NSOL_NAME), _fn(lib, NSOL_NAME + "_work")
+    k.gmat, k.gmat_work = _fn(lib, GMAT_NAME), _fn(lib, GMAT_NAME + "_work")
     return k
 
 

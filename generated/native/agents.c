@@ -8,6 +8,10 @@
  *   ag_rhs (t, xb, nb, cpl, prm, gf) -> (xbdot, jets)
  *   ag_jac (t, xb, nb, cpl, prm, gf) -> (jets, K),  K = d(xbdot, jets)/d(xb, nb) dense
  *   ag_faults (t) -> values
+ *   ag_nfac (c, K) -> (LU, pivots)       D = I + c A_ss factorised without pivoting
+ *   ag_nsol (c, K, LU, x0, s, b) -> (x, dj)  x = D^{-1} (b - c (A_s0 x0 + B_s s)),
+ *                                         dj = C_0 x0 + C_s x + E s
+ *   ag_gmat (c, K, LU) -> G               G = E - c C_s D^{-1} B_s
  * with xb = (eta0, s_i), nb = sum_j (L+B)_ij jets_j (3n) and cpl = (l_ii, a_i0 h_i).
  * The driver never calls these by name: it receives one table of function pointers per
  * follower model (hitl_agent_kernels), so followers of different models, each from its
@@ -56,6 +60,8 @@ typedef int (*hitl_work_fn)(casadi_int *, casadi_int *, casadi_int *, casadi_int
 typedef struct {
   hitl_fn jet[3], rhs, jac;
   hitl_work_fn jet_work[3], rhs_work, jac_work;
+  hitl_fn nfac, nsol, gmat; /* the agent's Newton blocks, unrolled on K's pattern */
+  hitl_work_fn nfac_work, nsol_work, gmat_work;
 } hitl_agent_kernels;
 
 /* The problem: sizes, kernels, per-agent data and the graph's topologies as CSR */
@@ -182,10 +188,10 @@ typedef struct {
   double *fvals, *jets, *nb; /* jets, nb: N x n3 */
   hitl_agwork *wk;           /* nthreads */
   /* linear solver */
-  double *lu;    /* (N + 1) x na x na: D_i's LU (block N: the leader's) */
-  int *piv;      /* (N + 1) x na */
-  double *F;     /* N x na x n3: D_i^{-1} B_s (column-major) */
+  double *lu;    /* (N + 1) x na x na: D_i's sparse LU (ag_nfac; block N: the leader's, dense) */
+  int *piv;      /* na: the leader's row swaps */
   double *G;     /* N x n3 x n3 (column-major) */
+  double *zero;  /* n3 zeros: the neighbour sums of ag_nsol when only D_i^{-1} is wanted */
   double *y;     /* N x na */
   double *dj, *dnb, *rj; /* N x n3 */
   double *S;     /* dense jets system (n3 N)^2, HITL_AG_DENSE */
@@ -196,6 +202,33 @@ typedef struct {
 } hitl_ag;
 
 static int hitl_ag_threads(const hitl_ag *d) { return d->nthreads; }
+
+/* the calling thread's kernel work arrays */
+static hitl_agwork *hitl_ag_wk(hitl_ag *d) {
+#ifdef _OPENMP
+  return d->wk + omp_get_thread_num();
+#else
+  return d->wk;
+#endif
+}
+
+/* agent i's Newton solve through its model's ag_nsol: x = D_i^{-1} (b - c (A_s0 x0 + B_s
+   s)) and dj = C_0 x0 + C_s x + E s (b is copied first: x may be where b was) */
+static int hitl_ag_nsol(hitl_ag *d, hitl_agwork *wk, int i, const double *K, double c,
+                        const double *x0, const double *s, const double *b, double *x,
+                        double *dj) {
+  const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
+  memcpy(wk->xb, b, sizeof(double) * (size_t)d->na);
+  wk->arg[0] = &c;
+  wk->arg[1] = K;
+  wk->arg[2] = d->lu + (size_t)d->na * d->na * i;
+  wk->arg[3] = x0;
+  wk->arg[4] = s;
+  wk->arg[5] = wk->xb;
+  wk->res[0] = x;
+  wk->res[1] = dj;
+  return kn->nsol(wk->arg, wk->res, wk->iw, wk->w, 0);
+}
 
 static int hitl_ag_topology(const hitl_agents_problem *p, double t) {
   int top = 0;
@@ -533,40 +566,28 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
    E dnb_i (x holds b on entry, the leader solved) */
 static int hitl_ag_forward_x(hitl_ag *d, const hitl_agmat *M, double *x) {
   const hitl_agents_problem *p = d->p;
-  int m = d->m, na = d->na, k = d->k, n3 = d->n3, top = d->ls_top;
+  int m = d->m, na = d->na, k = d->k, n3 = d->n3, top = d->ls_top, fail = 0;
   const int *ord = p->order + (size_t)top * d->N;
   const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
-  double c = M->c;
   for (int wv = 0; wv < p->nwaves[top]; ++wv) {
-#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8)
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8) reduction(| : fail)
     for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
       int i = ord[oi];
       double s[64];
-      const double *K = M->K + (size_t)k * k * i;
-      double *xi = x + m + (size_t)na * i, *dj = d->dj + (size_t)n3 * i;
+      double *xi = x + m + (size_t)na * i;
       hitl_ag_gather(d, top, i, d->dj, s, 0, 3);
-      for (int row = 0; row < na; ++row) {
-        double acc = 0.0;
-        for (int col = 0; col < m; ++col) acc += KAT(K, k, m + row, col) * x[col];
-        for (int col = 0; col < n3; ++col) acc += KAT(K, k, m + row, m + na + col) * s[col];
-        xi[row] -= c * acc;
-      }
-      hitl_lu_solve(d->lu + (size_t)na * na * i, na, d->piv + (size_t)na * i, xi);
-      for (int row = 0; row < n3; ++row) {
-        int r = m + na + row;
-        double acc = 0.0;
-        for (int col = 0; col < m; ++col) acc += KAT(K, k, r, col) * x[col];
-        for (int col = 0; col < na; ++col) acc += KAT(K, k, r, m + col) * xi[col];
-        for (int col = 0; col < n3; ++col) acc += KAT(K, k, r, m + na + col) * s[col];
-        dj[row] = acc;
-      }
+      if (hitl_ag_nsol(d, hitl_ag_wk(d), i, M->K + (size_t)k * k * i, M->c, x, s, xi, xi,
+                       d->dj + (size_t)n3 * i))
+        fail |= 1;
     }
   }
-  return 0;
+  return fail ? -1 : 0;
 }
 
-/* Set-up of M = I + c J: the leader's and every agent's D_i factorised, F_i = D_i^{-1}
-   B_s and G_i = E - c C_s F_i formed; HITL_AG_DENSE also factorises the jets system. */
+/* Set-up of M = I + c J: the leader's block factorised (dense, pivoting), every agent's
+   D_i by its model's ag_nfac (pivots checked as the whole-loop driver checks its own) and,
+   unless the solve substitutes through the states, G_i by ag_gmat; HITL_AG_DENSE also
+   factorises the jets system. */
 static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
   hitl_ag *d = (hitl_ag *)S->content;
   hitl_agmat *M = HITL_AGMAT(A);
@@ -581,34 +602,33 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
     for (int col = 0; col < m; ++col)
       for (int row = 0; row < m; ++row)
         L[(size_t)col * m + row] = c * KAT(M->K, k, row, col) + (row == col ? 1.0 : 0.0);
-    if (hitl_lu(L, m, d->piv + (size_t)na * N)) fail = 1;
+    if (hitl_lu(L, m, d->piv)) fail = 1;
   }
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
   for (int i = 0; i < N; ++i) {
+    hitl_agwork *wk = hitl_ag_wk(d);
+    const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
     const double *K = M->K + (size_t)k * k * i;
-    double *L = d->lu + (size_t)na * na * i, *F = d->F + (size_t)na * n3 * i;
-    double *G = d->G + (size_t)n3 * n3 * i;
-    int *pv = d->piv + (size_t)na * i;
-    for (int col = 0; col < na; ++col)
-      for (int row = 0; row < na; ++row)
-        L[(size_t)col * na + row] = c * KAT(K, k, m + row, m + col) + (row == col ? 1.0 : 0.0);
-    if (hitl_lu(L, na, pv)) {
+    double *LU = d->lu + (size_t)na * na * i;
+    wk->arg[0] = &c;
+    wk->arg[1] = K;
+    wk->res[0] = LU;
+    wk->res[1] = wk->col; /* the pivots */
+    if (kn->nfac(wk->arg, wk->res, wk->iw, wk->w, 0)) {
+      fail |= 1;
+      continue;
+    }
+    int bad = 0;
+    for (int r = 0; r < na; ++r)
+      if (!(fabs(wk->col[r]) > HITL_PIVOT_MIN)) bad = 1; /* also catches NaN */
+    if (bad) {
       fail |= 1;
       continue;
     }
     if (d->ls_mode == HITL_AG_FORWARD) continue; /* the solve substitutes through x */
-    for (int q = 0; q < n3; ++q) { /* F = D^{-1} B_s */
-      double *Fq = F + (size_t)na * q;
-      for (int row = 0; row < na; ++row) Fq[row] = KAT(K, k, m + row, m + na + q);
-      hitl_lu_solve(L, na, pv, Fq);
-    }
-    for (int q = 0; q < n3; ++q) /* G = E - c C_s F */
-      for (int row = 0; row < n3; ++row) {
-        double acc = KAT(K, k, m + na + row, m + na + q);
-        for (int e = 0; e < na; ++e)
-          acc -= c * KAT(K, k, m + na + row, m + e) * F[(size_t)na * q + e];
-        G[(size_t)q * n3 + row] = acc;
-      }
+    wk->arg[2] = LU;
+    wk->res[0] = d->G + (size_t)n3 * n3 * i;
+    if (kn->gmat(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
   }
   if (fail) {
     d->base.n_piv_fail++;
@@ -648,27 +668,16 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
   const double *b = N_VGetArrayPointer(bv);
   (void)tol;
   if (x != b) memcpy(x, b, sizeof(double) * (size_t)d->base.nx);
-  hitl_lu_solve(d->lu + (size_t)na * na * N, m, d->piv + (size_t)na * N, x); /* leader */
+  hitl_lu_solve(d->lu + (size_t)na * na * N, m, d->piv, x); /* leader */
   if (d->ls_mode == HITL_AG_FORWARD) return hitl_ag_forward_x(d, M, x);
-  /* y_i = D_i^{-1} (b_i - c A_s0 x_0), r_i = C_0 x_0 + C_s y_i */
-#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
-  for (int i = 0; i < N; ++i) {
-    const double *K = M->K + (size_t)k * k * i;
-    double *yi = d->y + (size_t)na * i, *ri = d->rj + (size_t)n3 * i;
-    const double *bi = x + m + (size_t)na * i;
-    for (int row = 0; row < na; ++row) {
-      double acc = 0.0;
-      for (int col = 0; col < m; ++col) acc += KAT(K, k, m + row, col) * x[col];
-      yi[row] = bi[row] - c * acc;
-    }
-    hitl_lu_solve(d->lu + (size_t)na * na * i, na, d->piv + (size_t)na * i, yi);
-    for (int row = 0; row < n3; ++row) {
-      double acc = 0.0;
-      for (int col = 0; col < m; ++col) acc += KAT(K, k, m + na + row, col) * x[col];
-      for (int col = 0; col < na; ++col) acc += KAT(K, k, m + na + row, m + col) * yi[col];
-      ri[row] = acc;
-    }
-  }
+  /* y_i = D_i^{-1} (b_i - c A_s0 x_0), r_i = C_0 x_0 + C_s y_i: ag_nsol with s = 0 */
+  int fail = 0;
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
+  for (int i = 0; i < N; ++i)
+    if (hitl_ag_nsol(d, hitl_ag_wk(d), i, M->K + (size_t)k * k * i, c, x, d->zero,
+                     x + m + (size_t)na * i, d->y + (size_t)na * i, d->rj + (size_t)n3 * i))
+      fail |= 1;
+  if (fail) return -1;
   if (d->ls_mode == HITL_AG_DENSE) {
     memcpy(d->dj, d->rj, sizeof(double) * (size_t)N * n3);
     hitl_lu_solve(d->S, N * n3, d->Spiv, d->dj);
@@ -677,21 +686,16 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
     memcpy(rhs, d->rj, sizeof(double) * (size_t)N * n3);
     if (hitl_ag_gmres(d, top, rhs, d->dj)) return SUNLS_CONV_FAIL; /* recoverable */
   }
-  /* x_i = y_i - c F_i dnb_i */
-#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
+  /* x_i = D_i^{-1} (b_i - c (A_s0 x_0 + B_s dnb_i)) */
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
   for (int i = 0; i < N; ++i) {
     double s[64];
-    const double *F = d->F + (size_t)na * n3 * i;
+    hitl_agwork *wk = hitl_ag_wk(d);
     double *xi = x + m + (size_t)na * i;
-    const double *yi = d->y + (size_t)na * i;
     hitl_ag_gather(d, top, i, d->dj, s, 0, 3);
-    for (int row = 0; row < na; ++row) {
-      double acc = 0.0;
-      for (int q = 0; q < n3; ++q) acc += F[(size_t)na * q + row] * s[q];
-      xi[row] = yi[row] - c * acc;
-    }
+    if (hitl_ag_nsol(d, wk, i, M->K + (size_t)k * k * i, c, x, s, xi, xi, wk->jscr)) fail |= 1;
   }
-  return 0;
+  return fail ? -1 : 0;
 }
 
 /* ---------------------------------------------------------------- set-up */
@@ -750,6 +754,9 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
     for (int l = 0; l < 3; ++l) hitl_work_size(kn->jet_work[l], sz);
     hitl_work_size(kn->rhs_work, sz);
     hitl_work_size(kn->jac_work, sz);
+    hitl_work_size(kn->nfac_work, sz);
+    hitl_work_size(kn->nsol_work, sz);
+    hitl_work_size(kn->gmat_work, sz);
   }
   hitl_work_size(p->faults_work, sz);
   if (hitl_ctx_alloc(c, nx, sz)) return -1;
@@ -757,8 +764,8 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
   d->jets = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->nb = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->lu = (double *)calloc((size_t)(N + 1) * na * na, sizeof(double));
-  d->piv = (int *)calloc((size_t)(N + 1) * na, sizeof(int));
-  d->F = (double *)calloc((size_t)N * na * d->n3 + 1, sizeof(double));
+  d->piv = (int *)calloc((size_t)m + 1, sizeof(int));
+  d->zero = (double *)calloc((size_t)d->n3 + 1, sizeof(double));
   d->G = (double *)calloc((size_t)N * d->n3 * d->n3 + 1, sizeof(double));
   d->y = (double *)calloc((size_t)N * na + 1, sizeof(double));
   d->dj = (double *)calloc((size_t)nj + 1, sizeof(double));
@@ -778,7 +785,7 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
     d->sn = (double *)calloc((size_t)kr + 1, sizeof(double));
     d->g = (double *)calloc((size_t)kr + 2, sizeof(double));
   }
-  if (!d->fvals || !d->jets || !d->nb || !d->lu || !d->piv || !d->F || !d->G || !d->y ||
+  if (!d->fvals || !d->jets || !d->nb || !d->lu || !d->piv || !d->zero || !d->G || !d->y ||
       !d->dj || !d->dnb || !d->rj || !d->z || !d->V || !d->H || !d->cs || !d->sn || !d->g ||
       (p->solver == HITL_AG_DENSE && (!d->S || !d->Spiv)) || hitl_ag_work_alloc(d, sz)) {
     hitl_msg(c, "out of memory");
@@ -802,7 +809,7 @@ static void hitl_ag_free(hitl_ag *d, hitl_cvode *s) {
       free(wk->xbdot), free(wk->gf), free(wk->jscr), free(wk->col);
     }
   free(d->wk);
-  free(d->fvals), free(d->jets), free(d->nb), free(d->lu), free(d->piv), free(d->F);
+  free(d->fvals), free(d->jets), free(d->nb), free(d->lu), free(d->piv), free(d->zero);
   free(d->G), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S);
   free(d->Spiv), free(d->V), free(d->H), free(d->cs), free(d->sn), free(d->g);
   hitl_cvode_free(&d->base, s);
