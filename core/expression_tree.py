@@ -13,7 +13,10 @@ Num(-0.0)``; whoever keys a cache by a tree keys it by the expression's text too
 
 Every walk over a tree is a :class:`Visitor` subclass, one method per node class, run by
 :func:`visit`. A method walks the children itself (``visit(node.left, self)``), so each
-walk keeps its own order of evaluation and may stop early.
+walk keeps its own order of evaluation and may stop early. Two bases give the common
+walks their defaults: a :class:`Walker` visits every child left to right and returns
+nothing (collectors override the nodes they collect), a :class:`Transformer` rebuilds
+the tree (rewrites override the nodes they change).
 """
 
 from __future__ import annotations
@@ -145,3 +148,109 @@ def visit(node: Node, visitor: Visitor[R]) -> R:
             f"(expected one of {', '.join(c.__name__ for c in METHODS)})"
         ) from None
     return getattr(visitor, method)(node)
+
+
+class Walker(Visitor[None]):
+    """A walk over every node, children left to right, returning nothing.
+
+    Collectors subclass it and override the methods of the nodes they act on (calling
+    the base method where the children are still to be walked).
+    """
+
+    def num(self, node: Num) -> None:
+        """Nothing to walk.
+
+        Parameters
+        ----------
+        node : Num
+        """
+
+    def time(self, node: Time) -> None:
+        """Nothing to walk.
+
+        Parameters
+        ----------
+        node : Time
+        """
+
+    def neg(self, node: Neg) -> None:
+        """Walk the argument.
+
+        Parameters
+        ----------
+        node : Neg
+        """
+        visit(node.arg, self)
+
+    def binop(self, node: BinOp) -> None:
+        """Walk the left operand, then the right.
+
+        Parameters
+        ----------
+        node : BinOp
+        """
+        visit(node.left, self)
+        visit(node.right, self)
+
+    def call(self, node: Call) -> None:
+        """Walk the arguments in order.
+
+        Parameters
+        ----------
+        node : Call
+        """
+        for a in node.args:
+            visit(a, self)
+
+
+class Transformer(Visitor[Node]):
+    """A walk that rebuilds the tree: every node with its children transformed.
+
+    Rewrites subclass it and override the methods of the nodes they change; the others
+    come back as they were (leaves) or rebuilt from their transformed children.
+    """
+
+    def num(self, node: Num) -> Node:
+        """The number itself.
+
+        Parameters
+        ----------
+        node : Num
+        """
+        return node
+
+    def time(self, node: Time) -> Node:
+        """``t`` itself.
+
+        Parameters
+        ----------
+        node : Time
+        """
+        return node
+
+    def neg(self, node: Neg) -> Node:
+        """``-arg`` of the transformed argument.
+
+        Parameters
+        ----------
+        node : Neg
+        """
+        return Neg(visit(node.arg, self))
+
+    def binop(self, node: BinOp) -> Node:
+        """The operation on the transformed operands (left first).
+
+        Parameters
+        ----------
+        node : BinOp
+        """
+        return BinOp(node.op, visit(node.left, self), visit(node.right, self))
+
+    def call(self, node: Call) -> Node:
+        """The call on the transformed arguments (in order).
+
+        Parameters
+        ----------
+        node : Call
+        """
+        return Call(node.name, tuple(visit(a, self) for a in node.args))

@@ -21,7 +21,17 @@ import casadi as ca
 import numpy as np
 
 from core.errors import ExpressionError
-from core.expression_tree import BinOp, Call, Neg, Node, Num, Time, Visitor, visit
+from core.expression_tree import (
+    BinOp,
+    Call,
+    Neg,
+    Node,
+    Num,
+    Time,
+    Visitor,
+    Walker,
+    visit,
+)
 from core.memo import MEMO
 
 #: accepted function names and their arity
@@ -403,7 +413,7 @@ def _literal_exponent(node: BinOp) -> float | None:
     return node.right.value if node.op == "**" and isinstance(node.right, Num) else None
 
 
-class _Literals(Visitor[None]):
+class _Literals(Walker):
     """Collects the numbers in walk order into ``out``, skipping literal exponents."""
 
     def __init__(self) -> None:
@@ -412,20 +422,10 @@ class _Literals(Visitor[None]):
     def num(self, node: Num) -> None:
         self.out.append(node.value)
 
-    def time(self, node: Time) -> None:
-        return None
-
-    def neg(self, node: Neg) -> None:
-        visit(node.arg, self)
-
     def binop(self, node: BinOp) -> None:
         visit(node.left, self)
         if _literal_exponent(node) is None:
             visit(node.right, self)
-
-    def call(self, node: Call) -> None:
-        for a in node.args:
-            visit(a, self)
 
 
 class _Template(Visitor[str]):
@@ -540,29 +540,15 @@ _BIN_CLOSURES = {
 }
 
 
-class _Breaks(Visitor[None]):
+class _Breaks(Walker):
     """Collects into ``out`` the times t > 0 where a call jumps or kinks (affine locations)."""
 
     def __init__(self) -> None:
         self.out: list[float] = []
 
-    def num(self, node: Num) -> None:
-        return None
-
-    def time(self, node: Time) -> None:
-        return None
-
-    def neg(self, node: Neg) -> None:
-        visit(node.arg, self)
-
-    def binop(self, node: BinOp) -> None:
-        visit(node.left, self)
-        visit(node.right, self)
-
     def call(self, node: Call) -> None:
+        super().call(node)  # the arguments' own breakpoints first
         name, args = node.name, node.args
-        for a in args:
-            visit(a, self)
         cand: list[Node]
         if name in ("step", "abs", "prefilter"):  # jump / kink / curvature jump where it is 0
             cand = [args[0]]

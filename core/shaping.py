@@ -24,7 +24,17 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from core.expression_tree import BinOp, Call, Neg, Node, Num, Time, Visitor, visit
+from core.expression_tree import (
+    BinOp,
+    Call,
+    Neg,
+    Node,
+    Num,
+    Time,
+    Transformer,
+    Visitor,
+    visit,
+)
 from core.expressions import Expr
 from core.faults import node_text
 
@@ -152,23 +162,11 @@ class _Mentions(Visitor[bool]):
         return node.name == self.name or any(visit(a, self) for a in node.args)
 
 
-class _Shape(Visitor[Node]):
+class _Shape(Transformer):
     """A tree with every ``step(x)`` replaced by its shaped form over ``rise`` seconds."""
 
     def __init__(self, rise: float, shape: str) -> None:
         self.rise, self.shape = rise, shape
-
-    def num(self, node: Num) -> Node:
-        return node
-
-    def time(self, node: Time) -> Node:
-        return node
-
-    def neg(self, node: Neg) -> Node:
-        return Neg(visit(node.arg, self))
-
-    def binop(self, node: BinOp) -> Node:
-        return BinOp(node.op, visit(node.left, self), visit(node.right, self))
 
     def call(self, node: Call) -> Node:
         args = tuple(visit(a, self) for a in node.args)

@@ -259,8 +259,11 @@ def test_every_node_class_has_its_visitor_method():
     import core.shaping  # noqa: F401
     import verify.reference  # noqa: F401
 
-    walks = [c for c in Visitor.__subclasses__() if c.__module__.split(".")[0] in PACKAGES]
-    assert {"_Template", "_Eval", "_Closure", "_Text", "_Shape", "_Dual"} <= {
+    def subclasses(cls):
+        return [d for c in cls.__subclasses__() for d in (c, *subclasses(c))]
+
+    walks = [c for c in subclasses(Visitor) if c.__module__.split(".")[0] in PACKAGES]
+    assert {"_Template", "_Eval", "_Closure", "_Text", "_Shape", "_Dual", "_Breaks"} <= {
         c.__qualname__ for c in walks
     }
     assert [c for c in walks if inspect.isabstract(c)] == []
@@ -362,3 +365,41 @@ def test_no_module_dispatches_on_a_tuple_tree():
 )
 def test_the_tuple_dispatch_grep_can_fail(line, bad):
     assert bool(TUPLE_DISPATCH.search(line)) is bad
+
+
+def test_walker_and_transformer_defaults():
+    from core.expression_tree import Transformer, Walker
+
+    e = parse_expression("-(2*t) + max(3, sin(t)**2)")
+
+    class Numbers(Walker):
+        def __init__(self):
+            self.seen = []
+
+        def num(self, node):
+            self.seen.append(node.value)
+
+    w = Numbers()
+    visit(e.node, w)
+    assert w.seen == [2.0, 3.0, 2.0]  # every child, left to right
+    assert visit(e.node, Transformer()) == e.node  # the identity rebuild
+
+    class Double(Transformer):
+        def num(self, node):
+            return Num(2 * node.value)
+
+    doubled = visit(e.node, Double())
+    assert doubled != e.node
+    assert [n.value for n in _nums(doubled)] == [4.0, 6.0, 4.0]
+
+
+def _nums(node):
+    if isinstance(node, Num):
+        return [node]
+    if isinstance(node, Neg):
+        return _nums(node.arg)
+    if isinstance(node, BinOp):
+        return _nums(node.left) + _nums(node.right)
+    if isinstance(node, Call):
+        return [n for a in node.args for n in _nums(a)]
+    return []

@@ -21,7 +21,7 @@ import pytest
 from helpers import ROOT, SCENARIOS
 
 from core.errors import ScenarioError
-from core.expression_tree import BinOp, Call, Neg, Node, Num, Time, Visitor, visit
+from core.expression_tree import Node, Num, Transformer, visit
 from core.expressions import Expr
 from core.faults import Fault, Slot, fault_times, slot_activation
 from core.scenario import Scenario, load_scenario, scenario_from_dict
@@ -150,23 +150,11 @@ def _casadi(e: Expr, ts: np.ndarray, parametric: bool) -> np.ndarray:
     return np.array(fun.map(ts.size)(ts.reshape(1, -1), np.array(e.literals()))).ravel()
 
 
-class _Erased(Visitor[Node]):
+class _Erased(Transformer):
     """The tree with every number erased (written 0): what the compiled code depends on."""
 
     def num(self, node: Num) -> Node:
         return Num(0.0)
-
-    def time(self, node: Time) -> Node:
-        return node
-
-    def neg(self, node: Neg) -> Node:
-        return Neg(visit(node.arg, self))
-
-    def binop(self, node: BinOp) -> Node:
-        return BinOp(node.op, visit(node.left, self), visit(node.right, self))
-
-    def call(self, node: Call) -> Node:
-        return Call(node.name, tuple(visit(a, self) for a in node.args))
 
 
 def _shape(node: Node) -> Node:
