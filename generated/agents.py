@@ -20,6 +20,7 @@ table of kernel pointers per model).
 from __future__ import annotations
 
 import ctypes
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -266,6 +267,10 @@ def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
     IntegrationError
         If a library's problem struct differs from :class:`Problem`.
     """
+    # libgomp reads its wait policy once, when the first OpenMP library loads: the driver
+    # enters a parallel region per pass and per wave, microseconds apart, and threads that
+    # sleep between them cost more to wake than a wave takes (docs/performance.md)
+    os.environ.setdefault("OMP_WAIT_POLICY", "active")
     libs = [native.load(Path(p)) for p in libraries]
     ci, cd, prob = ctypes.c_int, ctypes.c_double, ctypes.POINTER(Problem)
     opts, res = ctypes.POINTER(native.Options), ctypes.POINTER(native.Result)
