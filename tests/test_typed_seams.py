@@ -1,5 +1,5 @@
-"""The stage seams are typed: no ``Any`` anywhere in the fields of ``Built``, ``Gains`` and
-``Trajectory``, down through the TypedDicts and aliases they name (issue: typed contracts).
+"""The stage seams are typed: no ``Any`` anywhere in the fields of ``Built``, ``Gains``,
+``Trajectory`` and the verification inputs (``CheckInput``, ``TrajectoryView``), down through the TypedDicts and aliases they name (issue: typed contracts).
 
 The walk resolves every annotation (``typing.get_type_hints``), its arguments, the fields
 of TypedDicts and dataclasses it reaches and string aliases such as ``JSONValue``.
@@ -20,6 +20,8 @@ import core.json_types as jt
 from generated.api import Built
 from generated.integrate import Trajectory
 from synthesis.gains import Gains
+from verify.checks import CheckInput
+from verify.signals import TrajectoryView
 
 
 def _anys(hint: object, where: str, seen: set[str], ns: dict | None = None) -> list[str]:
@@ -59,7 +61,7 @@ def _annotations(cls: type) -> dict[str, object]:
     return out
 
 
-@pytest.mark.parametrize("cls", [Built, Gains, Trajectory])
+@pytest.mark.parametrize("cls", [Built, Gains, Trajectory, CheckInput, TrajectoryView])
 def test_no_any_in_the_fields(cls):
     assert _anys(cls, cls.__name__, set(), vars(sys.modules[cls.__module__])) == []
 
