@@ -1,5 +1,6 @@
 """The stage seams are typed: no ``Any`` anywhere in the fields of ``Built``, ``Gains``,
-``Trajectory`` and the verification inputs (``CheckInput``, ``TrajectoryView``), down through the TypedDicts and aliases they name (issue: typed contracts).
+``Trajectory`` and the verification inputs (``CheckInput``, ``TrajectoryView``), down
+through the TypedDicts and aliases they name (issue: typed contracts).
 
 The walk resolves every annotation (``typing.get_type_hints``), its arguments, the fields
 of TypedDicts and dataclasses it reaches and string aliases such as ``JSONValue``.
