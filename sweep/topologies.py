@@ -17,7 +17,8 @@ the synthesis stage may find a larger w with its best diagonal Z, so ``False`` h
 "not shown by the paper's z", not a proof of failure).
 
 Per sample: N, links, whether a topology has a cycle, link losses, w_min, theorem1,
-CVODE's status and counters, the integration time, the library key(s) and whether
+CVODE's status and counters (an incomplete run: the time it reached and CVODE's
+message, also listed in the report), the integration time, the library key(s) and whether
 they were compiled for this sample, and the observer's tail error max |η_i − η0| over
 the last quarter of the horizon. Output: ``out/topologies/results.csv`` and
 ``report.md`` (counts, timing, the libraries used).
@@ -93,7 +94,7 @@ def _run_one(sample: Any) -> dict[str, Any]:
     tr = agents.run([lib.path for lib in libs], prob, x0, t_out, s, breakpoints=sc.breakpoints())
     t2 = time.perf_counter()
     lay = agents.make_layout(sc.m, sc.n, sc.N, False)
-    tail = t_out >= 0.75 * H
+    tail = tr.t >= 0.75 * H  # the times reached: an incomplete run has fewer rows
     X = tr.x[tail & np.isfinite(tr.x).all(axis=1)]
     eta0 = X[:, : sc.m]
     err = (
@@ -110,6 +111,8 @@ def _run_one(sample: Any) -> dict[str, Any]:
         "w_min": w,
         "theorem1": thm,
         "status": "complete" if tr.complete else "incomplete",
+        "t_reached": float(tr.t_reached),
+        "message": "" if tr.complete else tr.message,
         "steps": int(tr.stats["steps"]),
         "prepare_s": round(t1 - t0, 4),
         "simulate_s": round(t2 - t1, 4),
@@ -192,6 +195,12 @@ def report(rows: list[dict], wall: float, path: str) -> str:
         f"- Theorem 1 shown with the paper's z: {len(thm)} of {len(ran)}",
         f"- observer tail error max |η_i − η0| (complete runs): median {np.median(err):.2e}, "
         f"max {err.max():.2e}",
+    ]
+    lines += [
+        f"- incomplete: sample {r['sample']} (N = {r['N']}) stopped at t = "
+        f"{r['t_reached']:.4g} s: {r['message']}"
+        for r in ran
+        if r["status"] != "complete"
     ]
     return "\n".join(lines) + "\n"
 

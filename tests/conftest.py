@@ -65,6 +65,7 @@ SLOW_MODULES = frozenset(
         "test_switching",
         "test_synthesis_cli",
         "test_theorem2_intervals",
+        "test_topologies_study",
         "test_verify_lyapunov",
         "test_verify_report",
         "test_verify_rows",
