@@ -38,6 +38,7 @@ import numpy as np
 from core.artifacts import atomic_write_text
 from core.errors import run_cli
 from core.memo import MEMO
+from core.provenance import provenance_line
 
 STUDY = "studies/topologies.toml"
 #: the study's base gains and codegen settings, set once per process (core/memo.py)
@@ -182,6 +183,8 @@ def report(rows: list[dict], wall: float, path: str) -> str:
     err = np.array([r["tail_obs_err"] for r in comp]) if comp else np.zeros(1)
     lines = [
         f"# Topology study ({path})",
+        "",
+        f"{provenance_line()}; `python -m sweep.topologies {path}`.",
         "",
         f"- samples: {len(rows)}; refused by the loader (Assumption 1 on a topology): "
         f"{len(rows) - len(ran)}; integrated: {len(ran)}, complete: {len(comp)}",

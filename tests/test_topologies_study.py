@@ -47,6 +47,7 @@ def test_an_integration_that_stops_early_is_an_incomplete_row(rows, monkeypatch,
     bad = [r for r in again if r["status"] == "incomplete"]
     assert bad and all(r["t_reached"] == 5.0 and r["message"] == "x" for r in bad)
     text = topologies.report(again, 1.0, STUDY)
+    assert text.splitlines()[2].startswith("measured ")  # date, commit and machine
     assert (
         f"incomplete: sample {bad[0]['sample']} (N = {bad[0]['N']}) stopped at t = 5 s: x" in text
     )
