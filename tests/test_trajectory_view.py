@@ -6,8 +6,8 @@
 - a missing column raises the one-line ``VerifyError`` naming it;
 - each ``Signal`` has its width rule, and the columns of all of them are the writer's
   (``generated.trajectory_file.column_names``), in its order;
-- no module of ``verify/`` or ``sweep/`` (besides ``verify/signals.py`` and
-  ``verify/reference.py``) spells a trajectory column from a prefix: no f-string column
+- no module of ``verify/`` or ``sweep/`` (besides ``verify/signals.py``) spells a
+  trajectory column from a prefix: no f-string column
   name, no prefix-string call of the column helpers (the scan is shown to catch planted
   examples).
 """
@@ -180,8 +180,8 @@ OFFENCES = (
     re.compile(r"""\b(?:block|agent_norm)\(\s*[\w.]+\s*,\s*f?["']"""),  # block(df, "p", ...)
     re.compile(r"""\b(?:column|take|has)\(\s*[\w.]+\s*,\s*(?:\[\s*)?f["']"""),  # take(df, [f"..."])
 )
-#: the view and the column helpers it builds on; another engineer's module
-EXEMPT = {"verify/signals.py", "verify/reference.py"}
+#: the view and the column helpers it builds on
+EXEMPT = {"verify/signals.py"}
 
 
 def offences(text: str) -> list[str]:
