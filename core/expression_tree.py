@@ -13,10 +13,11 @@ Num(-0.0)``; whoever keys a cache by a tree keys it by the expression's text too
 
 Every walk over a tree is a :class:`Visitor` subclass, one method per node class, run by
 :func:`visit`. A method walks the children itself (``visit(node.left, self)``), so each
-walk keeps its own order of evaluation and may stop early. Two bases give the common
+walk keeps its own order of evaluation and may stop early. Three bases give the common
 walks their defaults: a :class:`Walker` visits every child left to right and returns
-nothing (collectors override the nodes they collect), a :class:`Transformer` rebuilds
-the tree (rewrites override the nodes they change).
+nothing (collectors override the nodes they collect), a :class:`Search` asks whether
+some node matches and stops at the first (tests override the nodes that can match), a
+:class:`Transformer` rebuilds the tree (rewrites override the nodes they change).
 """
 
 from __future__ import annotations
@@ -201,6 +202,59 @@ class Walker(Visitor[None]):
         """
         for a in node.args:
             visit(a, self)
+
+
+class Search(Visitor[bool]):
+    """Whether some node of the tree matches, children left to right, stopping at the first.
+
+    Tests subclass it and override the methods of the nodes that can match (calling the
+    base method to search their children); no leaf matches by default.
+    """
+
+    def num(self, node: Num) -> bool:
+        """No match.
+
+        Parameters
+        ----------
+        node : Num
+        """
+        return False
+
+    def time(self, node: Time) -> bool:
+        """No match.
+
+        Parameters
+        ----------
+        node : Time
+        """
+        return False
+
+    def neg(self, node: Neg) -> bool:
+        """Whether the argument matches.
+
+        Parameters
+        ----------
+        node : Neg
+        """
+        return visit(node.arg, self)
+
+    def binop(self, node: BinOp) -> bool:
+        """Whether the left operand matches, else the right.
+
+        Parameters
+        ----------
+        node : BinOp
+        """
+        return visit(node.left, self) or visit(node.right, self)
+
+    def call(self, node: Call) -> bool:
+        """Whether some argument matches, in order.
+
+        Parameters
+        ----------
+        node : Call
+        """
+        return any(visit(a, self) for a in node.args)
 
 
 class Transformer(Visitor[Node]):

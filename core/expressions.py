@@ -27,6 +27,7 @@ from core.expression_tree import (
     Neg,
     Node,
     Num,
+    Search,
     Time,
     Visitor,
     Walker,
@@ -329,23 +330,11 @@ def _snippet(text: str, n: ast.AST) -> str:
     return seg if len(seg) <= 30 else seg[:27] + "..."
 
 
-class _MentionsT(Visitor[bool]):
+class _MentionsT(Search):
     """Whether the tree mentions ``t`` (stops at the first ``t``)."""
-
-    def num(self, node: Num) -> bool:
-        return False
 
     def time(self, node: Time) -> bool:
         return True
-
-    def neg(self, node: Neg) -> bool:
-        return visit(node.arg, self)
-
-    def binop(self, node: BinOp) -> bool:
-        return visit(node.left, self) or visit(node.right, self)
-
-    def call(self, node: Call) -> bool:
-        return any(visit(a, self) for a in node.args)
 
 
 _MENTIONS_T = _MentionsT()

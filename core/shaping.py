@@ -30,6 +30,7 @@ from core.expression_tree import (
     Neg,
     Node,
     Num,
+    Search,
     Time,
     Transformer,
     Visitor,
@@ -140,26 +141,14 @@ class _Atoms(Visitor[list[Node]]):
 _ATOMS = _Atoms()
 
 
-class _Mentions(Visitor[bool]):
+class _Mentions(Search):
     """Whether a tree calls the function ``name``."""
 
     def __init__(self, name: str) -> None:
         self.name = name
 
-    def num(self, node: Num) -> bool:
-        return False
-
-    def time(self, node: Time) -> bool:
-        return False
-
-    def neg(self, node: Neg) -> bool:
-        return visit(node.arg, self)
-
-    def binop(self, node: BinOp) -> bool:
-        return visit(node.left, self) or visit(node.right, self)
-
     def call(self, node: Call) -> bool:
-        return node.name == self.name or any(visit(a, self) for a in node.args)
+        return node.name == self.name or super().call(node)
 
 
 class _Shape(Transformer):

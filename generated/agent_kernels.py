@@ -116,7 +116,7 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
     na = k - m - n3
     st, jt = slice(m, m + na), slice(m + na, k)
     Kd = ca.SX.sym("K", k, k)  # the driver's dense K: only the structural entries are read
-    sub = ca.SX(pattern, ca.vertcat(*[Kd[r, c] for r, c in _entries(pattern)]))
+    sub = ca.project(Kd, pattern)
     c = ca.SX.sym("c")
     A_s0, A_ss, B_s = sub[st, :m], sub[st, st], sub[st, jt]
     C_0, C_s, E = sub[jt, :m], sub[jt, st], sub[jt, jt]
@@ -140,14 +140,6 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
             opts,
         ),
         ca.Function(GMAT_NAME, [c, Kd, LUs], [G], ["c", "K", "LU"], ["G"], opts),
-    ]
-
-
-def _entries(pattern: ca.Sparsity) -> list[tuple[int, int]]:
-    """(row, column) of each structural nonzero, in CasADi's column-major order."""
-    colind, row = pattern.colind(), pattern.row()
-    return [
-        (row[q], col) for col in range(pattern.size2()) for q in range(colind[col], colind[col + 1])
     ]
 
 

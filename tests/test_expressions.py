@@ -367,8 +367,8 @@ def test_the_tuple_dispatch_grep_can_fail(line, bad):
     assert bool(TUPLE_DISPATCH.search(line)) is bad
 
 
-def test_walker_and_transformer_defaults():
-    from core.expression_tree import Transformer, Walker
+def test_walker_search_and_transformer_defaults():
+    from core.expression_tree import Search, Transformer, Walker
 
     e = parse_expression("-(2*t) + max(3, sin(t)**2)")
 
@@ -383,6 +383,13 @@ def test_walker_and_transformer_defaults():
     visit(e.node, w)
     assert w.seen == [2.0, 3.0, 2.0]  # every child, left to right
     assert visit(e.node, Transformer()) == e.node  # the identity rebuild
+
+    class CallsSin(Search):
+        def call(self, node):
+            return node.name == "sin" or super().call(node)
+
+    assert visit(e.node, CallsSin()) and not visit(e.node, Search())
+    assert not visit(parse_expression("max(3, cos(t))").node, CallsSin())
 
     class Double(Transformer):
         def num(self, node):
