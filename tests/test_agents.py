@@ -9,6 +9,7 @@ the whole loop, its own sparse LU) for the trajectories.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -283,3 +284,36 @@ def test_newton_kernels_against_numpy(cases, gamma):
     np.testing.assert_allclose(dj, dj_ref, rtol=1e-10, atol=1e-10 * np.abs(dj_ref).max())
     G_ref = E - c * C_s @ np.linalg.solve(D, B_s)
     np.testing.assert_allclose(np.array(gmat(c, K, LU)), G_ref, rtol=1e-10, atol=1e-12)
+
+
+def test_an_operator_press_and_release_on_the_per_agent_driver(build_root):
+    """A key press and its release in u0 (shaped by the loader's default): the per-agent
+    driver completes without pivot failures, takes the whole loop's steps to within 25 %
+    and converges to its trajectory as the tolerance shrinks."""
+    import tomllib
+
+    from core.scenario import scenario_from_dict
+
+    raw = tomllib.loads(Path(PAPER).read_text())
+    raw["leader"]["u0"] = ["1.5*step(t - 0.3) - 1.5*step(t - 0.9)"]
+    raw["integration"] = {**raw.get("integration", {}), "horizon": 1.5}
+    sc = scenario_from_dict(raw, path=PAPER, sha256="press")
+    gains = api.scenario_gains(sc, "press")
+    cg = CodegenSettings(optimization="-O0", build_root=build_root)
+    cl = build_closed_loop(sc, gains)
+    built = api.build(sc, gains, "native", cg, closed_loop=cl)
+    libs, model = agents.build_models(sc, gains, cg)
+    prob = agents.problem(sc, gains, model)
+    t_out = output_grid(1.5, 0.01)
+    bps = [b for b in sc.breakpoints() if b < 1.5]
+    assert any(0.3 <= b <= 2.9 for b in bps)  # the shaped press and release are restarts
+    diffs = []
+    for rtol in (1e-7, 1e-9):
+        s = IntegratorSettings(method="native", rtol=rtol, atol=rtol * 1e-2, max_steps=2000000)
+        ref = api.integrate_built(built, cl.x0, t_out, s, bps)
+        tr = agents.run([lib.path for lib in libs], prob, cl.x0, t_out, s, breakpoints=bps)
+        assert tr.complete and ref.complete and tr.stats["pivot_failures"] == 0
+        assert 0.8 < tr.stats["steps"] / ref.stats["steps"] < 1.25
+        late = t_out >= 0.3
+        diffs.append((np.abs(tr.x - ref.x) / np.maximum(1.0, np.abs(ref.x)))[late].max())
+    assert diffs[1] < diffs[0] / 5 and diffs[1] < 1e-3, diffs
