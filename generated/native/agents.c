@@ -95,8 +95,18 @@ typedef struct {
 /* The Jacobian: N blocks K_i (k x k, column-major) of the topology it was evaluated on,
    representing c J (+ I once shifted) */
 typedef struct {
-  long len;
   double *K;
+  int refs;
+} hitl_kbuf;
+
+/* K is shared, not copied, by the matrices CVODE copies into each other (its saved
+   Jacobian and the Newton matrix): only the Jacobian evaluation writes K, and CVODE
+   copies the matrix it evaluated into the saved one right after; the shift c is kept
+   per matrix. */
+typedef struct {
+  long len;
+  hitl_kbuf *buf;
+  double *K; /* buf->K */
   double c;
   int shifted, top;
 } hitl_agmat;
@@ -114,19 +124,26 @@ static SUNMatrix hitl_agmat_clone(SUNMatrix A) {
   return hitl_agmat_new(HITL_AGMAT(A)->len, A->sunctx);
 }
 
+static void hitl_kbuf_release(hitl_kbuf *b) {
+  if (b && --b->refs == 0) {
+    free(b->K);
+    free(b);
+  }
+}
+
 static void hitl_agmat_destroy(SUNMatrix A) {
   if (!A) return;
   if (A->content) {
-    free(HITL_AGMAT(A)->K);
+    hitl_kbuf_release(HITL_AGMAT(A)->buf);
     free(A->content);
     A->content = NULL;
   }
   SUNMatFreeEmpty(A);
 }
 
+/* the Jacobian evaluation that follows writes every entry of K: only the shift resets */
 static SUNErrCode hitl_agmat_zero(SUNMatrix A) {
   hitl_agmat *m = HITL_AGMAT(A);
-  memset(m->K, 0, sizeof(double) * (size_t)m->len);
   m->c = 1.0;
   m->shifted = 0;
   return SUN_SUCCESS;
@@ -134,7 +151,12 @@ static SUNErrCode hitl_agmat_zero(SUNMatrix A) {
 
 static SUNErrCode hitl_agmat_copy(SUNMatrix A, SUNMatrix B) {
   hitl_agmat *a = HITL_AGMAT(A), *b = HITL_AGMAT(B);
-  memcpy(b->K, a->K, sizeof(double) * (size_t)a->len);
+  if (b->buf != a->buf) {
+    hitl_kbuf_release(b->buf);
+    b->buf = a->buf;
+    b->buf->refs++;
+    b->K = a->K;
+  }
   b->c = a->c;
   b->shifted = a->shifted;
   b->top = a->top;
@@ -154,12 +176,16 @@ static SUNMatrix hitl_agmat_new(long len, SUNContext ctx) {
   hitl_agmat *m;
   if (!A) return NULL;
   m = (hitl_agmat *)calloc(1, sizeof *m);
-  if (m) m->K = (double *)calloc((size_t)len + 1, sizeof(double));
-  if (!m || !m->K) {
+  if (m) m->buf = (hitl_kbuf *)calloc(1, sizeof *m->buf);
+  if (m && m->buf) m->buf->K = (double *)calloc((size_t)len + 1, sizeof(double));
+  if (!m || !m->buf || !m->buf->K) {
+    if (m) free(m->buf);
     free(m);
     SUNMatFreeEmpty(A);
     return NULL;
   }
+  m->buf->refs = 1;
+  m->K = m->buf->K;
   m->len = len;
   m->c = 1.0;
   A->content = m;
