@@ -6,7 +6,8 @@ option set, the kernels of ONE agent (:func:`symbolic.cascade.agent_block`, as C
 * ``ag_jet0``, ``ag_jet1``, ``ag_jet2``: the jets C0 η_i, C0 η̇_i, C0 η̈_i its listeners
   sum (level l reads only the levels < l of the agent's own neighbour sum);
 * ``ag_rhs``: the agent's rates (and the leader's, eq. (3));
-* ``ag_jac``: their Jacobian block K = ∂(ẋ_b, jets)/∂(x_b, nb);
+* ``ag_jac``: their Jacobian block K = ∂(ẋ_b, jets)/∂(x_b, nb), its structural
+  nonzeros only (column-compressed, ``ag_jac_sparsity_out(1)``);
 * ``ag_faults``: every distinct fault expression of the scenario;
 * ``ag_nfac``, ``ag_nsol``, ``ag_gmat``: the agent's part of CVODE's Newton systems on
   the structural pattern of K (:func:`newton_functions`): the LU of D = I + c A_ss without
@@ -73,8 +74,8 @@ def kernel_functions(
     xbdot, jets = block.call(args)
     n = sc.n
     xb, nb = args[1], args[2]
-    K_sparse = ca.jacobian(ca.vertcat(xbdot, jets), ca.vertcat(xb, nb))
-    K = ca.densify(K_sparse)
+    # K's structural nonzeros only: the driver stores and reads them contiguously
+    K = ca.jacobian(ca.vertcat(xbdot, jets), ca.vertcat(xb, nb))
     opts = {"cse": True} if cse else {}
     names = block.name_in()
     fns = [
@@ -86,7 +87,7 @@ def kernel_functions(
     faults, _ = fault_function(sc)
     t = ca.SX.sym("t")
     fns.append(ca.Function(FAULTS_NAME, [t], [faults(t)], ["t"], ["values"], opts))
-    return fns + newton_functions(K_sparse.sparsity(), sc.m, 3 * n, opts)
+    return fns + newton_functions(K.sparsity(), sc.m, 3 * n, opts)
 
 
 def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[ca.Function]:
@@ -94,8 +95,8 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
 
     K's rows are (leader's rates, agent's rates, jets), its columns (leader's state,
     agent's state, neighbour sums): blocks A_s0, A_ss, B_s and C_0, C_s, E
-    (generated/native/agents.c, header). The kernels take K dense, as the driver stores
-    it, and read only its structural nonzeros; D = I + c A_ss is factorised without
+    (generated/native/agents.c, header). The kernels take K's structural nonzeros, as
+    ag_jac writes them and the driver stores them; D = I + c A_ss is factorised without
     pivoting (the driver checks the pivots, as the whole-loop driver does).
 
     * ``ag_nfac(c, K) -> (LU, pivots)``;
@@ -115,8 +116,7 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
     k = pattern.size1()
     na = k - m - n3
     st, jt = slice(m, m + na), slice(m + na, k)
-    Kd = ca.SX.sym("K", k, k)  # the driver's dense K: only the structural entries are read
-    sub = ca.project(Kd, pattern)
+    sub = ca.SX.sym("K", pattern)  # K's nonzeros, as ag_jac writes them
     c = ca.SX.sym("c")
     A_s0, A_ss, B_s = sub[st, :m], sub[st, st], sub[st, jt]
     C_0, C_s, E = sub[jt, :m], sub[jt, st], sub[jt, jt]
@@ -130,16 +130,16 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
     cols = [lu.solve(LUs, ca.densify(B_s[:, q])) for q in range(n3)]
     G = ca.densify(E - c * C_s @ ca.horzcat(*cols))
     return [
-        ca.Function(NFAC_NAME, [c, Kd], [LU, pivots], ["c", "K"], ["LU", "pivots"], opts),
+        ca.Function(NFAC_NAME, [c, sub], [LU, pivots], ["c", "K"], ["LU", "pivots"], opts),
         ca.Function(
             NSOL_NAME,
-            [c, Kd, LUs, x0, s, b],
+            [c, sub, LUs, x0, s, b],
             [x, dj],
             ["c", "K", "LU", "x0", "s", "b"],
             ["x", "dj"],
             opts,
         ),
-        ca.Function(GMAT_NAME, [c, Kd, LUs], [G], ["c", "K", "LU"], ["G"], opts),
+        ca.Function(GMAT_NAME, [c, sub, LUs], [G], ["c", "K", "LU"], ["G"], opts),
     ]
 
 

@@ -201,6 +201,8 @@ class Problem(ctypes.Structure):
         ("krylov", ctypes.c_int),
         ("ls_tol", ctypes.c_double),
         ("max_iter", ctypes.c_int),
+        ("koff", _IP),
+        ("lead_nz", _IP),
     ]
 
 
@@ -251,6 +253,49 @@ def _kernels(lib: ctypes.CDLL) -> Kernels:
     k.nsol, k.nsol_work = _fn(lib, NSOL_NAME), _fn(lib, NSOL_NAME + "_work")
     k.gmat, k.gmat_work = _fn(lib, GMAT_NAME), _fn(lib, GMAT_NAME + "_work")
     return k
+
+
+def k_pattern(lib: ctypes.CDLL) -> tuple[int, np.ndarray, np.ndarray]:
+    """K's structural pattern as the library's ``ag_jac`` writes it (column-compressed).
+
+    Parameters
+    ----------
+    lib : ctypes.CDLL
+        A kernel library (:func:`load`).
+
+    Returns
+    -------
+    (int, ndarray, ndarray)
+        k (K is k × k), the column pointers (k + 1) and the row of every nonzero.
+    """
+    f = getattr(lib, JAC_NAME + "_sparsity_out")
+    f.restype = ctypes.POINTER(ctypes.c_longlong)
+    f.argtypes = [ctypes.c_longlong]
+    sp = f(1)
+    nrow, ncol = int(sp[0]), int(sp[1])
+    if sp[2] == 1 and nrow * ncol != 1:  # CasADi's shorthand for a dense pattern
+        colind = np.arange(ncol + 1) * nrow
+        rows = np.tile(np.arange(nrow), ncol)
+    else:
+        colind = np.array([sp[2 + q] for q in range(ncol + 1)])
+        rows = np.array([sp[3 + ncol + q] for q in range(colind[-1])])
+    return nrow, colind, rows
+
+
+def _k_layout(libs: list[ctypes.CDLL], model: np.ndarray, m: int) -> dict[str, np.ndarray]:
+    """Each agent's offset into the stored K nonzeros, and the leader block's nonzeros."""
+    pats = [k_pattern(lib) for lib in libs]
+    nnz = np.array([int(pats[j][1][-1]) for j in model])
+    _, colind, rows = pats[model[0]]
+    lead = -np.ones((m, m), np.int32)  # column-major, as the driver reads it
+    for col in range(m):
+        for q in range(colind[col], colind[col + 1]):
+            if rows[q] < m:
+                lead[col, rows[q]] = q
+    return {
+        "koff": np.concatenate([[0], np.cumsum(nnz)]).astype(np.int32),
+        "lead_nz": np.ascontiguousarray(lead.ravel()),
+    }
 
 
 def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
@@ -309,6 +354,7 @@ def _c_problem(
         "wave_ptr": np.concatenate(
             [np.pad(t.waves, (0, N + 1 - len(t.waves))) for t in tops]
         ).astype(np.int32),
+        **_k_layout(libs, np.asarray(prob.model), prob.m),
     }
     kern = (Kernels * len(libs))(*[_kernels(lib) for lib in libs])
     c = Problem(

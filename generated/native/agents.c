@@ -6,7 +6,8 @@
  * Appended (after common.c) to the C that CasADi generates for ONE follower model:
  *   ag_jet0, ag_jet1, ag_jet2 (t, xb, nb, cpl, prm, gf) -> C0 eta_i, C0 eta_i', C0 eta_i''
  *   ag_rhs (t, xb, nb, cpl, prm, gf) -> (xbdot, jets)
- *   ag_jac (t, xb, nb, cpl, prm, gf) -> (jets, K),  K = d(xbdot, jets)/d(xb, nb) dense
+ *   ag_jac (t, xb, nb, cpl, prm, gf) -> (jets, K),  K = d(xbdot, jets)/d(xb, nb): its
+ *                                         structural nonzeros (column-compressed)
  *   ag_faults (t) -> values
  *   ag_nfac (c, K) -> (LU, pivots)       D = I + c A_ss factorised without pivoting
  *   ag_nsol (c, K, LU, x0, s, b) -> (x, dj)  x = D^{-1} (b - c (A_s0 x0 + B_s s)),
@@ -90,10 +91,13 @@ typedef struct {
   int krylov;           /* GMRES restart length */
   double ls_tol;        /* GMRES: relative residual reached */
   int max_iter;         /* GMRES: iterations per solve before the setup fails */
+  const int *koff;      /* N + 1: agent i's nonzeros of K at koff[i] .. koff[i+1] */
+  const int *lead_nz;   /* m x m (column-major): the leader block's nonzero in agent 0's
+                           K, or -1 where it is structurally zero */
 } hitl_agents_problem;
 
-/* The Jacobian: N blocks K_i (k x k, column-major) of the topology it was evaluated on,
-   representing c J (+ I once shifted) */
+/* The Jacobian: N blocks K_i (each its model's structural nonzeros, at p->koff[i]) of
+   the topology it was evaluated on, representing c J (+ I once shifted) */
 typedef struct {
   double *K;
   int refs;
@@ -293,7 +297,7 @@ static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int top, int i, const do
 }
 
 /* The passes at (t, y): jets and neighbour sums of every level, then ydot (if not NULL)
-   and/or the Jacobian blocks K (if not NULL, N x k x k). Returns 0 or -1. */
+   and/or the Jacobian blocks K (if not NULL, at p->koff). Returns 0 or -1. */
 /* On an acyclic topology: one pass along the waves (depth levels) of its order, each
    agent's neighbour sums complete from the waves before it (the jets come out of the
    rate and Jacobian kernels themselves). */
@@ -325,7 +329,7 @@ static int hitl_ag_wave_pass(hitl_ag *d, int top, double t, const double *y, dou
                sizeof(double) * (size_t)d->na);
       } else {
         wk->res[0] = d->jets + (size_t)n3 * i;
-        wk->res[1] = K + (size_t)d->k * d->k * i;
+        wk->res[1] = K + p->koff[i];
         if (kn->jac(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
       }
     }
@@ -386,7 +390,7 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
     }
     if (K) {
       wk->res[0] = wk->jscr;
-      wk->res[1] = K + (size_t)d->k * d->k * i;
+      wk->res[1] = K + p->koff[i];
       if (kn->jac(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
     }
   }
@@ -461,7 +465,6 @@ static void hitl_lu_solve(const double *a, int n, const int *piv, double *b) {
 
 /* ---------------------------------------------------------------- linear solver */
 /* K_i's entry (row, col) */
-#define KAT(K, k, row, col) ((K)[(size_t)(col) * (k) + (row)])
 
 static int hitl_ag_mode(const hitl_ag *d, int top) {
   int s = d->p->solver;
@@ -592,7 +595,7 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
    E dnb_i (x holds b on entry, the leader solved) */
 static int hitl_ag_forward_x(hitl_ag *d, const hitl_agmat *M, double *x) {
   const hitl_agents_problem *p = d->p;
-  int m = d->m, na = d->na, k = d->k, n3 = d->n3, top = d->ls_top, fail = 0;
+  int m = d->m, na = d->na, n3 = d->n3, top = d->ls_top, fail = 0;
   const int *ord = p->order + (size_t)top * d->N;
   const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
   for (int wv = 0; wv < p->nwaves[top]; ++wv) {
@@ -602,7 +605,7 @@ static int hitl_ag_forward_x(hitl_ag *d, const hitl_agmat *M, double *x) {
       double s[64];
       double *xi = x + m + (size_t)na * i;
       hitl_ag_gather(d, top, i, d->dj, s, 0, 3);
-      if (hitl_ag_nsol(d, hitl_ag_wk(d), i, M->K + (size_t)k * k * i, M->c, x, s, xi, xi,
+      if (hitl_ag_nsol(d, hitl_ag_wk(d), i, M->K + d->p->koff[i], M->c, x, s, xi, xi,
                        d->dj + (size_t)n3 * i))
         fail |= 1;
     }
@@ -617,7 +620,7 @@ static int hitl_ag_forward_x(hitl_ag *d, const hitl_agmat *M, double *x) {
 static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
   hitl_ag *d = (hitl_ag *)S->content;
   hitl_agmat *M = HITL_AGMAT(A);
-  int m = d->m, na = d->na, k = d->k, n3 = d->n3, N = d->N, fail = 0;
+  int m = d->m, na = d->na, n3 = d->n3, N = d->N, fail = 0;
   double c = M->c;
   if (!M->shifted) return -1; /* CVODE always hands over I - gamma J */
   d->base.n_fac++;
@@ -626,15 +629,17 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
   { /* the leader: rows and columns 0..m-1 of agent 0's block */
     double *L = d->lu + (size_t)na * na * N;
     for (int col = 0; col < m; ++col)
-      for (int row = 0; row < m; ++row)
-        L[(size_t)col * m + row] = c * KAT(M->K, k, row, col) + (row == col ? 1.0 : 0.0);
+      for (int row = 0; row < m; ++row) {
+        int nz = d->p->lead_nz[(size_t)col * m + row];
+        L[(size_t)col * m + row] = (nz >= 0 ? c * M->K[nz] : 0.0) + (row == col ? 1.0 : 0.0);
+      }
     if (hitl_lu(L, m, d->piv)) fail = 1;
   }
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
   for (int i = 0; i < N; ++i) {
     hitl_agwork *wk = hitl_ag_wk(d);
     const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
-    const double *K = M->K + (size_t)k * k * i;
+    const double *K = M->K + d->p->koff[i];
     double *LU = d->lu + (size_t)na * na * i;
     wk->arg[0] = &c;
     wk->arg[1] = K;
@@ -689,7 +694,7 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
                             sunrealtype tol) {
   hitl_ag *d = (hitl_ag *)S->content;
   hitl_agmat *M = HITL_AGMAT(A);
-  int m = d->m, na = d->na, k = d->k, n3 = d->n3, N = d->N, top = d->ls_top;
+  int m = d->m, na = d->na, n3 = d->n3, N = d->N, top = d->ls_top;
   double c = M->c, *x = N_VGetArrayPointer(xv);
   const double *b = N_VGetArrayPointer(bv);
   (void)tol;
@@ -700,7 +705,7 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
   int fail = 0;
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
   for (int i = 0; i < N; ++i)
-    if (hitl_ag_nsol(d, hitl_ag_wk(d), i, M->K + (size_t)k * k * i, c, x, d->zero,
+    if (hitl_ag_nsol(d, hitl_ag_wk(d), i, M->K + d->p->koff[i], c, x, d->zero,
                      x + m + (size_t)na * i, d->y + (size_t)na * i, d->rj + (size_t)n3 * i))
       fail |= 1;
   if (fail) return -1;
@@ -719,7 +724,7 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
     hitl_agwork *wk = hitl_ag_wk(d);
     double *xi = x + m + (size_t)na * i;
     hitl_ag_gather(d, top, i, d->dj, s, 0, 3);
-    if (hitl_ag_nsol(d, wk, i, M->K + (size_t)k * k * i, c, x, s, xi, xi, wk->jscr)) fail |= 1;
+    if (hitl_ag_nsol(d, wk, i, M->K + d->p->koff[i], c, x, s, xi, xi, wk->jscr)) fail |= 1;
   }
   return fail ? -1 : 0;
 }
@@ -818,7 +823,7 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
     return -1;
   }
   if (hitl_sundials_create(c, s, nx, log_path)) return -1;
-  s->A = hitl_agmat_new((long)N * d->k * d->k, s->ctx);
+  s->A = hitl_agmat_new((long)p->koff[N], s->ctx);
   if (!s->A) {
     hitl_msg(c, "out of memory");
     return -1;
