@@ -32,7 +32,7 @@ endif
 endif
 endif
 
-.PHONY: all demo synth sim sweep search console chromium verify report check test lint bench clean clean-cache distclean
+.PHONY: all demo synth sim sweep topologies search console chromium verify report check test lint bench clean clean-cache distclean
 
 all: demo
 
@@ -56,6 +56,10 @@ sim: $(STAMP)
 
 sweep: $(STAMP)
 	$(PY) -m sweep run $(SWEEP)
+
+# the topology study on one library per follower model (docs/performance.md, "The graph as data")
+topologies: $(STAMP)
+	$(PY) -m sweep.topologies
 
 # worst-case search of a search file's requirements over its study space (docs/search.md)
 search: $(STAMP)
@@ -99,6 +103,7 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.study
 	$(PY) -m benchmarks.remedies
 	$(PY) -m benchmarks.agents
+	$(PY) -m sweep.topologies
 	$(PY) -m benchmarks.search
 
 clean:

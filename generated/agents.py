@@ -271,14 +271,28 @@ def k_pattern(lib: ctypes.CDLL) -> tuple[int, np.ndarray, np.ndarray]:
     f = getattr(lib, JAC_NAME + "_sparsity_out")
     f.restype = ctypes.POINTER(ctypes.c_longlong)
     f.argtypes = [ctypes.c_longlong]
-    sp = f(1)
+    return parse_sparsity(f(1))
+
+
+def parse_sparsity(sp: Sequence[int]) -> tuple[int, np.ndarray, np.ndarray]:
+    """A pattern in CasADi's generated-code format: (nrow, ncol, colind..., row...).
+
+    Parameters
+    ----------
+    sp : indexable of int
+        ``nrow, ncol`` then the ncol + 1 column pointers and the rows of the nonzeros,
+        or ``nrow, ncol, 1`` for a dense pattern (CasADi's shorthand).
+
+    Returns
+    -------
+    (int, ndarray, ndarray)
+        nrow, the column pointers and the rows.
+    """
     nrow, ncol = int(sp[0]), int(sp[1])
-    if sp[2] == 1 and nrow * ncol != 1:  # CasADi's shorthand for a dense pattern
-        colind = np.arange(ncol + 1) * nrow
-        rows = np.tile(np.arange(nrow), ncol)
-    else:
-        colind = np.array([sp[2 + q] for q in range(ncol + 1)])
-        rows = np.array([sp[3 + ncol + q] for q in range(colind[-1])])
+    if sp[2] == 1:  # a general pattern's first column pointer is 0
+        return nrow, np.arange(ncol + 1) * nrow, np.tile(np.arange(nrow), ncol)
+    colind = np.array([int(sp[2 + q]) for q in range(ncol + 1)])
+    rows = np.array([int(sp[3 + ncol + q]) for q in range(colind[-1])])
     return nrow, colind, rows
 
 
