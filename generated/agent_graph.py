@@ -4,7 +4,8 @@ One :class:`Topology` per graph of a scenario (the base graph, then one per swit
 time) is runtime data of :mod:`generated.agents`, never compiled in: follower i hears
 ``idx[ptr[i]:ptr[i+1]]`` with the weights (L + B)_ij, and a topological order grouped
 into waves of equal depth lets the driver solve an acyclic graph's Newton systems by
-forward substitution; on a cycle each follower is a wave of its own.
+forward substitution; on a cycle the waves are those of the edges from earlier
+followers, which the GMRES preconditioner keeps.
 """
 
 from __future__ import annotations
@@ -75,11 +76,15 @@ class Topology:
     cpl : ndarray
         N × 2: (l̄_ii, a_i0 h_i).
     order : ndarray
-        Sorted by depth on an acyclic topology (each follower after all it hears).
+        Sorted by depth (:func:`depth_waves`): on an acyclic topology each follower
+        comes after all it hears.
     acyclic : bool
     waves : ndarray
         Pointers into ``order``: wave w (followers of depth w) is
-        ``order[waves[w]:waves[w+1]]``; one wave per follower on a cycle.
+        ``order[waves[w]:waves[w+1]]``; on a cycle, the waves of the edges kept by
+        the forward-substitution preconditioner.
+    depth : ndarray
+        N: each follower's wave.
     """
 
     t_start: float
@@ -90,34 +95,42 @@ class Topology:
     order: np.ndarray
     acyclic: bool
     waves: np.ndarray
+    depth: np.ndarray
 
 
 def depth_waves(
     ptr: np.ndarray, idx: np.ndarray, order: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """``order`` regrouped by depth (1 + the largest depth of the followers heard).
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``order`` regrouped by depth over the edges it keeps (from earlier followers).
+
+    A follower's depth is 1 + the largest depth of the followers it hears that come
+    before it in ``order`` (0 if none): on an acyclic topology with a topological order
+    every edge counts; on a cycle the edges from later followers (the back edges) are
+    dropped, which is the forward-substitution preconditioner's graph.
 
     Parameters
     ----------
     ptr, idx : ndarray
-        CSR of an acyclic topology.
+        CSR: follower i hears ``idx[ptr[i]:ptr[i+1]]``.
     order : ndarray
-        A topological order of it.
+        An order of the followers (:func:`topological_order`).
 
     Returns
     -------
-    (order, waves) : (ndarray, ndarray)
-        The followers sorted by (depth, position in ``order``) and the wave pointers.
+    (order, waves, depth) : (ndarray, ndarray, ndarray)
+        The followers sorted by (depth, position in ``order``), the wave pointers
+        (wave w is ``order[waves[w]:waves[w+1]]``) and each follower's depth.
     """
-    depth = np.zeros(len(order), dtype=int)
-    for i in order:
-        js = idx[ptr[i] : ptr[i + 1]]
-        depth[i] = 1 + depth[js].max() if len(js) else 0
     pos = np.empty(len(order), dtype=int)
     pos[order] = np.arange(len(order))
+    depth = np.zeros(len(order), dtype=int)
+    for i in order:
+        js = [j for j in idx[ptr[i] : ptr[i + 1]] if pos[j] < pos[i]]
+        depth[i] = 1 + depth[js].max() if js else 0
     new = np.asarray(sorted(order, key=lambda i: (depth[i], pos[i])), dtype=np.int32)
     counts = np.bincount(depth, minlength=depth.max() + 1)
-    return new, np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+    waves = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
+    return new, waves, depth.astype(np.int32)
 
 
 def topology(t_start: float, adjacency: np.ndarray, pinning: np.ndarray, h: np.ndarray) -> Topology:
@@ -143,9 +156,6 @@ def topology(t_start: float, adjacency: np.ndarray, pinning: np.ndarray, h: np.n
         ptr.append(len(idx))
     p, q = np.asarray(ptr, np.int32), np.asarray(idx, np.int32)
     order, acyclic = topological_order(p, q)
-    if acyclic:
-        order, waves = depth_waves(p, q, order)
-    else:
-        waves = np.arange(N + 1, dtype=np.int32)
+    order, waves, depth = depth_waves(p, q, order)
     cpl = np.column_stack([np.diag(L_B), np.asarray(pinning, float) * h]).astype(float)
-    return Topology(float(t_start), p, q, np.asarray(w, float), cpl, order, acyclic, waves)
+    return Topology(float(t_start), p, q, np.asarray(w, float), cpl, order, acyclic, waves, depth)

@@ -203,6 +203,8 @@ class Problem(ctypes.Structure):
         ("max_iter", ctypes.c_int),
         ("koff", _IP),
         ("lead_nz", _IP),
+        ("pnwaves", _IP),
+        ("depth", _IP),
     ]
 
 
@@ -368,6 +370,8 @@ def _c_problem(
         "wave_ptr": np.concatenate(
             [np.pad(t.waves, (0, N + 1 - len(t.waves))) for t in tops]
         ).astype(np.int32),
+        "pnwaves": np.asarray([len(t.waves) - 1 for t in tops], np.int32),
+        "depth": np.ascontiguousarray(np.concatenate([t.depth for t in tops]), np.int32),
         **_k_layout(libs, np.asarray(prob.model), prob.m),
     }
     kern = (Kernels * len(libs))(*[_kernels(lib) for lib in libs])

@@ -38,15 +38,17 @@
  *                    agents it hears, then dj_i; only the D_i are factorised),
  *   HITL_AG_DENSE    a dense LU with partial pivoting of the whole jets system (exact on
  *                    any graph; (3nN)^2 memory, for small N),
- *   HITL_AG_GMRES    restarted GMRES on the jets system, right-preconditioned by the
- *                    forward substitution along the order with the back edges dropped
- *                    (exact, one iteration, on an acyclic topology),
+ *   HITL_AG_GMRES    restarted GMRES on the jets system, right-preconditioned by a
+ *                    forward substitution over the depth waves of the edges from earlier
+ *                    agents of the order (back edges dropped; exact, one iteration, on an
+ *                    acyclic topology),
  * then x_i = D_i^{-1} (b_i - c A_s0 x_0) - c D_i^{-1} B_s dnb_i.
  * HITL_AG_AUTO takes FORWARD on an acyclic topology and GMRES otherwise.
  *
  * Threads (OpenMP, when compiled with -fopenmp; a serial build has no OpenMP region at
  * all, whose entry costs more than a pass at small N): the passes, the Jacobian blocks,
- * the block factorisations and the GMRES products are split over the agents.
+ * the block factorisations, the GMRES products and the preconditioner's waves are split
+ * over the agents.
  */
 #ifdef _OPENMP
 #include <omp.h>
@@ -82,10 +84,11 @@ typedef struct {
   const int *idx;       /* followers each one hears */
   const double *w;      /* weights (L + B)_ij */
   const double *cpl;    /* ntop x N x 2: (l_ii, a_i0 h_i) */
-  const int *order;     /* ntop x N: topological order (cycles broken) */
+  const int *order;     /* ntop x N: topological order (cycles broken), grouped by depth */
   const int *acyclic;   /* ntop flags */
   const int *nwaves;    /* ntop: depth levels of an acyclic topology (0 on a cycle) */
-  const int *wave_ptr;  /* ntop x (N + 1): wave w is order[wave_ptr[w] .. wave_ptr[w+1]) */
+  const int *wave_ptr;  /* ntop x (N + 1): wave w is order[wave_ptr[w] .. wave_ptr[w+1]);
+                           on a cycle, the preconditioner's waves (pnwaves) */
   int solver;           /* HITL_AG_* */
   int nthreads;         /* <= 0: OpenMP's default */
   int krylov;           /* GMRES restart length */
@@ -94,6 +97,9 @@ typedef struct {
   const int *koff;      /* N + 1: agent i's nonzeros of K at koff[i] .. koff[i+1] */
   const int *lead_nz;   /* m x m (column-major): the leader block's nonzero in agent 0's
                            K, or -1 where it is structurally zero */
+  const int *pnwaves;   /* ntop: waves of the edges the GMRES preconditioner keeps (all
+                           of an acyclic topology's) */
+  const int *depth;     /* ntop x N: each follower's wave */
 } hitl_agents_problem;
 
 /* The Jacobian: N blocks K_i (each its model's structural nonzeros, at p->koff[i]) of
@@ -488,27 +494,33 @@ static void hitl_ag_apply(hitl_ag *d, int top, const double *v, double *out) {
   }
 }
 
-/* z = P^{-1} u: forward substitution along the order, edges from later agents dropped */
-static void hitl_ag_forward(hitl_ag *d, int top, const double *u, double *z, int *pos) {
+/* z = P^{-1} u: forward substitution along the waves, keeping the edges from lower waves
+   (on a cycle the back edges of the order are dropped; agents of one wave are
+   independent, so a wave runs in parallel) */
+static void hitl_ag_forward(hitl_ag *d, int top, const double *u, double *z) {
   const hitl_agents_problem *p = d->p;
   const int *ord = p->order + (size_t)top * d->N;
   const int *ptr = p->ptr + (size_t)top * (d->N + 1);
-  int n3 = d->n3, N = d->N;
-  for (int oi = 0; oi < N; ++oi) pos[ord[oi]] = oi;
-  for (int oi = 0; oi < N; ++oi) {
-    int i = ord[oi];
-    double s[64];
-    const double *G = d->G + (size_t)n3 * n3 * i;
-    for (int r = 0; r < n3; ++r) s[r] = 0.0;
-    for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
-      int j = p->idx[q];
-      if (pos[j] >= oi) continue;
-      for (int r = 0; r < n3; ++r) s[r] += p->w[q] * z[(size_t)n3 * j + r];
-    }
-    for (int r = 0; r < n3; ++r) {
-      double acc = u[(size_t)n3 * i + r];
-      for (int q = 0; q < n3; ++q) acc += G[(size_t)q * n3 + r] * s[q];
-      z[(size_t)n3 * i + r] = acc;
+  const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
+  const int *dep = p->depth + (size_t)top * d->N;
+  int n3 = d->n3;
+  for (int wv = 0; wv < p->pnwaves[top]; ++wv) {
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8)
+    for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
+      int i = ord[oi];
+      double s[64];
+      const double *G = d->G + (size_t)n3 * n3 * i;
+      for (int r = 0; r < n3; ++r) s[r] = 0.0;
+      for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
+        int j = p->idx[q];
+        if (dep[j] >= wv) continue;
+        for (int r = 0; r < n3; ++r) s[r] += p->w[q] * z[(size_t)n3 * j + r];
+      }
+      for (int r = 0; r < n3; ++r) {
+        double acc = u[(size_t)n3 * i + r];
+        for (int q = 0; q < n3; ++q) acc += G[(size_t)q * n3 + r] * s[q];
+        z[(size_t)n3 * i + r] = acc;
+      }
     }
   }
 }
@@ -527,7 +539,6 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
   int kr = p->krylov, it = 0;
   double beta0 = sqrt(hitl_dot(rhs, rhs, n)), tol = p->ls_tol * beta0;
   double *V = d->V, *H = d->H, *z = d->z;
-  int *pos = (int *)(d->z + n);
   memset(x, 0, sizeof(double) * (size_t)n);
   if (beta0 == 0.0) return 0;
   double *r = d->rj; /* residual */
@@ -541,7 +552,7 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
     int j = 0;
     for (; j < kr && it < p->max_iter; ++j, ++it) {
       double *vj = V + (size_t)n * j, *w = V + (size_t)n * (j + 1);
-      hitl_ag_forward(d, top, vj, z, pos);
+      hitl_ag_forward(d, top, vj, z);
       hitl_ag_apply(d, top, z, w);
       for (int q = 0; q <= j; ++q) { /* modified Gram-Schmidt */
         double h = hitl_dot(w, V + (size_t)n * q, n);
@@ -581,7 +592,7 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
     memset(r, 0, sizeof(double) * (size_t)n);
     for (int q = 0; q < j; ++q)
       for (long e = 0; e < n; ++e) r[e] += d->g[q] * V[(size_t)n * q + e];
-    hitl_ag_forward(d, top, r, z, pos);
+    hitl_ag_forward(d, top, r, z);
     for (long e = 0; e < n; ++e) x[e] += z[e];
     /* true residual */
     hitl_ag_apply(d, top, x, r);
@@ -802,8 +813,7 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
   d->dj = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->dnb = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->rj = (double *)calloc((size_t)nj + 1, sizeof(double));
-  /* z: nj doubles, then N ints (positions in the order) */
-  d->z = (double *)calloc((size_t)nj + (size_t)N + 1, sizeof(double));
+  d->z = (double *)calloc((size_t)nj + 1, sizeof(double));
   if (p->solver == HITL_AG_DENSE) {
     d->S = (double *)calloc((size_t)nj * nj + 1, sizeof(double));
     d->Spiv = (int *)calloc((size_t)nj + 1, sizeof(int));
