@@ -203,7 +203,6 @@ class Problem(ctypes.Structure):
         ("max_iter", ctypes.c_int),
         ("koff", _IP),
         ("lead_nz", _IP),
-        ("pnwaves", _IP),
         ("depth", _IP),
     ]
 
@@ -366,11 +365,10 @@ def _c_problem(
         "cpl": np.ascontiguousarray(np.concatenate([t.cpl.ravel() for t in tops]), float),
         "order": np.ascontiguousarray(np.concatenate([t.order for t in tops]), np.int32),
         "acyclic": np.asarray([int(t.acyclic) for t in tops], np.int32),
-        "nwaves": np.asarray([len(t.waves) - 1 if t.acyclic else 0 for t in tops], np.int32),
+        "nwaves": np.asarray([len(t.waves) - 1 for t in tops], np.int32),
         "wave_ptr": np.concatenate(
             [np.pad(t.waves, (0, N + 1 - len(t.waves))) for t in tops]
         ).astype(np.int32),
-        "pnwaves": np.asarray([len(t.waves) - 1 for t in tops], np.int32),
         "depth": np.ascontiguousarray(np.concatenate([t.depth for t in tops]), np.int32),
         **_k_layout(libs, np.asarray(prob.model), prob.m),
     }

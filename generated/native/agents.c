@@ -86,9 +86,9 @@ typedef struct {
   const double *cpl;    /* ntop x N x 2: (l_ii, a_i0 h_i) */
   const int *order;     /* ntop x N: topological order (cycles broken), grouped by depth */
   const int *acyclic;   /* ntop flags */
-  const int *nwaves;    /* ntop: depth levels of an acyclic topology (0 on a cycle) */
-  const int *wave_ptr;  /* ntop x (N + 1): wave w is order[wave_ptr[w] .. wave_ptr[w+1]);
-                           on a cycle, the preconditioner's waves (pnwaves) */
+  const int *nwaves;    /* ntop: depth levels (on a cycle, of the edges the GMRES
+                           preconditioner keeps: all of an acyclic topology's) */
+  const int *wave_ptr;  /* ntop x (N + 1): wave w is order[wave_ptr[w] .. wave_ptr[w+1]) */
   int solver;           /* HITL_AG_* */
   int nthreads;         /* <= 0: OpenMP's default */
   int krylov;           /* GMRES restart length */
@@ -97,8 +97,6 @@ typedef struct {
   const int *koff;      /* N + 1: agent i's nonzeros of K at koff[i] .. koff[i+1] */
   const int *lead_nz;   /* m x m (column-major): the leader block's nonzero in agent 0's
                            K, or -1 where it is structurally zero */
-  const int *pnwaves;   /* ntop: waves of the edges the GMRES preconditioner keeps (all
-                           of an acyclic topology's) */
   const int *depth;     /* ntop x N: each follower's wave */
 } hitl_agents_problem;
 
@@ -355,7 +353,7 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
   c->arg[0] = &tt;
   c->res[0] = d->fvals;
   if (p->faults(c->arg, c->res, c->iw, c->w, 0)) return -1;
-  if (p->nwaves[top] > 0 && (ydot == NULL || K == NULL))
+  if (p->acyclic[top] && (ydot == NULL || K == NULL))
     return hitl_ag_wave_pass(d, top, t, y, ydot, K);
   memset(d->nb, 0, sizeof(double) * (size_t)N * n3);
   for (int lev = 0; lev < 3; ++lev) {
@@ -504,7 +502,7 @@ static void hitl_ag_forward(hitl_ag *d, int top, const double *u, double *z) {
   const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
   const int *dep = p->depth + (size_t)top * d->N;
   int n3 = d->n3;
-  for (int wv = 0; wv < p->pnwaves[top]; ++wv) {
+  for (int wv = 0; wv < p->nwaves[top]; ++wv) {
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8)
     for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
       int i = ord[oi];
