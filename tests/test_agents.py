@@ -217,6 +217,51 @@ def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, na
     assert all(d < 4 * o for d, o in zip(diffs, own, strict=True)), (diffs, own)
 
 
+#: (start, length) of a window past the start-up; link losses: after both switches
+SETTLED = {
+    "paper": (3.0, 0.5),
+    "acyclic": (0.5, 0.1),
+    "cyclic": (0.5, 0.1),
+    "cyclic-mixed": (0.5, 0.1),
+    "link-losses": (0.5, 0.1),
+}
+
+
+@pytest.mark.parametrize("name", list(SETTLED))
+def test_trajectory_equals_the_whole_loop_native_one_past_the_start_up(cases, build_root, name):
+    """At rtol 1e-12, from the whole loop's state past the start-up, the two codes agree
+    to a relative 1e-9 at every output time.
+
+    Past the start-up's boundary layer (and clear of kicks: switches, fault onsets) the
+    loop no longer amplifies rounding to the integrator's error level, so a fixed
+    threshold applies. The start state is the reference's (from x(0) at rtol 1e-8: any
+    state serves, both codes start from it); on the link-loss graph the window runs on
+    the third topology (one link restored, another lost). The threshold has teeth: the
+    kernels' parameters off by a relative 1e-9 break it.
+    """
+    sc, gains, cl, libs, prob = cases[name]
+    cg = CodegenSettings(optimization="-O0", build_root=build_root)
+    built = api.build(sc, gains, "native", cg, closed_loop=cl)
+    t0, width = SETTLED[name]
+    s = IntegratorSettings(method="native", rtol=1e-12, atol=1e-14, max_steps=2_000_000)
+    bps = sc.breakpoints()
+    coarse = IntegratorSettings(method="native", rtol=1e-8, atol=1e-10, max_steps=200_000)
+    pre = api.integrate_built(built, cl.x0, np.array([0.0, t0]), coarse, [b for b in bps if b < t0])
+    assert pre.complete and not [b for b in bps if t0 <= b < t0 + width]
+    t_out = np.linspace(t0, t0 + width, 31)
+    tr = agents.run([lib.path for lib in libs], prob, pre.x[-1], t_out, s)
+    ref = api.integrate_built(built, pre.x[-1], t_out, s)
+    assert tr.complete and ref.complete
+
+    def rel(a):
+        return (np.abs(a.x - ref.x) / np.maximum(1.0, np.abs(ref.x))).max()
+
+    assert rel(tr) < 1e-9, (name, rel(tr))
+    if name == "cyclic":
+        off = dataclasses.replace(prob, params=prob.params * (1 + 1e-9))
+        assert rel(agents.run([lib.path for lib in libs], off, pre.x[-1], t_out, s)) > 1e-9
+
+
 def test_initial_state_is_the_closed_loops(cases):
     for name in ("paper", "cyclic-mixed", "link-losses"):
         sc, _, cl, _, _ = cases[name]
