@@ -102,7 +102,8 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
     * ``ag_nfac(c, K) -> (LU, pivots)``;
     * ``ag_nsol(c, K, LU, x0, s, b) -> (x, dj)``: x = D⁻¹ (b − c (A_s0 x0 + B_s s)),
       dj = C_0 x0 + C_s x + E s;
-    * ``ag_gmat(c, K, LU) -> G``: G = E − c C_s D⁻¹ B_s (dense n3 × n3).
+    * ``ag_gmat(c, K, LU) -> (G, H)``: G = E − c C_s D⁻¹ B_s (dense n3 × n3) and
+      H = −c D⁻¹ B_s (dense na × n3), so that x = D⁻¹ (b − c A_s0 x0) + H s.
 
     Parameters
     ----------
@@ -129,6 +130,7 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
     dj = C_0 @ x0 + C_s @ x + E @ s
     cols = [lu.solve(LUs, ca.densify(B_s[:, q])) for q in range(n3)]
     G = ca.densify(E - c * C_s @ ca.horzcat(*cols))
+    H = ca.densify(-c * ca.horzcat(*cols))  # x = D⁻¹ (b − c A_s0 x0) + H s
     return [
         ca.Function(NFAC_NAME, [c, sub], [LU, pivots], ["c", "K"], ["LU", "pivots"], opts),
         ca.Function(
@@ -139,7 +141,7 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
             ["x", "dj"],
             opts,
         ),
-        ca.Function(GMAT_NAME, [c, sub, LUs], [G], ["c", "K", "LU"], ["G"], opts),
+        ca.Function(GMAT_NAME, [c, sub, LUs], [G, H], ["c", "K", "LU"], ["G", "H"], opts),
     ]
 
 

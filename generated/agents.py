@@ -221,7 +221,8 @@ class LinearSettings:
     krylov : int
         GMRES restart length.
     tol : float
-        GMRES: relative residual of the jets system reached at every solve.
+        GMRES: relative residual of the jets system reached at every solve (a restart
+        that no longer halves it is accepted below a relative 1e-10: rounding).
     max_iter : int
         GMRES iterations per solve before the solve fails (CVODE then retries).
     """
@@ -229,7 +230,7 @@ class LinearSettings:
     solver: str = "auto"
     threads: int = 1
     krylov: int = 30
-    tol: float = 1e-12
+    tol: float = 1e-14
     max_iter: int = 300
 
     def __post_init__(self) -> None:

@@ -328,8 +328,13 @@ def test_newton_kernels_against_numpy(cases, gamma):
     np.testing.assert_allclose(x, x_ref, rtol=1e-10, atol=1e-12 * np.abs(x_ref).max())
     dj_ref = C_0 @ x0 + C_s @ x_ref + E @ s
     np.testing.assert_allclose(dj, dj_ref, rtol=1e-10, atol=1e-10 * np.abs(dj_ref).max())
-    G_ref = E - c * C_s @ np.linalg.solve(D, B_s)
-    np.testing.assert_allclose(np.array(gmat(c, K, LU)), G_ref, rtol=1e-10, atol=1e-12)
+    G, H = (np.array(v) for v in gmat(c, K, LU))
+    np.testing.assert_allclose(G, E - c * C_s @ np.linalg.solve(D, B_s), rtol=1e-10, atol=1e-12)
+    H_ref = -c * np.linalg.solve(D, B_s)
+    np.testing.assert_allclose(H, H_ref, rtol=1e-10, atol=1e-12 * np.abs(H_ref).max())
+    # the driver's back-substitution x = D⁻¹ (b − c A_s0 x0) + H s equals ag_nsol's x
+    y = np.array(nsol(c, K, LU, x0, np.zeros(n3), b)[0]).ravel()
+    np.testing.assert_allclose(y + H @ s, x_ref, rtol=1e-10, atol=1e-12 * np.abs(x_ref).max())
 
 
 def test_an_operator_press_and_release_on_the_per_agent_driver(build_root):

@@ -12,7 +12,7 @@
  *   ag_nfac (c, K) -> (LU, pivots)       D = I + c A_ss factorised without pivoting
  *   ag_nsol (c, K, LU, x0, s, b) -> (x, dj)  x = D^{-1} (b - c (A_s0 x0 + B_s s)),
  *                                         dj = C_0 x0 + C_s x + E s
- *   ag_gmat (c, K, LU) -> G               G = E - c C_s D^{-1} B_s
+ *   ag_gmat (c, K, LU) -> (G, H)          G = E - c C_s D^{-1} B_s, H = -c D^{-1} B_s
  * with xb = (eta0, s_i), nb = sum_j (L+B)_ij jets_j (3n) and cpl = (l_ii, a_i0 h_i).
  * The driver never calls these by name: it receives one table of function pointers per
  * follower model (hitl_agent_kernels), so followers of different models, each from its
@@ -38,10 +38,11 @@
  *                    agents it hears, then dj_i; only the D_i are factorised),
  *   HITL_AG_DENSE    a dense LU with partial pivoting of the whole jets system (exact on
  *                    any graph; (3nN)^2 memory, for small N),
- *   HITL_AG_GMRES    restarted GMRES on the jets system, right-preconditioned by a
- *                    forward substitution over the depth waves of the edges from earlier
- *                    agents of the order (back edges dropped; exact, one iteration, on an
- *                    acyclic topology),
+ *   HITL_AG_GMRES    restarted GMRES on the jets system, right-preconditioned: on an
+ *                    acyclic topology by the forward substitution over the depth waves
+ *                    (exact, one iteration); on a cycle level by level (hitl_ag_levels:
+ *                    the level-l rows from the complete levels < l, and level l along the
+ *                    waves, back edges dropped),
  * then x_i = D_i^{-1} (b_i - c A_s0 x_0) - c D_i^{-1} B_s dnb_i.
  * HITL_AG_AUTO takes FORWARD on an acyclic topology and GMRES otherwise.
  *
@@ -225,6 +226,8 @@ typedef struct {
   double *lu;    /* (N + 1) x na x na: D_i's sparse LU (ag_nfac; block N: the leader's, dense) */
   int *piv;      /* na: the leader's row swaps */
   double *G;     /* N x n3 x n3 (column-major) */
+  double *Hm;    /* N x na x n3 (column-major): -c D_i^{-1} B_s */
+  double *ps;    /* N x n3: the level-by-level preconditioner's partial neighbour sums */
   double *zero;  /* n3 zeros: the neighbour sums of ag_nsol when only D_i^{-1} is wanted */
   double *y;     /* N x na */
   double *dj, *dnb, *rj; /* N x n3 */
@@ -523,14 +526,64 @@ static void hitl_ag_forward(hitl_ag *d, int top, const double *u, double *z) {
   }
 }
 
+/* z = P^{-1} u level by level (cyclic topologies): P keeps every coupling of a level-l
+   row to the levels < l (E's, whole) and, within level l, the edges from lower waves;
+   it drops only couplings of G_i's -c C_s D_i^{-1} B_s part (to higher levels, and the
+   back edges within a level), which vanish with the step, instead of the back edges'
+   E couplings that the agent-by-agent sweep drops */
+static void hitl_ag_levels(hitl_ag *d, int top, const double *u, double *z) {
+  const hitl_agents_problem *p = d->p;
+  const int *ord = p->order + (size_t)top * d->N;
+  const int *ptr = p->ptr + (size_t)top * (d->N + 1);
+  const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
+  const int *dep = p->depth + (size_t)top * d->N;
+  int n = d->n, n3 = d->n3;
+  for (int l = 0; l < 3; ++l) {
+    int lo = l * n, hi = lo + n;
+    for (int wv = 0; wv < p->nwaves[top]; ++wv) {
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8)
+      for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
+        int i = ord[oi];
+        double *s = d->ps + (size_t)n3 * i; /* levels < l - 1 complete from earlier sweeps */
+        const double *G = d->G + (size_t)n3 * n3 * i;
+        for (int r = lo; r < hi; ++r) s[r] = 0.0;
+        for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
+          int j = p->idx[q];
+          const double *zj = z + (size_t)n3 * j;
+          double wq = p->w[q];
+          if (dep[j] < wv) /* level l from the lower waves */
+            for (int r = lo; r < hi; ++r) s[r] += wq * zj[r];
+          else if (l > 0) /* level l - 1 from the agents sweep l - 1 had not reached */
+            for (int r = lo - n; r < lo; ++r) s[r] += wq * zj[r];
+        }
+        for (int r = lo; r < hi; ++r) {
+          double acc = u[(size_t)n3 * i + r];
+          for (int q = 0; q < hi; ++q) acc += G[(size_t)q * n3 + r] * s[q];
+          z[(size_t)n3 * i + r] = acc;
+        }
+      }
+    }
+  }
+}
+
 static double hitl_dot(const double *a, const double *b, long n) {
   double s = 0.0;
   for (long i = 0; i < n; ++i) s += a[i] * b[i];
   return s;
 }
 
+/* GMRES's preconditioner: exact agent by agent on an acyclic topology, level by level on
+   a cycle */
+static void hitl_ag_precond(hitl_ag *d, int top, const double *u, double *z) {
+  if (d->p->acyclic[top]) hitl_ag_forward(d, top, u, z);
+  else hitl_ag_levels(d, top, u, z);
+}
+
+#define HITL_GMRES_FLOOR 1e-10
+
 /* Restarted right-preconditioned GMRES on the jets system: x from rhs (x: initial guess
-   0). Returns 0, or -1 if the residual did not reach ls_tol * |rhs| in max_iter. */
+   0). Returns 0, or -1 if the residual did not reach ls_tol * |rhs| (or stagnated above
+   HITL_GMRES_FLOOR * |rhs|) in max_iter. */
 static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
   const hitl_agents_problem *p = d->p;
   long n = (long)d->N * d->n3;
@@ -541,16 +594,21 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
   if (beta0 == 0.0) return 0;
   double *r = d->rj; /* residual */
   memcpy(r, rhs, sizeof(double) * (size_t)n);
+  double beta_prev = HUGE_VAL;
   while (it < p->max_iter) {
     double beta = sqrt(hitl_dot(r, r, n));
     if (beta <= tol) return 0;
+    /* a restart that no longer halves the true residual has reached rounding: accept it
+       where that is within HITL_GMRES_FLOOR of the right-hand side */
+    if (beta > 0.5 * beta_prev && beta <= HITL_GMRES_FLOOR * beta0) return 0;
+    beta_prev = beta;
     for (long q = 0; q < n; ++q) V[q] = r[q] / beta;
     for (int q = 0; q <= kr; ++q) d->g[q] = 0.0;
     d->g[0] = beta;
     int j = 0;
     for (; j < kr && it < p->max_iter; ++j, ++it) {
       double *vj = V + (size_t)n * j, *w = V + (size_t)n * (j + 1);
-      hitl_ag_forward(d, top, vj, z);
+      hitl_ag_precond(d, top, vj, z);
       hitl_ag_apply(d, top, z, w);
       for (int q = 0; q <= j; ++q) { /* modified Gram-Schmidt */
         double h = hitl_dot(w, V + (size_t)n * q, n);
@@ -590,7 +648,7 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
     memset(r, 0, sizeof(double) * (size_t)n);
     for (int q = 0; q < j; ++q)
       for (long e = 0; e < n; ++e) r[e] += d->g[q] * V[(size_t)n * q + e];
-    hitl_ag_forward(d, top, r, z);
+    hitl_ag_precond(d, top, r, z);
     for (long e = 0; e < n; ++e) x[e] += z[e];
     /* true residual */
     hitl_ag_apply(d, top, x, r);
@@ -668,6 +726,7 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
     if (d->ls_mode == HITL_AG_FORWARD) continue; /* the solve substitutes through x */
     wk->arg[2] = LU;
     wk->res[0] = d->G + (size_t)n3 * n3 * i;
+    wk->res[1] = d->Hm + (size_t)na * n3 * i;
     if (kn->gmat(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
   }
   if (fail) {
@@ -726,16 +785,18 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
     memcpy(rhs, d->rj, sizeof(double) * (size_t)N * n3);
     if (hitl_ag_gmres(d, top, rhs, d->dj)) return SUNLS_CONV_FAIL; /* recoverable */
   }
-  /* x_i = D_i^{-1} (b_i - c (A_s0 x_0 + B_s dnb_i)) */
-#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
+  /* x_i = D_i^{-1} (b_i - c (A_s0 x_0 + B_s dnb_i)) = y_i + H_i dnb_i */
+#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
   for (int i = 0; i < N; ++i) {
     double s[64];
-    hitl_agwork *wk = hitl_ag_wk(d);
+    const double *Hi = d->Hm + (size_t)na * n3 * i, *yi = d->y + (size_t)na * i;
     double *xi = x + m + (size_t)na * i;
     hitl_ag_gather(d, top, i, d->dj, s, 0, 3);
-    if (hitl_ag_nsol(d, wk, i, M->K + d->p->koff[i], c, x, s, xi, xi, wk->jscr)) fail |= 1;
+    for (int r = 0; r < na; ++r) xi[r] = yi[r];
+    for (int q = 0; q < n3; ++q)
+      for (int r = 0; r < na; ++r) xi[r] += Hi[(size_t)q * na + r] * s[q];
   }
-  return fail ? -1 : 0;
+  return 0;
 }
 
 /* ---------------------------------------------------------------- set-up */
@@ -807,6 +868,8 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
   d->piv = (int *)calloc((size_t)m + 1, sizeof(int));
   d->zero = (double *)calloc((size_t)d->n3 + 1, sizeof(double));
   d->G = (double *)calloc((size_t)N * d->n3 * d->n3 + 1, sizeof(double));
+  d->Hm = (double *)calloc((size_t)N * na * d->n3 + 1, sizeof(double));
+  d->ps = (double *)calloc((size_t)N * d->n3 + 1, sizeof(double));
   d->y = (double *)calloc((size_t)N * na + 1, sizeof(double));
   d->dj = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->dnb = (double *)calloc((size_t)nj + 1, sizeof(double));
@@ -824,7 +887,7 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
     d->sn = (double *)calloc((size_t)kr + 1, sizeof(double));
     d->g = (double *)calloc((size_t)kr + 2, sizeof(double));
   }
-  if (!d->fvals || !d->jets || !d->nb || !d->lu || !d->piv || !d->zero || !d->G || !d->y ||
+  if (!d->fvals || !d->jets || !d->nb || !d->lu || !d->piv || !d->zero || !d->G || !d->Hm || !d->ps || !d->y ||
       !d->dj || !d->dnb || !d->rj || !d->z || !d->V || !d->H || !d->cs || !d->sn || !d->g ||
       (p->solver == HITL_AG_DENSE && (!d->S || !d->Spiv)) || hitl_ag_work_alloc(d, sz)) {
     hitl_msg(c, "out of memory");
@@ -849,7 +912,7 @@ static void hitl_ag_free(hitl_ag *d, hitl_cvode *s) {
     }
   free(d->wk);
   free(d->fvals), free(d->jets), free(d->nb), free(d->lu), free(d->piv), free(d->zero);
-  free(d->G), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S);
+  free(d->G), free(d->Hm), free(d->ps), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S);
   free(d->Spiv), free(d->V), free(d->H), free(d->cs), free(d->sn), free(d->g);
   hitl_cvode_free(&d->base, s);
 }
