@@ -41,8 +41,8 @@ from core.memo import MEMO
 from core.provenance import provenance_line
 
 STUDY = "studies/topologies.toml"
-#: the study's base gains and codegen settings, set once per process (core/memo.py)
-_STATE = MEMO.namespace("topologies-state", 2)
+#: the study, its base gains and codegen settings, set once per process (core/memo.py)
+_STATE = MEMO.namespace("topologies-state", 3)
 
 
 def sample_gains(base: Any, sc: Any) -> tuple[Any, float, bool]:
@@ -123,10 +123,17 @@ def _run_one(sample: Any) -> dict[str, Any]:
     }
 
 
-def _init_worker() -> None:
+def _init_worker(study: Any) -> None:
     import os
 
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    _STATE["study"] = study
+
+
+def _run_id(sample_id: int) -> dict[str, Any]:
+    from sweep.sampler import make_sample
+
+    return _run_one(make_sample(_STATE["study"], sample_id))
 
 
 def run_study(path: str, count: int | None, workers: int, build_root: str | None) -> list[dict]:
@@ -137,27 +144,36 @@ def run_study(path: str, count: int | None, workers: int, build_root: str | None
     path : str
     count : int, optional
     workers : int
-        Processes (forked after the first sample: they inherit its libraries).
+        Processes (forked after the first sample: they inherit its libraries). Each
+        draws its own samples, one at a time, so a long sample holds up no other.
     build_root : str, optional
     """
     from generated import api
     from generated.codegen import CodegenSettings
-    from sweep.sampler import samples
+    from sweep.sampler import make_sample
     from sweep.study import load_study
 
     study = load_study(path)
     n = study.count if count is None else min(count, study.count)
-    todo = list(samples(study, range(n)))
-    first = next(s for s in todo if s.scenario is not None)
-    _STATE["codegen"] = CodegenSettings(build_root=build_root)
-    _STATE["gains"] = api.scenario_gains(first.scenario, f"gains of sample {first.id}")
-    rows = [_run_one(first)]
-    rest = [s for s in todo if s is not first]
+    rows, k = [], 0
+    while k < n:  # the first sample the loader accepts compiles the kernels
+        first = make_sample(study, k)
+        k += 1
+        if first.scenario is None:
+            rows.append(_run_one(first))
+            continue
+        _STATE["codegen"] = CodegenSettings(build_root=build_root)
+        _STATE["gains"] = api.scenario_gains(first.scenario, f"gains of sample {first.id}")
+        rows.append(_run_one(first))
+        break
+    rest = range(k, n)
     if workers > 1:
-        with mp.get_context("fork").Pool(workers, initializer=_init_worker) as pool:
-            rows += pool.map(_run_one, rest, chunksize=max(1, len(rest) // (4 * workers)))
+        ctx = mp.get_context("fork")
+        with ctx.Pool(workers, initializer=_init_worker, initargs=(study,)) as pool:
+            rows += pool.imap_unordered(_run_id, rest, chunksize=1)
     else:
-        rows += [_run_one(s) for s in rest]
+        _STATE["study"] = study
+        rows += [_run_id(k) for k in rest]
     return sorted(rows, key=lambda r: r["sample"])
 
 
