@@ -34,6 +34,7 @@ from core.memo import MEMO
 from core.scenario import Scenario
 from generated import native
 from generated.codegen import CodegenSettings, Library, build_library
+from generated.compiler import Toolchain
 from generated.sparse_lu import sparse_lu
 from symbolic.cascade import agent_block
 from symbolic.closed_loop import fault_function, make_layout, model_groups, observer_gains
@@ -148,7 +149,7 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
 def kernel_settings(
     settings: CodegenSettings | None = None, openmp: bool = False
 ) -> CodegenSettings:
-    """``settings`` for the kernels: with OpenMP's flags for a threaded build.
+    """``settings`` for the kernels: at their optimisation, with OpenMP's flags if threaded.
 
     Parameters
     ----------
@@ -161,7 +162,13 @@ def kernel_settings(
     extra = tuple(s.extra_cflags)
     if openmp:
         extra += tuple(f for f in OPENMP_FLAGS if f not in extra)
-    return dataclasses.replace(s, extra_cflags=extra, jacobian="sparse", expand=True)
+    return dataclasses.replace(
+        s,
+        optimization=s.kernel_optimization,
+        extra_cflags=extra,
+        jacobian="sparse",
+        expand=True,
+    )
 
 
 #: kernel libraries built in this process, by :func:`kernel_key` (core/memo.py)
@@ -216,6 +223,26 @@ def kernel_key(
     return hashlib.sha256(json.dumps(desc, sort_keys=True, default=str).encode()).hexdigest()
 
 
+def driver_toolchain(sc: Scenario) -> Toolchain:
+    """The driver, compiled for one follower's sizes (``HITL_AG_*`` in agents.c).
+
+    The leader's states m, a follower's states and its output coordinates n are the
+    same for every model of a scenario; as compile-time constants they let gcc unroll
+    the driver's per-agent loops. The driver refuses a problem of other sizes.
+
+    Parameters
+    ----------
+    sc : Scenario
+    """
+    tc = native.toolchain(DRIVER)
+    na = make_layout(sc.m, sc.n, sc.N, False).agent_size
+    sizes = (
+        f"#define HITL_AG_N_LEADER {sc.m}\n#define HITL_AG_N_STATE {na}\n"
+        f"#define HITL_AG_N_OUT {sc.n}\n"
+    )
+    return dataclasses.replace(tc, appended_source=sizes + tc.appended_source)
+
+
 def build_models(
     sc: Scenario, gains: Gains, settings: CodegenSettings | None = None, openmp: bool = False
 ) -> tuple[list[Library], np.ndarray]:
@@ -251,7 +278,7 @@ def build_models(
         lib = _BUILT.get(key)
         if lib is None or not lib.path.is_file():
             fns = kernel_functions(sc, gains, members[0], cse=s.cse)
-            lib = build_library(fns, s, toolchain=native.toolchain(DRIVER))
+            lib = build_library(fns, s, toolchain=driver_toolchain(sc))
             _BUILT[key] = lib
         else:
             lib = dataclasses.replace(lib, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0)

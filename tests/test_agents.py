@@ -171,6 +171,15 @@ def test_forward_substitution_refuses_a_cycle(cases):
         agents.LinearSettings(solver="klu")
 
 
+def test_the_driver_refuses_sizes_it_was_not_compiled_for(cases):
+    """The driver is compiled for its model's sizes (m, na, n): other sizes are refused."""
+    sc, _, cl, libs, prob = cases["acyclic"]
+    bad = dataclasses.replace(prob, m=prob.m + 1)
+    x = np.concatenate([[0.0], cl.x0])
+    with pytest.raises(IntegrationError, match=r"sizes \(m, na, n\) differ"):
+        agents.probe([lib.path for lib in libs], bad, 0.1, x, 1e-2, x)
+
+
 @pytest.mark.parametrize("name", ["paper", "cyclic-mixed", "link-losses"])
 def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, name):
     """Same integrator (CVODE BDF, exact Newton), kernels against the whole loop's C.

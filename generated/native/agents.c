@@ -207,6 +207,23 @@ static SUNMatrix hitl_agmat_new(long len, SUNContext ctx) {
   return A;
 }
 
+/* The sizes of one follower, known when the driver is compiled with its model
+   (generated/agent_kernels.py defines them; hitl_ag_init checks them against the
+   problem), so the small per-agent loops unroll. 0: read at run time. */
+#ifndef HITL_AG_N_OUT
+#define HITL_AG_N_OUT 0
+#endif
+#ifndef HITL_AG_N_STATE
+#define HITL_AG_N_STATE 0
+#endif
+#ifndef HITL_AG_N_LEADER
+#define HITL_AG_N_LEADER 0
+#endif
+#define AG_N(d) (HITL_AG_N_OUT ? HITL_AG_N_OUT : (d)->n)
+#define AG_N3(d) (3 * AG_N(d))
+#define AG_NA(d) (HITL_AG_N_STATE ? HITL_AG_N_STATE : (d)->na)
+#define AG_M(d) (HITL_AG_N_LEADER ? HITL_AG_N_LEADER : (d)->m)
+
 /* one thread's work arrays for the kernels and its agent's inputs */
 typedef struct {
   const casadi_real **arg;
@@ -255,10 +272,10 @@ static int hitl_ag_nsol(hitl_ag *d, hitl_agwork *wk, int i, const double *K, dou
                         const double *x0, const double *s, const double *b, double *x,
                         double *dj) {
   const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
-  memcpy(wk->xb, b, sizeof(double) * (size_t)d->na);
+  memcpy(wk->xb, b, sizeof(double) * (size_t)AG_NA(d));
   wk->arg[0] = &c;
   wk->arg[1] = K;
-  wk->arg[2] = d->lu + (size_t)d->na * d->na * i;
+  wk->arg[2] = d->lu + (size_t)AG_NA(d) * AG_NA(d) * i;
   wk->arg[3] = x0;
   wk->arg[4] = s;
   wk->arg[5] = wk->xb;
@@ -278,10 +295,10 @@ static void hitl_ag_gather(const hitl_ag *d, int top, int i, const double *J, do
                            int lo, int hi) {
   const hitl_agents_problem *p = d->p;
   const int *ptr = p->ptr + (size_t)top * (d->N + 1);
-  int n = d->n;
+  int n = AG_N(d);
   for (int r = lo * n; r < hi * n; ++r) nb[r] = 0.0;
   for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
-    const double *jj = J + (size_t)p->idx[q] * d->n3;
+    const double *jj = J + (size_t)p->idx[q] * AG_N3(d);
     double w = p->w[q];
     for (int r = lo * n; r < hi * n; ++r) nb[r] += w * jj[r];
   }
@@ -291,13 +308,14 @@ static void hitl_ag_gather(const hitl_ag *d, int top, int i, const double *J, do
 static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int top, int i, const double *y,
                            double *tt) {
   const hitl_agents_problem *p = d->p;
-  const int *fi = p->fidx + (size_t)(1 + d->n) * i;
-  memcpy(wk->xb, y, sizeof(double) * (size_t)d->m);
-  memcpy(wk->xb + d->m, y + d->m + (size_t)d->na * i, sizeof(double) * (size_t)d->na);
-  for (int r = 0; r <= d->n; ++r) wk->gf[r] = d->fvals[fi[r]];
+  const int *fi = p->fidx + (size_t)(1 + AG_N(d)) * i;
+  memcpy(wk->xb, y, sizeof(double) * (size_t)AG_M(d));
+  memcpy(wk->xb + AG_M(d), y + AG_M(d) + (size_t)AG_NA(d) * i,
+         sizeof(double) * (size_t)AG_NA(d));
+  for (int r = 0; r <= AG_N(d); ++r) wk->gf[r] = d->fvals[fi[r]];
   wk->arg[0] = tt;
   wk->arg[1] = wk->xb;
-  wk->arg[2] = d->nb + (size_t)d->n3 * i;
+  wk->arg[2] = d->nb + (size_t)AG_N3(d) * i;
   wk->arg[3] = p->cpl + ((size_t)top * d->N + i) * 2;
   wk->arg[4] = p->prm + (size_t)d->npar * i;
   wk->arg[5] = wk->gf;
@@ -313,7 +331,7 @@ static int hitl_ag_wave_pass(hitl_ag *d, int top, double t, const double *y, dou
   const hitl_agents_problem *p = d->p;
   const int *ord = p->order + (size_t)top * d->N;
   const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
-  int n3 = d->n3, fail = 0;
+  int n3 = AG_N3(d), fail = 0;
   for (int wv = 0; wv < p->nwaves[top]; ++wv) {
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8) reduction(| : fail)
     for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
@@ -331,9 +349,9 @@ static int hitl_ag_wave_pass(hitl_ag *d, int top, double t, const double *y, dou
         wk->res[0] = wk->xbdot;
         wk->res[1] = d->jets + (size_t)n3 * i;
         if (kn->rhs(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
-        if (i == 0) memcpy(ydot, wk->xbdot, sizeof(double) * (size_t)d->m);
-        memcpy(ydot + d->m + (size_t)d->na * i, wk->xbdot + d->m,
-               sizeof(double) * (size_t)d->na);
+        if (i == 0) memcpy(ydot, wk->xbdot, sizeof(double) * (size_t)AG_M(d));
+        memcpy(ydot + AG_M(d) + (size_t)AG_NA(d) * i, wk->xbdot + AG_M(d),
+               sizeof(double) * (size_t)AG_NA(d));
       } else {
         wk->res[0] = d->jets + (size_t)n3 * i;
         wk->res[1] = K + p->koff[i];
@@ -350,7 +368,7 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
   const hitl_agents_problem *p = d->p;
   hitl_ctx *c = &d->base;
   casadi_real tt = t;
-  int N = d->N, n3 = d->n3, fail = 0;
+  int N = d->N, n3 = AG_N3(d), fail = 0;
   int top = hitl_ag_topology(p, t);
   if (top_out) *top_out = top;
   c->arg[0] = &tt;
@@ -370,7 +388,7 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
       casadi_real ti = t;
       const hitl_agent_kernels *kn = p->kern + p->model[i];
       hitl_ag_inputs(d, wk, top, i, y, &ti);
-      wk->res[0] = d->jets + (size_t)n3 * i + (size_t)lev * d->n;
+      wk->res[0] = d->jets + (size_t)n3 * i + (size_t)lev * AG_N(d);
       if (kn->jet[lev](wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
     }
     if (fail) return -1;
@@ -392,8 +410,9 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
       wk->res[0] = wk->xbdot;
       wk->res[1] = wk->jscr;
       if (kn->rhs(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
-      if (i == 0) memcpy(ydot, wk->xbdot, sizeof(double) * (size_t)d->m);
-      memcpy(ydot + d->m + (size_t)d->na * i, wk->xbdot + d->m, sizeof(double) * (size_t)d->na);
+      if (i == 0) memcpy(ydot, wk->xbdot, sizeof(double) * (size_t)AG_M(d));
+      memcpy(ydot + AG_M(d) + (size_t)AG_NA(d) * i, wk->xbdot + AG_M(d),
+             sizeof(double) * (size_t)AG_NA(d));
     }
     if (K) {
       wk->res[0] = wk->jscr;
@@ -481,7 +500,7 @@ static int hitl_ag_mode(const hitl_ag *d, int top) {
 
 /* y = A_jets v: (A v)_i = v_i - G_i sum_j w_ij v_j */
 static void hitl_ag_apply(hitl_ag *d, int top, const double *v, double *out) {
-  int n3 = d->n3, N = d->N;
+  int n3 = AG_N3(d), N = d->N;
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
   for (int i = 0; i < N; ++i) {
     double s[64];
@@ -504,7 +523,7 @@ static void hitl_ag_forward(hitl_ag *d, int top, const double *u, double *z) {
   const int *ptr = p->ptr + (size_t)top * (d->N + 1);
   const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
   const int *dep = p->depth + (size_t)top * d->N;
-  int n3 = d->n3;
+  int n3 = AG_N3(d);
   for (int wv = 0; wv < p->nwaves[top]; ++wv) {
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8)
     for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
@@ -537,7 +556,7 @@ static void hitl_ag_levels(hitl_ag *d, int top, const double *u, double *z) {
   const int *ptr = p->ptr + (size_t)top * (d->N + 1);
   const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
   const int *dep = p->depth + (size_t)top * d->N;
-  int n = d->n, n3 = d->n3;
+  int n = AG_N(d), n3 = AG_N3(d);
   for (int l = 0; l < 3; ++l) {
     int lo = l * n, hi = lo + n;
     for (int wv = 0; wv < p->nwaves[top]; ++wv) {
@@ -586,7 +605,7 @@ static void hitl_ag_precond(hitl_ag *d, int top, const double *u, double *z) {
    HITL_GMRES_FLOOR * |rhs|) in max_iter. */
 static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
   const hitl_agents_problem *p = d->p;
-  long n = (long)d->N * d->n3;
+  long n = (long)d->N * AG_N3(d);
   int kr = p->krylov, it = 0;
   double beta0 = sqrt(hitl_dot(rhs, rhs, n)), tol = p->ls_tol * beta0;
   double *V = d->V, *H = d->H, *z = d->z;
@@ -662,7 +681,7 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
    E dnb_i (x holds b on entry, the leader solved) */
 static int hitl_ag_forward_x(hitl_ag *d, const hitl_agmat *M, double *x) {
   const hitl_agents_problem *p = d->p;
-  int m = d->m, na = d->na, n3 = d->n3, top = d->ls_top, fail = 0;
+  int m = AG_M(d), na = AG_NA(d), n3 = AG_N3(d), top = d->ls_top, fail = 0;
   const int *ord = p->order + (size_t)top * d->N;
   const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
   for (int wv = 0; wv < p->nwaves[top]; ++wv) {
@@ -687,7 +706,7 @@ static int hitl_ag_forward_x(hitl_ag *d, const hitl_agmat *M, double *x) {
 static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
   hitl_ag *d = (hitl_ag *)S->content;
   hitl_agmat *M = HITL_AGMAT(A);
-  int m = d->m, na = d->na, n3 = d->n3, N = d->N, fail = 0;
+  int m = AG_M(d), na = AG_NA(d), n3 = AG_N3(d), N = d->N, fail = 0;
   double c = M->c;
   if (!M->shifted) return -1; /* CVODE always hands over I - gamma J */
   d->base.n_fac++;
@@ -762,7 +781,7 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
                             sunrealtype tol) {
   hitl_ag *d = (hitl_ag *)S->content;
   hitl_agmat *M = HITL_AGMAT(A);
-  int m = d->m, na = d->na, n3 = d->n3, N = d->N, top = d->ls_top;
+  int m = AG_M(d), na = AG_NA(d), n3 = AG_N3(d), N = d->N, top = d->ls_top;
   double c = M->c, *x = N_VGetArrayPointer(xv);
   const double *b = N_VGetArrayPointer(bv);
   (void)tol;
@@ -842,6 +861,11 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
 #else
   d->nthreads = 1;
 #endif
+  if ((HITL_AG_N_OUT && n != HITL_AG_N_OUT) || (HITL_AG_N_STATE && na != HITL_AG_N_STATE) ||
+      (HITL_AG_N_LEADER && m != HITL_AG_N_LEADER)) {
+    hitl_msg(c, "the problem's sizes (m, na, n) differ from those the driver was compiled for");
+    return -1;
+  }
   if (d->n3 > 64) {
     hitl_msg(c, "more than 21 output coordinates per follower");
     return -1;
