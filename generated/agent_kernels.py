@@ -11,8 +11,9 @@ option set, the kernels of ONE agent (:func:`symbolic.cascade.agent_block`, as C
 * ``ag_faults``: every distinct fault expression of the scenario;
 * ``ag_nfac``, ``ag_nsol``, ``ag_gmat``: the agent's part of CVODE's Newton systems on
   the structural pattern of K (:func:`newton_functions`): the LU of D = I + c A_ss without
-  pivoting, unrolled (:mod:`generated.sparse_lu`), the solve x = D⁻¹ (b − c (A_s0 x0 +
-  B_s s)) with its jets C_0 x0 + C_s x + E s, and G = E − c C_s D⁻¹ B_s;
+  pivoting, unrolled (:mod:`generated.sparse_lu`) and packed with the blocks a solve
+  reads, the solve x = D⁻¹ (b − c (A_s0 x0 + B_s s)) with its jets C_0 x0 + C_s x + E s,
+  and G = E − c C_s D⁻¹ B_s;
 
 and appends the driver ``generated/native/agents.c``. What is compiled in, and so is the
 library's identity (the cache key is the hash of the C source): the follower model and
@@ -96,14 +97,17 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
 
     K's rows are (leader's rates, agent's rates, jets), its columns (leader's state,
     agent's state, neighbour sums): blocks A_s0, A_ss, B_s and C_0, C_s, E
-    (generated/native/agents.c, header). The kernels take K's structural nonzeros, as
-    ag_jac writes them and the driver stores them; D = I + c A_ss is factorised without
-    pivoting (the driver checks the pivots, as the whole-loop driver does).
+    (generated/native/agents.c, header). D = I + c A_ss is factorised without pivoting
+    (the driver checks the pivots, as the whole-loop driver does). The factorisation
+    packs all a solve reads into one vector P, its LU with U's diagonal inverted
+    (:func:`generated.sparse_lu.sparse_lu`, ``reciprocal``) followed by c A_s0, c B_s,
+    C_0, C_s and E (nonzeros): a solve then reads one contiguous block per agent and
+    divides nowhere.
 
-    * ``ag_nfac(c, K) -> (LU, pivots)``;
-    * ``ag_nsol(c, K, LU, x0, s, b) -> (x, dj)``: x = D⁻¹ (b − c (A_s0 x0 + B_s s)),
+    * ``ag_nfac(c, K) -> (P, pivots)``, K's structural nonzeros as ag_jac writes them;
+    * ``ag_nsol(P, x0, s, b) -> (x, dj)``: x = D⁻¹ (b − c (A_s0 x0 + B_s s)),
       dj = C_0 x0 + C_s x + E s;
-    * ``ag_gmat(c, K, LU) -> (G, H)``: G = E − c C_s D⁻¹ B_s (dense n3 × n3) and
+    * ``ag_gmat(P) -> (G, H)``: G = E − c C_s D⁻¹ B_s (dense n3 × n3) and
       H = −c D⁻¹ B_s (dense na × n3), so that x = D⁻¹ (b − c A_s0 x0) + H s.
 
     Parameters
@@ -120,30 +124,34 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
     st, jt = slice(m, m + na), slice(m + na, k)
     sub = ca.SX.sym("K", pattern)  # K's nonzeros, as ag_jac writes them
     c = ca.SX.sym("c")
-    A_s0, A_ss, B_s = sub[st, :m], sub[st, st], sub[st, jt]
-    C_0, C_s, E = sub[jt, :m], sub[jt, st], sub[jt, jt]
-    lu = sparse_lu(A_ss.sparsity() + ca.Sparsity.diag(na), "ag_dlu", cse=bool(opts))
-    D = ca.project(ca.SX.eye(na) + c * A_ss, lu.pattern)
-    LU, pivots = lu.factor(D)
-    LUs = ca.SX.sym("LU", LU.sparsity())
+    A_ss = sub[st, st]
+    lu = sparse_lu(
+        A_ss.sparsity() + ca.Sparsity.diag(na), "ag_dlu", cse=bool(opts), reciprocal=True
+    )
+    LU, pivots = lu.factor(ca.project(ca.SX.eye(na) + c * A_ss, lu.pattern))
+    blocks = [LU, c * sub[st, :m], c * sub[st, jt], sub[jt, :m], sub[jt, st], sub[jt, jt]]
+    P = ca.vertcat(*(blk.nz[:] for blk in blocks))
+    Ps = ca.SX.sym("P", P.numel())
+    LUs, cA_s0, cB_s, C_0, C_s, E = _unpack(Ps, [blk.sparsity() for blk in blocks])
     x0, s, b = ca.SX.sym("x0", m), ca.SX.sym("s", n3), ca.SX.sym("b", na)
-    x = lu.solve(LUs, b - c * (A_s0 @ x0 + B_s @ s))
+    x = lu.solve(LUs, b - (cA_s0 @ x0 + cB_s @ s))
     dj = C_0 @ x0 + C_s @ x + E @ s
-    cols = [lu.solve(LUs, ca.densify(B_s[:, q])) for q in range(n3)]
-    G = ca.densify(E - c * C_s @ ca.horzcat(*cols))
-    H = ca.densify(-c * ca.horzcat(*cols))  # x = D⁻¹ (b − c A_s0 x0) + H s
+    H = ca.densify(-ca.horzcat(*(lu.solve(LUs, ca.densify(cB_s[:, q])) for q in range(n3))))
+    G = ca.densify(E + C_s @ H)  # x = D⁻¹ (b − c A_s0 x0) + H s
     return [
-        ca.Function(NFAC_NAME, [c, sub], [LU, pivots], ["c", "K"], ["LU", "pivots"], opts),
-        ca.Function(
-            NSOL_NAME,
-            [c, sub, LUs, x0, s, b],
-            [x, dj],
-            ["c", "K", "LU", "x0", "s", "b"],
-            ["x", "dj"],
-            opts,
-        ),
-        ca.Function(GMAT_NAME, [c, sub, LUs], [G, H], ["c", "K", "LU"], ["G", "H"], opts),
+        ca.Function(NFAC_NAME, [c, sub], [P, pivots], ["c", "K"], ["P", "pivots"], opts),
+        ca.Function(NSOL_NAME, [Ps, x0, s, b], [x, dj], ["P", "x0", "s", "b"], ["x", "dj"], opts),
+        ca.Function(GMAT_NAME, [Ps], [G, H], ["P"], ["G", "H"], opts),
     ]
+
+
+def _unpack(v: ca.SX, patterns: list[ca.Sparsity]) -> list[ca.SX]:
+    """Consecutive slices of ``v`` as the nonzeros of matrices on ``patterns``."""
+    out, a = [], 0
+    for sp in patterns:
+        out.append(ca.SX(sp, v[a : a + sp.nnz()]))
+        a += sp.nnz()
+    return out
 
 
 def kernel_settings(

@@ -202,6 +202,7 @@ class Problem(ctypes.Structure):
         ("ls_tol", ctypes.c_double),
         ("max_iter", ctypes.c_int),
         ("koff", _IP),
+        ("poff", _IP),
         ("lead_nz", _IP),
         ("depth", _IP),
     ]
@@ -298,10 +299,27 @@ def parse_sparsity(sp: Sequence[int]) -> tuple[int, np.ndarray, np.ndarray]:
     return nrow, colind, rows
 
 
+def packed_size(lib: ctypes.CDLL) -> int:
+    """Doubles of one agent's packed factorisation P (``ag_nfac``'s first output).
+
+    Parameters
+    ----------
+    lib : ctypes.CDLL
+        A kernel library (:func:`load`).
+    """
+    f = getattr(lib, NFAC_NAME + "_sparsity_out")
+    f.restype = ctypes.POINTER(ctypes.c_longlong)
+    f.argtypes = [ctypes.c_longlong]
+    _, colind, _ = parse_sparsity(f(0))
+    return int(colind[-1])
+
+
 def _k_layout(libs: list[ctypes.CDLL], model: np.ndarray, m: int) -> dict[str, np.ndarray]:
-    """Each agent's offset into the stored K nonzeros, and the leader block's nonzeros."""
+    """Each agent's offsets into the stored K nonzeros and into the packed factorisations,
+    and the leader block's nonzeros."""
     pats = [k_pattern(lib) for lib in libs]
     nnz = np.array([int(pats[j][1][-1]) for j in model])
+    npk = np.array([packed_size(libs[j]) for j in range(len(libs))])[model]
     _, colind, rows = pats[model[0]]
     lead = -np.ones((m, m), np.int32)  # column-major, as the driver reads it
     for col in range(m):
@@ -310,6 +328,7 @@ def _k_layout(libs: list[ctypes.CDLL], model: np.ndarray, m: int) -> dict[str, n
                 lead[col, rows[q]] = q
     return {
         "koff": np.concatenate([[0], np.cumsum(nnz)]).astype(np.int32),
+        "poff": np.concatenate([[0], np.cumsum(npk)]).astype(np.int32),
         "lead_nz": np.ascontiguousarray(lead.ravel()),
     }
 

@@ -43,15 +43,21 @@ class SparseLU:
         ``(LU, b) -> x`` with ``M x = b`` (forward then backward substitution).
     fill : int
         Nonzeros of LU minus those of M.
+    reciprocal : bool
+        LU's diagonal holds 1 / u_kk and the solve multiplies by it (``pivots`` stays
+        u_kk).
     """
 
     pattern: ca.Sparsity
     factor: ca.Function
     solve: ca.Function
     fill: int
+    reciprocal: bool = False
 
 
-def sparse_lu(pattern: ca.Sparsity, prefix: str = "lu", *, cse: bool = True) -> SparseLU:
+def sparse_lu(
+    pattern: ca.Sparsity, prefix: str = "lu", *, cse: bool = True, reciprocal: bool = False
+) -> SparseLU:
     """Symbolic Gaussian elimination (no pivoting) on ``pattern``, as two SX Functions.
 
     Parameters
@@ -62,6 +68,9 @@ def sparse_lu(pattern: ca.Sparsity, prefix: str = "lu", *, cse: bool = True) -> 
         The Functions are named ``<prefix>_factor`` and ``<prefix>_solve``.
     cse : bool
         Eliminate common subexpressions (CasADi's ``cse`` option).
+    reciprocal : bool
+        Store 1 / u_kk on LU's diagonal, so that a solve has no division (a solve is
+        called many times per factorisation; the rounding differs from the default's).
 
     Raises
     ------
@@ -74,6 +83,9 @@ def sparse_lu(pattern: ca.Sparsity, prefix: str = "lu", *, cse: bool = True) -> 
     pivots = _eliminate(rows, n)
     lu_sp = _lu_pattern(rows, n)
     lci, lrow = lu_sp.colind(), lu_sp.row()
+    if reciprocal:
+        for i in range(n):
+            rows[i][i] = 1 / rows[i][i]
     values = [rows[lrow[k]][c] for c in range(n) for k in range(lci[c], lci[c + 1])]
     opts = {"cse": True} if cse else {}
     factor = ca.Function(
@@ -84,8 +96,8 @@ def sparse_lu(pattern: ca.Sparsity, prefix: str = "lu", *, cse: bool = True) -> 
         ["LU", "pivots"],
         opts,
     )
-    solve = _solve_function(f"{prefix}_solve", lu_sp, n, opts)
-    return SparseLU(pattern, factor, solve, lu_sp.nnz() - pattern.nnz())
+    solve = _solve_function(f"{prefix}_solve", lu_sp, n, opts, reciprocal)
+    return SparseLU(pattern, factor, solve, lu_sp.nnz() - pattern.nnz(), reciprocal)
 
 
 def _check_pattern(pattern: ca.Sparsity) -> int:
@@ -142,8 +154,11 @@ def _lu_pattern(rows: list[dict[int, ca.SX]], n: int) -> ca.Sparsity:
     return ca.Sparsity.triplet(n, n, trip_r, trip_c)
 
 
-def _solve_function(name: str, lu_sp: ca.Sparsity, n: int, opts: dict) -> ca.Function:
-    """``(LU, b) -> x`` with ``M x = b``: forward (L, unit) then backward (U) substitution."""
+def _solve_function(
+    name: str, lu_sp: ca.Sparsity, n: int, opts: dict, reciprocal: bool = False
+) -> ca.Function:
+    """``(LU, b) -> x`` with ``M x = b``: forward (L, unit) then backward (U) substitution
+    (``reciprocal``: U's diagonal stored inverted)."""
     LU = ca.SX.sym("LU", lu_sp)
     b = ca.SX.sym("b", n)
     lrows = _rows_by_index(LU.nz, lu_sp, n)
@@ -160,5 +175,5 @@ def _solve_function(name: str, lu_sp: ca.Sparsity, n: int, opts: dict) -> ca.Fun
         for j, v in lrows[i].items():
             if j > i:
                 s = s - v * x[j]
-        x[i] = s / lrows[i][i]
+        x[i] = s * lrows[i][i] if reciprocal else s / lrows[i][i]
     return ca.Function(name, [LU, b], [ca.vertcat(*x)], ["LU", "b"], ["x"], opts)

@@ -191,7 +191,9 @@ def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, na
     can agree more closely. Both codes are measured because the amplification is
     discrete: a perturbation that flips one step's acceptance in the start-up moves the
     trajectory by up to about 5e-2 at rtol 1e-8, and which code's unperturbed run sits
-    next to such a flip depends on its rounding.
+    next to such a flip depends on its rounding. Such flips still reach 1e-4 at rtol
+    1e-10 on some rounding (link losses); the tight run is at 1e-12, where no flip moves
+    either code by more than about 1e-7, and must agree to 1e-6.
     """
     sc, gains, cl, libs, prob = cases[name]
     cg = CodegenSettings(optimization="-O0", build_root=build_root)
@@ -207,7 +209,7 @@ def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, na
         return (np.abs(a.x - b.x) / np.maximum(1.0, np.abs(b.x))).max()
 
     diffs, own = [], []
-    for rtol in (1e-8, 1e-10):
+    for rtol in (1e-8, 1e-12):
         s = IntegratorSettings(method="native", rtol=rtol, atol=rtol * 1e-2, max_steps=200000)
         tr = agents.run(paths, prob, cl.x0, t_out, s, breakpoints=bps)
         ref = api.integrate_built(built, cl.x0, t_out, s, bps)
@@ -222,7 +224,7 @@ def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, na
             moved.append(rel(agents.run(paths, prob, x0, t_out, s, breakpoints=bps), tr))
         diffs.append(rel(tr, ref))
         own.append(max(moved))
-    assert diffs[1] < 1e-4 and diffs[1] < diffs[0] / 5, diffs
+    assert diffs[1] < 1e-6 and diffs[1] < diffs[0] / 5, diffs
     assert all(d < 4 * o for d, o in zip(diffs, own, strict=True)), (diffs, own)
 
 
@@ -329,20 +331,20 @@ def test_newton_kernels_against_numpy(cases, gamma):
     C_0, C_s, E = K[m + na :, :m], K[m + na :, m : m + na], K[m + na :, m + na :]
     c = -gamma
     D = np.eye(na) + c * A_ss
-    LU, pivots = nfac(c, K)
+    P, pivots = nfac(c, K)
     assert np.isclose(np.prod(np.array(pivots)), np.linalg.det(D), rtol=1e-9)
     x0, s, b = rng.normal(size=m), rng.normal(size=n3), rng.normal(size=na)
-    x, dj = (np.array(v).ravel() for v in nsol(c, K, LU, x0, s, b))
+    x, dj = (np.array(v).ravel() for v in nsol(P, x0, s, b))
     x_ref = np.linalg.solve(D, b - c * (A_s0 @ x0 + B_s @ s))
     np.testing.assert_allclose(x, x_ref, rtol=1e-10, atol=1e-12 * np.abs(x_ref).max())
     dj_ref = C_0 @ x0 + C_s @ x_ref + E @ s
     np.testing.assert_allclose(dj, dj_ref, rtol=1e-10, atol=1e-10 * np.abs(dj_ref).max())
-    G, H = (np.array(v) for v in gmat(c, K, LU))
+    G, H = (np.array(v) for v in gmat(P))
     np.testing.assert_allclose(G, E - c * C_s @ np.linalg.solve(D, B_s), rtol=1e-10, atol=1e-12)
     H_ref = -c * np.linalg.solve(D, B_s)
     np.testing.assert_allclose(H, H_ref, rtol=1e-10, atol=1e-12 * np.abs(H_ref).max())
     # the driver's back-substitution x = D⁻¹ (b − c A_s0 x0) + H s equals ag_nsol's x
-    y = np.array(nsol(c, K, LU, x0, np.zeros(n3), b)[0]).ravel()
+    y = np.array(nsol(P, x0, np.zeros(n3), b)[0]).ravel()
     np.testing.assert_allclose(y + H @ s, x_ref, rtol=1e-10, atol=1e-12 * np.abs(x_ref).max())
 
 

@@ -43,12 +43,17 @@ def random_pattern(rng, n: int, density: float) -> tuple[ca.Sparsity, np.ndarray
 
 
 @pytest.mark.parametrize(("n", "density"), [(1, 1.0), (6, 0.5), (25, 0.1), (40, 0.06)])
-def test_sparse_lu_solves_like_numpy_and_pivots_give_the_determinant(n, density):
+@pytest.mark.parametrize("reciprocal", [False, True])
+def test_sparse_lu_solves_like_numpy_and_pivots_give_the_determinant(n, density, reciprocal):
     rng = np.random.default_rng(n)
     for _ in range(3):
         sp, A = random_pattern(rng, n, density)
-        lu = sparse_lu(sp)
+        lu = sparse_lu(sp, reciprocal=reciprocal)
         LU, piv = lu.factor(ca.project(ca.DM(A), sp))
+        # the stored diagonal: U's pivots, or their reciprocals
+        diag = np.diag(np.array(ca.DM(LU)))
+        p = np.array(piv).ravel()
+        np.testing.assert_allclose(diag * p if reciprocal else diag / p, 1.0, rtol=1e-14)
         b = rng.standard_normal(n)
         x = np.array(lu.solve(LU, b)).ravel()
         np.testing.assert_allclose(x, np.linalg.solve(A, b), rtol=1e-11, atol=1e-13)

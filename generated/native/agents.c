@@ -9,10 +9,12 @@
  *   ag_jac (t, xb, nb, cpl, prm, gf) -> (jets, K),  K = d(xbdot, jets)/d(xb, nb): its
  *                                         structural nonzeros (column-compressed)
  *   ag_faults (t) -> values
- *   ag_nfac (c, K) -> (LU, pivots)       D = I + c A_ss factorised without pivoting
- *   ag_nsol (c, K, LU, x0, s, b) -> (x, dj)  x = D^{-1} (b - c (A_s0 x0 + B_s s)),
+ *   ag_nfac (c, K) -> (P, pivots)        D = I + c A_ss factorised without pivoting, packed
+ *                                         with what a solve reads: P = (LU of D with U's
+ *                                         diagonal inverted, c A_s0, c B_s, C_0, C_s, E)
+ *   ag_nsol (P, x0, s, b) -> (x, dj)     x = D^{-1} (b - c (A_s0 x0 + B_s s)),
  *                                         dj = C_0 x0 + C_s x + E s
- *   ag_gmat (c, K, LU) -> (G, H)          G = E - c C_s D^{-1} B_s, H = -c D^{-1} B_s
+ *   ag_gmat (P) -> (G, H)                G = E - c C_s D^{-1} B_s, H = -c D^{-1} B_s
  * with xb = (eta0, s_i), nb = sum_j (L+B)_ij jets_j (3n) and cpl = (l_ii, a_i0 h_i).
  * The driver never calls these by name: it receives one table of function pointers per
  * follower model (hitl_agent_kernels), so followers of different models, each from its
@@ -96,6 +98,7 @@ typedef struct {
   double ls_tol;        /* GMRES: relative residual reached */
   int max_iter;         /* GMRES: iterations per solve before the setup fails */
   const int *koff;      /* N + 1: agent i's nonzeros of K at koff[i] .. koff[i+1] */
+  const int *poff;      /* N + 1: agent i's packed factorisation P at poff[i] .. poff[i+1] */
   const int *lead_nz;   /* m x m (column-major): the leader block's nonzero in agent 0's
                            K, or -1 where it is structurally zero */
   const int *depth;     /* ntop x N: each follower's wave */
@@ -240,7 +243,8 @@ typedef struct {
   double *fvals, *jets, *nb; /* jets, nb: N x n3 */
   hitl_agwork *wk;           /* nthreads */
   /* linear solver */
-  double *lu;    /* (N + 1) x na x na: D_i's sparse LU (ag_nfac; block N: the leader's, dense) */
+  double *lu;    /* p->poff[N]: each agent's P (ag_nfac) at p->poff[i] */
+  double *lul;   /* m x m: the leader's dense LU */
   int *piv;      /* na: the leader's row swaps */
   double *G;     /* N x n3 x n3 (column-major) */
   double *Hm;    /* N x na x n3 (column-major): -c D_i^{-1} B_s */
@@ -266,19 +270,17 @@ static hitl_agwork *hitl_ag_wk(hitl_ag *d) {
 #endif
 }
 
-/* agent i's Newton solve through its model's ag_nsol: x = D_i^{-1} (b - c (A_s0 x0 + B_s
-   s)) and dj = C_0 x0 + C_s x + E s (b is copied first: x may be where b was) */
-static int hitl_ag_nsol(hitl_ag *d, hitl_agwork *wk, int i, const double *K, double c,
-                        const double *x0, const double *s, const double *b, double *x,
-                        double *dj) {
+/* agent i's Newton solve through its model's ag_nsol on its packed factorisation: x =
+   D_i^{-1} (b - c (A_s0 x0 + B_s s)) and dj = C_0 x0 + C_s x + E s (b is copied first: x
+   may be where b was) */
+static int hitl_ag_nsol(hitl_ag *d, hitl_agwork *wk, int i, const double *x0,
+                        const double *s, const double *b, double *x, double *dj) {
   const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
   memcpy(wk->xb, b, sizeof(double) * (size_t)AG_NA(d));
-  wk->arg[0] = &c;
-  wk->arg[1] = K;
-  wk->arg[2] = d->lu + (size_t)AG_NA(d) * AG_NA(d) * i;
-  wk->arg[3] = x0;
-  wk->arg[4] = s;
-  wk->arg[5] = wk->xb;
+  wk->arg[0] = d->lu + d->p->poff[i];
+  wk->arg[1] = x0;
+  wk->arg[2] = s;
+  wk->arg[3] = wk->xb;
   wk->res[0] = x;
   wk->res[1] = dj;
   return kn->nsol(wk->arg, wk->res, wk->iw, wk->w, 0);
@@ -679,7 +681,7 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
 /* Block forward substitution through the states along the waves of an acyclic
    topology: D_i x_i = b_i - c (A_s0 x_0 + B_s dnb_i), then dj_i = C_0 x_0 + C_s x_i +
    E dnb_i (x holds b on entry, the leader solved) */
-static int hitl_ag_forward_x(hitl_ag *d, const hitl_agmat *M, double *x) {
+static int hitl_ag_forward_x(hitl_ag *d, double *x) {
   const hitl_agents_problem *p = d->p;
   int m = AG_M(d), na = AG_NA(d), n3 = AG_N3(d), top = d->ls_top, fail = 0;
   const int *ord = p->order + (size_t)top * d->N;
@@ -691,8 +693,7 @@ static int hitl_ag_forward_x(hitl_ag *d, const hitl_agmat *M, double *x) {
       double s[64];
       double *xi = x + m + (size_t)na * i;
       hitl_ag_gather(d, top, i, d->dj, s, 0, 3);
-      if (hitl_ag_nsol(d, hitl_ag_wk(d), i, M->K + d->p->koff[i], M->c, x, s, xi, xi,
-                       d->dj + (size_t)n3 * i))
+      if (hitl_ag_nsol(d, hitl_ag_wk(d), i, x, s, xi, xi, d->dj + (size_t)n3 * i))
         fail |= 1;
     }
   }
@@ -713,7 +714,7 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
   d->ls_top = M->top;
   d->ls_mode = hitl_ag_mode(d, M->top);
   { /* the leader: rows and columns 0..m-1 of agent 0's block */
-    double *L = d->lu + (size_t)na * na * N;
+    double *L = d->lul;
     for (int col = 0; col < m; ++col)
       for (int row = 0; row < m; ++row) {
         int nz = d->p->lead_nz[(size_t)col * m + row];
@@ -726,10 +727,10 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
     hitl_agwork *wk = hitl_ag_wk(d);
     const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
     const double *K = M->K + d->p->koff[i];
-    double *LU = d->lu + (size_t)na * na * i;
+    double *P = d->lu + d->p->poff[i];
     wk->arg[0] = &c;
     wk->arg[1] = K;
-    wk->res[0] = LU;
+    wk->res[0] = P;
     wk->res[1] = wk->col; /* the pivots */
     if (kn->nfac(wk->arg, wk->res, wk->iw, wk->w, 0)) {
       fail |= 1;
@@ -743,7 +744,7 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
       continue;
     }
     if (d->ls_mode == HITL_AG_FORWARD) continue; /* the solve substitutes through x */
-    wk->arg[2] = LU;
+    wk->arg[0] = P;
     wk->res[0] = d->G + (size_t)n3 * n3 * i;
     wk->res[1] = d->Hm + (size_t)na * n3 * i;
     if (kn->gmat(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
@@ -780,20 +781,19 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
 static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vector bv,
                             sunrealtype tol) {
   hitl_ag *d = (hitl_ag *)S->content;
-  hitl_agmat *M = HITL_AGMAT(A);
   int m = AG_M(d), na = AG_NA(d), n3 = AG_N3(d), N = d->N, top = d->ls_top;
-  double c = M->c, *x = N_VGetArrayPointer(xv);
+  double *x = N_VGetArrayPointer(xv);
   const double *b = N_VGetArrayPointer(bv);
-  (void)tol;
+  (void)A, (void)tol; /* the factorisations of the set-up are all a solve reads */
   if (x != b) memcpy(x, b, sizeof(double) * (size_t)d->base.nx);
-  hitl_lu_solve(d->lu + (size_t)na * na * N, m, d->piv, x); /* leader */
-  if (d->ls_mode == HITL_AG_FORWARD) return hitl_ag_forward_x(d, M, x);
+  hitl_lu_solve(d->lul, m, d->piv, x); /* leader */
+  if (d->ls_mode == HITL_AG_FORWARD) return hitl_ag_forward_x(d, x);
   /* y_i = D_i^{-1} (b_i - c A_s0 x_0), r_i = C_0 x_0 + C_s y_i: ag_nsol with s = 0 */
   int fail = 0;
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
   for (int i = 0; i < N; ++i)
-    if (hitl_ag_nsol(d, hitl_ag_wk(d), i, M->K + d->p->koff[i], c, x, d->zero,
-                     x + m + (size_t)na * i, d->y + (size_t)na * i, d->rj + (size_t)n3 * i))
+    if (hitl_ag_nsol(d, hitl_ag_wk(d), i, x, d->zero, x + m + (size_t)na * i,
+                     d->y + (size_t)na * i, d->rj + (size_t)n3 * i))
       fail |= 1;
   if (fail) return -1;
   if (d->ls_mode == HITL_AG_DENSE) {
@@ -888,7 +888,8 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
   d->fvals = (double *)calloc((size_t)p->nfaults + 1, sizeof(double));
   d->jets = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->nb = (double *)calloc((size_t)nj + 1, sizeof(double));
-  d->lu = (double *)calloc((size_t)(N + 1) * na * na, sizeof(double));
+  d->lu = (double *)calloc((size_t)p->poff[N] + 1, sizeof(double));
+  d->lul = (double *)calloc((size_t)m * m + 1, sizeof(double));
   d->piv = (int *)calloc((size_t)m + 1, sizeof(int));
   d->zero = (double *)calloc((size_t)d->n3 + 1, sizeof(double));
   d->G = (double *)calloc((size_t)N * d->n3 * d->n3 + 1, sizeof(double));
@@ -911,7 +912,7 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
     d->sn = (double *)calloc((size_t)kr + 1, sizeof(double));
     d->g = (double *)calloc((size_t)kr + 2, sizeof(double));
   }
-  if (!d->fvals || !d->jets || !d->nb || !d->lu || !d->piv || !d->zero || !d->G || !d->Hm || !d->ps || !d->y ||
+  if (!d->fvals || !d->jets || !d->nb || !d->lu || !d->lul || !d->piv || !d->zero || !d->G || !d->Hm || !d->ps || !d->y ||
       !d->dj || !d->dnb || !d->rj || !d->z || !d->V || !d->H || !d->cs || !d->sn || !d->g ||
       (p->solver == HITL_AG_DENSE && (!d->S || !d->Spiv)) || hitl_ag_work_alloc(d, sz)) {
     hitl_msg(c, "out of memory");
@@ -935,7 +936,7 @@ static void hitl_ag_free(hitl_ag *d, hitl_cvode *s) {
       free(wk->xbdot), free(wk->gf), free(wk->jscr), free(wk->col);
     }
   free(d->wk);
-  free(d->fvals), free(d->jets), free(d->nb), free(d->lu), free(d->piv), free(d->zero);
+  free(d->fvals), free(d->jets), free(d->nb), free(d->lu), free(d->lul), free(d->piv), free(d->zero);
   free(d->G), free(d->Hm), free(d->ps), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S);
   free(d->Spiv), free(d->V), free(d->H), free(d->cs), free(d->sn), free(d->g);
   hitl_cvode_free(&d->base, s);
