@@ -313,6 +313,48 @@ def test_threads_give_the_serial_results(cases, build_root):
         )
 
 
+@pytest.mark.parametrize("kind", ["acyclic", "cyclic"])
+def test_threads_give_the_serial_trajectory_on_a_swarm(build_root, kind):
+    """N = 150: the sweeps along the order run as one region with flags, not waves.
+
+    Each agent computes from the same inputs whichever thread takes it, and the sweep
+    waits for every input it reads, so two threads give the serial numbers bit for bit:
+    the passes, each Newton solver, and a short run through the start-up (a read before
+    its write would differ by far more than rounding and change CVODE's steps).
+    """
+    from benchmarks.agents import cyclic_variant
+
+    sc = _bench(150)
+    if kind == "cyclic":
+        sc = cyclic_variant(sc)
+    gains = bench_gains(sc)[0]
+    cg = CodegenSettings(optimization="-O0", build_root=build_root)
+    libs, model = agents.build_models(sc, gains, cg)
+    tlibs, _ = agents.build_models(sc, gains, cg, openmp=True)
+    prob = agents.problem(sc, gains, model)
+    assert prob.acyclic == (kind == "acyclic")
+    x0 = agents.initial_state(sc)
+    rng = np.random.default_rng(5)
+    x = x0 + rng.normal(scale=0.2, size=prob.nx)
+    b = rng.normal(size=prob.nx)
+    for s in ("auto", "gmres") + (("forward",) if prob.acyclic else ()):
+        one = agents.probe([lib.path for lib in libs], prob, 0.1, x, 1e-2, b, agents.LinearSettings(s))
+        two = agents.probe(
+            [lib.path for lib in tlibs], prob, 0.1, x, 1e-2, b, agents.LinearSettings(s, threads=2)
+        )
+        np.testing.assert_array_equal(one[0], two[0])
+        np.testing.assert_array_equal(one[1], two[1])
+    st = IntegratorSettings(method="native", rtol=1e-6, atol=1e-8, max_steps=100000)
+    t_out = output_grid(0.05, 0.01)
+    run1 = agents.run([lib.path for lib in libs], prob, x0, t_out, st)
+    run2 = agents.run(
+        [lib.path for lib in tlibs], prob, x0, t_out, st, linear=agents.LinearSettings(threads=2)
+    )
+    assert run1.complete and run2.complete
+    assert run1.stats["steps"] == run2.stats["steps"]
+    np.testing.assert_array_equal(run1.x, run2.x)
+
+
 @pytest.mark.parametrize("gamma", [1e-4, 1e-2, 1.0])
 def test_newton_kernels_against_numpy(cases, gamma):
     """ag_nfac / ag_nsol / ag_gmat on the model's real K equal numpy's dense algebra."""

@@ -50,8 +50,10 @@
  *
  * Threads (OpenMP, when compiled with -fopenmp; a serial build has no OpenMP region at
  * all, whose entry costs more than a pass at small N): the passes, the Jacobian blocks,
- * the block factorisations, the GMRES products and the preconditioner's waves are split
- * over the agents.
+ * the block factorisations and the GMRES products are split over the agents; what runs
+ * along a topological order (the one-pass sweep of an acyclic topology, the forward
+ * substitutions, the preconditioner) is one region in which each agent waits on its
+ * neighbours' flags (hitl_ag_sweep), not a barrier per wave.
  */
 #ifdef _OPENMP
 #include <omp.h>
@@ -256,6 +258,7 @@ typedef struct {
   int *Spiv;
   int S_ok, ls_top, ls_mode;
   double *V, *H, *cs, *sn, *g, *z; /* GMRES */
+  long *done, epoch; /* hitl_ag_sweep's flags: the last level each agent finished */
   long n_krylov;
 } hitl_ag;
 
@@ -325,44 +328,106 @@ static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int top, int i, const do
 
 /* The passes at (t, y): jets and neighbour sums of every level, then ydot (if not NULL)
    and/or the Jacobian blocks K (if not NULL, at p->koff). Returns 0 or -1. */
-/* On an acyclic topology: one pass along the waves (depth levels) of its order, each
-   agent's neighbour sums complete from the waves before it (the jets come out of the
-   rate and Jacobian kernels themselves). */
-static int hitl_ag_wave_pass(hitl_ag *d, int top, double t, const double *y, double *ydot,
-                             double *K) {
+/* What one agent computes at one level of a sweep (hitl_ag_sweep): 0, or non-zero */
+typedef int (*hitl_ag_step_fn)(hitl_ag *d, hitl_agwork *wk, int top, int i, int lev,
+                               void *ctx);
+
+#ifndef HITL_AG_SWEEP_CHUNK
+#define HITL_AG_SWEEP_CHUNK 4 /* consecutive positions of the order one thread takes */
+#endif
+#ifndef HITL_AG_SWEEP_MIN
+#define HITL_AG_SWEEP_MIN 64 /* fewer agents: one thread (a region costs more) */
+#endif
+
+/* wait until agent j's flag reaches need (acquire: what j wrote before is visible) */
+static void hitl_ag_wait(const long *done, int j, long need) {
+  while (__atomic_load_n(done + j, __ATOMIC_ACQUIRE) < need) {
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_pause();
+#endif
+  }
+}
+
+/* One sweep over the agents of topology top, `levels` times, level-major, in its order
+   (grouped by depth): agent i's level l reads its neighbours' level l where they are of
+   lower depth and their level l - 1 otherwise (on an acyclic topology every neighbour is
+   of lower depth), which the serial order provides. With threads, one OpenMP region: the
+   order is dealt out in chunks and each agent waits on its neighbours' flags instead of a
+   barrier per wave. Every wait is on an item earlier in (level, position) and every
+   thread takes its items in that order, so the least unfinished item is always ready.
+   An agent's result does not depend on the thread that computes it. Returns 0 or -1. */
+static int hitl_ag_sweep(hitl_ag *d, int top, int levels, hitl_ag_step_fn f, void *ctx) {
   const hitl_agents_problem *p = d->p;
   const int *ord = p->order + (size_t)top * d->N;
-  const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
-  int n3 = AG_N3(d), fail = 0;
-  for (int wv = 0; wv < p->nwaves[top]; ++wv) {
-#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8) reduction(| : fail)
-    for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
-#ifdef _OPENMP
-      hitl_agwork *wk = d->wk + omp_get_thread_num();
-#else
-      hitl_agwork *wk = d->wk;
-#endif
-      int i = ord[oi];
-      casadi_real ti = t;
-      const hitl_agent_kernels *kn = p->kern + p->model[i];
-      hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)n3 * i, 0, 3);
-      hitl_ag_inputs(d, wk, top, i, y, &ti);
-      if (ydot) {
-        wk->res[0] = wk->xbdot;
-        wk->res[1] = d->jets + (size_t)n3 * i;
-        if (kn->rhs(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
-        if (i == 0) memcpy(ydot, wk->xbdot, sizeof(double) * (size_t)AG_M(d));
-        memcpy(ydot + AG_M(d) + (size_t)AG_NA(d) * i, wk->xbdot + AG_M(d),
-               sizeof(double) * (size_t)AG_NA(d));
-      } else {
-        wk->res[0] = d->jets + (size_t)n3 * i;
-        wk->res[1] = K + p->koff[i];
-        if (kn->jac(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
-      }
-    }
-    if (fail) return -1;
+  int N = d->N, fail = 0;
+  if (hitl_ag_threads(d) <= 1 || N < HITL_AG_SWEEP_MIN) {
+    for (int l = 0; l < levels; ++l)
+      for (int oi = 0; oi < N; ++oi)
+        if (f(d, d->wk, top, ord[oi], l, ctx)) fail = 1;
+    return fail ? -1 : 0;
   }
-  return 0;
+#ifdef _OPENMP
+  const int *ptr = p->ptr + (size_t)top * (N + 1);
+  const int *dep = p->depth + (size_t)top * N;
+  long ep = d->epoch, *done = d->done;
+  d->epoch += levels;
+#pragma omp parallel num_threads(hitl_ag_threads(d)) reduction(| : fail)
+  {
+    int nt = omp_get_num_threads(), th = omp_get_thread_num();
+    hitl_agwork *wk = d->wk + th;
+    for (int l = 0; l < levels; ++l)
+      for (int c0 = th * HITL_AG_SWEEP_CHUNK; c0 < N; c0 += nt * HITL_AG_SWEEP_CHUNK)
+        for (int oi = c0; oi < c0 + HITL_AG_SWEEP_CHUNK && oi < N; ++oi) {
+          int i = ord[oi];
+          for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
+            int j = p->idx[q];
+            hitl_ag_wait(done, j, ep + l + (dep[j] < dep[i]));
+          }
+          if (f(d, wk, top, i, l, ctx)) fail |= 1;
+          __atomic_store_n(done + i, ep + l + 1, __ATOMIC_RELEASE); /* also on failure */
+        }
+  }
+#endif
+  return fail ? -1 : 0;
+}
+
+typedef struct {
+  double t;
+  const double *y;
+  double *ydot, *K;
+} hitl_ag_at;
+
+/* agent i of the one-pass sweep: its neighbour sums (complete: every neighbour is of
+   lower depth), then its rates (ydot) or its Jacobian block (K), the jets coming out of
+   the rate and Jacobian kernels themselves */
+static int hitl_ag_wave_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int lev,
+                             void *ctx) {
+  const hitl_ag_at *a = (const hitl_ag_at *)ctx;
+  const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
+  int n3 = AG_N3(d);
+  casadi_real ti = a->t;
+  (void)lev;
+  hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)n3 * i, 0, 3);
+  hitl_ag_inputs(d, wk, top, i, a->y, &ti);
+  if (a->ydot) {
+    wk->res[0] = wk->xbdot;
+    wk->res[1] = d->jets + (size_t)n3 * i;
+    if (kn->rhs(wk->arg, wk->res, wk->iw, wk->w, 0)) return 1;
+    if (i == 0) memcpy(a->ydot, wk->xbdot, sizeof(double) * (size_t)AG_M(d));
+    memcpy(a->ydot + AG_M(d) + (size_t)AG_NA(d) * i, wk->xbdot + AG_M(d),
+           sizeof(double) * (size_t)AG_NA(d));
+    return 0;
+  }
+  wk->res[0] = d->jets + (size_t)n3 * i;
+  wk->res[1] = a->K + d->p->koff[i];
+  return kn->jac(wk->arg, wk->res, wk->iw, wk->w, 0);
+}
+
+/* On an acyclic topology: one sweep along its order, ydot or K */
+static int hitl_ag_wave_pass(hitl_ag *d, int top, double t, const double *y, double *ydot,
+                             double *K) {
+  hitl_ag_at a = {t, y, ydot, K};
+  return hitl_ag_sweep(d, top, 1, hitl_ag_wave_step, &a);
 }
 
 static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, double *K,
@@ -516,75 +581,73 @@ static void hitl_ag_apply(hitl_ag *d, int top, const double *v, double *out) {
   }
 }
 
-/* z = P^{-1} u: forward substitution along the waves, keeping the edges from lower waves
-   (on a cycle the back edges of the order are dropped; agents of one wave are
-   independent, so a wave runs in parallel) */
-static void hitl_ag_forward(hitl_ag *d, int top, const double *u, double *z) {
-  const hitl_agents_problem *p = d->p;
-  const int *ord = p->order + (size_t)top * d->N;
-  const int *ptr = p->ptr + (size_t)top * (d->N + 1);
-  const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
-  const int *dep = p->depth + (size_t)top * d->N;
+/* agent i of P^{-1} u on an acyclic topology: z_i = u_i + G_i sum_j w_ij z_j */
+typedef struct {
+  const double *u;
+  double *z;
+} hitl_ag_uz;
+
+static int hitl_ag_forward_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int lev,
+                                void *ctx) {
+  const hitl_ag_uz *a = (const hitl_ag_uz *)ctx;
   int n3 = AG_N3(d);
-  for (int wv = 0; wv < p->nwaves[top]; ++wv) {
-#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8)
-    for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
-      int i = ord[oi];
-      double s[64];
-      const double *G = d->G + (size_t)n3 * n3 * i;
-      for (int r = 0; r < n3; ++r) s[r] = 0.0;
-      for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
-        int j = p->idx[q];
-        if (dep[j] >= wv) continue;
-        for (int r = 0; r < n3; ++r) s[r] += p->w[q] * z[(size_t)n3 * j + r];
-      }
-      for (int r = 0; r < n3; ++r) {
-        double acc = u[(size_t)n3 * i + r];
-        for (int q = 0; q < n3; ++q) acc += G[(size_t)q * n3 + r] * s[q];
-        z[(size_t)n3 * i + r] = acc;
-      }
-    }
+  double s[64];
+  const double *G = d->G + (size_t)n3 * n3 * i;
+  (void)wk, (void)lev;
+  hitl_ag_gather(d, top, i, a->z, s, 0, 3);
+  for (int r = 0; r < n3; ++r) {
+    double acc = a->u[(size_t)n3 * i + r];
+    for (int q = 0; q < n3; ++q) acc += G[(size_t)q * n3 + r] * s[q];
+    a->z[(size_t)n3 * i + r] = acc;
   }
+  return 0;
+}
+
+/* z = P^{-1} u: forward substitution along the order of an acyclic topology (exact) */
+static void hitl_ag_forward(hitl_ag *d, int top, const double *u, double *z) {
+  hitl_ag_uz a = {u, z};
+  hitl_ag_sweep(d, top, 1, hitl_ag_forward_step, &a);
+}
+
+/* agent i's level l of the level-by-level preconditioner: its partial neighbour sums
+   ps_i gain level l from the neighbours of lower depth and level l - 1 from the others
+   (which sweep l - 1 had not reached), then z_i's level-l rows from levels <= l */
+static int hitl_ag_levels_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int l,
+                               void *ctx) {
+  const hitl_agents_problem *p = d->p;
+  const hitl_ag_uz *a = (const hitl_ag_uz *)ctx;
+  const int *ptr = p->ptr + (size_t)top * (d->N + 1);
+  const int *dep = p->depth + (size_t)top * d->N;
+  int n = AG_N(d), n3 = AG_N3(d), lo = l * n, hi = lo + n;
+  double *s = d->ps + (size_t)n3 * i; /* levels < l - 1 complete from earlier sweeps */
+  const double *G = d->G + (size_t)n3 * n3 * i;
+  (void)wk;
+  for (int r = lo; r < hi; ++r) s[r] = 0.0;
+  for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
+    int j = p->idx[q];
+    const double *zj = a->z + (size_t)n3 * j;
+    double wq = p->w[q];
+    if (dep[j] < dep[i])
+      for (int r = lo; r < hi; ++r) s[r] += wq * zj[r];
+    else if (l > 0)
+      for (int r = lo - n; r < lo; ++r) s[r] += wq * zj[r];
+  }
+  for (int r = lo; r < hi; ++r) {
+    double acc = a->u[(size_t)n3 * i + r];
+    for (int q = 0; q < hi; ++q) acc += G[(size_t)q * n3 + r] * s[q];
+    a->z[(size_t)n3 * i + r] = acc;
+  }
+  return 0;
 }
 
 /* z = P^{-1} u level by level (cyclic topologies): P keeps every coupling of a level-l
-   row to the levels < l (E's, whole) and, within level l, the edges from lower waves;
+   row to the levels < l (E's, whole) and, within level l, the edges from lower depths;
    it drops only couplings of G_i's -c C_s D_i^{-1} B_s part (to higher levels, and the
    back edges within a level), which vanish with the step, instead of the back edges'
    E couplings that the agent-by-agent sweep drops */
 static void hitl_ag_levels(hitl_ag *d, int top, const double *u, double *z) {
-  const hitl_agents_problem *p = d->p;
-  const int *ord = p->order + (size_t)top * d->N;
-  const int *ptr = p->ptr + (size_t)top * (d->N + 1);
-  const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
-  const int *dep = p->depth + (size_t)top * d->N;
-  int n = AG_N(d), n3 = AG_N3(d);
-  for (int l = 0; l < 3; ++l) {
-    int lo = l * n, hi = lo + n;
-    for (int wv = 0; wv < p->nwaves[top]; ++wv) {
-#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8)
-      for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
-        int i = ord[oi];
-        double *s = d->ps + (size_t)n3 * i; /* levels < l - 1 complete from earlier sweeps */
-        const double *G = d->G + (size_t)n3 * n3 * i;
-        for (int r = lo; r < hi; ++r) s[r] = 0.0;
-        for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
-          int j = p->idx[q];
-          const double *zj = z + (size_t)n3 * j;
-          double wq = p->w[q];
-          if (dep[j] < wv) /* level l from the lower waves */
-            for (int r = lo; r < hi; ++r) s[r] += wq * zj[r];
-          else if (l > 0) /* level l - 1 from the agents sweep l - 1 had not reached */
-            for (int r = lo - n; r < lo; ++r) s[r] += wq * zj[r];
-        }
-        for (int r = lo; r < hi; ++r) {
-          double acc = u[(size_t)n3 * i + r];
-          for (int q = 0; q < hi; ++q) acc += G[(size_t)q * n3 + r] * s[q];
-          z[(size_t)n3 * i + r] = acc;
-        }
-      }
-    }
-  }
+  hitl_ag_uz a = {u, z};
+  hitl_ag_sweep(d, top, 3, hitl_ag_levels_step, &a);
 }
 
 static double hitl_dot(const double *a, const double *b, long n) {
@@ -678,26 +741,21 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
   return sqrt(hitl_dot(r, r, n)) <= tol ? 0 : -1;
 }
 
-/* Block forward substitution through the states along the waves of an acyclic
-   topology: D_i x_i = b_i - c (A_s0 x_0 + B_s dnb_i), then dj_i = C_0 x_0 + C_s x_i +
-   E dnb_i (x holds b on entry, the leader solved) */
+/* agent i of the forward substitution through the states: D_i x_i = b_i - c (A_s0 x_0 +
+   B_s dnb_i), then dj_i = C_0 x_0 + C_s x_i + E dnb_i (x holds b on entry, the leader
+   solved) */
+static int hitl_ag_forward_x_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int lev,
+                                  void *ctx) {
+  double *x = (double *)ctx, s[64];
+  double *xi = x + AG_M(d) + (size_t)AG_NA(d) * i;
+  (void)lev;
+  hitl_ag_gather(d, top, i, d->dj, s, 0, 3);
+  return hitl_ag_nsol(d, wk, i, x, s, xi, xi, d->dj + (size_t)AG_N3(d) * i);
+}
+
+/* Block forward substitution through the states along the order of an acyclic topology */
 static int hitl_ag_forward_x(hitl_ag *d, double *x) {
-  const hitl_agents_problem *p = d->p;
-  int m = AG_M(d), na = AG_NA(d), n3 = AG_N3(d), top = d->ls_top, fail = 0;
-  const int *ord = p->order + (size_t)top * d->N;
-  const int *wp = p->wave_ptr + (size_t)top * (d->N + 1);
-  for (int wv = 0; wv < p->nwaves[top]; ++wv) {
-#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1 && wp[wv + 1] - wp[wv] > 8) reduction(| : fail)
-    for (int oi = wp[wv]; oi < wp[wv + 1]; ++oi) {
-      int i = ord[oi];
-      double s[64];
-      double *xi = x + m + (size_t)na * i;
-      hitl_ag_gather(d, top, i, d->dj, s, 0, 3);
-      if (hitl_ag_nsol(d, hitl_ag_wk(d), i, x, s, xi, xi, d->dj + (size_t)n3 * i))
-        fail |= 1;
-    }
-  }
-  return fail ? -1 : 0;
+  return hitl_ag_sweep(d, d->ls_top, 1, hitl_ag_forward_x_step, x);
 }
 
 /* Set-up of M = I + c J: the leader's block factorised (dense, pivoting), every agent's
@@ -900,6 +958,7 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
   d->dnb = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->rj = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->z = (double *)calloc((size_t)nj + 1, sizeof(double));
+  d->done = (long *)calloc((size_t)N + 1, sizeof(long));
   if (p->solver == HITL_AG_DENSE) {
     d->S = (double *)calloc((size_t)nj * nj + 1, sizeof(double));
     d->Spiv = (int *)calloc((size_t)nj + 1, sizeof(int));
@@ -913,7 +972,7 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
     d->g = (double *)calloc((size_t)kr + 2, sizeof(double));
   }
   if (!d->fvals || !d->jets || !d->nb || !d->lu || !d->lul || !d->piv || !d->zero || !d->G || !d->Hm || !d->ps || !d->y ||
-      !d->dj || !d->dnb || !d->rj || !d->z || !d->V || !d->H || !d->cs || !d->sn || !d->g ||
+      !d->dj || !d->dnb || !d->rj || !d->z || !d->done || !d->V || !d->H || !d->cs || !d->sn || !d->g ||
       (p->solver == HITL_AG_DENSE && (!d->S || !d->Spiv)) || hitl_ag_work_alloc(d, sz)) {
     hitl_msg(c, "out of memory");
     return -1;
@@ -937,7 +996,7 @@ static void hitl_ag_free(hitl_ag *d, hitl_cvode *s) {
     }
   free(d->wk);
   free(d->fvals), free(d->jets), free(d->nb), free(d->lu), free(d->lul), free(d->piv), free(d->zero);
-  free(d->G), free(d->Hm), free(d->ps), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S);
+  free(d->G), free(d->Hm), free(d->ps), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S), free(d->done);
   free(d->Spiv), free(d->V), free(d->H), free(d->cs), free(d->sn), free(d->g);
   hitl_cvode_free(&d->base, s);
 }
