@@ -333,7 +333,7 @@ typedef int (*hitl_ag_step_fn)(hitl_ag *d, hitl_agwork *wk, int top, int i, int 
                                void *ctx);
 
 #ifndef HITL_AG_SWEEP_CHUNK
-#define HITL_AG_SWEEP_CHUNK 4 /* consecutive positions of the order one thread takes */
+#define HITL_AG_SWEEP_CHUNK 16 /* consecutive positions of the order one thread takes */
 #endif
 #ifndef HITL_AG_SWEEP_MIN
 #define HITL_AG_SWEEP_MIN 64 /* fewer agents: one thread (a region costs more) */
@@ -355,8 +355,12 @@ static void hitl_ag_wait(const long *done, int j, long need) {
    order is dealt out in chunks and each agent waits on its neighbours' flags instead of a
    barrier per wave. Every wait is on an item earlier in (level, position) and every
    thread takes its items in that order, so the least unfinished item is always ready.
-   An agent's result does not depend on the thread that computes it. Returns 0 or -1. */
-static int hitl_ag_sweep(hitl_ag *d, int top, int levels, hitl_ag_step_fn f, void *ctx) {
+   An agent's result does not depend on the thread that computes it. nbrows (N x n3, or
+   NULL): what a step reads of its neighbours, prefetched with their flags one item ahead
+   (another thread wrote them, and fetching them takes longer than one agent's work).
+   Returns 0 or -1. */
+static int hitl_ag_sweep(hitl_ag *d, int top, int levels, hitl_ag_step_fn f, void *ctx,
+                         const double *nbrows) {
   const hitl_agents_problem *p = d->p;
   const int *ord = p->order + (size_t)top * d->N;
   int N = d->N, fail = 0;
@@ -379,6 +383,16 @@ static int hitl_ag_sweep(hitl_ag *d, int top, int levels, hitl_ag_step_fn f, voi
       for (int c0 = th * HITL_AG_SWEEP_CHUNK; c0 < N; c0 += nt * HITL_AG_SWEEP_CHUNK)
         for (int oi = c0; oi < c0 + HITL_AG_SWEEP_CHUNK && oi < N; ++oi) {
           int i = ord[oi];
+          { /* the next item's neighbours: their flags and rows, written by other threads */
+            int on = oi + 1 < c0 + HITL_AG_SWEEP_CHUNK ? oi + 1 : c0 + nt * HITL_AG_SWEEP_CHUNK;
+            if (on < N) {
+              int inx = ord[on];
+              for (int q = ptr[inx]; q < ptr[inx + 1]; ++q) {
+                __builtin_prefetch(done + p->idx[q]);
+                if (nbrows) __builtin_prefetch(nbrows + (size_t)AG_N3(d) * p->idx[q]);
+              }
+            }
+          }
           for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
             int j = p->idx[q];
             hitl_ag_wait(done, j, ep + l + (dep[j] < dep[i]));
@@ -427,7 +441,7 @@ static int hitl_ag_wave_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int le
 static int hitl_ag_wave_pass(hitl_ag *d, int top, double t, const double *y, double *ydot,
                              double *K) {
   hitl_ag_at a = {t, y, ydot, K};
-  return hitl_ag_sweep(d, top, 1, hitl_ag_wave_step, &a);
+  return hitl_ag_sweep(d, top, 1, hitl_ag_wave_step, &a, d->jets);
 }
 
 static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, double *K,
@@ -606,7 +620,7 @@ static int hitl_ag_forward_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int
 /* z = P^{-1} u: forward substitution along the order of an acyclic topology (exact) */
 static void hitl_ag_forward(hitl_ag *d, int top, const double *u, double *z) {
   hitl_ag_uz a = {u, z};
-  hitl_ag_sweep(d, top, 1, hitl_ag_forward_step, &a);
+  hitl_ag_sweep(d, top, 1, hitl_ag_forward_step, &a, z);
 }
 
 /* agent i's level l of the level-by-level preconditioner: its partial neighbour sums
@@ -647,7 +661,7 @@ static int hitl_ag_levels_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int 
    E couplings that the agent-by-agent sweep drops */
 static void hitl_ag_levels(hitl_ag *d, int top, const double *u, double *z) {
   hitl_ag_uz a = {u, z};
-  hitl_ag_sweep(d, top, 3, hitl_ag_levels_step, &a);
+  hitl_ag_sweep(d, top, 3, hitl_ag_levels_step, &a, z);
 }
 
 static double hitl_dot(const double *a, const double *b, long n) {
@@ -755,7 +769,7 @@ static int hitl_ag_forward_x_step(hitl_ag *d, hitl_agwork *wk, int top, int i, i
 
 /* Block forward substitution through the states along the order of an acyclic topology */
 static int hitl_ag_forward_x(hitl_ag *d, double *x) {
-  return hitl_ag_sweep(d, d->ls_top, 1, hitl_ag_forward_x_step, x);
+  return hitl_ag_sweep(d, d->ls_top, 1, hitl_ag_forward_x_step, x, d->dj);
 }
 
 /* Set-up of M = I + c J: the leader's block factorised (dense, pivoting), every agent's
