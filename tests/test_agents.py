@@ -338,7 +338,9 @@ def test_threads_give_the_serial_trajectory_on_a_swarm(build_root, kind):
     x = x0 + rng.normal(scale=0.2, size=prob.nx)
     b = rng.normal(size=prob.nx)
     for s in ("auto", "gmres") + (("forward",) if prob.acyclic else ()):
-        one = agents.probe([lib.path for lib in libs], prob, 0.1, x, 1e-2, b, agents.LinearSettings(s))
+        one = agents.probe(
+            [lib.path for lib in libs], prob, 0.1, x, 1e-2, b, agents.LinearSettings(s)
+        )
         two = agents.probe(
             [lib.path for lib in tlibs], prob, 0.1, x, 1e-2, b, agents.LinearSettings(s, threads=2)
         )
