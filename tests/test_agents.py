@@ -315,7 +315,7 @@ def test_threads_give_the_serial_results(cases, build_root):
 
 @pytest.mark.parametrize("kind", ["acyclic", "cyclic"])
 def test_threads_give_the_serial_trajectory_on_a_swarm(build_root, kind):
-    """N = 150: the sweeps along the order run as one region with flags, not waves.
+    """N = 80: the sweeps along the order run as one region with flags, not waves.
 
     Each agent computes from the same inputs whichever thread takes it, and the sweep
     waits for every input it reads, so two threads give the serial numbers bit for bit:
@@ -324,7 +324,7 @@ def test_threads_give_the_serial_trajectory_on_a_swarm(build_root, kind):
     """
     from benchmarks.agents import cyclic_variant
 
-    sc = _bench(150)
+    sc = _bench(80)  # above HITL_AG_SWEEP_MIN: the threaded sweep runs
     if kind == "cyclic":
         sc = cyclic_variant(sc)
     gains = bench_gains(sc)[0]
