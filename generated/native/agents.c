@@ -106,112 +106,6 @@ typedef struct {
   const int *depth;     /* ntop x N: each follower's wave */
 } hitl_agents_problem;
 
-/* The Jacobian: N blocks K_i (each its model's structural nonzeros, at p->koff[i]) of
-   the topology it was evaluated on, representing c J (+ I once shifted) */
-typedef struct {
-  double *K;
-  int refs;
-} hitl_kbuf;
-
-/* K is shared, not copied, by the matrices CVODE copies into each other (its saved
-   Jacobian and the Newton matrix): only the Jacobian evaluation writes K, and CVODE
-   copies the matrix it evaluated into the saved one right after; the shift c is kept
-   per matrix. */
-typedef struct {
-  long len;
-  hitl_kbuf *buf;
-  double *K; /* buf->K */
-  double c;
-  int shifted, top;
-} hitl_agmat;
-
-#define HITL_AGMAT(A) ((hitl_agmat *)(A)->content)
-
-static SUNMatrix_ID hitl_agmat_id(SUNMatrix A) {
-  (void)A;
-  return SUNMATRIX_CUSTOM;
-}
-
-static SUNMatrix hitl_agmat_new(long len, SUNContext ctx);
-
-static SUNMatrix hitl_agmat_clone(SUNMatrix A) {
-  return hitl_agmat_new(HITL_AGMAT(A)->len, A->sunctx);
-}
-
-static void hitl_kbuf_release(hitl_kbuf *b) {
-  if (b && --b->refs == 0) {
-    free(b->K);
-    free(b);
-  }
-}
-
-static void hitl_agmat_destroy(SUNMatrix A) {
-  if (!A) return;
-  if (A->content) {
-    hitl_kbuf_release(HITL_AGMAT(A)->buf);
-    free(A->content);
-    A->content = NULL;
-  }
-  SUNMatFreeEmpty(A);
-}
-
-/* the Jacobian evaluation that follows writes every entry of K: only the shift resets */
-static SUNErrCode hitl_agmat_zero(SUNMatrix A) {
-  hitl_agmat *m = HITL_AGMAT(A);
-  m->c = 1.0;
-  m->shifted = 0;
-  return SUN_SUCCESS;
-}
-
-static SUNErrCode hitl_agmat_copy(SUNMatrix A, SUNMatrix B) {
-  hitl_agmat *a = HITL_AGMAT(A), *b = HITL_AGMAT(B);
-  if (b->buf != a->buf) {
-    hitl_kbuf_release(b->buf);
-    b->buf = a->buf;
-    b->buf->refs++;
-    b->K = a->K;
-  }
-  b->c = a->c;
-  b->shifted = a->shifted;
-  b->top = a->top;
-  return SUN_SUCCESS;
-}
-
-static SUNErrCode hitl_agmat_scaleaddi(sunrealtype c, SUNMatrix A) {
-  hitl_agmat *m = HITL_AGMAT(A);
-  if (m->shifted) return SUN_ERR_NOT_IMPLEMENTED;
-  m->c *= c;
-  m->shifted = 1;
-  return SUN_SUCCESS;
-}
-
-static SUNMatrix hitl_agmat_new(long len, SUNContext ctx) {
-  SUNMatrix A = SUNMatNewEmpty(ctx);
-  hitl_agmat *m;
-  if (!A) return NULL;
-  m = (hitl_agmat *)calloc(1, sizeof *m);
-  if (m) m->buf = (hitl_kbuf *)calloc(1, sizeof *m->buf);
-  if (m && m->buf) m->buf->K = (double *)calloc((size_t)len + 1, sizeof(double));
-  if (!m || !m->buf || !m->buf->K) {
-    if (m) free(m->buf);
-    free(m);
-    SUNMatFreeEmpty(A);
-    return NULL;
-  }
-  m->buf->refs = 1;
-  m->K = m->buf->K;
-  m->len = len;
-  m->c = 1.0;
-  A->content = m;
-  A->ops->getid = hitl_agmat_id;
-  A->ops->clone = hitl_agmat_clone;
-  A->ops->destroy = hitl_agmat_destroy;
-  A->ops->zero = hitl_agmat_zero;
-  A->ops->copy = hitl_agmat_copy;
-  A->ops->scaleaddi = hitl_agmat_scaleaddi;
-  return A;
-}
-
 /* The sizes of one follower, known when the driver is compiled with its model
    (generated/agent_kernels.py defines them; hitl_ag_init checks them against the
    problem), so the small per-agent loops unroll. 0: read at run time. */
@@ -517,7 +411,7 @@ static int hitl_ag_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data) {
 static int hitl_ag_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, void *data,
                        N_Vector t1, N_Vector t2, N_Vector t3) {
   hitl_ag *d = (hitl_ag *)data;
-  hitl_agmat *M = HITL_AGMAT(J);
+  hitl_kmat *M = HITL_KMAT(J);
   (void)fy; (void)t1; (void)t2; (void)t3;
   d->base.n_jac++;
   M->c = 1.0;
@@ -778,7 +672,7 @@ static int hitl_ag_forward_x(hitl_ag *d, double *x) {
    factorises the jets system. */
 static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
   hitl_ag *d = (hitl_ag *)S->content;
-  hitl_agmat *M = HITL_AGMAT(A);
+  hitl_kmat *M = HITL_KMAT(A);
   int m = AG_M(d), na = AG_NA(d), n3 = AG_N3(d), N = d->N, fail = 0;
   double c = M->c;
   if (!M->shifted) return -1; /* CVODE always hands over I - gamma J */
@@ -992,7 +886,7 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
     return -1;
   }
   if (hitl_sundials_create(c, s, nx, log_path)) return -1;
-  s->A = hitl_agmat_new((long)p->koff[N], s->ctx);
+  s->A = hitl_kmat_new((long)p->koff[N], s->ctx);
   if (!s->A) {
     hitl_msg(c, "out of memory");
     return -1;

@@ -3,8 +3,9 @@
  * includes, the context shared by the drivers, the custom direct SUNLinearSolver that
  * factorises M = I - gamma J with the generated nat_lu_factor / nat_lu_solve (sparse
  * LU without pivoting, generated/sparse_lu.py), CVODE's counters and the SUNDIALS
- * version/index check. Prepended to driver.c (whole closed loop) or dag.c (follower by
- * follower in graph order), both method 'native'; the generated C comes first. The
+ * version/index check, and the per-follower block matrix of the graph-ordered drivers.
+ * Prepended to driver.c (whole closed loop), dag.c (follower by follower in graph
+ * order) or agents.c (per-agent kernels, any graph); the generated C comes first. The
  * drivers' entry points take hitl_options and fill hitl_result (hitl_native.h).
  */
 #include <math.h>
@@ -299,6 +300,115 @@ static void hitl_cvode_free(hitl_ctx *c, hitl_cvode *s) {
   if (s->log) fclose(s->log), s->log = NULL;
   free(c->arg), free(c->res), free(c->iw), free(c->w), free(c->lu), free(c->piv);
   free(c->jcol), free(c->jrow);
+}
+
+/* ------------------------------------------------- the per-follower block matrix */
+/* The Jacobian of the graph-ordered drivers (dag.c, agents.c): one block K_i per
+   follower, laid out by the driver, representing c J (+ I once shifted). */
+typedef struct {
+  double *K;
+  int refs;
+} hitl_kbuf;
+
+/* K is shared, not copied, by the matrices CVODE copies into each other (its saved
+   Jacobian and the Newton matrix): only the Jacobian evaluation writes K, and it writes
+   every entry; CVODE copies the matrix it evaluated into the saved one right after. The
+   shift c (and top, the topology K was evaluated on: agents.c) is kept per matrix. */
+typedef struct {
+  long len;
+  hitl_kbuf *buf;
+  double *K; /* buf->K */
+  double c;
+  int shifted, top;
+} hitl_kmat;
+
+#define HITL_KMAT(A) ((hitl_kmat *)(A)->content)
+
+static SUNMatrix_ID hitl_kmat_id(SUNMatrix A) {
+  (void)A;
+  return SUNMATRIX_CUSTOM;
+}
+
+static SUNMatrix hitl_kmat_new(long len, SUNContext ctx);
+
+static SUNMatrix hitl_kmat_clone(SUNMatrix A) {
+  return hitl_kmat_new(HITL_KMAT(A)->len, A->sunctx);
+}
+
+static void hitl_kbuf_release(hitl_kbuf *b) {
+  if (b && --b->refs == 0) {
+    free(b->K);
+    free(b);
+  }
+}
+
+static void hitl_kmat_destroy(SUNMatrix A) {
+  if (!A) return;
+  if (A->content) {
+    hitl_kbuf_release(HITL_KMAT(A)->buf);
+    free(A->content);
+    A->content = NULL;
+  }
+  SUNMatFreeEmpty(A);
+}
+
+/* the Jacobian evaluation that follows writes every entry of K: only the shift resets */
+static SUNErrCode hitl_kmat_zero(SUNMatrix A) {
+  hitl_kmat *m = HITL_KMAT(A);
+  m->c = 1.0;
+  m->shifted = 0;
+  return SUN_SUCCESS;
+}
+
+static SUNErrCode hitl_kmat_copy(SUNMatrix A, SUNMatrix B) {
+  hitl_kmat *a = HITL_KMAT(A), *b = HITL_KMAT(B);
+  if (b->buf != a->buf) {
+    hitl_kbuf_release(b->buf);
+    b->buf = a->buf;
+    b->buf->refs++;
+    b->K = a->K;
+  }
+  b->c = a->c;
+  b->shifted = a->shifted;
+  b->top = a->top;
+  return SUN_SUCCESS;
+}
+
+/* A = c A + I: CVODE calls it once on a fresh copy of the Jacobian */
+static SUNErrCode hitl_kmat_scaleaddi(sunrealtype c, SUNMatrix A) {
+  hitl_kmat *m = HITL_KMAT(A);
+  if (m->shifted) return SUN_ERR_NOT_IMPLEMENTED;
+  m->c *= c;
+  m->shifted = 1;
+  return SUN_SUCCESS;
+}
+
+/* A block matrix of len entries (zero), or NULL when out of memory */
+static SUNMatrix hitl_kmat_new(long len, SUNContext ctx) {
+  SUNMatrix A = SUNMatNewEmpty(ctx);
+  hitl_kmat *m;
+  if (!A) return NULL;
+  m = (hitl_kmat *)calloc(1, sizeof *m);
+  if (m) m->buf = (hitl_kbuf *)calloc(1, sizeof *m->buf);
+  if (m && m->buf) m->buf->K = (double *)calloc((size_t)len + 1, sizeof(double));
+  if (!m || !m->buf || !m->buf->K) {
+    if (m) free(m->buf);
+    free(m);
+    SUNMatFreeEmpty(A);
+    return NULL;
+  }
+  m->buf->refs = 1;
+  m->K = m->buf->K;
+  m->len = len;
+  m->c = 1.0;
+  A->content = m;
+  A->ops->getid = hitl_kmat_id;
+  A->ops->clone = hitl_kmat_clone;
+  A->ops->destroy = hitl_kmat_destroy;
+  A->ops->zero = hitl_kmat_zero;
+  A->ops->copy = hitl_kmat_copy;
+  A->ops->scaleaddi = hitl_kmat_scaleaddi;
+  return A;
 }
 
 /* sizeof of the structs of hitl_native.h as compiled here (which: HITL_*_SIZE), or -1:

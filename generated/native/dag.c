@@ -34,84 +34,7 @@ SUNDIALS_EXPORT sunindextype SUNDlsMat_denseGETRF(sunrealtype **a, sunindextype 
 SUNDIALS_EXPORT void SUNDlsMat_denseGETRS(sunrealtype **a, sunindextype n, sunindextype *p,
                                           sunrealtype *b);
 
-/* The Jacobian as N blocks K_i (k x k, column-major), representing c J (+ I if shifted) */
-typedef struct {
-  long len; /* N * k * k */
-  double *K;
-  double c;
-  int shifted;
-} hitl_dagmat;
-
-#define HITL_DAGMAT(A) ((hitl_dagmat *)(A)->content)
-
-static SUNMatrix_ID hitl_dagmat_id(SUNMatrix A) {
-  (void)A;
-  return SUNMATRIX_CUSTOM;
-}
-
-static SUNMatrix hitl_dagmat_new(long len, SUNContext ctx);
-
-static SUNMatrix hitl_dagmat_clone(SUNMatrix A) {
-  return hitl_dagmat_new(HITL_DAGMAT(A)->len, A->sunctx);
-}
-
-static void hitl_dagmat_destroy(SUNMatrix A) {
-  if (!A) return;
-  if (A->content) {
-    free(HITL_DAGMAT(A)->K);
-    free(A->content);
-    A->content = NULL;
-  }
-  SUNMatFreeEmpty(A);
-}
-
-static SUNErrCode hitl_dagmat_zero(SUNMatrix A) {
-  hitl_dagmat *m = HITL_DAGMAT(A);
-  memset(m->K, 0, sizeof(double) * (size_t)m->len);
-  m->c = 1.0;
-  m->shifted = 0;
-  return SUN_SUCCESS;
-}
-
-static SUNErrCode hitl_dagmat_copy(SUNMatrix A, SUNMatrix B) {
-  hitl_dagmat *a = HITL_DAGMAT(A), *b = HITL_DAGMAT(B);
-  memcpy(b->K, a->K, sizeof(double) * (size_t)a->len);
-  b->c = a->c;
-  b->shifted = a->shifted;
-  return SUN_SUCCESS;
-}
-
-/* A = c A + I: CVODE calls it once on a fresh copy of the Jacobian */
-static SUNErrCode hitl_dagmat_scaleaddi(sunrealtype c, SUNMatrix A) {
-  hitl_dagmat *m = HITL_DAGMAT(A);
-  if (m->shifted) return SUN_ERR_NOT_IMPLEMENTED;
-  m->c *= c;
-  m->shifted = 1;
-  return SUN_SUCCESS;
-}
-
-static SUNMatrix hitl_dagmat_new(long len, SUNContext ctx) {
-  SUNMatrix A = SUNMatNewEmpty(ctx);
-  hitl_dagmat *m;
-  if (!A) return NULL;
-  m = (hitl_dagmat *)calloc(1, sizeof *m);
-  if (m) m->K = (double *)calloc((size_t)len + 1, sizeof(double));
-  if (!m || !m->K) {
-    free(m);
-    SUNMatFreeEmpty(A);
-    return NULL;
-  }
-  m->len = len;
-  m->c = 1.0;
-  A->content = m;
-  A->ops->getid = hitl_dagmat_id;
-  A->ops->clone = hitl_dagmat_clone;
-  A->ops->destroy = hitl_dagmat_destroy;
-  A->ops->zero = hitl_dagmat_zero;
-  A->ops->copy = hitl_dagmat_copy;
-  A->ops->scaleaddi = hitl_dagmat_scaleaddi;
-  return A;
-}
+/* The Jacobian: a hitl_kmat (common.c) of N blocks K_i, k x k, column-major */
 
 typedef struct {
   hitl_ctx base; /* first member */
@@ -183,7 +106,7 @@ static int hitl_dag_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data) {
 static int hitl_dag_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, void *data,
                         N_Vector t1, N_Vector t2, N_Vector t3) {
   hitl_dag *d = (hitl_dag *)data;
-  hitl_dagmat *M = HITL_DAGMAT(J);
+  hitl_kmat *M = HITL_KMAT(J);
   (void)fy; (void)t1; (void)t2; (void)t3;
   d->base.n_jac++;
   M->c = 1.0;
@@ -195,7 +118,7 @@ static int hitl_dag_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, voi
    rows and columns 0..m-1) and every follower's A_ss. */
 static int hitl_dag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
   hitl_dag *d = (hitl_dag *)S->content;
-  hitl_dagmat *M = HITL_DAGMAT(A);
+  hitl_kmat *M = HITL_KMAT(A);
   int m = d->m, na = d->na, k = d->k;
   double c = M->c;
   if (!M->shifted) return -1; /* CVODE always hands over I - gamma J */
@@ -224,7 +147,7 @@ static int hitl_dag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
 static int hitl_dag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vector bv,
                              sunrealtype tol) {
   hitl_dag *d = (hitl_dag *)S->content;
-  hitl_dagmat *M = HITL_DAGMAT(A);
+  hitl_kmat *M = HITL_KMAT(A);
   int m = d->m, na = d->na, k = d->k, n3 = d->n3, N = d->N;
   double c = M->c, *x = N_VGetArrayPointer(xv);
   const double *b = N_VGetArrayPointer(bv);
@@ -300,7 +223,7 @@ static int hitl_dag_init(hitl_dag *d, hitl_cvode *s, const hitl_dag_problem *p, 
     return -1;
   }
   if (hitl_sundials_create(c, s, nx, log_path)) return -1;
-  s->A = hitl_dagmat_new((long)N * d->k * d->k, s->ctx);
+  s->A = hitl_kmat_new((long)N * d->k * d->k, s->ctx);
   if (!s->A) {
     hitl_msg(c, "out of memory");
     return -1;
