@@ -73,7 +73,7 @@ SLOW_MODULES = frozenset(
 )
 
 #: single tests of quick modules that take tens of seconds (a large sample's statistics)
-SLOW_TESTS = frozenset({"test_truncated_normal_bounds_and_analytic_mean"})
+SLOW_TESTS: frozenset[str] = frozenset()
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
