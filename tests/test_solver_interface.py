@@ -189,18 +189,23 @@ def test_a_method_registered_in_a_test_runs_through_the_api(tmp_path, toy_method
     """Registered here only, the method runs through api.run; CVODES is the second
     implementation it must agree with (both at tight tolerances, test_sim_api's bound)."""
     path = _small(tmp_path)
-    text = path.read_text()
-    for key, loose in (("rtol", "1e-8"), ("atol", "1e-10"), ("max_steps", "20000")):
-        assert f"\n{key} = {loose}\n" in text
-        text = text.replace(f"\n{key} = {loose}\n", f"\n{key} = {TIGHT[key]}\n")
-    path.write_text(text)  # one run at tight tolerances through api.run, compared below
+    # one run at tight tolerances through api.run (the file's own are looser), compared below
+    tight = {f"integration.{k}": TIGHT[k] for k in ("rtol", "atol", "max_steps")}
     cg = CodegenSettings(optimization="-O0", build_root=str(tmp_path / "build"))
     out = tmp_path / "out"
-    res = api.run(path, method=toy_method.name, codegen=cg, out_root=out, progress=False)
+    res = api.run(
+        path,
+        overrides=tight,
+        variant="tight",
+        method=toy_method.name,
+        codegen=cg,
+        out_root=out,
+        progress=False,
+    )
     assert res.trajectory.complete and res.trajectory.method == toy_method.name
     assert res.meta["method"] == toy_method.name
-    assert (out / "small" / "trajectory.csv").is_file()
-    sc = api.load(path)
+    assert (out / "small-tight" / "trajectory.csv").is_file()
+    sc = api.load(path, tight, "tight")
     gains, _ = api.ensure_gains(sc, out)
     s = api.integrator_settings(sc, "cvodes", cg)
     assert (s.rtol, s.atol, s.max_steps) == (TIGHT["rtol"], TIGHT["atol"], TIGHT["max_steps"])
