@@ -165,6 +165,14 @@ class Trajectory:
         SUNDIALS' warnings and errors of the run, one line each (``[WARNING][CVode]
         text (cvode.c:line)``; the native drivers), empty when there were none; counted
         by :func:`sundials_messages`.
+    t_stop : float
+        Where the integrator stood when it returned (the native drivers; NaN for the
+        others): on a failure CVODE's last internal step, between ``t_reached`` and the
+        next output time; the horizon for a complete run.
+    x_stop : ndarray or None, shape (nx,)
+        The state at ``t_stop`` (the native drivers; None for the others). On a failure it tells a state that ran away from an integrator
+        that stalled on a tame one, which the output rows, ending at ``t_reached``,
+        cannot.
     """
 
     t: np.ndarray
@@ -176,6 +184,8 @@ class Trajectory:
     message: str
     stats: dict[str, float] = field(default_factory=dict)
     sundials_log: str = ""
+    t_stop: float = math.nan
+    x_stop: np.ndarray | None = None
 
     @property
     def complete(self) -> bool:

@@ -118,9 +118,11 @@ class Result(ctypes.Structure):
 
     _fields_ = [
         ("x_out", _DP),
+        ("x_stop", _DP),
         ("filled", ctypes.c_int),
         ("flag", ctypes.c_int),
         ("t_reached", ctypes.c_double),
+        ("t_stop", ctypes.c_double),
         ("last_step", ctypes.c_double),
         *((name, ctypes.c_long) for name in COUNTERS),
         ("msg", ctypes.c_char * MSG_LEN),
@@ -375,9 +377,11 @@ class DriverCall:
         The run's output times, targets and restart times.
     options : Options
     result : Result
-        ``result.x_out`` points into :attr:`X`.
+        ``result.x_out`` points into :attr:`X`, ``result.x_stop`` into :attr:`x_stop`.
     X : ndarray, shape (len(t_out), nx)
         The output rows, NaN where not filled.
+    x_stop : ndarray, shape (nx,)
+        The state CVODE held when it returned (at ``result.t_stop``).
     log : Path or None
         The temporary file the driver appends SUNDIALS' messages to; read into
         ``Trajectory.sundials_log`` and removed by :meth:`trajectory`.
@@ -387,6 +391,7 @@ class DriverCall:
     options: Options
     result: Result
     X: np.ndarray
+    x_stop: np.ndarray
     _keep: tuple[np.ndarray, ...]
     #: the temporary file the driver appends SUNDIALS' messages to (``options.log_path``)
     log: Path | None = None
@@ -420,6 +425,7 @@ class DriverCall:
         tq = np.ascontiguousarray(sched.targets, dtype=float)
         bps = np.ascontiguousarray(sched.breaks, dtype=float)
         X = np.full((len(sched.t_out), nx), np.nan)
+        x_stop = np.full(nx, np.nan)
         options = Options(
             rtol=float(settings.rtol),
             atol=float(settings.atol),
@@ -433,7 +439,8 @@ class DriverCall:
         )
         log = new_sundials_log()
         options.log_path = str(log).encode()
-        return cls(sched, options, Result(x_out=dptr(X)), X, (tq, bps, pv), log)
+        result = Result(x_out=dptr(X), x_stop=dptr(x_stop))
+        return cls(sched, options, result, X, x_stop, (tq, bps, pv), log)
 
     def trajectory(
         self, method: str, wall0: float, progress: Callable[[float], None] | None = None
@@ -447,7 +454,8 @@ class DriverCall:
         """
         log = take_sundials_log(self.log)  # SUNDIALS' messages; the temporary file removed
         tr = driver_trajectory(method, self.sched.t_out, self.X, self.result, wall0, progress)
-        return replace(tr, sundials_log=log)
+        stop = dict(t_stop=float(self.result.t_stop), x_stop=self.x_stop.copy())
+        return replace(tr, sundials_log=log, **stop)
 
 
 def run(

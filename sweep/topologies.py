@@ -18,9 +18,12 @@ the synthesis stage may find a larger w with its best diagonal Z, so ``False`` h
 
 Per sample: N, links, whether a topology has a cycle, link losses, w_min, theorem1,
 CVODE's status and counters (an incomplete run: the time it reached and CVODE's
-message, also listed in the report), the integration time, the library key(s) and whether
-they were compiled for this sample, and the observer's tail error max |η_i − η0| over
-the last quarter of the horizon. Output: ``out/topologies/results.csv`` and
+message, also listed in the report), where CVODE stood when it returned (``t_stop``)
+with the largest state there (``stop_state``, ``stop_abs``) against the largest of the
+output rows (``rows_abs``) — a state that ran away, or an integrator stalled on a tame
+one — the integration time, the library key(s) and whether they were compiled for this
+sample, and the observer's tail error max |η_i − η0| over the last quarter of the
+horizon. Output: ``out/topologies/results.csv`` and
 ``report.md`` (counts, timing, the libraries used).
 """
 
@@ -103,6 +106,7 @@ def _run_one(sample: Any) -> dict[str, Any]:
         if len(X)
         else np.nan
     )
+    k_stop = int(np.argmax(np.nan_to_num(np.abs(tr.x_stop), nan=np.inf)))
     return {
         **row,
         "N": sc.N,
@@ -114,6 +118,10 @@ def _run_one(sample: Any) -> dict[str, Any]:
         "status": "complete" if tr.complete else "incomplete",
         "t_reached": float(tr.t_reached),
         "message": "" if tr.complete else tr.message,
+        "t_stop": float(tr.t_stop),
+        "stop_state": lay.name_of(k_stop),
+        "stop_abs": float(abs(tr.x_stop[k_stop])),
+        "rows_abs": float(np.nanmax(np.abs(tr.x))),
         "steps": int(tr.stats["steps"]),
         "prepare_s": round(t1 - t0, 4),
         "simulate_s": round(t2 - t1, 4),
@@ -196,7 +204,8 @@ def report(rows: list[dict], wall: float, path: str) -> str:
     compiled = [r["sample"] for r in ran if r["compiled"]]
     sim = np.array([r["simulate_s"] for r in ran]) if ran else np.zeros(1)
     thm = [r for r in ran if r["theorem1"]]
-    err = np.array([r["tail_obs_err"] for r in comp]) if comp else np.zeros(1)
+    err = np.array([r["tail_obs_err"] for r in comp])
+    tail = f"median {np.median(err):.2e}, max {err.max():.2e}" if comp else "no complete run"
     lines = [
         f"# Topology study ({path})",
         "",
@@ -212,16 +221,24 @@ def report(rows: list[dict], wall: float, path: str) -> str:
         f"- libraries: {len(libs)} ({', '.join(libs)}); compiled for sample(s) "
         f"{compiled or 'none (all from the cache)'}",
         f"- Theorem 1 shown with the paper's z: {len(thm)} of {len(ran)}",
-        f"- observer tail error max |η_i − η0| (complete runs): median {np.median(err):.2e}, "
-        f"max {err.max():.2e}",
+        f"- observer tail error max |η_i − η0| (complete runs): {tail}",
     ]
     lines += [
         f"- incomplete: sample {r['sample']} (N = {r['N']}) stopped at t = "
-        f"{r['t_reached']:.4g} s: {r['message']}"
+        f"{r['t_reached']:.4g} s: {r['message']}" + _stop_text(r)
         for r in ran
         if r["status"] != "complete"
     ]
     return "\n".join(lines) + "\n"
+
+
+def _stop_text(r: dict) -> str:
+    """Where CVODE stood when it gave up, against the largest state of the rows before."""
+    return (
+        f"; at CVODE's last step, t = {r['t_stop']:.7g} s, the largest state is "
+        f"{r['stop_state']} = {r['stop_abs']:.3g} in magnitude (at most {r['rows_abs']:.3g} "
+        "in the output rows before)"
+    )
 
 
 def _csv(rows: list[dict]) -> str:

@@ -79,6 +79,22 @@ class StateLayout:
             out[name] = blocks[:, sl].copy()
         return out
 
+    def name_of(self, k: int) -> str:
+        """The name of entry ``k`` of x: ``"eta0[j]"`` or ``"q[j] of follower i"`` (1-based i).
+
+        Parameters
+        ----------
+        k : int
+            0-based index into x.
+        """
+        if not 0 <= k < self.nx:
+            raise IndexError(f"state index {k} outside 0..{self.nx - 1}")
+        if k < self.m:
+            return f"eta0[{k}]"
+        i, r = divmod(k - self.m, self.agent_size)
+        name, sl = next((n, s) for n, s in self.agent_offsets.items() if s.start <= r < s.stop)
+        return f"{name}[{r - sl.start}] of follower {i + 1}"
+
     def pack(self, parts: dict[str, np.ndarray]) -> np.ndarray:
         """Inverse of :meth:`unpack`; every name of the layout must be present.
 

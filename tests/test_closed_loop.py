@@ -355,6 +355,17 @@ def test_layout_round_trip():
     assert np.array_equal(lay.get(cl.x0, "p", 3), sc.followers[3].p0)
     names = {k[0] for k in lay.slices if isinstance(k, tuple)}
     assert names == {"mu", "eta", "phi", "p", "q", "thetahat", "ghat"}
+    # every entry's name points back at it through get()
+    for k in range(lay.nx):
+        label = lay.name_of(k)
+        if label.startswith("eta0["):
+            assert lay.get(x, "eta0")[int(label[5:-1])] == k
+            continue
+        part, _, who = label.partition(" of follower ")
+        name, j = part[:-1].split("[")
+        assert lay.get(x, name, int(who) - 1)[int(j)] == k
+    with pytest.raises(IndexError, match="outside"):
+        lay.name_of(lay.nx)
 
 
 def test_formation_start(tmp_path):

@@ -104,6 +104,25 @@ def test_linear_ode_matches_matrix_exponential_across_breakpoints(cg):
         native.run(lib.path, np.zeros(2), tg, s)
 
 
+def test_a_run_returns_the_state_where_cvode_stood(cg):
+    """A run that gives up hands back CVODE's last step (t_stop, x_stop), past the rows.
+
+    Truth: the matrix exponential at t_stop. A complete run stands at the horizon.
+    """
+    t, x = ca.SX.sym("t"), ca.SX.sym("x", 3)
+    lib = native.build(ode("lin", t, x, ca.mtimes(ca.DM(A_LIN), x)), cg)
+    tg, x0 = output_grid(2.0, 0.5), np.array([1.0, 0.0, 1.0])
+    s = IntegratorSettings(method="native", rtol=1e-10, atol=1e-12, max_steps=40)
+    tr = native.run(lib.path, x0, tg, s)
+    assert not tr.complete
+    assert tr.t_reached < tr.t_stop < tg[len(tr.t)]  # between the last row and the next
+    np.testing.assert_allclose(tr.x_stop, expm(A_LIN * tr.t_stop) @ x0, rtol=1e-7, atol=1e-9)
+    assert np.abs(tr.x_stop - tr.x[-1]).max() > 1e-3  # not the last output row
+    done = native.run(lib.path, x0, tg, dataclasses.replace(s, max_steps=100_000))
+    assert done.complete and done.t_stop == tg[-1]
+    assert np.array_equal(done.x_stop, done.x[-1])
+
+
 def test_discontinuity_at_a_breakpoint_is_resolved_exactly(cg):
     """ẋ = 1 before t = 0.505, −2 after (not an output time): x = t, then 0.505 − 2(t − 0.505)."""
     t, x = ca.SX.sym("t"), ca.SX.sym("x", 1)

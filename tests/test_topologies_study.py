@@ -8,12 +8,17 @@ why (named in the report), never a crash of the study.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
+import numpy as np
 import pytest
 
-from generated import agents
+from generated import agents, api
+from generated.codegen import CodegenSettings
 from generated.solvers import Status
 from sweep import topologies
+from sweep.sampler import make_sample
+from sweep.study import load_study
 
 STUDY = "studies/topologies.toml"
 
@@ -30,6 +35,42 @@ def test_one_library_for_every_graph(rows):
     assert len({r["library"] for r in ran}) == 1
     assert [r["compiled"] for r in ran] == [True] + [False] * (len(ran) - 1)
     assert all(r["status"] == "complete" and r["t_reached"] == 20.0 for r in ran)
+
+
+def test_a_run_that_gives_up_reports_where_cvode_stood(tmp_path):
+    """A real stop (too few steps allowed): the row and the report name CVODE's last state.
+
+    Truth: a second run of the same sample, to t_stop, with the steps it needs.
+    """
+    study = Path(STUDY).read_text().replace("count = 1000", "count = 1")
+    base = Path("scenarios/paper.toml").resolve().as_posix()
+    study = study.replace('base = "../scenarios/paper.toml"', f'base = "{base}"')
+    path = tmp_path / "few-steps.toml"
+    path.write_text(study + '\n[set]\n"integration.max_steps" = 1000\n')
+    (row,) = topologies.run_study(str(path), 1, 1, None)
+    assert row["status"] == "incomplete"
+    assert row["t_reached"] < row["t_stop"] < row["t_reached"] + 0.01  # the output step
+    sample = make_sample(load_study(str(path)), 0)
+    sc = sample.scenario
+    gains, _, _ = topologies.sample_gains(api.scenario_gains(sc, "gains"), sc)
+    libs, model = agents.build_models(sc, gains, CodegenSettings())
+    settings = api.integrator_settings(sc, "native", CodegenSettings())
+    tr = agents.run(
+        [lib.path for lib in libs],
+        agents.problem(sc, gains, model),
+        agents.initial_state(sc),
+        np.array([0.0, row["t_stop"]]),
+        dataclasses.replace(settings, max_steps=200_000),
+    )
+    lay = agents.make_layout(sc.m, sc.n, sc.N, False)
+    k = int(np.argmax(np.abs(tr.x[-1])))
+    assert row["stop_state"] == lay.name_of(k)
+    assert row["stop_abs"] == pytest.approx(abs(tr.x[-1, k]), rel=1e-3)
+    assert row["rows_abs"] == np.abs(agents.initial_state(sc)).max()  # the only row: x(0)
+    assert row["stop_abs"] > 2 * row["rows_abs"]  # so x(0) in its place would fail above
+    text = topologies.report([row], 1.0, str(path))
+    assert f"the largest state is {row['stop_state']} = " in text
+    assert "(complete runs): no complete run" in text
 
 
 def test_an_integration_that_stops_early_is_an_incomplete_row(rows, monkeypatch, tmp_path):

@@ -182,6 +182,7 @@ static int hitl_cvode_outputs(hitl_cvode *s, int nx, const hitl_options *o, hitl
         tstop_set = stop;
       }
       *flag = CVode(s->mem, tout < stop ? tout : stop, s->y, &t, CV_NORMAL);
+      r->t_stop = t; /* on a failure CVODE returns its last internal step's state in y */
       if (*flag < 0) return filled;
       if (t >= stop) {
         tstop_set = NAN; /* CVODE forgets a stop time once reached */
@@ -248,9 +249,10 @@ static void hitl_stats(const hitl_ctx *c, const long *acc, double last_step, int
 
 /* A driver's result before the run: zero counters, an empty message, x_out kept */
 static void hitl_result_start(hitl_result *r) {
-  double *x_out = r->x_out;
+  double *x_out = r->x_out, *x_stop = r->x_stop;
   memset(r, 0, sizeof *r);
   r->x_out = x_out;
+  r->x_stop = x_stop;
   r->filled = -1;
 }
 
@@ -276,9 +278,12 @@ static int hitl_cvode_run(hitl_ctx *c, hitl_cvode *s, int ok, void *data, CVRhsF
   if (ok) {
     memcpy(N_VGetArrayPointer(s->y), x0, (size_t)nx * sizeof(double));
     memcpy(r->x_out, x0, (size_t)nx * sizeof(double));
+    r->t_stop = o->t_out[0];
     if (!CVodeInit(s->mem, rhs, o->t_out[0], s->y) &&
         !hitl_cvode_options(s, data, o, jac)) /* else: msg set by the error handler */
       filled = hitl_cvode_outputs(s, nx, o, r, acc, &flag);
+    if (filled >= 1 && r->x_stop)
+      memcpy(r->x_stop, N_VGetArrayPointer(s->y), (size_t)nx * sizeof(double));
   }
   if (s->mem) {
     hitl_add_counters(s->mem, acc);

@@ -29,12 +29,16 @@ typedef struct {
   const char *log_path; /* SUNDIALS' warnings and errors appended here (NULL: dropped) */
 } hitl_options;
 
-/* What a run returns: the output rows, CVODE's counters, its last flag and message. */
+/* What a run returns: the output rows, CVODE's counters, its last flag and message, and
+   the state CVODE held when it returned. */
 typedef struct {
   double *x_out;           /* caller's nt x nx buffer, row-major (x_out[k * nx + i]) */
+  double *x_stop;          /* caller's nx buffer (NULL: not wanted): the state at t_stop */
   int filled;              /* rows of x_out filled (>= 1), or -1 if CVODE could not start */
   int flag;                /* CVODE's last flag (< 0 on a failure) */
   double t_reached;        /* t_out[filled - 1] */
+  double t_stop;           /* where CVODE stood when it returned: on a failure its last
+                              internal step (past t_reached), else the horizon */
   double last_step;        /* the last step size taken */
   long steps;
   long rhs_evals;
