@@ -9,7 +9,9 @@
   bench_scenario`) on its random acyclic graph and on the same graph with random extra
   links until the mean in-degree is 3 (cyclic), with 1 and 2 threads;
 * the Newton solvers side by side (forward substitution, dense LU, GMRES) where each
-  applies.
+  applies, and on the cyclic graph a sparse direct solver (SuperLU) projected onto the
+  GMRES run's counters (:mod:`benchmarks.sparse_direct`): its linear algebra alone
+  for the same steps, against the GMRES run's whole time.
 
 Results: the table on stdout and ``out/bench/agents.csv``. Each integration reports
 CVODE's counters; the wall time excludes the symbolic build, synthesis and gcc (listed
@@ -189,7 +191,30 @@ def large_rows(
                     )
                 )
                 print(rows[-1], flush=True)
+                if not prob.acyclic and solver in ("auto", "gmres"):
+                    rows.append(_direct_row(prob, rows[-1]))
+                    print(rows[-1], flush=True)
     return rows
+
+
+def _direct_row(prob: Any, gmres: dict[str, Any]) -> dict[str, Any]:
+    """SuperLU on the jets system of ``prob``'s first topology, projected onto the
+    counters of the GMRES run ``gmres`` (benchmarks/sparse_direct.py)."""
+    from benchmarks.sparse_direct import jets_matrix, superlu_cost
+
+    top = prob.topologies[0]
+    cost = superlu_cost(jets_matrix(top.ptr, top.idx, top.w, 3 * prob.n))
+    projected = cost.projected_s(gmres["lin_setups"], gmres["newton_iters"])
+    return {
+        "case": gmres["case"],
+        "method": "sparse direct (SuperLU, projected on the run above)",
+        "seconds": round(projected, 3),
+        "factor_ms": round(cost.factor_s * 1e3, 3),
+        "solve_ms": round(cost.solve_s * 1e3, 4),
+        "fill": cost.fill,
+        "two_cores": round(projected / 2, 3),
+        "ratio_to_gmres": round(projected / gmres["seconds"], 2),
+    }
 
 
 def _table(rows: list[dict[str, Any]]) -> str:
