@@ -36,22 +36,6 @@ DEFAULT_RTOLS = (1e-6, 1e-8)
 REFERENCE_METHOD, CHECK_METHOD = "native", "cvodes"
 
 
-def state_label(layout: Any, index: int) -> str:
-    """The name of state ``index`` as in the CSV columns (``p2_1``, ``eta0_2``; 1-based).
-
-    Parameters
-    ----------
-    layout : symbolic.closed_loop.StateLayout
-    index : int
-        0-based position in x.
-    """
-    for key, sl in layout.slices.items():
-        if sl.start <= index < sl.stop:
-            comp = index - sl.start + 1
-            return f"{key}_{comp}" if isinstance(key, str) else f"{key[0]}{key[1] + 1}_{comp}"
-    return f"x{index}"
-
-
 def relative_errors(x: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """``|x − ref| / max(1, |ref|)``, elementwise.
 
@@ -137,7 +121,7 @@ def precision_table(
                     "rhs_evals": tr.stats["rhs_evals"],
                     "max_err": float(e.max()),
                     "worst_t": float(tr.t[k]),
-                    "worst_state": state_label(layout, int(j)),
+                    "worst_state": layout.name_of(int(j)),
                     "max_err_after_1s": float(e[late].max()) if late.any() else np.nan,
                     "final_err": float(e[-1].max()) if tr.complete else np.nan,
                 }

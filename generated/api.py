@@ -47,7 +47,13 @@ from generated.codegen import (
     renamed,
 )
 from generated.gains_cache import GainsInfo, ensure_gains, scenario_gains
-from generated.integrate import IntegratorSettings, Trajectory, output_grid, sundials_summary
+from generated.integrate import (
+    IntegratorSettings,
+    Trajectory,
+    output_grid,
+    stop_note,
+    sundials_summary,
+)
 from generated.loaded import (
     BUILDS,
     DAE_NAME,
@@ -473,7 +479,9 @@ def simulate(
     -------
     Trajectory
         Incomplete (not raised) on an integrator failure (see
-        :func:`generated.integrate.integrate`).
+        :func:`generated.integrate.integrate`); a native run's message then ends with
+        the largest state where CVODE stood (:func:`generated.integrate.stop_note`, the
+        state named as its trajectory.csv column).
 
     Raises
     ------
@@ -483,7 +491,12 @@ def simulate(
     s = settings or integrator_settings(sc)
     t_out = output_grid(sc.integration.horizon, sc.integration.output_step)
     x0 = np.asarray(built.closed_loop.x0, dtype=float)
-    return integrate_built(built, x0, t_out, s, breakpoints(built, sc), progress)
+    traj = integrate_built(built, x0, t_out, s, breakpoints(built, sc), progress)
+    k = traj.largest_at_stop()
+    if traj.complete or k is None:
+        return traj
+    note = stop_note(traj.t_stop, built.closed_loop.layout.name_of(k), abs(traj.x_stop[k]))
+    return dataclasses.replace(traj, message=traj.message + note)
 
 
 def integrate_built(

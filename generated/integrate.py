@@ -192,10 +192,34 @@ class Trajectory:
         """True when every output time was reached (``status is Status.OK``)."""
         return self.status is Status.OK
 
+    def largest_at_stop(self) -> int | None:
+        """Index of the largest ``|x_stop|`` entry (a non-finite one first); None without it."""
+        if self.x_stop is None:
+            return None
+        return int(np.argmax(np.nan_to_num(np.abs(self.x_stop), nan=np.inf)))
+
     def raise_if_incomplete(self) -> None:
         """Raise :class:`IntegrationError` (with ``t_reached``) when incomplete."""
         if not self.complete:
             raise IntegrationError(self.message, self.t_reached)
+
+
+def stop_note(t_stop: float, state: str, value: float) -> str:
+    """The clause a failure's message gains: where CVODE stood and its largest state there.
+
+    Parameters
+    ----------
+    t_stop : float
+        ``Trajectory.t_stop``.
+    state : str
+        The name of the largest entry of ``x_stop`` (e.g. ``StateLayout.name_of``).
+    value : float
+        Its magnitude.
+    """
+    return (
+        f"; at CVODE's last step, t = {t_stop:.7g} s, the largest state is {state} = "
+        f"{value:.3g} in magnitude"
+    )
 
 
 def output_grid(horizon: float, output_step: float) -> np.ndarray:

@@ -106,7 +106,7 @@ def _run_one(sample: Any) -> dict[str, Any]:
         if len(X)
         else np.nan
     )
-    k_stop = int(np.argmax(np.nan_to_num(np.abs(tr.x_stop), nan=np.inf)))
+    k_stop = tr.largest_at_stop()
     return {
         **row,
         "N": sc.N,
@@ -234,11 +234,10 @@ def report(rows: list[dict], wall: float, path: str) -> str:
 
 def _stop_text(r: dict) -> str:
     """Where CVODE stood when it gave up, against the largest state of the rows before."""
-    return (
-        f"; at CVODE's last step, t = {r['t_stop']:.7g} s, the largest state is "
-        f"{r['stop_state']} = {r['stop_abs']:.3g} in magnitude (at most {r['rows_abs']:.3g} "
-        "in the output rows before)"
-    )
+    from generated.integrate import stop_note
+
+    note = stop_note(r["t_stop"], r["stop_state"], r["stop_abs"])
+    return f"{note} (at most {r['rows_abs']:.3g} in the output rows before)"
 
 
 def _csv(rows: list[dict]) -> str:

@@ -80,7 +80,10 @@ class StateLayout:
         return out
 
     def name_of(self, k: int) -> str:
-        """The name of entry ``k`` of x: ``"eta0[j]"`` or ``"q[j] of follower i"`` (1-based i).
+        """The name of entry ``k`` of x as trajectory.csv spells it (1-based agents and parts).
+
+        ``"eta0_2"``, ``"q10_1"`` (the first entry of follower 10's q), ``"phi3"``
+        (a scalar state has no part index).
 
         Parameters
         ----------
@@ -90,10 +93,11 @@ class StateLayout:
         if not 0 <= k < self.nx:
             raise IndexError(f"state index {k} outside 0..{self.nx - 1}")
         if k < self.m:
-            return f"eta0[{k}]"
+            return f"eta0_{k + 1}"
         i, r = divmod(k - self.m, self.agent_size)
         name, sl = next((n, s) for n, s in self.agent_offsets.items() if s.start <= r < s.stop)
-        return f"{name}[{r - sl.start}] of follower {i + 1}"
+        width = sl.stop - sl.start
+        return f"{name}{i + 1}" if width == 1 else f"{name}{i + 1}_{r - sl.start + 1}"
 
     def pack(self, parts: dict[str, np.ndarray]) -> np.ndarray:
         """Inverse of :meth:`unpack`; every name of the layout must be present.

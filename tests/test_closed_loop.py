@@ -17,6 +17,7 @@ from core.errors import ScenarioError, SynthesisError
 from core.graph import check_network, find_gauge
 from core.models import build_model
 from core.scenario import Graph, load_scenario
+from generated.trajectory_file import column_names
 from symbolic.adaptive import projection
 from symbolic.closed_loop import build_closed_loop
 from symbolic.derivatives import filter_function
@@ -355,15 +356,18 @@ def test_layout_round_trip():
     assert np.array_equal(lay.get(cl.x0, "p", 3), sc.followers[3].p0)
     names = {k[0] for k in lay.slices if isinstance(k, tuple)}
     assert names == {"mu", "eta", "phi", "p", "q", "thetahat", "ghat"}
-    # every entry's name points back at it through get()
+    # every entry's name is its trajectory.csv column, and points back at it through get()
+    cols = set(column_names(sc))
     for k in range(lay.nx):
         label = lay.name_of(k)
-        if label.startswith("eta0["):
-            assert lay.get(x, "eta0")[int(label[5:-1])] == k
+        assert label in cols
+        if label.startswith("eta0_"):
+            assert lay.get(x, "eta0")[int(label[5:]) - 1] == k
             continue
-        part, _, who = label.partition(" of follower ")
-        name, j = part[:-1].split("[")
-        assert lay.get(x, name, int(who) - 1)[int(j)] == k
+        head, _, part = label.partition("_")
+        name = head.rstrip("0123456789")
+        i = int(head[len(name) :]) - 1
+        assert lay.get(x, name, i)[int(part or 1) - 1] == k
     with pytest.raises(IndexError, match="outside"):
         lay.name_of(lay.nx)
 

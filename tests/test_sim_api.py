@@ -10,6 +10,7 @@ import dataclasses
 import io
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -262,7 +263,7 @@ def test_native_agrees_with_cvodes_and_runs_from_the_cli(base, env, capsys, tigh
 
 def test_precision_table_against_the_reference(env):
     """Errors shrink with the tolerance; the reference agrees with CVODES at its tolerance."""
-    from benchmarks.precision import precision_table, state_label
+    from benchmarks.precision import precision_table
 
     sc = api.load(env["scenario"])
     df, unc = precision_table(
@@ -276,8 +277,9 @@ def test_precision_table_against_the_reference(env):
         assert tight < loose / 100  # 1000x tighter tolerance: at least 100x closer
     assert (df.atol / df.rtol).round(12).eq(1e-2).all()  # the scenario's atol/rtol ratio
     lay = api.build(sc, api.ensure_gains(sc, env["out"])[0], "cvodes", env["cg"]).closed_loop.layout
-    assert state_label(lay, 0) == "eta0_1"
-    assert state_label(lay, lay.slices[("p", 1)].start + 1) == "p2_2"
+    assert lay.name_of(0) == "eta0_1"
+    assert lay.name_of(lay.slices[("p", 1)].start + 1) == "p2_2"
+    assert lay.name_of(lay.slices[("phi", 1)].start) == "phi2"  # a scalar: its column
 
 
 def test_failing_integration_writes_incomplete_trajectory_and_exits_2(env, capsys):
@@ -318,6 +320,27 @@ def test_failing_integration_writes_incomplete_trajectory_and_exits_2(env, capsy
             out_root=out,
             progress=False,
         )
+
+
+def test_a_native_failure_names_the_largest_state_where_cvode_stood(env):
+    """The message ends with CVODE's last step and its largest state, as a CSV column.
+
+    Truth: a second run to t_stop with the steps it needs.
+    """
+    sc = api.load(env["scenario"])
+    built = api.build(sc, api.ensure_gains(sc, env["out"])[0], "native", env["cg"])
+    s = dataclasses.replace(api.integrator_settings(sc, "native", env["cg"]), max_steps=1000)
+    tr = api.simulate(built, sc, s)
+    assert not tr.complete and tr.t_reached < tr.t_stop < sc.integration.output_step
+    big = dataclasses.replace(s, max_steps=10**6)
+    ref = api.integrate_built(built, built.closed_loop.x0, np.array([0.0, tr.t_stop]), big)
+    k = int(np.argmax(np.abs(ref.x[-1])))
+    name = built.closed_loop.layout.name_of(k)
+    assert name in api.column_names(sc)
+    assert abs(ref.x[-1, k]) > 10 * np.abs(built.closed_loop.x0).max()  # not x(0)'s largest
+    found = re.search(r"the largest state is (\S+) = (\S+) in magnitude$", tr.message)
+    assert found and found[1] == name
+    assert float(found[2]) == pytest.approx(abs(ref.x[-1, k]), rel=5e-3)  # 3 digits printed
 
 
 def test_broken_compile_via_cli_exits_2(env, capsys):
