@@ -21,7 +21,7 @@ CVODE's status and counters (an incomplete run: the time it reached and CVODE's
 message, also listed in the report), where CVODE stood when it returned (``t_stop``)
 with the largest state there (``stop_state``, ``stop_abs``) against the largest of the
 output rows (``rows_abs``) — a state that ran away, or an integrator stalled on a tame
-one — the integration time, the library key(s) and whether they were compiled for this
+one — and the last topology switch before it (``switch_before_stop``), the integration time, the library key(s) and whether they were compiled for this
 sample, and the observer's tail error max |η_i − η0| over the last quarter of the
 horizon. Output: ``out/topologies/results.csv`` and
 ``report.md`` (counts, timing, the libraries used).
@@ -76,6 +76,7 @@ def sample_gains(base: Any, sc: Any) -> tuple[Any, float, bool]:
 
 
 def _run_one(sample: Any) -> dict[str, Any]:
+    from core.graph import switch_times
     from generated import agents, api
 
     row: dict[str, Any] = {"sample": sample.id}
@@ -107,6 +108,7 @@ def _run_one(sample: Any) -> dict[str, Any]:
         else np.nan
     )
     k_stop = tr.largest_at_stop()
+    before = [t for t in switch_times(sc.graph.switches) if t <= tr.t_stop]
     return {
         **row,
         "N": sc.N,
@@ -122,6 +124,7 @@ def _run_one(sample: Any) -> dict[str, Any]:
         "stop_state": lay.name_of(k_stop),
         "stop_abs": float(abs(tr.x_stop[k_stop])),
         "rows_abs": float(np.nanmax(np.abs(tr.x))),
+        "switch_before_stop": before[-1] if before else np.nan,
         "steps": int(tr.stats["steps"]),
         "prepare_s": round(t1 - t0, 4),
         "simulate_s": round(t2 - t1, 4),
@@ -237,7 +240,13 @@ def _stop_text(r: dict) -> str:
     from generated.integrate import stop_note
 
     note = stop_note(r["t_stop"], r["stop_state"], r["stop_abs"])
-    return f"{note} (at most {r['rows_abs']:.3g} in the output rows before)"
+    switch = r["switch_before_stop"]
+    last = (
+        "no topology switch before"
+        if np.isnan(switch)
+        else f"{(r['t_stop'] - switch) * 1e3:.3g} ms after the last topology switch"
+    )
+    return f"{note} (at most {r['rows_abs']:.3g} in the output rows before; {last})"
 
 
 def _csv(rows: list[dict]) -> str:

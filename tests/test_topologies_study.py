@@ -71,6 +71,10 @@ def test_a_run_that_gives_up_reports_where_cvode_stood(tmp_path):
     text = topologies.report([row], 1.0, str(path))
     assert f"the largest state is {row['stop_state']} = " in text
     assert "(complete runs): no complete run" in text
+    if sc.graph.switches:  # sample 0 has none: the report says so
+        assert row["switch_before_stop"] <= row["t_stop"]
+    else:
+        assert np.isnan(row["switch_before_stop"]) and "no topology switch before" in text
 
 
 def test_an_integration_that_stops_early_is_an_incomplete_row(rows, monkeypatch, tmp_path):
@@ -92,3 +96,15 @@ def test_an_integration_that_stops_early_is_an_incomplete_row(rows, monkeypatch,
     assert (
         f"incomplete: sample {bad[0]['sample']} (N = {bad[0]['N']}) stopped at t = 5 s: x" in text
     )
+
+
+def test_the_report_times_a_stop_from_the_last_switch():
+    row = {
+        "sample": 15, "N": 18, "cyclic": True, "losses": 2, "theorem1": False,
+        "status": "incomplete", "t_reached": 6.37, "message": "TOO_MUCH_WORK",
+        "t_stop": 6.3737, "stop_state": "q10_1", "stop_abs": 6.88e4, "rows_abs": 870.0,
+        "switch_before_stop": 6.3729, "simulate_s": 1.0, "library": "k", "compiled": False,
+    }  # fmt: skip
+    text = topologies.report([row], 1.0, STUDY)
+    assert "the largest state is q10_1 = 6.88e+04 in magnitude (at most 870 in the output" in text
+    assert "; 0.8 ms after the last topology switch)" in text
