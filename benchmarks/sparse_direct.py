@@ -76,7 +76,15 @@ class DirectCost:
     fill: int  # nonzeros of L + U
 
     def projected_s(self, lin_setups: int, newton_iters: int) -> float:
-        """The linear algebra of a run with these counters (s)."""
+        """The linear algebra of a run with these counters (s).
+
+        Parameters
+        ----------
+        lin_setups : int
+            Linear-solver set-ups (one factorisation each).
+        newton_iters : int
+            Newton iterations (one solve each).
+        """
         return lin_setups * self.factor_s + newton_iters * self.solve_s
 
 

@@ -99,12 +99,10 @@ def test_an_integration_that_stops_early_is_an_incomplete_row(rows, monkeypatch,
 
 
 def test_the_report_times_a_stop_from_the_last_switch():
-    row = {
-        "sample": 15, "N": 18, "cyclic": True, "losses": 2, "theorem1": False,
-        "status": "incomplete", "t_reached": 6.37, "message": "TOO_MUCH_WORK",
-        "t_stop": 6.3737, "stop_state": "q10_1", "stop_abs": 6.88e4, "rows_abs": 870.0,
-        "switch_before_stop": 6.3729, "simulate_s": 1.0, "library": "k", "compiled": False,
-    }  # fmt: skip
+    row = dict(sample=15, N=18, cyclic=True, losses=2, theorem1=False, status="incomplete")
+    row.update(t_reached=6.37, message="TOO_MUCH_WORK", t_stop=6.3737, stop_state="q10_1")
+    row.update(stop_abs=6.88e4, rows_abs=870.0, switch_before_stop=6.3729, simulate_s=1.0)
+    row.update(library="k", compiled=False)
     text = topologies.report([row], 1.0, STUDY)
     assert "the largest state is q10_1 = 6.88e+04 in magnitude (at most 870 in the output" in text
     assert "; 0.8 ms after the last topology switch)" in text
