@@ -55,9 +55,8 @@ def jets_matrix(
     rng = np.random.default_rng(seed)
     G = rng.standard_normal((N, n3, n3))
     row_w = np.array([np.abs(w[ptr[i] : ptr[i + 1]]).sum() for i in range(N)])
-    G *= (DOMINANCE / np.maximum(row_w, 1e-300))[:, None, None] / np.linalg.norm(G, 2, axis=(1, 2))[
-        :, None, None
-    ]
+    norm = np.linalg.norm(G, 2, axis=(1, 2)) * np.maximum(row_w, 1e-300)
+    G *= (DOMINANCE / norm)[:, None, None]
     agent = np.repeat(np.arange(N), np.diff(ptr))
     blocks = -w[:, None, None] * G[agent]  # block (i, j) of each edge
     r = (agent[:, None, None] * n3 + np.arange(n3)[None, :, None]).repeat(n3, axis=2)

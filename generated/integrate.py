@@ -170,9 +170,9 @@ class Trajectory:
         others): on a failure CVODE's last internal step, between ``t_reached`` and the
         next output time; the horizon for a complete run.
     x_stop : ndarray or None, shape (nx,)
-        The state at ``t_stop`` (the native drivers; None for the others). On a failure it tells a state that ran away from an integrator
-        that stalled on a tame one, which the output rows, ending at ``t_reached``,
-        cannot.
+        The state at ``t_stop`` (the native drivers; None for the others). On a failure
+        it tells a state that ran away from an integrator that stalled on a tame one,
+        which the output rows, ending at ``t_reached``, cannot.
     """
 
     t: np.ndarray

@@ -454,8 +454,8 @@ class DriverCall:
         """
         log = take_sundials_log(self.log)  # SUNDIALS' messages; the temporary file removed
         tr = driver_trajectory(method, self.sched.t_out, self.X, self.result, wall0, progress)
-        stop = dict(t_stop=float(self.result.t_stop), x_stop=self.x_stop.copy())
-        return replace(tr, sundials_log=log, **stop)
+        t_stop = float(self.result.t_stop)
+        return replace(tr, sundials_log=log, t_stop=t_stop, x_stop=self.x_stop.copy())
 
 
 def run(
