@@ -16,7 +16,7 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -36,6 +36,7 @@ from synthesis.certificate_record import CertificateRecord, CheckRecord
 from synthesis.gains import MATRIX_FIELDS, Gains
 from synthesis.lemma3 import DENSE_EIG_MAX_N, w_of
 from synthesis.lmi_matrices import lmi15_matrix, lmi16_matrix
+from synthesis.verified import Proof, prove_inequalities, proven
 
 DEFAULT_TOL = 1e-8  # when the gains file records no solver tolerance
 SYM_RTOL = 1e-9  # relative asymmetry accepted in T, Ω, Z, L̄ᵀZ + ZL̄
@@ -102,6 +103,10 @@ class Check:
         Scenario-given gains the check depends on (a failure is then a warning).
     eq : str
         Where the condition comes from in the paper (``"eq. (15)"``, ``"Lemma 3"``).
+    proved : str
+        Matrix inequalities only: the matrix :mod:`synthesis.verified` proved ≻ 0.
+    proofs : tuple of Proof
+        Its definiteness tests; the check passes only if every rigorous one proved it.
     """
 
     name: str
@@ -111,10 +116,13 @@ class Check:
     passed: bool
     involves: tuple[str, ...] = ()
     eq: str = ""
+    proved: str = ""
+    proofs: tuple[Proof, ...] = ()
 
     def to_json(self) -> CheckRecord:
-        """``{"name", "value", "margin", "passed", "detail", "involves", "eq"}``."""
-        return {
+        """``{"name", "value", "margin", "passed", "detail", "involves", "eq"}``, and
+        ``"proved"``, ``"proofs"`` for a matrix inequality."""
+        out: CheckRecord = {
             "name": self.name,
             "value": _clean(self.value),
             "margin": _clean(None if self.margin is None else float(self.margin)),
@@ -123,11 +131,20 @@ class Check:
             "involves": list(self.involves),
             "eq": self.eq,
         }
+        if self.proofs:
+            out["proved"] = self.proved
+            out["proofs"] = [p.to_json() for p in self.proofs]
+        return out
 
     def line(self) -> str:
         """The check as one line of a warning or failure message."""
         d = self.to_json()
-        return f"{self.name}: {self.condition} (value {d['value']}, margin {d['margin']})"
+        why = "".join(
+            f"; {self.proved} not proven by {p.test}"
+            for p in self.proofs
+            if p.rigorous and not p.passed
+        )
+        return f"{self.name}: {self.condition} (value {d['value']}, margin {d['margin']}{why})"
 
 
 @dataclass(frozen=True)
@@ -623,4 +640,18 @@ def _certify(g: Gains, tol: float, given: tuple[str, ...]) -> Certificate:
     if not shapes.passed:
         return Certificate((shapes,), given, tol)
     nums = _Numbers.of(g, tol, given)
-    return Certificate((shapes, *_flatten(f(nums) for f in _CONDITIONS)), given, tol)
+    checks = _flatten(f(nums) for f in _CONDITIONS)
+    return Certificate((shapes, *_verified(checks, g)), given, tol)
+
+
+def _verified(checks: list[Check], g: Gains) -> list[Check]:
+    """The matrix inequalities with their rigorous proofs (synthesis/verified.py): a check
+    passes only if its numpy test and every rigorous test pass."""
+    proofs = prove_inequalities(g)
+    out = []
+    for c in checks:
+        if c.name in proofs:
+            text, ps = proofs[c.name]
+            c = replace(c, proved=text, proofs=ps, passed=c.passed and proven(ps))
+        out.append(c)
+    return out

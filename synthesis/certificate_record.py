@@ -4,13 +4,30 @@
 
 from __future__ import annotations
 
-from typing import TypedDict
+from typing import NotRequired, TypedDict
 
 from core.json_types import JSONValue
 
 
+class ProofRecord(TypedDict):
+    """One definiteness test of a check's matrix (:meth:`synthesis.verified.Proof.to_json`).
+
+    ``test`` is ``"rump-cholesky"``, ``"exact-rational"`` or ``"numpy-eigvalsh"``; ``margin``
+    the m with λ_min > m proven (the rigorous tests) or numpy's λ_min estimate.
+    """
+
+    test: str
+    passed: bool
+    margin: float | None
+    detail: str
+
+
 class CheckRecord(TypedDict):
-    """One check (:meth:`synthesis.certificate.Check.to_json`); non-finite numbers are None."""
+    """One check (:meth:`synthesis.certificate.Check.to_json`); non-finite numbers are None.
+
+    ``proofs`` (matrix inequalities only): the tests of :mod:`synthesis.verified` that were run
+    on the check's matrix, and ``proved`` the matrix they were run on.
+    """
 
     name: str
     value: JSONValue
@@ -19,6 +36,8 @@ class CheckRecord(TypedDict):
     detail: str
     involves: list[str]
     eq: str
+    proved: NotRequired[str]
+    proofs: NotRequired[list[ProofRecord]]
 
 
 class CertificateRecord(TypedDict, total=False):
