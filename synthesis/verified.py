@@ -30,7 +30,7 @@ import numpy as np
 
 from synthesis.certificate_record import ProofRecord
 from synthesis.gains import Gains
-from synthesis.lemma3 import DENSE_EIG_MAX_N, w_of
+from synthesis.lemma3 import DENSE_EIG_MAX_N
 from synthesis.lmi_matrices import lmi15_matrix, lmi16_matrix
 
 U = Fraction(1, 2**53)  # unit roundoff of IEEE binary64, rounding to nearest
@@ -364,8 +364,9 @@ def inequalities(g: Gains) -> dict[str, Inequality]:
     ``lmi16``, ``lemma3_w`` and ``k1`` (docs/synthesis.md, 'Verified certificates').
 
     T and Ω enter through their exact symmetric parts, as in the numpy checks. Lemma 3 is
-    proven at w' = (1 − 10⁻⁶)·min(stored w, w of numpy), the room ``lemma3_w`` already allows;
-    it is left out for N > :data:`synthesis.lemma3.DENSE_EIG_MAX_N` or a non-positive z.
+    proven at w' = (1 − 10⁻⁶)·(stored w), the relative room ``lemma3_w`` already allows a
+    stored w over the recomputed one; it is left out for N >
+    :data:`synthesis.lemma3.DENSE_EIG_MAX_N` or a non-positive z.
 
     Parameters
     ----------
@@ -388,8 +389,7 @@ def inequalities(g: Gains) -> dict[str, Inequality]:
     N = z.size
     if float(z.min()) > 0 and N <= DENSE_EIG_MAX_N:
         Lb = np.asarray(g.L_bar, dtype=float)
-        w_np = w_of(Lb, z)
-        w = Fraction(min(float(g.w), w_np)) * (1 - Fraction(1, 10**6))
+        w = Fraction(float(g.w)) * (1 - Fraction(1, 10**6))
         zq = [Fraction(float(v)) for v in z]
         S = np.zeros((N, N), dtype=object)
         rows, cols = np.nonzero(Lb)
