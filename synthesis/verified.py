@@ -185,7 +185,8 @@ def float_enclosure(M: np.ndarray) -> tuple[np.ndarray, Fraction]:
             q = M[i, j]
             f = float(q)
             F[i, j] = f
-            row += abs(q - Fraction(f))
+            if q != f:  # not a float already (zeros of a sparse matrix are the common case)
+                row += abs(q - Fraction(f))
         r = max(r, row)
     return F, r
 
