@@ -36,7 +36,7 @@ from synthesis.certificate_record import CertificateRecord, CheckRecord
 from synthesis.gains import MATRIX_FIELDS, Gains
 from synthesis.lemma3 import DENSE_EIG_MAX_N, w_of
 from synthesis.lmi_matrices import lmi15_matrix, lmi16_matrix
-from synthesis.verified import Proof, prove_inequalities, proven
+from synthesis.verified import EXACT, RUMP, Proof, prove_inequalities, proven
 
 DEFAULT_TOL = 1e-8  # when the gains file records no solver tolerance
 SYM_RTOL = 1e-9  # relative asymmetry accepted in T, Ω, Z, L̄ᵀZ + ZL̄
@@ -187,6 +187,18 @@ class Certificate:
     def passed(self) -> bool:
         """True when no check failed (neither failures nor warnings)."""
         return all(c.passed for c in self.checks)
+
+    def proof_summary(self) -> str:
+        """How many matrix inequalities each rigorous test proved, and the least margin."""
+        ineq = [c for c in self.checks if c.proofs]
+        parts = []
+        for test in (RUMP, EXACT):
+            ps = [p for c in ineq for p in c.proofs if p.test == test]
+            ok = [p.margin for p in ps if p.passed and p.margin is not None]
+            if ps:
+                least = f", least margin {min(ok):.3g}" if ok else ""
+                parts.append(f"{len(ok)}/{len(ineq)} by {test}{least}")
+        return f"matrix inequalities proven: {'; '.join(parts)}" if parts else ""
 
     def to_json(self) -> CertificateRecord:
         """The ``certificate`` object of ``gains.json``.

@@ -80,5 +80,6 @@ def main(argv: list[str]) -> int:
     print(
         f"{args.gains}: {npass}/{len(cert.checks)} checks pass"
         + (f", {len(warnings)} warning(s) about given gains" if warnings else "")
+        + (f"; {cert.proof_summary()}" if cert.proof_summary() else "")
     )
     return 0
