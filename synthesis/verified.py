@@ -394,7 +394,7 @@ def inequalities(g: Gains) -> dict[str, Inequality]:
         zq = [Fraction(float(v)) for v in z]
         S = np.zeros((N, N), dtype=object)
         rows, cols = np.nonzero(Lb)
-        for i, j in zip(rows.tolist(), cols.tolist()):
+        for i, j in zip(rows.tolist(), cols.tolist(), strict=True):
             lij = Fraction(float(Lb[i, j]))
             S[i, j] += zq[i] * lij  # (ZL̄)_ij
             S[j, i] += lij * zq[i]  # (L̄ᵀZ)_ji
