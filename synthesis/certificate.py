@@ -8,7 +8,8 @@ means the condition holds with that much room — and the paper's equation); the
 checks make up a :class:`Certificate`. ``involves`` lists the scenario-given gains a
 check depends on, so that a failure caused only by a gain the user chose is a
 *warning* rather than an error. :meth:`Certificate.to_json` is what ``gains.json``
-stores under ``certificate``.
+stores under ``certificate``. The matrix inequalities are also proven rigorously
+(:mod:`synthesis.verified`): those checks pass only when proven.
 """
 
 from __future__ import annotations

@@ -28,6 +28,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from core.errors import SynthesisError
 from synthesis.certificate_record import ProofRecord
 from synthesis.gains import Gains
 from synthesis.lemma3 import DENSE_EIG_MAX_N
@@ -249,7 +250,11 @@ def rump_pd(M: np.ndarray) -> tuple[Proof, Proof]:
         λ_min of fl(M) for comparison.
     """
     if not ieee_ok():
-        raise RuntimeError("floating-point arithmetic is not IEEE round-to-nearest")
+        raise SynthesisError(
+            "floating-point arithmetic does not round to nearest with gradual underflow "
+            "(a library set flush-to-zero?): the verified certificate cannot run; "
+            "run without that library loaded"
+        )
     try:
         F, r = float_enclosure(M)
     except OverflowError:

@@ -231,6 +231,17 @@ def test_a_gain_nudged_across_its_boundary_fails_the_proof(gains, name):
     assert f"not proven by {RUMP}" in bad.line()
 
 
+def test_certify_command_reports_the_proofs(tmp_path, capsys):
+    from synthesis.cli import main
+
+    g = synthesize(load_scenario(ROOT / "scenarios" / "paper-synth.toml"))
+    path = save_gains(g, tmp_path / "gains.json")
+    assert main(["certify", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "matrix inequalities proven: 6/6 by rump-cholesky" in out
+    assert "6/6 by exact-rational" in out
+
+
 def test_every_load_reruns_the_verified_test(tmp_path):
     g = synthesize(load_scenario(ROOT / "scenarios" / "paper-synth.toml"))
     path = save_gains(g, tmp_path / "gains.json")
