@@ -191,7 +191,7 @@ class Certificate:
 
     def proof_summary(self) -> str:
         """How many matrix inequalities each rigorous test proved, and the least margin."""
-        ineq = [c for c in self.checks if c.proofs]
+        ineq = [c for c in self.checks if any(p.test == RUMP for p in c.proofs)]
         parts = []
         for test in (RUMP, EXACT):
             ps = [p for c in ineq for p in c.proofs if p.test == test]
@@ -199,7 +199,12 @@ class Certificate:
             if ps:
                 least = f", least margin {min(ok):.3g}" if ok else ""
                 parts.append(f"{len(ok)}/{len(ineq)} by {test}{least}")
-        return f"matrix inequalities proven: {'; '.join(parts)}" if parts else ""
+        text = f"matrix inequalities proven: {'; '.join(parts)}" if parts else ""
+        scalar = [c for c in self.checks if c.proofs and c not in ineq]
+        if text and scalar:
+            n_ok = sum(proven(c.proofs) for c in scalar)
+            text += f"; {', '.join(c.name for c in scalar)} proven exactly: {n_ok}/{len(scalar)}"
+        return text
 
     def to_json(self) -> CertificateRecord:
         """The ``certificate`` object of ``gains.json``.

@@ -433,4 +433,24 @@ def prove_inequalities(g: Gains) -> dict[str, tuple[str, tuple[Proof, ...]]]:
     dict
         Check name → (the matrix proven ≻ 0 in words, its proofs).
     """
-    return {k: (v.proved, prove_pd(v.matrix)) for k, v in inequalities(g).items()}
+    out = {k: (v.proved, prove_pd(v.matrix)) for k, v in inequalities(g).items()}
+    out["lambda1"] = lambda1_proof(g)
+    return out
+
+
+def lambda1_proof(g: Gains) -> tuple[str, tuple[Proof, ...]]:
+    """Theorem 1's λ1·w′ > λ̄1 in exact arithmetic, at the w′ Lemma 3 is proven for.
+
+    With ``lemma3_w``'s proof (L̄ᵀZ + ZL̄ ⪰ w′Z) this closes Theorem 1's condition on the
+    stored numbers without rounding.
+
+    Parameters
+    ----------
+    g : Gains
+        Finite numbers.
+    """
+    w = Fraction(float(g.w)) * (1 - Fraction(1, 10**6))
+    room = Fraction(float(g.lambda1)) * w - Fraction(float(g.lambda_bar1))
+    text = f"λ1·w′ > λ̄1, w′ = (1 − 10⁻⁶)·w = {float(w):.9g} (Theorem 1)"
+    proof = Proof(EXACT, room > 0, _down(room) if room > 0 else None, "λ1·w′ − λ̄1 in fractions")
+    return text, (proof,)

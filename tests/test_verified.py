@@ -231,6 +231,15 @@ def test_a_gain_nudged_across_its_boundary_fails_the_proof(gains, name):
     assert f"not proven by {RUMP}" in bad.line()
 
 
+def test_lambda1_is_proven_exactly_at_the_proven_w(gains):
+    w_proven = gains.w * (1 - 1e-6)
+    need = gains.lambda_bar1 / w_proven
+    for side, ok in ((1e-9, True), (-1e-9, False)):
+        c = {c.name: c for c in certify(replace(gains, lambda1=need * (1 + side))).checks}
+        (p,) = c["lambda1"].proofs
+        assert p.test == EXACT and p.passed is ok and c["lambda1"].passed is ok
+
+
 def test_certify_command_reports_the_proofs(tmp_path, capsys):
     from synthesis.cli import main
 
