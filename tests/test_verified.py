@@ -124,6 +124,29 @@ def test_plain_float_cholesky_accepts_an_indefinite_matrix_that_rump_refuses():
     assert not rump.passed and not exact.passed
 
 
+def test_rump_never_accepts_what_exact_arithmetic_refuses():
+    # rounded B·Bᵀ with B n×(n−1): singular before rounding, so the float matrix is within
+    # rounding of singular, on either side; whatever Rump proves, exact arithmetic confirms
+    rng = np.random.default_rng(7)
+    fooled = accepted = 0
+    for _ in range(150):
+        n = int(rng.integers(2, 7))
+        B = rng.standard_normal((n, n - 1)) * 10.0 ** rng.integers(-3, 4, size=(1, n - 1))
+        A = B @ B.T
+        A = np.triu(A) + np.triu(A, 1).T  # exactly symmetric floats
+        M = rational(A)
+        rump, exact, _ = prove_pd(M)
+        truth = exact_pd(M)
+        assert exact.passed is truth
+        if rump.passed:
+            accepted += 1
+            assert truth and exact_pd(M, Fraction(rump.margin))
+        fooled += float_cholesky_succeeds(A) and not truth
+    assert fooled > 0  # plain floating-point Cholesky does accept some of these
+    # and none can be proven: λ_min(fl(BBᵀ)) ≤ ‖fl(BBᵀ) − BBᵀ‖₂ ≤ γ_{n−1}·tr(A) < Rump's c
+    assert accepted == 0
+
+
 def test_exact_arithmetic_proves_what_is_below_floating_rounding():
     M = _known_spectrum([sympy.Rational(1, 10**20), 1, 2], seed=3)
     rump, exact, _ = prove_pd(M)
