@@ -107,12 +107,6 @@ def _down(q: Fraction) -> float:
     return f if Fraction(f) <= q else float(np.nextafter(f, -math.inf))
 
 
-def _up(q: Fraction) -> float:
-    """The smallest float ≥ q."""
-    f = float(q)
-    return f if Fraction(f) >= q else float(np.nextafter(f, math.inf))
-
-
 def ieee_ok() -> bool:
     """numpy arithmetic rounds to nearest with gradual underflow (the theorem's model)."""
     one, tiny = np.float64(1.0), np.float64(1e-30)
@@ -142,28 +136,30 @@ def rump_shift(diag: Iterable[float]) -> Fraction:
 
 
 def float_cholesky_succeeds(A: np.ndarray) -> bool:
-    """Floating-point Cholesky AᵀA-style factorisation R of A runs to completion (every
-    pivot > 0 and finite), computed row by row with IEEE operations: r_jj = √(a_jj − Σ r_kj²),
-    r_jl = (a_jl − Σ r_kj r_kl)/r_jj (any summation order is covered by the theorem).
+    """Floating-point Cholesky A ≈ RᵀR runs to completion (every pivot > 0 and finite).
+
+    IEEE operations in the order of the theorem's formalisation: r_jj = √(a_jj − r_1j² − … −
+    r_(j−1)j²) and r_jl = (a_jl − r_1j r_1l − … − r_(j−1)j r_(j−1)l)/r_jj, each product and
+    difference rounded separately, left to right. The right-looking form below subtracts
+    the outer product of row j of R from the trailing block at step j, which is that order
+    for every entry (numpy's elementwise operations do not fuse them).
 
     Parameters
     ----------
     A : ndarray
-        n×n float, symmetric (only its upper triangle is read).
+        n×n float, symmetric.
     """
-    n = A.shape[0]
-    R = np.zeros((n, n))
+    S = np.array(A, dtype=float)
+    n = S.shape[0]
     with np.errstate(all="ignore"):
         for j in range(n):
-            s = A[j, j:] - R[:j, j] @ R[:j, j:]
-            piv = s[0]
+            piv = S[j, j]
             if not (np.isfinite(piv) and piv > 0):
                 return False
-            rjj = np.sqrt(piv)
-            R[j, j] = rjj
-            R[j, j + 1 :] = s[1:] / rjj
-            if not np.all(np.isfinite(R[j, j:])):
+            row = S[j, j + 1 :] / np.sqrt(piv)
+            if not np.all(np.isfinite(row)):
                 return False
+            S[j + 1 :, j + 1 :] = S[j + 1 :, j + 1 :] - np.outer(row, row)
     return True
 
 
