@@ -97,7 +97,13 @@ def rational(x: np.ndarray | float) -> np.ndarray:
 
 
 def sym_part(M: np.ndarray) -> np.ndarray:
-    """(M + Mᵀ)/2, exact for a rational (object) array."""
+    """(M + Mᵀ)/2, exact for a rational (object) array.
+
+    Parameters
+    ----------
+    M : ndarray
+        Square, of Fractions (object) or floats.
+    """
     return (M + M.T) / Fraction(2) if M.dtype == object else 0.5 * (M + M.T)
 
 
@@ -339,7 +345,13 @@ def prove_pd(M: np.ndarray, *, exact: bool | None = None) -> tuple[Proof, ...]:
 
 
 def proven(proofs: Iterable[Proof]) -> bool:
-    """True when at least one rigorous test ran and every rigorous test proved."""
+    """True when at least one rigorous test ran and every rigorous test proved.
+
+    Parameters
+    ----------
+    proofs : iterable of Proof
+        The tests run on one inequality.
+    """
     rig = [p for p in proofs if p.rigorous]
     return bool(rig) and all(p.passed for p in rig)
 
