@@ -101,8 +101,8 @@ def paper_rows(runs: int, build_root: str | None) -> list[dict[str, Any]]:
     """
     from core.scenario import load_scenario
     from generated import agents, api
-    from generated.codegen import CodegenSettings
-    from generated.integrate import output_grid
+    from generated.schedule import output_grid
+    from generated.values import CodegenSettings
 
     sc = load_scenario(PAPER)
     gains = api.scenario_gains(sc, "paper")
@@ -146,8 +146,8 @@ def large_rows(
     """
     from benchmarks.scenarios import bench_gains, bench_scenario
     from generated import agents
-    from generated.codegen import CodegenSettings
-    from generated.integrate import IntegratorSettings, output_grid
+    from generated.schedule import output_grid
+    from generated.values import CodegenSettings, IntegratorSettings
 
     rows = []
     base = bench_scenario(N, horizon=horizon)

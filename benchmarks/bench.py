@@ -37,7 +37,7 @@ All of ours are built and integrated by the functions of ``make sim``
 ``c-idas``
     Our generated C (DAE form) + IDAS, same plan as ours, same functions.
 ``fixed``
-    The fixed-step ROS2 method of :mod:`generated.integrate` with the exact sign
+    The fixed-step ROS2 method of :mod:`generated.solvers.fixed` with the exact sign
     function (its purpose), step ``integration.fixed_step``.
 
 Compile cache: unless ``--warm-cache``, the cells build into a fresh cache
@@ -86,7 +86,7 @@ from benchmarks.tables import (
 )
 from benchmarks.worker import worker
 from core.errors import run_cli
-from generated.solvers import Status
+from generated.values import Status
 
 
 # ----------------------------------------------------------------------------- parent

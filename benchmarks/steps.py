@@ -4,7 +4,7 @@ What drives the integrator's step count is measured, not guessed. Two measuremen
 
 Windows (:func:`step_profile`)
     The horizon is cut into windows (finer near t = 0); each window is integrated by
-    the same :func:`generated.integrate.integrate` as ``make sim`` and its steps,
+    the same :func:`generated.solvers.engine.integrate` as ``make sim`` and its steps,
     error-test and Newton failures, last step size and order are recorded, together
     with whether the operator's command u0 changes sign inside the window. Each
     window restarts the integrator (order 1, small first step), so the windowed total
@@ -129,7 +129,7 @@ def step_profile(built: Any, sc: Any, edges: Sequence[float], settings: Any = No
 
     Parameters
     ----------
-    built : generated.api.Built
+    built : generated.built.Built
         The compiled closed loop (ODE form).
     sc : Scenario
     edges : sequence of float

@@ -26,7 +26,7 @@ from benchmarks.catalogue import (
     integration_method,
 )
 from benchmarks.scenarios import bench_gains, bench_scenario
-from generated.solvers import Status
+from generated.values import Status
 
 
 def _rss_mb() -> float:
@@ -204,7 +204,7 @@ def _cell(
     N: int, method: BenchMethod, horizon: float, deadline: float, rec: dict[str, Any], out: Path
 ) -> Cell:
     """The scenario, gains and closed loop of a cell (their times and sizes into ``rec``)."""
-    from generated.integrate import output_grid
+    from generated.schedule import output_grid
     from symbolic.closed_loop import build_closed_loop
 
     sc = bench_scenario(N, horizon=horizon)
@@ -225,7 +225,7 @@ def _cell(
 
 
 def _traj_result(tr: Any, jtimes: bool = False) -> dict[str, Any]:
-    """One run's record entries from a :class:`~generated.integrate.Trajectory`."""
+    """One run's record entries from a :class:`~generated.values.Trajectory`."""
     st = tr.stats
     res = {
         "wall": st["wall_seconds"],
@@ -264,7 +264,7 @@ def _setup_scipy(cell: Cell, rec: dict[str, Any]) -> Callable[[], dict[str, Any]
 def _setup_exact(cell: Cell, rec: dict[str, Any]) -> Callable[[], dict[str, Any]]:
     """Our generated C with the exact sign function and the fixed-step method."""
     from generated.api import build_from_closed_loop, integrate_built
-    from generated.integrate import IntegratorSettings
+    from generated.values import IntegratorSettings
     from symbolic.closed_loop import build_closed_loop
 
     sc, meth = cell.sc, integration_method(cell.method.name)
@@ -295,9 +295,9 @@ def _setup_ours(cell: Cell, rec: dict[str, Any]) -> Callable[[], dict[str, Any]]
     integrates the symbolic closed loop with the same settings, no code generation."""
     from generated import solvers
     from generated.api import build_from_closed_loop, integrator_settings, simulate
-    from generated.codegen import CodegenSettings
-    from generated.integrate import integrate
     from generated.largescale import choose_plan
+    from generated.solvers.engine import integrate
+    from generated.values import CodegenSettings
 
     meth = integration_method(cell.method.name)
     cg = CodegenSettings(jacobian=cell.method.jacobian)

@@ -20,7 +20,7 @@ import numpy as np
 
 if TYPE_CHECKING:  # the loop calls in here; only its type is needed
     from console.engine import LoopBase
-    from generated.integrate import IntegratorSettings
+    from generated.values import IntegratorSettings
 
 #: integrator attempts per call before the loop is held (the first one and the restarts)
 MAX_ATTEMPTS = 4

@@ -236,7 +236,7 @@ class Initial:
 
 @dataclass(frozen=True, kw_only=True)
 class Integration:
-    """Integration settings (``generated.integrate.IntegratorSettings`` takes these defaults)."""
+    """Integration settings (``generated.values.IntegratorSettings`` takes these defaults)."""
 
     method: str = setting("cvodes", "choice", options=METHODS)
     rtol: float = setting(1e-6, "number", POSITIVE, _BELOW_ONE)

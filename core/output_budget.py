@@ -41,7 +41,7 @@ def output_rows(horizon: float, output_step: float) -> int:
     horizon, output_step : float
         ``integration.horizon`` and ``integration.output_step`` (s).
     """
-    return round(horizon / output_step) + 1  # as generated.integrate.output_grid
+    return round(horizon / output_step) + 1  # as generated.schedule.output_grid
 
 
 def output_budget() -> int:

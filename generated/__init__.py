@@ -5,17 +5,6 @@ build (symbolic closed loop, C code generation, compile, cached under
 ``<build cache>/<sha256>/``, the user cache folder or ``$HITL_BUILD_DIR``) -> simulate
 -> trajectory as a pandas DataFrame.
 ``python -m generated sim SCENARIO`` (``make sim``) runs them all and writes
-``out/<name>/trajectory.csv`` and ``meta.json``.
+``out/<name>/trajectory.csv`` and ``meta.json``. The values the modules pass each
+other are in :mod:`generated.values`, the package's import leaf.
 """
-
-from generated.codegen import CodegenSettings, Library, build_library
-from generated.integrate import IntegratorSettings, Trajectory, integrate
-
-__all__ = [
-    "CodegenSettings",
-    "IntegratorSettings",
-    "Library",
-    "Trajectory",
-    "build_library",
-    "integrate",
-]

@@ -84,7 +84,7 @@ def _cache(clear: bool) -> int:
 def _sim(args: argparse.Namespace) -> int:
     """``sim``: run :func:`generated.api.run` and print a one-line summary on stderr."""
     from generated import api
-    from generated.codegen import CodegenSettings
+    from generated.values import CodegenSettings
 
     overrides, variant = scenario_knobs(args, {"options.ablation": True} if args.ablation else None)
     cg = CodegenSettings(

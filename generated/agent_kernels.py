@@ -34,9 +34,10 @@ import numpy as np
 from core.memo import MEMO
 from core.scenario import Scenario
 from generated import native
-from generated.codegen import CodegenSettings, Library, build_library
+from generated.codegen import Library, build_library
 from generated.compiler import Toolchain
 from generated.sparse_lu import sparse_lu
+from generated.values import CodegenSettings
 from symbolic.cascade import agent_block
 from symbolic.closed_loop import fault_function, make_layout, model_groups, observer_gains
 from synthesis.gains import Gains

@@ -44,7 +44,7 @@ from generated.agent_kernels import (
     kernel_key,
 )
 from generated.driver_probe import checked_state, probe_driver
-from generated.integrate import IntegratorSettings, Trajectory
+from generated.values import IntegratorSettings, Trajectory
 from symbolic.closed_loop import fault_function, make_layout
 from symbolic.parameters import param_matrix
 from synthesis.gains import Gains

@@ -27,11 +27,10 @@ import hashlib
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-import casadi as ca
 import numpy as np
 import pandas as pd
 
@@ -39,21 +38,10 @@ from core.artifacts import OUT_ROOT, atomic_write_text
 from core.errors import ScenarioError
 from core.scenario import Scenario
 from generated import solvers
-from generated.codegen import (
-    CodegenSettings,
-    Library,
-    build_library,
-    check_dyn_signature,
-    renamed,
-)
+from generated.built import Built
+from generated.codegen import Library, build_library, check_dyn_signature, renamed
 from generated.gains_cache import GainsInfo, ensure_gains, scenario_gains
-from generated.integrate import (
-    IntegratorSettings,
-    Trajectory,
-    output_grid,
-    stop_note,
-    sundials_summary,
-)
+from generated.largescale import choose_plan
 from generated.loaded import (
     BUILDS,
     DAE_NAME,
@@ -74,6 +62,8 @@ from generated.overrides import (
 )
 from generated.progress import progress_bar
 from generated.reuse import CODE_PACKAGES, code_sha256, library_hashes, reuse_problem, run_inputs
+from generated.schedule import output_grid
+from generated.sundials_log import sundials_summary
 from generated.trajectory_file import (
     INCOMPLETE_MARK,
     column_names,
@@ -83,14 +73,10 @@ from generated.trajectory_file import (
     trajectory_frame,
     trajectory_text,
 )
-from symbolic.closed_loop import fix_parameters
+from generated.values import CodegenSettings, IntegratorSettings, Trajectory, stop_note
+from symbolic.closed_loop import bind, build_closed_loop, fix_parameters
+from symbolic.parameters import structure_key
 from synthesis.gains import Gains
-
-if TYPE_CHECKING:
-    import ctypes
-
-    from symbolic.cascade import Cascade
-    from symbolic.closed_loop import ClosedLoop
 
 #: the names other packages use, from this module or re-exported from the modules above
 __all__ = [
@@ -99,7 +85,6 @@ __all__ = [
     "MAX_SET_DEPTH",
     "MAX_SET_INT",
     "MAX_VARIANT_CHARS",
-    "Built",
     "GainsInfo",
     "RunMeta",
     "RunResult",
@@ -171,66 +156,13 @@ def resolve_codegen(N: int, settings: CodegenSettings | None = None) -> CodegenS
     settings : CodegenSettings, optional
         Default ``CodegenSettings(jacobian="auto")``.
     """
-    from generated.largescale import choose_plan
-
     settings = settings or CodegenSettings(jacobian="auto")
     plan = choose_plan(N, settings.jacobian, linear_solver=settings.linear_solver)
     return plan.codegen_settings(settings)
 
 
-@dataclass(frozen=True)
-class Built:
-    """A closed loop compiled for one method, bound to one scenario's numbers.
-
-    The library takes the closed loop's runtime parameters p as an input
-    (:mod:`symbolic.parameters`); :attr:`dyn` and :attr:`outputs` are the library's
-    Functions with :attr:`p` filled in; :func:`build` binds the same library to every
-    later scenario of the same structure.
-
-    Attributes
-    ----------
-    closed_loop : symbolic.closed_loop.ClosedLoop
-        Bound to the scenario (``x0``, ``p0``, breakpoints).
-    library : Library
-    dyn : casadi.Function
-        The compiled integrator-form right-hand side (ODE, or DAE for ``idas``) with p
-        fixed (its p input is empty).
-    outputs : casadi.Function
-        The compiled ``(t, x) -> named outputs`` with p fixed.
-    form : str
-        ``"ode"`` or ``"dae"``.
-    timings : dict
-        ``symbolic_build``, ``codegen``, ``compile`` seconds.
-    dag : (Library, Cascade) or None
-        Method ``native`` above :data:`generated.native.MAX_AGENTS` followers: the
-        graph-ordered library (:mod:`generated.dag`) and the per-follower blocks it was
-        built from; None otherwise.
-    p : ndarray
-        The runtime parameters the library is called with.
-    dyn_p, outputs_p : casadi.Function or None
-        The library's Functions with p as an input.
-    driver : ctypes.CDLL or None
-        The native driver's entry points (:func:`generated.native.open_library`) of the
-        loaded library; None if it has none.
-    """
-
-    closed_loop: ClosedLoop
-    library: Library
-    dyn: ca.Function
-    outputs: ca.Function
-    form: str
-    timings: dict[str, float] = field(default_factory=dict)
-    dag: tuple[Library, Cascade] | None = None
-    p: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    dyn_p: ca.Function | None = None
-    outputs_p: ca.Function | None = None
-    driver: ctypes.CDLL | None = None
-
-
 def _reuse(c: Compiled, sc: Scenario, gains: Gains, key: str) -> Built:
     """``c``'s loaded library bound to ``sc`` (whose structure key is ``key``)."""
-    from symbolic.closed_loop import bind
-
     cl = c.closed_loop
     cl = bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks, key=key)
     lib = dataclasses.replace(c.library, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0)
@@ -264,8 +196,6 @@ def build(
     closed_loop : ClosedLoop, optional
         A prebuilt closed loop (skips ``build_closed_loop``).
     """
-    from symbolic.parameters import structure_key
-
     settings = resolve_codegen(sc.N, settings)
     method = method or sc.integration.method
     t0 = time.perf_counter()
@@ -280,8 +210,6 @@ def build(
             return _reuse(c, sc, gains, key[0])
         del BUILDS[key]  # its entry no longer checks out: build again (the cache says why)
     if closed_loop is None:
-        from symbolic.closed_loop import build_closed_loop
-
         closed_loop = build_closed_loop(sc, gains)
     built, image = _compile(closed_loop, method, settings, t0, cascade)
     if key is not None and closed_loop.parametric is not None:
@@ -425,8 +353,6 @@ def integrator_settings(
         Safeguard tolerance of the fixed-step method (sets ``fixed_rtol`` and
         ``fixed_atol``; default 1e-3, see :class:`IntegratorSettings`).
     """
-    from generated.largescale import choose_plan
-
     ig = sc.integration
     cg = codegen or CodegenSettings(jacobian="auto")
     plan = choose_plan(sc.N, cg.jacobian, linear_solver=cg.linear_solver)
@@ -479,8 +405,8 @@ def simulate(
     -------
     Trajectory
         Incomplete (not raised) on an integrator failure (see
-        :func:`generated.integrate.integrate`); a native run's message then ends with
-        the largest state where CVODE stood (:func:`generated.integrate.stop_note`, the
+        :func:`generated.solvers.engine.integrate`); a native run's message then ends with
+        the largest state where CVODE stood (:func:`generated.values.stop_note`, the
         state named as its trajectory.csv column).
 
     Raises

@@ -1,7 +1,7 @@
 """What a compiled library is and how it is keyed: the settings, the key, the build.
 
-One :class:`CodegenSettings` holds every option that shapes the generated code and
-the compiled library (acados-style: one place). :func:`build_library` turns CasADi
+One :class:`~generated.values.CodegenSettings` holds every option that shapes the
+generated code and the compiled library (acados-style: one place). :func:`build_library` turns CasADi
 Functions into a shared library under ``<build root>/<sha256>/`` where the key is
 the SHA-256 of everything that produced it: the generated C text, the compiler's
 path and version, the flags, the CasADi version and the settings. An unchanged
@@ -24,7 +24,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -48,23 +48,22 @@ from generated.build_cache import (
     remove_stale_builds,
 )
 from generated.compiler import Toolchain, compile_source, compiler_identity
-from generated.csource import JACOBIAN_STRATEGIES, check_dyn_signature, generate_source, renamed
+from generated.csource import check_dyn_signature, generate_source, renamed
 from generated.shared_library import load_problem, preload
+from generated.values import CodegenSettings
 
 __all__ = [
     "DEFAULT_BUILD_ROOT",
     "ENTRY_PATTERN",
-    "JACOBIAN_CHOICES",
-    "JACOBIAN_STRATEGIES",
     "LIBRARY_NAME",
     "MANIFEST_NAME",
     "SOURCE_NAME",
     "TMP_PREFIX",
-    "CodegenSettings",
     "Library",
     "Toolchain",
     "build_library",
     "cache_key",
+    "cache_root",
     "check_dyn_signature",
     "clear_cache",
     "compile_source",
@@ -77,116 +76,6 @@ __all__ = [
     "remove_stale_builds",
     "renamed",
 ]
-
-#: ``auto`` is resolved from the number of agents by :func:`generated.largescale.choose_plan`
-#: before anything is generated
-JACOBIAN_CHOICES = ("auto", *JACOBIAN_STRATEGIES)
-
-
-@dataclass(frozen=True)
-class CodegenSettings:
-    """Every option of code generation, compilation and the integrators' linear algebra.
-
-    Attributes
-    ----------
-    compiler : str
-        C compiler executable (``gcc``; ``cc``/``clang`` work too).
-    optimization : str
-        Optimisation flag. ``-O1`` is the default: ``-O0`` compiles 3–4× faster on
-        large files but the right-hand side then runs slower.
-    kernel_optimization : str
-        Optimisation flag of the per-agent kernel libraries (``generated/agent_kernels.py``),
-        which replaces ``optimization`` there. ``-O3``: those sources are small (about
-        2 s of gcc per follower model) and their driver's loops are hot.
-    extra_cflags : tuple of str
-        Appended after the fixed flags ``-shared -fPIC``.
-    jacobian : str
-        ``"sparse"``: ``jac_<name>`` from ``f.jacobian()`` (CasADi's sparse CCS pattern)
-        with a direct sparse linear solver; ``"gmres"``: additionally
-        ``fwd1_<name>`` (``f.forward(1)``, Jacobian-vector products) and the
-        integrators' iterative ``newton_scheme = "gmres"`` (no factorisation, for
-        large N); ``"jvp"``: only ``fwd1_<name>`` and GMRES (no Jacobian generated at
-        all: code size flat in N with ``expand=False``; the fixed-step method then
-        builds its Jacobian from forward sweeps).
-    linear_solver : str
-        Direct sparse linear solver of CVODES/IDAS and of the fixed-step method
-        (a CasADi Linsol plugin: ``csparse``, ``qr``, ``ldl``, ``lapacklu`` (dense)).
-    expand : bool
-        Expand MX Functions to SX before generating code (flat, faster C).
-    cse : bool
-        Common-subexpression elimination (CasADi's ``cse`` option) on SX functions and
-        their generated Jacobians before code is written. Same operations on the same
-        operands, so the same results; measured on the paper scenario (N = 5): the
-        right-hand side 2,723 → 1,721 instructions, its Jacobian 27,298 → 17,557.
-    build_root : str or None
-        Cache root; ``None`` = ``$HITL_BUILD_DIR`` or :data:`DEFAULT_BUILD_ROOT`.
-    timeout : float
-        Seconds allowed for one compilation.
-    codegen_options : tuple of (str, value) pairs
-        Options for :class:`casadi.CodeGenerator`.
-    """
-
-    compiler: str = "gcc"
-    optimization: str = "-O1"
-    kernel_optimization: str = "-O3"
-    extra_cflags: tuple[str, ...] = ()
-    jacobian: str = "sparse"
-    linear_solver: str = "csparse"
-    expand: bool = True
-    cse: bool = True
-    build_root: str | None = None
-    timeout: float = 900.0
-    codegen_options: tuple[tuple[str, Any], ...] = field(default=(("with_header", False),))
-
-    def __post_init__(self) -> None:
-        if self.jacobian not in JACOBIAN_CHOICES:
-            raise BuildError(
-                f"CodegenSettings.jacobian: {self.jacobian!r} is not allowed "
-                f"(expected one of {', '.join(JACOBIAN_CHOICES)})"
-            )
-        if not ca.has_linsol(self.linear_solver):
-            raise BuildError(
-                f"CodegenSettings.linear_solver: {self.linear_solver!r} is not a CasADi "
-                "linear solver plugin (expected csparse, qr, ldl or lapacklu)"
-            )
-
-    @property
-    def cflags(self) -> tuple[str, ...]:
-        """The complete compiler flags, in order."""
-        return ("-shared", "-fPIC", self.optimization, *self.extra_cflags)
-
-    def root(self) -> Path:
-        """The cache root folder."""
-        return Path(self.build_root) if self.build_root is not None else default_build_root()
-
-    def integrator_options(self) -> dict[str, Any]:
-        """The CVODES/IDAS options that follow from the Jacobian strategy.
-
-        Those of :func:`generated.largescale.choose_plan` (the one place that maps a
-        strategy to solver options; ``jvp`` adds ``use_preconditioner=False`` and
-        ``max_krylov``).
-
-        Raises
-        ------
-        BuildError
-            For ``jacobian="auto"`` (it depends on N: resolve it first).
-        """
-        from generated.largescale import choose_plan  # largescale imports this module
-
-        if self.jacobian not in JACOBIAN_STRATEGIES:
-            raise BuildError(
-                f"CodegenSettings.jacobian: {self.jacobian!r} depends on N "
-                "(resolve it with generated.largescale.choose_plan(N))"
-            )
-        return choose_plan(1, self.jacobian, linear_solver=self.linear_solver).integrator_options
-
-    def key_fields(self) -> dict[str, Any]:
-        """The settings that enter the cache key (the build root does not)."""
-        d = asdict(self)
-        d.pop("build_root")
-        d.pop("timeout")
-        d["codegen_options"] = [list(p) for p in self.codegen_options]
-        return d
 
 
 @dataclass(frozen=True)
@@ -241,6 +130,17 @@ class Library:
             )
         preload(self.preload)
         return ca.external(name, str(self.path))
+
+
+def cache_root(settings: CodegenSettings) -> Path:
+    """The cache root folder of ``settings``: its ``build_root``, else ``$HITL_BUILD_DIR``
+    or the user cache folder (:func:`generated.build_cache.default_build_root`).
+
+    Parameters
+    ----------
+    settings : CodegenSettings
+    """
+    return Path(settings.build_root) if settings.build_root is not None else default_build_root()
 
 
 def cache_key(
@@ -308,7 +208,7 @@ def build_library(
     source += tc.appended_source
     t_codegen = time.perf_counter() - t0
     key = cache_key(source, settings, tc.key)
-    root = settings.root()
+    root = cache_root(settings)
     folder = root / key
     if root.is_dir():
         remove_stale_builds(root)

@@ -2,7 +2,7 @@
 
 :class:`Toolchain` is what a build needs beyond the generated code (hand-written C
 appended to it, include folders, libraries to link); :func:`compile_source` runs the
-compiler (``gcc`` by default, :class:`generated.codegen.CodegenSettings`) on one
+compiler (``gcc`` by default, :class:`generated.values.CodegenSettings`) on one
 translation unit and turns its failure into a :class:`core.errors.BuildError` that names
 the source.
 """
@@ -16,15 +16,13 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from core import artifacts
 from core.errors import BuildError
 from core.memo import MEMO
 from generated.build_cache import LIBRARY_NAME, SOURCE_NAME
-
-if TYPE_CHECKING:  # codegen imports this module
-    from generated.codegen import CodegenSettings
+from generated.values import CodegenSettings
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """C source of CasADi Functions: renamed copies, the integrator signature, the derivatives.
 
 :func:`generate_source` writes the functions of one library, with the derivative
-companions the Jacobian strategy asks for (:data:`JACOBIAN_STRATEGIES`), into one C text;
+companions the Jacobian strategy asks for (:data:`generated.values.JACOBIAN_STRATEGIES`), into one C text;
 compiling and caching it is :mod:`generated.codegen`.
 
 Facts this module relies on (measured with CasADi 3.8.2): an external Function used
@@ -16,19 +16,12 @@ nx×nx matrix (N = 500: 2.8 GB, ≈ 400 s; see docs/performance.md).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import casadi as ca
 
 from core.errors import BuildError
 from generated.build_cache import SOURCE_NAME
-
-if TYPE_CHECKING:  # codegen imports this module
-    from generated.codegen import CodegenSettings
-
-#: what derivative code is generated: ``jac_<name>`` (sparse), ``jac_`` and ``fwd1_``
-#: (gmres) or only ``fwd1_<name>`` (jvp)
-JACOBIAN_STRATEGIES = ("sparse", "gmres", "jvp")
+from generated.values import JACOBIAN_STRATEGIES, CodegenSettings
 
 
 def renamed(f: ca.Function, name: str, *, expand: bool = True, cse: bool = False) -> ca.Function:

@@ -33,9 +33,9 @@ import casadi as ca
 import numpy as np
 
 from generated import native
-from generated.codegen import CodegenSettings, Library, build_library
+from generated.codegen import Library, build_library
 from generated.driver_probe import checked_state, probe_driver
-from generated.integrate import IntegratorSettings, Trajectory
+from generated.values import CodegenSettings, IntegratorSettings, Trajectory
 from symbolic.cascade import Cascade
 
 DRIVER = native.NATIVE_DIR / "dag.c"
@@ -151,7 +151,7 @@ def run(
         ``rtol``, ``atol`` and ``max_steps`` (between two output times).
     breakpoints : sequence of float
         The run restarts exactly at these times, reconciled with ``t_out`` by
-        :func:`generated.integrate.schedule`.
+        :func:`generated.schedule.schedule`.
     progress : callable, optional
         Called once with the time reached.
 

@@ -8,7 +8,7 @@ right-hand side alone, kept as an MX ``map`` (no SX expansion), stays small and 
 forward derivative (one direction, ``fwd1_<name>``) is mapped too.
 
 This module only *chooses*; building is :func:`generated.codegen.build_library` and
-integrating is :func:`generated.integrate.integrate`, the same functions ``make sim``
+integrating is :func:`generated.solvers.engine.integrate`, the same functions ``make sim``
 (:mod:`generated.api`) uses. A :class:`JacobianPlan` turns into the settings of those
 two: :meth:`JacobianPlan.codegen_settings` and :meth:`JacobianPlan.integrator_settings`.
 
@@ -40,8 +40,7 @@ from typing import Any
 import casadi as ca
 
 from core.errors import BuildError
-from generated.codegen import JACOBIAN_CHOICES, CodegenSettings
-from generated.integrate import IntegratorSettings
+from generated.values import JACOBIAN_CHOICES, CodegenSettings, IntegratorSettings
 
 #: above this many agents ``auto`` switches to the matrix-free plan. Measured
 #: (docs/performance.md): N = 5 direct 0.67 s vs gmres 1.16 s; N = 50 direct does not

@@ -25,6 +25,7 @@ import casadi as ca
 
 from core.errors import BuildError
 from core.memo import MEMO
+from generated import native
 from generated.codegen import (
     MANIFEST_NAME,
     TMP_PREFIX,
@@ -120,8 +121,6 @@ def open_image(lib: Library, form: str) -> Image:
     form : str
         ``"ode"`` or ``"dae"``: which right-hand side to load.
     """
-    from generated import native
-
     data, stamp = verified_bytes(lib)
     root = lib.folder.parent
     try:

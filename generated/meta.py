@@ -21,10 +21,10 @@ import numpy as np
 from core.errors import ToolkitError
 from core.scenario import Scenario
 from generated import solvers
-from generated.codegen import CodegenSettings, Library
+from generated.codegen import Library
 from generated.gains_cache import GainsInfo
-from generated.integrate import IntegratorSettings, Trajectory
 from generated.sundials_log import sundials_messages as count_sundials_messages
+from generated.values import CodegenSettings, IntegratorSettings, Trajectory
 
 
 class MetaFileError(ToolkitError):

@@ -44,19 +44,19 @@ import numpy as np
 
 from core.errors import BuildError, IntegrationError
 from core.memo import MEMO
-from generated.codegen import CodegenSettings, Library, Toolchain, build_library, preload
-from generated.integrate import (
+from generated.codegen import Library, Toolchain, build_library, preload
+from generated.largescale import DIRECT_MAX_AGENTS
+from generated.schedule import Schedule, schedule
+from generated.sparse_lu import SparseLU, sparse_lu
+from generated.sundials_log import new_sundials_log, take_sundials_log
+from generated.values import (
+    CodegenSettings,
     IntegratorSettings,
-    Schedule,
+    Status,
     Trajectory,
     flag_reason,
-    new_sundials_log,
-    schedule,
-    take_sundials_log,
+    flag_status,
 )
-from generated.largescale import DIRECT_MAX_AGENTS
-from generated.solvers import Status, flag_status
-from generated.sparse_lu import SparseLU, sparse_lu
 
 NATIVE_DIR = Path(__file__).resolve().parent / "native"
 INCLUDE_DIR = NATIVE_DIR / "include"
@@ -416,7 +416,7 @@ class DriverCall:
         settings : IntegratorSettings
             ``rtol``, ``atol`` and ``max_steps``.
         breakpoints : sequence of float
-            Restart times, reconciled with ``t_out`` by :func:`~generated.integrate.schedule`.
+            Restart times, reconciled with ``t_out`` by :func:`~generated.schedule.schedule`.
         p : ndarray, optional
             The closed loop's parameters (whole-loop driver); default none.
         """
@@ -484,7 +484,7 @@ def run(
         as CVODES' ``max_num_steps``) are used.
     breakpoints : sequence of float
         The run restarts exactly at these times (CVODE stops there, then re-initialises),
-        reconciled with ``t_out`` by :func:`generated.integrate.schedule`: an output time
+        reconciled with ``t_out`` by :func:`generated.schedule.schedule`: an output time
         within its tolerance of a breakpoint is integrated to the breakpoint.
     progress : callable, optional
         Called once with the time reached (the run is one C call).

@@ -22,7 +22,7 @@ from core.scenario import Scenario
 from generated.trajectory_file import INCOMPLETE_MARK, data_rows
 
 if TYPE_CHECKING:
-    from generated.api import Built
+    from generated.built import Built
 
 #: packages whose sources shape a trajectory (their hash is part of the reuse key)
 CODE_PACKAGES = ("symbolic", "synthesis", "generated")

@@ -21,10 +21,10 @@ import pandas as pd
 from core.errors import BuildError
 from core.memo import MEMO
 from core.scenario import Scenario
-from generated.integrate import Trajectory
+from generated.values import Trajectory
 
 if TYPE_CHECKING:
-    from generated.api import Built
+    from generated.built import Built
 
 #: first line of a trajectory.csv whose run stopped early (readers skip ``#`` lines)
 INCOMPLETE_MARK = "# incomplete: "

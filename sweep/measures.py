@@ -101,13 +101,13 @@ def effort_over_demand(ids: list[str], agents: list[Any], observed: np.ndarray) 
     observed : ndarray
         Its observed values.
     """
-    from verify import claims as CL
     from verify.demanded_effort import DEMANDED_LATE
+    from verify.effort import PEAK_U_LATE
 
     def by_agent(cid: str) -> dict[Any, float]:
         return {a: float(o) for c, a, o in zip(ids, agents, observed, strict=True) if c == cid}
 
-    late, demand = by_agent(CL.PEAK_U_LATE.id), by_agent(DEMANDED_LATE.id)
+    late, demand = by_agent(PEAK_U_LATE.id), by_agent(DEMANDED_LATE.id)
     ratios = [late[a] / demand[a] for a in late if demand.get(a, 0.0) > 0.0]
     return max(ratios) if ratios else math.nan
 
@@ -129,6 +129,7 @@ def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
 
     from verify import claims as CL
     from verify.demanded_effort import DEMANDED_LATE
+    from verify.effort import PEAK_U, PEAK_U_LATE
 
     # plain lists: a few comparisons per row cost less than pandas' methods
     claims, kinds = table["claim"].tolist(), table["kind"].tolist()
@@ -150,8 +151,8 @@ def summarize_table(table: pd.DataFrame) -> dict[str, Any]:
     out: dict[str, Any] = {
         "formation_tail_max": max_observed(CL.FORMATION.id),
         "observer_tail_max": max_observed(CL.T1_TAIL.id),
-        "peak_u_max": max_observed(CL.PEAK_U.id),
-        "peak_u_late": max_observed(CL.PEAK_U_LATE.id),
+        "peak_u_max": max_observed(PEAK_U.id),
+        "peak_u_late": max_observed(PEAK_U_LATE.id),
         "demanded_u_late": max_observed(DEMANDED_LATE.id),
         "effort_over_demand": effort_over_demand(ids, agents, observed),
         "guaranteed_held": all(holds[k] for k in g),

@@ -92,7 +92,7 @@ def _run_one(sample: Any) -> dict[str, Any]:
     x0 = agents.initial_state(sc)
     t1 = time.perf_counter()
     s = api.integrator_settings(sc, "native", cg)
-    from generated.integrate import output_grid
+    from generated.schedule import output_grid
 
     H = sc.integration.horizon
     t_out = output_grid(H, sc.integration.output_step)
@@ -160,7 +160,7 @@ def run_study(path: str, count: int | None, workers: int, build_root: str | None
     build_root : str, optional
     """
     from generated import api
-    from generated.codegen import CodegenSettings
+    from generated.values import CodegenSettings
     from sweep.sampler import make_sample
     from sweep.study import load_study
 
@@ -237,7 +237,7 @@ def report(rows: list[dict], wall: float, path: str) -> str:
 
 def _stop_text(r: dict) -> str:
     """Where CVODE stood when it gave up, against the largest state of the rows before."""
-    from generated.integrate import stop_note
+    from generated.values import stop_note
 
     note = stop_note(r["t_stop"], r["stop_state"], r["stop_abs"])
     switch = r["switch_before_stop"]

@@ -20,8 +20,8 @@ from core.errors import IntegrationError
 from core.graph import Switch
 from core.scenario import Graph, load_scenario
 from generated import agents, api
-from generated.codegen import CodegenSettings
-from generated.integrate import IntegratorSettings, output_grid
+from generated.schedule import output_grid
+from generated.values import CodegenSettings, IntegratorSettings
 from symbolic.closed_loop import build_closed_loop
 
 PAPER = "scenarios/paper.toml"

@@ -31,7 +31,8 @@ from core.artifacts import atomic_write_text, sha256_file
 from core.errors import SynthesisError, run_cli
 from generated import api, reuse
 from generated.__main__ import main as sim_main
-from generated.codegen import CodegenSettings, build_library
+from generated.codegen import build_library
+from generated.values import CodegenSettings
 from verify import pipeline as P
 
 PY = sys.executable

@@ -17,9 +17,10 @@ from benchmarks.bench import main
 from benchmarks.catalogue import BenchError
 from benchmarks.scenarios import bench_scenario, random_graph
 from core.errors import ToolkitError
-from generated.codegen import CodegenSettings, build_library
-from generated.integrate import IntegratorSettings, integrate
+from generated.codegen import build_library
 from generated.largescale import choose_plan
+from generated.solvers.engine import integrate
+from generated.values import CodegenSettings, IntegratorSettings
 
 
 # ----------------------------------------------------------------------------- graphs

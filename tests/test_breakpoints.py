@@ -1,4 +1,4 @@
-"""Breakpoints and output times (generated/integrate.py: schedule; every integrator uses it).
+"""Breakpoints and output times (generated/schedule.py; every integrator uses it).
 
 Independent truths: the properties a schedule must have (sorted, inside the horizon,
 no two stops closer than the tolerance, every breakpoint a restart, every requested
@@ -23,14 +23,11 @@ from hypothesis import strategies as st
 
 from core.errors import IntegrationError
 from generated import api, dag, native
-from generated.codegen import CodegenSettings, build_library
-from generated.integrate import (
-    IntegratorSettings,
-    integrate,
-    output_grid,
-    schedule,
-    time_tolerance,
-)
+from generated.built import Built
+from generated.codegen import build_library
+from generated.schedule import output_grid, schedule, time_tolerance
+from generated.solvers.engine import integrate
+from generated.values import CodegenSettings, IntegratorSettings
 
 E = ca.SX(0, 1)
 EPS = float(np.finfo(float).eps)
@@ -251,7 +248,7 @@ FAULTS = {
 def faulty(paper_env):
     gains, cg = paper_env
     sc = _paper(1.0, FAULTS)
-    built: dict[str, api.Built] = {}
+    built: dict[str, Built] = {}
 
     def get(method: str) -> tuple:
         if method not in built:

@@ -30,8 +30,9 @@ import pytest
 from helpers import SMALL
 
 from generated import api
-from generated.codegen import CodegenSettings
-from generated.integrate import schedule, time_tolerance
+from generated.built import Built
+from generated.schedule import schedule, time_tolerance
+from generated.values import CodegenSettings, Trajectory
 
 PY = sys.executable
 ROOT = Path(__file__).resolve().parent.parent
@@ -43,7 +44,7 @@ import json, sys
 from pathlib import Path
 import numpy as np
 from generated import api
-from generated.codegen import CodegenSettings
+from generated.values import CodegenSettings
 
 small, other, build_root, out, method = sys.argv[1:6]
 cg = CodegenSettings(optimization="-O0", build_root=build_root)
@@ -105,7 +106,7 @@ def test_library_rewritten_in_place_is_rebuilt_and_the_process_exits_cleanly(env
     assert "rebuilding" in r.stderr and "SHA-256" in r.stderr
 
 
-def _run(env, path: Path) -> tuple[api.Built, pd.DataFrame, api.Trajectory]:
+def _run(env, path: Path) -> tuple[Built, pd.DataFrame, Trajectory]:
     sc = api.load(path)
     gains, _ = api.ensure_gains(sc, env["root"] / "out")
     b = api.build(sc, gains, None, env["cg"])

@@ -31,9 +31,9 @@ import pytest
 
 from generated import native
 from generated.build_cache import LIBRARY_NAME, MANIFEST_NAME
-from generated.codegen import CodegenSettings, build_library
+from generated.codegen import build_library
 from generated.compiler import Toolchain
-from generated.integrate import IntegratorSettings
+from generated.values import CodegenSettings, IntegratorSettings
 
 PY = sys.executable
 ROOT = Path(__file__).resolve().parent.parent
@@ -48,8 +48,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 from generated import native
-from generated.codegen import CodegenSettings, build_library
-from generated.integrate import IntegratorSettings
+from generated.codegen import build_library
+from generated.values import CodegenSettings, IntegratorSettings
 
 root, what = sys.argv[1:3]
 E = ca.SX(0, 1)
@@ -187,8 +187,8 @@ from pathlib import Path
 from core.scenario import load_scenario
 from generated import agents
 from generated.api import ensure_gains
-from generated.codegen import CodegenSettings
-from generated.integrate import IntegratorSettings, output_grid
+from generated.schedule import output_grid
+from generated.values import CodegenSettings, IntegratorSettings
 
 root, scenario, out = sys.argv[1:4]
 sc = load_scenario(scenario)

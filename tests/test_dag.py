@@ -17,8 +17,8 @@ import pytest
 from benchmarks.scenarios import bench_gains, bench_scenario
 from core.errors import IntegrationError, ScenarioError
 from generated import api, dag
-from generated.codegen import CodegenSettings
-from generated.integrate import IntegratorSettings, output_grid
+from generated.schedule import output_grid
+from generated.values import CodegenSettings, IntegratorSettings
 from symbolic.cascade import build_cascade, topological_order
 from symbolic.closed_loop import build_closed_loop
 

@@ -21,7 +21,7 @@ from core.expressions import parse_expression
 from core.faults import FAULT
 from core.scenario import load_scenario
 from generated import api
-from generated.codegen import CodegenSettings
+from generated.values import CodegenSettings
 
 HORIZON = 10.0
 BASE = f"""

@@ -15,9 +15,11 @@ from platformdirs import user_cache_dir
 from core.errors import BuildError
 from generated import codegen
 from generated.__main__ import main as gen_main
-from generated.codegen import CodegenSettings, build_library
+from generated.codegen import build_library
 from generated.compiler import compile_source
 from generated.csource import check_dyn_signature, renamed
+from generated.largescale import choose_plan
+from generated.values import CodegenSettings
 
 
 def dyn(name: str, c: float = 0.3) -> ca.Function:
@@ -144,7 +146,7 @@ def test_broken_compile_reports_first_errors_and_source(settings, tmp_path):
     from pathlib import Path
 
     assert Path(src).is_file()  # the source is kept where the message says
-    root = Path(settings.root())
+    root = Path(codegen.cache_root(settings))
     entries = [p for p in root.iterdir() if p.name not in ("failed",)]
     assert entries == []  # no cache entry, no temporary folder left behind
 
@@ -194,7 +196,7 @@ def test_jvp_strategy_has_forward_derivative_only(settings):
     lib = build_library([dyn("toy")], s2, ["toy"])
     assert "fwd1_toy" in lib.names and "jac_toy" not in lib.names
     # no Jacobian to precondition with: GMRES must run unpreconditioned
-    assert s2.integrator_options() == {
+    assert choose_plan(1, "jvp", linear_solver=s2.linear_solver).integrator_options == {
         "newton_scheme": "gmres",
         "use_preconditioner": False,
         "max_krylov": 20,
@@ -223,7 +225,7 @@ def test_concurrent_identical_builds_share_one_entry(settings):
     with ThreadPoolExecutor(2) as ex:
         libs = list(ex.map(lambda _: build_library([dyn("conc")], settings, ["conc"]), range(2)))
     assert libs[0].key == libs[1].key and libs[0].path.is_file()
-    entries = [p for p in settings.root().iterdir() if not p.name.startswith(".")]
+    entries = [p for p in codegen.cache_root(settings).iterdir() if not p.name.startswith(".")]
     assert [p.name for p in entries] == [libs[0].key]
     x = np.array([0.1, 0.2, 0.3])
     for lib in libs:
@@ -268,7 +270,7 @@ def test_default_cache_is_outside_the_package_and_env_overrides_it(tmp_path, mon
     """The default root is the user cache (XDG_CACHE_HOME honoured), never under the package."""
     package = Path(codegen.__file__).resolve().parent
     monkeypatch.delenv("HITL_BUILD_DIR", raising=False)
-    root = CodegenSettings().root()
+    root = codegen.cache_root(CodegenSettings())
     assert package not in root.resolve().parents and root.resolve() != package
     assert root == Path(user_cache_dir("hitl-formation")) / "build"
     env = subprocess.run(
@@ -284,12 +286,12 @@ def test_default_cache_is_outside_the_package_and_env_overrides_it(tmp_path, mon
     )
     assert env.stdout.strip() == str(tmp_path / "xdg" / "hitl-formation" / "build")
     monkeypatch.setenv("HITL_BUILD_DIR", str(tmp_path / "mine"))
-    assert CodegenSettings().root() == tmp_path / "mine"
-    assert CodegenSettings(build_root=str(tmp_path / "set")).root() == tmp_path / "set"
+    assert codegen.cache_root(CodegenSettings()) == tmp_path / "mine"
+    assert codegen.cache_root(CodegenSettings(build_root=str(tmp_path / "set"))) == tmp_path / "set"
 
 
 def test_clear_cache_removes_only_what_the_cache_made(settings, tmp_path, capsys, monkeypatch):
-    root = settings.root()
+    root = codegen.cache_root(settings)
     lib = build_library([dyn("toy")], settings, ["toy"])
     (root / "failed" / ("0" * 64)).mkdir(parents=True)
     (root / ".tmp-abc-1-x").mkdir()

@@ -1,4 +1,4 @@
-"""Integration methods over compiled code (generated/integrate.py), against exact solutions."""
+"""Integration methods over compiled code (generated/solvers/engine.py), against exact solutions."""
 
 from __future__ import annotations
 
@@ -8,8 +8,10 @@ import pytest
 from scipy.linalg import expm
 
 from core.errors import IntegrationError
-from generated.codegen import CodegenSettings, build_library
-from generated.integrate import IntegratorSettings, _plan, integrate, output_grid
+from generated.codegen import build_library
+from generated.schedule import output_grid
+from generated.solvers.engine import _plan, integrate
+from generated.values import CodegenSettings, IntegratorSettings
 
 E = ca.SX(0, 1)
 

@@ -18,45 +18,8 @@ import sys
 
 import pandas as pd
 import pytest
-from helpers import ROOT, SMALL
-
-NEW_MODEL = '''"""The paper's two-link arm with viscous friction c1, c2 in its joints, n = 2."""
-
-from core.models.base import ModelSpec, register
-
-
-def _lagrangian(prm):
-    import sympy as sp
-
-    p1, p2 = sp.symbols("p1 p2", real=True)
-    q1, q2 = sp.symbols("q1 q2", real=True)
-    m1, m2, r1, r2, J1, J2, g0, c1, c2 = (
-        sp.nsimplify(prm[k]) for k in ("m1", "m2", "r1", "r2", "J1", "J2", "g0", "c1", "c2")
-    )
-    T = sp.Rational(1, 2) * (m1 + m2) * r1**2 * q1**2
-    T += sp.Rational(1, 2) * m2 * (r2**2 * (q1 + q2) ** 2 + 2 * r1 * r2 * sp.cos(p2) * q1 * (q1 + q2))
-    T += sp.Rational(1, 2) * J1 * q1**2 + sp.Rational(1, 2) * J2 * q2**2
-    V = g0 * ((m1 + m2) * r1 * sp.sin(p1) + m2 * r2 * sp.sin(p1 + p2))
-    R = sp.Rational(1, 2) * (c1 * q1**2 + c2 * q2**2)  # Rayleigh: viscous friction
-    return T, V, [p1, p2], [q1, q2], R
-
-
-SPEC = register(
-    ModelSpec(
-        name="damped_arm",
-        n=2,
-        defaults={"m1": 0.5, "m2": 1.5, "r1": 1.0, "r2": 0.8, "J1": 5.0, "J2": 5.0, "g0": 9.81,
-                  "c1": 2.0, "c2": 3.0},
-        lagrangian=_lagrangian,
-        description="two-link arm with viscous joint friction",
-        nonnegative=frozenset({"g0", "J1", "J2", "c1", "c2"}),
-    )
-)
-'''
-ANCHOR = (
-    "from core.models import point_mass_2d, point_mass_3d, two_link  # noqa: F401  (registers)\n"
-)
-LINE = "from core.models import damped_arm  # noqa: F401  (registers)\n"
+import recipes
+from helpers import SMALL
 
 #: in the copy: D against c q, and the generated loop against the numpy reference
 CHECK = """
@@ -89,14 +52,8 @@ print(json.dumps({"D": d.tolist(), "cq": [2.0 * q[0], 3.0 * q[1]], "rhs": worst,
 
 
 def _follow_the_recipe(root):
-    repo = root / "repo"
-    for pkg in ("core", "synthesis", "symbolic", "generated", "verify"):
-        shutil.copytree(ROOT / pkg, repo / pkg, ignore=shutil.ignore_patterns("__pycache__"))
-    (repo / "core" / "models" / "damped_arm.py").write_text(NEW_MODEL)
-    reg = repo / "core" / "models" / "__init__.py"
-    text = reg.read_text()
-    assert text.count(ANCHOR) == 1, "core/models/__init__.py: the import line the recipe names"
-    reg.write_text(text.replace(ANCHOR, ANCHOR + LINE))
+    repo = recipes.copy_tree(root / "repo")
+    recipes.add_model(repo)
     return repo
 
 

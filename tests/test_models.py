@@ -51,7 +51,11 @@ def test_properties_symbolically(name):
     Mdot = sp.Matrix(n, n, lambda i, j: sum(sp.diff(M[i, j], p[k]) * q[k] for k in range(n)))
     S = Mdot - 2 * C
     assert sp.simplify(S + S.T).is_zero_matrix  # exactly zero, not numerically small
-    assert mdl.checks == {"property1": "exact", "property2": "exact"}
+    assert (mdl.checks["property1"], mdl.checks["property2"]) == ("exact", "exact")
+    # a Rayleigh function R adds D = ∂R/∂q and its check; nothing else
+    assert set(mdl.checks) == {"property1", "property2"} | (
+        {"dissipation"} if mdl.D is not None else set()
+    )
     # numerically too: xᵀ(Ṁ − 2C)x = 0 and λ_min(M) within M_bounds at random states
     rng = np.random.default_rng(3)
     for _ in range(20):
@@ -63,6 +67,15 @@ def test_properties_symbolically(name):
         Mdot_v = (np.array(mdl.M(pv + eps * qv)) - np.array(mdl.M(pv - eps * qv))) / (2 * eps)
         Sv = Mdot_v - 2 * np.array(mdl.C(pv, qv))
         assert abs(x @ Sv @ x) < 1e-6 * (1 + np.abs(Sv).max())
+        if mdl.D is not None:  # ∂D/∂q ⪰ 0 by central differences of the CasADi D
+            Dq = np.column_stack(
+                [
+                    (np.array(mdl.D(pv, qv + eps * e)) - np.array(mdl.D(pv, qv - eps * e))).ravel()
+                    / (2 * eps)
+                    for e in np.eye(n)
+                ]
+            )
+            assert np.linalg.eigvalsh((Dq + Dq.T) / 2).min() > -1e-6 * (1 + np.abs(Dq).max())
 
 
 def test_point_mass_models():

@@ -15,9 +15,10 @@ from scipy.linalg import expm
 
 from core.errors import BuildError, IntegrationError
 from generated import native
-from generated.codegen import CodegenSettings, cache_key
-from generated.integrate import IntegratorSettings, output_grid
+from generated.codegen import cache_key
+from generated.schedule import output_grid
 from generated.sparse_lu import sparse_lu
+from generated.values import CodegenSettings, IntegratorSettings
 
 E = ca.SX(0, 1)
 

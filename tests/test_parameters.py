@@ -13,6 +13,7 @@ from helpers import PAPER
 
 from core.graph import weights_at
 from generated import api
+from generated.values import CodegenSettings
 from symbolic.closed_loop import bind, build_closed_loop
 from symbolic.parameters import layout_of, param_values, structure_key
 from verify.reference import Reference
@@ -138,7 +139,7 @@ def test_switching_weights_follow_the_topology(tmp_path):
 
 def test_a_second_scenario_reuses_the_compiled_library(pair, tmp_path):
     a, ga, b, gb, _ = pair
-    cg = api.CodegenSettings(optimization="-O0", build_root=str(tmp_path / "build"))
+    cg = CodegenSettings(optimization="-O0", build_root=str(tmp_path / "build"))
     first = api.build(a, ga, "native", cg)
     second = api.build(b, gb, "native", cg)
     assert second.library.path == first.library.path

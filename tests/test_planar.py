@@ -281,7 +281,7 @@ STEPS = {
 @pytest.fixture(scope="module")
 def steps_run(tmp_path_factory):
     from generated import api
-    from generated.codegen import CodegenSettings
+    from generated.values import CodegenSettings
     from verify.pipeline import Run, verify_run
 
     root = tmp_path_factory.mktemp("planar")

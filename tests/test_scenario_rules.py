@@ -18,7 +18,7 @@ from helpers import PAPER
 from core.errors import ScenarioError
 from core.scenario import Integration, load_scenario
 from generated import api
-from generated.integrate import IntegratorSettings
+from generated.values import IntegratorSettings
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,7 @@ from helpers import ROOT
 
 from core.scenario import load_scenario
 from generated import api
-from generated.codegen import CodegenSettings
+from generated.values import CodegenSettings
 from sweep.sampler import samples, write_scenario
 from sweep.study import load_study
 

@@ -23,9 +23,9 @@ from helpers import SMALL, TIGHT, TIGHT_BOUND
 from core.errors import BuildError, IntegrationError, ScenarioError, run_cli
 from generated import api
 from generated.__main__ import main as cli_main
-from generated.codegen import CodegenSettings
 from generated.meta import MetaFileError, RunMeta
 from generated.progress import progress_bar
+from generated.values import CodegenSettings
 
 
 @pytest.fixture(scope="module")
@@ -123,7 +123,7 @@ def test_second_run_reuses_library_and_gives_identical_file(base):
 def test_codegen_is_deterministic_across_processes(base, env):
     """Another interpreter (another hash seed) generates the same C: same cache key."""
     code = (
-        "import sys; from generated import api; from generated.codegen import CodegenSettings;"
+        "import sys; from generated import api; from generated.values import CodegenSettings;"
         "sc = api.load(sys.argv[1]); g, _ = api.ensure_gains(sc, sys.argv[2]);"
         "b = api.build(sc, g, 'cvodes', CodegenSettings(optimization='-O0', build_root=sys.argv[3]));"
         "print(b.library.key, b.library.cache_hit)"

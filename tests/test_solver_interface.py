@@ -24,9 +24,11 @@ from helpers import SMALL, TIGHT, TIGHT_BOUND
 
 from core.errors import IntegrationError, ScenarioError
 from generated import api, native, solvers
-from generated.codegen import CodegenSettings
-from generated.integrate import IntegratorSettings, Trajectory, integrate, output_grid
-from generated.solvers import Solver, Status
+from generated.built import Built
+from generated.schedule import output_grid
+from generated.solvers import Solver
+from generated.solvers.engine import integrate
+from generated.values import CodegenSettings, IntegratorSettings, Status, Trajectory, flag_status
 
 
 def _c_layout(tmp_path) -> dict[str, int]:
@@ -92,7 +94,7 @@ def _small(folder):
     return path
 
 
-def _library_rhs(built: api.Built) -> Callable[[float, np.ndarray], np.ndarray]:
+def _library_rhs(built: Built) -> Callable[[float, np.ndarray], np.ndarray]:
     """``(t, x) -> ode`` of ``built.dyn`` through the library's C entry point (ctypes).
 
     The same compiled function ``built.dyn`` calls, with ``built.p`` filled in, without
@@ -134,7 +136,7 @@ class ScipyRadau(Solver):
 
     def run(
         self,
-        built: api.Built,
+        built: Built,
         x0: np.ndarray,
         t_out: np.ndarray,
         settings: IntegratorSettings,
@@ -259,8 +261,8 @@ def test_failures_carry_a_status() -> None:
 
 
 def test_flag_names_map_to_statuses() -> None:
-    assert solvers.flag_status("CV_TOO_MUCH_WORK") is Status.STEP_LIMIT
-    assert solvers.flag_status("IDA_CONV_FAIL") is Status.CONV_FAIL
-    assert solvers.flag_status("CV_ERR_FAILURE") is Status.ERROR_TEST
-    assert solvers.flag_status("CV_TOO_CLOSE") is Status.TOO_CLOSE
-    assert solvers.flag_status("CV_SOMETHING_NEW") is Status.FAILED
+    assert flag_status("CV_TOO_MUCH_WORK") is Status.STEP_LIMIT
+    assert flag_status("IDA_CONV_FAIL") is Status.CONV_FAIL
+    assert flag_status("CV_ERR_FAILURE") is Status.ERROR_TEST
+    assert flag_status("CV_TOO_CLOSE") is Status.TOO_CLOSE
+    assert flag_status("CV_SOMETHING_NEW") is Status.FAILED

@@ -24,7 +24,7 @@ from benchmarks.steps import (
 from core.errors import IntegrationError, UsageError, run_cli
 from core.scenario import load_scenario
 from generated import api
-from generated.codegen import CodegenSettings
+from generated.values import CodegenSettings
 
 PAPER = "scenarios/paper.toml"
 
@@ -83,7 +83,7 @@ def test_step_profile_tiles_the_run(small):
 
 
 def test_step_profile_final_state_matches_one_run(small):
-    from generated.integrate import integrate
+    from generated.solvers.engine import integrate
 
     sc, built = small["sc"], small["built"]
     s = api.integrator_settings(sc)

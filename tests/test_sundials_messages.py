@@ -22,8 +22,9 @@ import numpy as np
 import pytest
 
 from generated import native
-from generated.codegen import CodegenSettings
-from generated.integrate import IntegratorSettings, output_grid, sundials_messages
+from generated.schedule import output_grid
+from generated.sundials_log import sundials_messages
+from generated.values import CodegenSettings, IntegratorSettings
 
 ROOT = Path(__file__).resolve().parent.parent
 E = ca.SX(0, 1)

@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 from generated import agents, api
-from generated.codegen import CodegenSettings
-from generated.solvers import Status
+from generated.values import CodegenSettings, Status
 from sweep import topologies
 from sweep.sampler import make_sample
 from sweep.study import load_study

@@ -18,8 +18,8 @@ from typing import Any, ForwardRef, TypedDict
 import pytest
 
 import core.json_types as jt
-from generated.api import Built
-from generated.integrate import Trajectory
+from generated.built import Built
+from generated.values import Trajectory
 from synthesis.gains import Gains
 from verify.checks import CheckInput
 from verify.signals import TrajectoryView

@@ -218,9 +218,6 @@ DEF1_ENV = register(
     BG,
 )
 FORMATION = register("formation.leader", "Formation |p_i - h_i y0 - R(tau_i^0) b_i0| (tail sup)", I)
-# effort
-PEAK_U = register("effort.peak", "peak |u_i|", I)
-PEAK_U_LATE = register("effort.peak_late", "peak |u_i| after t = {startup:g} s", I)
 # Fig. 13 (ablation)
 FIG13_VERDICT = register(
     "fig13.verdict",

@@ -1,5 +1,8 @@
-"""Peak control effort: ‖u_i‖ over the run and after the start-up (``info`` rows), a check
-registered with :mod:`verify.checks` as a new check would be."""
+"""Peak control effort: ‖u_i‖ over the run and after the start-up (``info`` rows).
+
+A check as docs/ARCHITECTURE.md's recipe adds one: its claims registered here
+(:func:`verify.claims.register`), its rows with :func:`verify.checks.register_check`.
+"""
 
 from __future__ import annotations
 
@@ -14,6 +17,9 @@ from verify.rows import Rows
 
 #: peak |u_i| is also reported after this start-up time (s): the t = 0 peak dominates
 STARTUP = 1.0
+
+PEAK_U = CL.register("effort.peak", "peak |u_i|", CL.Kind.INFO)
+PEAK_U_LATE = CL.register("effort.peak_late", "peak |u_i| after t = {startup:g} s", CL.Kind.INFO)
 
 
 def effort_rows(R: Rows, df: S.FrameOrView, N: int, n: int) -> None:
@@ -42,7 +48,7 @@ def effort_rows(R: Rows, df: S.FrameOrView, N: int, n: int) -> None:
                 continue
             k = int(np.flatnonzero(mask)[np.argmax(un[mask])])
             R.add(
-                CL.PEAK_U_LATE if label else CL.PEAK_U,
+                PEAK_U_LATE if label else PEAK_U,
                 CL.Kind.INFO,
                 math.inf,  # a measurement: no bound
                 float(un[k]),

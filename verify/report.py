@@ -13,6 +13,7 @@ from core.artifacts import atomic_write_text
 from core.scenario import Scenario
 from verify import claims as CL
 from verify.bounds import VerifyConfig, theorem1_floor, theorem1_rates, theorem2_constants
+from verify.effort import PEAK_U, PEAK_U_LATE
 from verify.lyapunov import InequalityCheck
 from verify.rows import KINDS, failed_mask, held_mask
 from verify.table import (
@@ -227,7 +228,7 @@ def effort_section(table: pd.DataFrame) -> list[str]:
     table : DataFrame
         The bound-vs-actual table (its ``peak |u_i|`` rows).
     """
-    rows = table[table["claim_id"].isin([CL.PEAK_U.id, CL.PEAK_U_LATE.id])]
+    rows = table[table["claim_id"].isin([PEAK_U.id, PEAK_U_LATE.id])]
     if rows.empty:
         return []
     L = [

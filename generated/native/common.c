@@ -159,7 +159,7 @@ static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx, const char *
    there (row-major x_out[k * nx + i]; CVODE's interpolant between its steps). CVODE
    restarts (CVodeReInit) at every breakpoint; it stops exactly there and at the horizon
    (CVodeSetStopTime), never stepping beyond. t_out and breaks are the targets and
-   restart times of generated.integrate.schedule: increasing, breaks strictly inside
+   restart times of generated.schedule.schedule: increasing, breaks strictly inside
    (t_out[0], t_out[nt-1]), every two distinct times more than its tolerance apart, and
    an output time that coincides with a breakpoint to that tolerance replaced by it, so
    CVODE is never asked for a time it already stands at (CV_TOO_CLOSE).

@@ -131,7 +131,7 @@ static int hitl_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, void *d
  * r->x_out (row-major x_out[k * nx + i]; CVODE's interpolant between its steps, as
  * CVODES through CasADi). The run restarts (CVodeReInit) at every breakpoint; it stops
  * exactly there and at the horizon (CVodeSetStopTime), never stepping beyond. The
- * options' t_out and breaks are generated.integrate.schedule's targets and restart
+ * options' t_out and breaks are generated.schedule.schedule's targets and restart
  * times (hitl_cvode_outputs). Returns r->filled: the rows of x_out filled (>= 1), or -1
  * if CVODE could not be set up; r->flag is CVODE's last flag (< 0 on a failure) and
  * r->msg its name and message.

@@ -15,7 +15,7 @@
 #define HITL_MSG_LEN 1024
 
 /* What a run is asked to do: tolerances, steps, output and restart times. t_out and
-   breaks are generated.integrate.schedule's targets and restart times. */
+   breaks are generated.schedule.schedule's targets and restart times. */
 typedef struct {
   double rtol;
   double atol;

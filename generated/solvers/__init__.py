@@ -21,14 +21,11 @@ import importlib
 from core import methods
 from core.errors import IntegrationError
 from core.methods import MethodSpec
-from generated.solvers.base import FORMS, BuildPlan, ChunkFailure, Solver, Status, flag_status
+from generated.solvers.base import BuildPlan, Solver
 
 __all__ = [
     "BuildPlan",
-    "ChunkFailure",
     "Solver",
-    "Status",
-    "flag_status",
     "get",
     "names",
     "register",
@@ -63,8 +60,10 @@ def register(solver: Solver, *, replace: bool = False) -> Solver:
         solver that disagrees with the method's declaration.
     """
     name = getattr(solver, "name", "")
-    if solver.form not in FORMS:
-        raise IntegrationError(f"solver {name!r}: form {solver.form!r} is not one of {FORMS}")
+    if solver.form not in methods.FORMS:
+        raise IntegrationError(
+            f"solver {name!r}: form {solver.form!r} is not one of {methods.FORMS}"
+        )
     if name in _REGISTRY and not replace and _REGISTRY[name] is not solver:
         raise IntegrationError(f"solver {name!r} is registered already (pass replace=True)")
     spec = methods.get(name) if name in methods.names() else None

@@ -1,4 +1,4 @@
-"""What every integration method provides: the :class:`Solver` interface and :class:`Status`.
+"""What every integration method provides: the :class:`Solver` interface and its :class:`BuildPlan`.
 
 A method is one :class:`Solver` subclass, registered by name
 (:func:`generated.solvers.register`). The pipeline (:mod:`generated.api`) asks the
@@ -9,98 +9,24 @@ before the closed loop is built, ``build`` for what goes into the compiled libra
 
 from __future__ import annotations
 
-import enum
-import re
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
+
+from core.errors import IntegrationError
 
 if TYPE_CHECKING:
     import casadi as ca
     import numpy as np
 
     from core.scenario import Scenario
-    from generated.api import Built
-    from generated.codegen import CodegenSettings, Library, Toolchain
-    from generated.integrate import IntegratorSettings, Trajectory
+    from generated.built import Built
+    from generated.codegen import Library, Toolchain
     from generated.largescale import JacobianPlan as Plan
+    from generated.values import CodegenSettings, IntegratorSettings, Trajectory
     from symbolic.closed_loop import ClosedLoop
     from synthesis.gains import Gains
-
-#: the two forms a closed loop is compiled in
-FORMS = ("ode", "dae")
-
-
-class Status(enum.Enum):
-    """Why a run ended: callers test this, never the text of the message.
-
-    ``OK`` is a complete run; every other member is an incomplete one.
-    """
-
-    OK = "complete"
-    STEP_LIMIT = "too many steps before the next output time"
-    ERROR_TEST = "error test failed repeatedly"
-    CONV_FAIL = "Newton iteration failed repeatedly"
-    ACCURACY = "tolerances too small for machine precision"
-    RHS_FAIL = "right-hand side or residual not finite"
-    LINEAR_FAIL = "linear solver failed"
-    NOT_FINITE = "state is not finite"
-    TOO_CLOSE = "output time too close to the current time"
-    INIT_FAIL = "consistent initial conditions not found"
-    TIME_LIMIT = "wall-clock time limit reached"
-    FAILED = "solver failure"
-
-
-#: SUNDIALS return-flag names (without CV_/IDA_) -> status
-_FLAG_STATUS = {
-    "TOO_MUCH_WORK": Status.STEP_LIMIT,
-    "TOO_MUCH_ACC": Status.ACCURACY,
-    "ERR_FAIL": Status.ERROR_TEST,
-    "ERR_FAILURE": Status.ERROR_TEST,
-    "CONV_FAIL": Status.CONV_FAIL,
-    "CONV_FAILURE": Status.CONV_FAIL,
-    "RHSFUNC_FAIL": Status.RHS_FAIL,
-    "REPTD_RHSFUNC_ERR": Status.RHS_FAIL,
-    "UNREC_RHSFUNC_ERR": Status.RHS_FAIL,
-    "FIRST_RHSFUNC_ERR": Status.RHS_FAIL,
-    "RES_FAIL": Status.RHS_FAIL,
-    "REP_RES_ERR": Status.RHS_FAIL,
-    "FIRST_RES_FAIL": Status.RHS_FAIL,
-    "LSETUP_FAIL": Status.LINEAR_FAIL,
-    "LSOLVE_FAIL": Status.LINEAR_FAIL,
-    "TOO_CLOSE": Status.TOO_CLOSE,
-    "LINESEARCH_FAIL": Status.INIT_FAIL,
-    "NO_RECOVERY": Status.INIT_FAIL,
-}
-
-
-def flag_status(flag: str) -> Status:
-    """The :class:`Status` of a SUNDIALS return flag (``CV_TOO_MUCH_WORK``, ``ERR_FAIL``).
-
-    Parameters
-    ----------
-    flag : str
-        The flag's name with or without its ``CV_``/``IDA_`` prefix.
-    """
-    return _FLAG_STATUS.get(re.sub(r"^(?:CV|IDA)_", "", flag.strip()), Status.FAILED)
-
-
-class ChunkFailure(Exception):
-    """A stepper's failure to reach the end of its chunk (the engine replays and reports it).
-
-    Parameters
-    ----------
-    reason : str
-        One readable line (the trajectory's message).
-    status : Status
-    t_target : float
-        The time it was working towards.
-    """
-
-    def __init__(self, reason: str, status: Status, t_target: float) -> None:
-        super().__init__(reason)
-        self.reason, self.status, self.t_target = reason, status, t_target
 
 
 @dataclass(frozen=True)
@@ -195,8 +121,6 @@ class Solver(ABC):
         ----------
         built : Built
         """
-        from core.errors import IntegrationError
-
         if built.form != self.form:
             raise IntegrationError(
                 f"method {self.name!r} needs the {self.form.upper()} build "

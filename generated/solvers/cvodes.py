@@ -10,7 +10,7 @@ from generated.solvers.engine import CasadiSolver, SundialsStepper
 if TYPE_CHECKING:
     import casadi as ca
 
-    from generated.integrate import IntegratorSettings
+    from generated.values import IntegratorSettings
 
 
 class CvodesStepper(SundialsStepper):

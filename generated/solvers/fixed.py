@@ -30,12 +30,12 @@ from typing import TYPE_CHECKING, Any
 import casadi as ca
 import numpy as np
 
-from generated.integrate import failure_reason
-from generated.solvers import ChunkFailure, Status, register
-from generated.solvers.engine import CasadiSolver
+from generated.solvers import register
+from generated.solvers.engine import CasadiSolver, failure_reason
+from generated.values import ChunkFailure, Status
 
 if TYPE_CHECKING:
-    from generated.integrate import IntegratorSettings
+    from generated.values import IntegratorSettings
 
 GAMMA_ROS2 = 1.0 + 1.0 / math.sqrt(2.0)
 

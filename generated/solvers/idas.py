@@ -17,7 +17,7 @@ from generated.solvers import register
 from generated.solvers.engine import CasadiSolver, SundialsStepper
 
 if TYPE_CHECKING:
-    from generated.integrate import IntegratorSettings
+    from generated.values import IntegratorSettings
 
 
 def _z_newton_step(f: ca.Function, nz: int, linear_solver: str) -> ca.Function | None:

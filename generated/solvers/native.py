@@ -18,17 +18,18 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from core.errors import BuildError, IntegrationError
+from generated import dag, native
 from generated.solvers import register
 from generated.solvers.base import BuildPlan, Solver
+from symbolic.cascade import build_cascade
 
 if TYPE_CHECKING:
     import casadi as ca
 
     from core.scenario import Scenario
-    from generated.api import Built
-    from generated.codegen import CodegenSettings
-    from generated.integrate import IntegratorSettings, Trajectory
+    from generated.built import Built
     from generated.largescale import JacobianPlan as Plan
+    from generated.values import CodegenSettings, IntegratorSettings, Trajectory
     from symbolic.closed_loop import ClosedLoop
     from synthesis.gains import Gains
 
@@ -54,12 +55,8 @@ class Native(Solver):
         ScenarioError
             Above the limit, if the graph has a cycle or the followers differ in model.
         """
-        from generated import native
-
         if sc.N <= native.MAX_AGENTS:
             return None
-        from symbolic.cascade import build_cascade
-
         return build_cascade(sc, gains)
 
     def build(
@@ -74,8 +71,6 @@ class Native(Solver):
         dyn, cl, settings, prepared
             As :meth:`generated.solvers.Solver.build`.
         """
-        from generated import native
-
         if cl.layout.N <= native.MAX_AGENTS:  # whole loop, flat SX
             functions = native.native_functions(dyn, cse=settings.cse)[0]
             return BuildPlan(tuple(functions), derivatives=False, toolchain=native.toolchain())
@@ -85,8 +80,6 @@ class Native(Solver):
                 "per-follower blocks: call build(sc, gains, method='native') or pass "
                 "cascade=native_cascade(sc, gains)"
             )
-        from generated import dag  # one block's code whatever N
-
         return BuildPlan(derivatives=False, companion=dag.build(prepared, settings), data=prepared)
 
     def check_built(self, built: Built) -> None:
@@ -96,8 +89,6 @@ class Native(Solver):
         ----------
         built : Built
         """
-        from generated import native
-
         super().check_built(built)
         if built.dag is None and native.RHS_NAME not in built.library.names:
             raise IntegrationError(
@@ -112,8 +103,6 @@ class Native(Solver):
         N : int
         plan : Plan
         """
-        from generated import native
-
         if N <= native.MAX_AGENTS:
             return "native CVODE: generated J (reused by CVODE) and sparse LU without pivoting"
         return "native CVODE, graph-ordered blocks: block forward substitution"
@@ -135,14 +124,10 @@ class Native(Solver):
             As :meth:`generated.solvers.Solver.run`.
         """
         if built.dag is not None:
-            from generated import dag
-
             lib, cascade = built.dag
             return dag.run(
                 lib.path, cascade, x0, t_out, settings, breakpoints=breakpoints, progress=progress
             )
-        from generated import native
-
         return native.run(
             built.library.path,
             x0,
