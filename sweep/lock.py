@@ -1,0 +1,74 @@
+"""One run at a time in a study's folder: an exclusive lock on ``<folder>/.lock``.
+
+The lock is the kernel's (``flock``) on the open file, so it ends with its process,
+however that process ends: a lock file left by a dead run names a PID that holds
+nothing, and the next run takes it. The file carries the holder's PID and host, for
+the refusal's message.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import socket
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from core.errors import ToolkitError
+
+LOCK = ".lock"
+
+
+class StudyLocked(ToolkitError):
+    """Another process holds the study folder's lock."""
+
+
+@contextmanager
+def study_lock(folder: Path) -> Iterator[Path]:
+    """Hold the lock of ``folder`` (created) while the block runs.
+
+    Parameters
+    ----------
+    folder : Path
+        The study's folder.
+
+    Yields
+    ------
+    Path
+        The lock file.
+
+    Raises
+    ------
+    StudyLocked
+        Another process holds it: one line naming its PID and the fix.
+    """
+    path = Path(folder) / LOCK
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = _holder(fd)
+        os.close(fd)
+        raise StudyLocked(
+            f"{folder} is in use by another run of this study ({holder}, lock {path}): wait "
+            "for it to finish, or give another --out DIR"
+        ) from None
+    except BaseException:
+        os.close(fd)
+        raise
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()} {socket.gethostname()}\n".encode(), 0)
+        yield path
+    finally:
+        os.ftruncate(fd, 0)
+        os.close(fd)  # releases the lock
+
+
+def _holder(fd: int) -> str:
+    """``PID <pid> on <host>`` from the lock file (``PID unknown`` while it is written)."""
+    words = os.pread(fd, 200, 0).decode("utf-8", "replace").split()
+    if not words or not words[0].isdigit():
+        return "PID unknown"
+    return f"PID {words[0]}" + (f" on {words[1]}" if len(words) > 1 else "")
