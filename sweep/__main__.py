@@ -118,6 +118,8 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
         raise UsageError("--chunk: give a number of samples per task >= 1")
     if args.batch < 1:
         raise UsageError("--batch: give a number of rows per commit >= 1")
+    if args.out is not None and not args.out.strip():
+        raise UsageError("--out: an empty path: give a folder (default out/ or $HITL_OUT)")
     path = run_study(
         args.study,
         out_root=args.out or OUT_ROOT,
