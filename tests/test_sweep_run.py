@@ -416,17 +416,19 @@ def test_failed_samples_fail_the_command_and_a_rerun_retries_them(setup, capsys)
     study.write_text(good)
     assert _sweep_cli([*argv, "--ids", "0"], capsys) == (0, [])
     first = pd.read_parquet(root / "out/retry/results.parquet")
-    # the same draws with a step budget CVODES cannot meet: ids 1 and 2 fail
-    study.write_text(good + '\n[set]\n"integration.max_steps" = 10\n')
-    status, err = _sweep_cli(argv, capsys)
+    # the same study with a build cache the workers cannot use (a file, not a folder):
+    # ids 1 and 2 fail (a changed study would be refused: docs/studies.md, 'Identity')
+    (root / "not-a-folder").write_text("")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("HITL_BUILD_DIR", str(root / "not-a-folder"))  # inherited by the workers
+        status, err = _sweep_cli(argv, capsys)
     assert status == 1 and len(err) == 1, err
-    assert err[0].startswith("study faults: 2 of 3 samples failed; first (id 1): IntegrationError")
+    assert err[0].startswith("study faults: 2 of 3 samples failed; first (id 1): ")
     assert err[0].endswith(f"rerun `make sweep SWEEP={study}` retries them")
     failed = pd.read_parquet(root / "out/retry/results.parquet").set_index("id")
     assert failed.loc[0, "finished_utc"] == first.loc[0, "finished_utc"]  # ok is final
     report = root / "out/retry/report.md"
     assert "Retried in this run: 0 samples" in report.read_text()
-    study.write_text(good)
     assert _sweep_cli(argv, capsys) == (0, [])
     again = pd.read_parquet(root / "out/retry/results.parquet").set_index("id")
     assert (again["status"] == "ok").all() and again.index.is_unique and len(again) == 3
