@@ -3,11 +3,14 @@
 The lock is the kernel's (``flock``) on the open file, so it ends with its process,
 however that process ends: a lock file left by a dead run names a PID that holds
 nothing, and the next run takes it. The file carries the holder's PID and host, for
-the refusal's message.
+the refusal's message. A run that created the folder and fails before writing results
+removes the lock file while holding it; a run that locked the removed file meanwhile
+sees it is no longer the folder's lock file and locks the new one.
 """
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import socket
@@ -44,26 +47,47 @@ def study_lock(folder: Path) -> Iterator[Path]:
         Another process holds it: one line naming its PID and the fix.
     """
     path = Path(folder) / LOCK
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        holder = _holder(fd)
-        os.close(fd)
-        raise StudyLocked(
-            f"{folder} is in use by another run of this study ({holder}, lock {path}): wait "
-            "for it to finish, or give another --out DIR"
-        ) from None
-    except BaseException:
-        os.close(fd)
-        raise
+    for _ in range(_TRIES):
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _holder(fd)
+            os.close(fd)
+            raise StudyLocked(
+                f"{folder} is in use by another run of this study ({holder}, lock {path}): "
+                "wait for it to finish, or give another --out DIR"
+            ) from None
+        except BaseException:
+            os.close(fd)
+            raise
+        if _same_file(fd, path):
+            break
+        os.close(fd)  # the holder removed the file before releasing it: lock the new one
+    else:
+        raise StudyLocked(f"{path} keeps being replaced: another run is starting; try again")
     try:
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()} {socket.gethostname()}\n".encode(), 0)
         yield path
     finally:
-        os.ftruncate(fd, 0)
+        with contextlib.suppress(OSError):
+            os.ftruncate(fd, 0)
         os.close(fd)  # releases the lock
+
+
+#: attempts to lock a lock file that its holder removes meanwhile
+_TRIES = 10
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    """Whether the open file ``fd`` is still the file at ``path``."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return False
+    own = os.fstat(fd)
+    return (st.st_dev, st.st_ino) == (own.st_dev, own.st_ino)
 
 
 def _holder(fd: int) -> str:

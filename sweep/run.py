@@ -158,10 +158,10 @@ def run_study(
     if batch < 1:
         raise UsageError(f"--batch: {batch} rows per commit: give an integer >= 1")
     scheduler = scheduler_address(scheduler)
-    created = not paths.folder.exists()
+    created = [d for d in (paths.folder, *paths.folder.parents) if not d.exists()]
     paths.folder.mkdir(parents=True, exist_ok=True)
-    try:
-        with study_lock(paths.folder):
+    with study_lock(paths.folder):
+        try:
             return _run_locked(
                 study,
                 study_path,
@@ -171,13 +171,20 @@ def run_study(
                 restart,
                 RunOptions(scheduler, workers, batch, keep, chunk),
             )
-    except BaseException:
-        if created and not paths.results.exists():  # leave no empty folder behind
-            for name in (LOCK, IDENTITY):
-                (paths.folder / name).unlink(missing_ok=True)
-            with contextlib.suppress(OSError):
-                paths.folder.rmdir()
-        raise
+        except BaseException:
+            if created and not paths.results.exists():
+                _remove_new_folders(paths, created)
+            raise
+
+
+def _remove_new_folders(paths: StudyPaths, created: list[Path]) -> None:
+    """Remove the folders this run created, with its identity and lock file (the lock
+    still held: :func:`sweep.lock.study_lock` retries on an unlinked lock file)."""
+    for name in (IDENTITY, LOCK):
+        (paths.folder / name).unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        for d in created:  # the deepest first; stops at one that is not empty
+            d.rmdir()
 
 
 def discard(paths: StudyPaths) -> None:

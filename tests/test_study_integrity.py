@@ -411,3 +411,13 @@ def test_bad_flags_of_topologies_are_one_line(tmp_path, capsys, monkeypatch, arg
     study = ROOT / "studies" / "topologies.toml"
     _one_line(capsys, run_cli(topologies.main, [a.format(study=study) for a in argv]))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_scheduler_that_does_not_answer_leaves_no_folder(tmp_path, capsys, monkeypatch):
+    import dask
+
+    monkeypatch.setenv("DASK_SCHEDULER", "tcp://127.0.0.1:1")  # nothing listens on port 1
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        code = run_cli(main, ["run", str(_study(tmp_path)), "--out", str(tmp_path / "o" / "x")])
+    assert "cannot connect" in _one_line(capsys, code)
+    assert not (tmp_path / "o").exists()
