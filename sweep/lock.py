@@ -14,6 +14,7 @@ import contextlib
 import fcntl
 import os
 import socket
+import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -48,8 +49,20 @@ def study_lock(folder: Path) -> Iterator[Path]:
     """
     path = Path(folder) / LOCK
     for _ in range(_TRIES):
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        # never through a symbolic link, never a FIFO or device planted under the name
+        flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | os.O_NONBLOCK
         try:
+            fd = os.open(path, flags, 0o666)
+        except OSError as exc:
+            raise StudyLocked(
+                f"{path}: cannot open the study's lock file ({exc.strerror}): remove it if it "
+                "is not a regular file, or give another --out DIR"
+            ) from None
+        try:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                raise StudyLocked(
+                    f"{path} is not a regular file: remove it, or give another --out DIR"
+                )
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = _holder(fd)

@@ -421,3 +421,16 @@ def test_scheduler_that_does_not_answer_leaves_no_folder(tmp_path, capsys, monke
         code = run_cli(main, ["run", str(_study(tmp_path)), "--out", str(tmp_path / "o" / "x")])
     assert "cannot connect" in _one_line(capsys, code)
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("plant", ["symlink", "fifo"])
+def test_lock_file_that_is_not_a_regular_file_is_refused(tmp_path, plant):
+    target = tmp_path / "elsewhere"
+    if plant == "symlink":
+        (tmp_path / LOCK).symlink_to(target)
+    else:
+        os.mkfifo(tmp_path / LOCK)
+    with pytest.raises(StudyLocked, match="--out DIR"):
+        with study_lock(tmp_path):
+            pass
+    assert not target.exists()
