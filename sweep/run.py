@@ -155,8 +155,9 @@ def run_study(
             raise UsageError(
                 f"--ids: sample id {k} outside 0..{study.count - 1}: give ids of the study"
             )
-    if batch < 1:
-        raise UsageError(f"--batch: {batch} rows per commit: give an integer >= 1")
+    for flag, value in (("--batch", batch), ("--workers", workers), ("--chunk", chunk)):
+        if value is not None and value < 1:
+            raise UsageError(f"{flag}: {value}: give an integer >= 1")
     scheduler = scheduler_address(scheduler)
     created = [d for d in (paths.folder, *paths.folder.parents) if not d.exists()]
     paths.folder.mkdir(parents=True, exist_ok=True)
