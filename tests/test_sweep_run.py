@@ -441,7 +441,10 @@ def test_failed_samples_fail_the_command_and_a_rerun_retries_them(setup, capsys)
 def test_refused_samples_are_final_and_do_not_fail_the_command(setup, capsys):
     root = setup["root"]
     text = STUDY.replace('name = "tiny"', 'name = "allrefused"').replace("count = 4", "count = 2")
-    (root / "allrefused.toml").write_text(text + '"leader.alpha" = { choice = [0.5] }\n')
+    # operator amplitudes above leader.alpha = 2: the loader refuses every drawn sample (a
+    # refusal of the study's own keys, e.g. leader.alpha = 0.5 in [params], fails at load)
+    operator = '[operator]\nu0 = ["A*cos(t)"]\nparams = { A = { uniform = [3.0, 4.0] } }\n'
+    (root / "allrefused.toml").write_text(text + operator)
     argv = ["run", str(root / "allrefused.toml"), "--out", str(root / "out"), "--workers", "1"]
     assert _sweep_cli(argv, capsys) == (0, [])
     rows = pd.read_parquet(root / "out/allrefused/results.parquet")
