@@ -123,8 +123,8 @@ def read_results(path: Path) -> pd.DataFrame:
 
 def _unreadable(path: Path, problem: str) -> ResultsError:
     return ResultsError(
-        f"{path} {problem[:300]}; it is kept: move it away, give another --out DIR, or rerun "
-        "with --restart to discard it"
+        f"{path} {problem[:300]}; it is kept: move or delete it, or give another --out DIR "
+        "(`python -m sweep run --restart` discards it)"
     )
 
 
