@@ -54,6 +54,11 @@ def main(argv: list[str]) -> int:
     rp.add_argument(
         "--keep-runs", action="store_true", help="also write each sample's scenario and run files"
     )
+    rp.add_argument(
+        "--restart",
+        action="store_true",
+        help="discard the study folder's results, report and runs first (a changed study)",
+    )
     cp = sub.add_parser("cost", help="a study sample's cost against a lone run of it")
     cp.add_argument("study", help="the study TOML file")
     cp.add_argument(
@@ -111,6 +116,10 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
         raise UsageError("--workers: give a number of worker processes >= 1")
     if args.chunk is not None and args.chunk < 1:
         raise UsageError("--chunk: give a number of samples per task >= 1")
+    if args.batch < 1:
+        raise UsageError("--batch: give a number of rows per commit >= 1")
+    if args.out is not None and not args.out.strip():
+        raise UsageError("--out: an empty path: give a folder (default out/ or $HITL_OUT)")
     path = run_study(
         args.study,
         out_root=args.out or OUT_ROOT,
@@ -120,6 +129,7 @@ def _run(args: argparse.Namespace, argv: list[str]) -> int:
         workers=args.workers,
         keep=args.keep_runs,
         chunk=args.chunk,
+        restart=args.restart,
     )
     print(f"results: {path}")
     print(f"report: {path.parent / 'report.md'}")

@@ -57,16 +57,56 @@ def dask_client(scheduler: str | None, workers: int | None = None) -> Any:
     """
     from distributed import Client
 
-    address = scheduler or os.environ.get("DASK_SCHEDULER")
+    address = scheduler_address(scheduler)
     if address:
         try:
             return Client(address)
-        except OSError as exc:  # refused or timed out: name the address and the fix
+        except (OSError, ValueError) as exc:  # refused or timed out: name the address and the fix
             raise UsageError(
                 f"Dask scheduler {address}: cannot connect ({' '.join(str(exc).split())[:200]}); "
                 "start `dask scheduler` and `dask worker` there, or unset DASK_SCHEDULER"
             ) from exc
     return _local_client(workers)
+
+
+def scheduler_address(scheduler: str | None) -> str | None:
+    """The scheduler's address (``scheduler``, else ``$DASK_SCHEDULER``; None: a local
+    cluster), checked before anything connects or is written.
+
+    Parameters
+    ----------
+    scheduler : str or None
+        An address given by the caller.
+
+    Raises
+    ------
+    UsageError
+        Not ``scheme://host:port`` with a scheme Dask knows and a port in 1..65535.
+    """
+    address = scheduler or os.environ.get("DASK_SCHEDULER")
+    if not address:
+        return None
+    from distributed.comm import get_address_host_port
+    from distributed.comm.addressing import parse_address
+    from distributed.comm.registry import backends
+
+    where = "scheduler" if scheduler else "DASK_SCHEDULER"
+    try:
+        scheme, _ = parse_address(address, strict=True)
+        host, port = get_address_host_port(address)
+    except (ValueError, TypeError) as exc:
+        problem = " ".join(str(exc).split())[:200]
+    else:
+        if scheme not in backends:
+            problem = f"unknown scheme {scheme!r}"
+        elif not host or not 1 <= port <= 65535:
+            problem = "needs a host and a port in 1..65535"
+        else:
+            return address
+    raise UsageError(
+        f"{where}={address[:200]!r} is not a Dask scheduler address ({problem}): give "
+        f"tcp://HOST:PORT or tls://HOST:PORT, or unset {where} for a local cluster"
+    )
 
 
 def _local_client(workers: int | None) -> Any:

@@ -1,19 +1,27 @@
 """A study's outputs: its folders and the results table, one row per sample.
 
 Rows are committed to ``<study>/results.parquet`` by an atomic replace of the whole
-table (a temporary file, then ``os.replace``): an interrupted study leaves the last
-committed table, and a rerun resumes from it (:mod:`sweep.resume`).
+table (a temporary file named after its writer's PID, then ``os.replace``): an
+interrupted study leaves the last committed table, and a rerun resumes from it
+(:mod:`sweep.resume`). A file that is not such a table is refused, never overwritten.
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
+from core.artifacts import atomic_write_bytes
+from core.errors import ToolkitError
+from core.files import FileRefused, read_regular_file
+
 RESULTS = "results.parquet"
+#: largest results table read (bytes)
+MAX_RESULTS_BYTES = 1 << 32
+#: columns a results table must have to be read as one
+REQUIRED_COLUMNS = ("id", "status")
 #: columns every row has, in this order (then ``param:<key>`` and ``t2_entry:<i>``)
 BASE_COLUMNS = [
     "id",
@@ -76,23 +84,55 @@ class StudyPaths:
         return self.folder / RESULTS
 
 
+class ResultsError(ToolkitError):
+    """A results file that is not a results table (truncated, foreign, not a regular file)."""
+
+
 def read_results(path: Path) -> pd.DataFrame:
     """The committed rows (an empty table when the file does not exist).
 
     Parameters
     ----------
     path : Path
-        ``results.parquet``.
+        ``results.parquet``: a regular file of at most :data:`MAX_RESULTS_BYTES`, a
+        Parquet table with the columns :data:`REQUIRED_COLUMNS`.
+
+    Raises
+    ------
+    ResultsError
+        One line naming the file, what is wrong with it and the fix; the file is kept.
     """
-    if not path.is_file():
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    path = Path(path)
+    if not path.exists() and not path.is_symlink():
         return pd.DataFrame(columns=BASE_COLUMNS)
-    return pd.read_parquet(path)
+    try:
+        data = read_regular_file(path, MAX_RESULTS_BYTES)
+        table = pq.read_table(pa.BufferReader(data)).to_pandas()
+    except FileRefused as exc:
+        raise _unreadable(path, str(exc)) from None
+    except (pa.ArrowException, ValueError, OSError) as exc:
+        raise _unreadable(path, f"is not a Parquet table ({type(exc).__name__}: {exc})") from None
+    missing = [c for c in REQUIRED_COLUMNS if c not in table.columns]
+    if missing:
+        raise _unreadable(path, f"has no column {', '.join(missing)}: not a study's results")
+    return table
+
+
+def _unreadable(path: Path, problem: str) -> ResultsError:
+    return ResultsError(
+        f"{path} {problem[:300]}; it is kept: move or delete it, or give another --out DIR "
+        "(`python -m sweep run --restart` discards it)"
+    )
 
 
 def commit_rows(
     path: Path, old: pd.DataFrame, rows: list[dict], info: dict[str, str]
 ) -> pd.DataFrame:
-    """Write ``old`` plus ``rows`` as the whole table: a temporary file, then ``os.replace``.
+    """Write ``old`` plus ``rows`` as the whole table: a temporary file, then ``os.replace``
+    (:func:`core.artifacts.atomic_write_bytes`).
 
     Parameters
     ----------
@@ -121,9 +161,10 @@ def commit_rows(
     table = _column_order(_uniform_types(table))
     arrow = pa.Table.from_pandas(table, preserve_index=False)
     meta = {**(arrow.schema.metadata or {}), **{k.encode(): v.encode() for k, v in info.items()}}
-    tmp = path.with_name(path.name + ".tmp")
-    pq.write_table(arrow.replace_schema_metadata(meta), tmp)
-    os.replace(tmp, path)
+    sink = pa.BufferOutputStream()
+    pq.write_table(arrow.replace_schema_metadata(meta), sink)
+    # a temporary name per writer (its PID), then os.replace: never a half-written table
+    atomic_write_bytes(path, sink.getvalue().to_pybytes())
     return table
 
 

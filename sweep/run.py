@@ -10,8 +10,10 @@ with a bounded window of tasks in flight. Rows are committed to
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import os
+import shutil
 import sys
 import uuid
 from collections import deque
@@ -24,9 +26,16 @@ import pandas as pd
 
 from core.errors import UsageError
 from core.provenance import current_commit, machine
-from sweep.cluster import LOCAL_CLUSTER_CONFIG, close_client, dask_client  # noqa: F401
+from sweep.cluster import (  # noqa: F401
+    LOCAL_CLUSTER_CONFIG,
+    close_client,
+    dask_client,
+    scheduler_address,
+)
+from sweep.identity import IDENTITY, check_identity
+from sweep.lock import LOCK, study_lock
 from sweep.measures import summarize_table, tail_max_et, theorem2_entry  # noqa: F401
-from sweep.results import StudyPaths, commit_rows, read_results
+from sweep.results import RESULTS, StudyPaths, commit_rows, read_results
 from sweep.resume import pending_ids
 from sweep.study import load_study
 from sweep.worker import one_line, param_columns, run_in_memory, run_samples  # noqa: F401
@@ -97,9 +106,14 @@ def run_study(
     workers: int | None = None,
     keep: bool = False,
     chunk: int | None = None,
+    restart: bool = False,
 ) -> Path:
     """Run the study's samples not yet in ``results.parquet``, and again those recorded as
     ``failed`` (``refused`` is final); return the results path.
+
+    The study's folder is locked while it runs (:func:`sweep.lock.study_lock`: a second
+    run is refused), and its results are added to only when the folder's recorded
+    identity is this study's (:func:`sweep.identity.check_identity`).
 
     Parameters
     ----------
@@ -125,6 +139,8 @@ def run_study(
         results and the report are written).
     chunk : int, optional
         Samples per Dask task (default :func:`chunk_size`).
+    restart : bool
+        Discard the folder's results (and its report, runs and sample files) first.
 
     Returns
     -------
@@ -139,8 +155,69 @@ def run_study(
             raise UsageError(
                 f"--ids: sample id {k} outside 0..{study.count - 1}: give ids of the study"
             )
+    for flag, value in (("--batch", batch), ("--workers", workers), ("--chunk", chunk)):
+        if value is not None and value < 1:
+            raise UsageError(f"{flag}: {value}: give an integer >= 1")
+    scheduler = scheduler_address(scheduler)
+    created = [d for d in (paths.folder, *paths.folder.parents) if not d.exists()]
     paths.folder.mkdir(parents=True, exist_ok=True)
+    with study_lock(paths.folder):
+        try:
+            return _run_locked(
+                study,
+                study_path,
+                paths,
+                wanted,
+                command,
+                restart,
+                RunOptions(scheduler, workers, batch, keep, chunk),
+            )
+        except BaseException:
+            if created and not paths.results.exists():
+                _remove_new_folders(paths, created)
+            raise
+
+
+def _remove_new_folders(paths: StudyPaths, created: list[Path]) -> None:
+    """Remove the folders this run created, with its identity and lock file (the lock
+    still held: :func:`sweep.lock.study_lock` retries on an unlinked lock file)."""
+    for name in (IDENTITY, LOCK):
+        (paths.folder / name).unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        for d in created:  # the deepest first; stops at one that is not empty
+            d.rmdir()
+
+
+def discard(paths: StudyPaths) -> None:
+    """Remove a study folder's results, identity, report, figures, runs and samples
+    (``--restart``); the folder and its lock stay.
+
+    Parameters
+    ----------
+    paths : StudyPaths
+        The study's folder.
+    """
+    for name in (RESULTS, IDENTITY, "report.md"):
+        (paths.folder / name).unlink(missing_ok=True)
+    for sub in (paths.folder / "figures", paths.runs, paths.samples):
+        if sub.is_dir() and not sub.is_symlink():
+            shutil.rmtree(sub)
+
+
+def _run_locked(
+    study: Any,
+    study_path: str | Path,
+    paths: StudyPaths,
+    wanted: list[int],
+    command: str | None,
+    restart: bool,
+    opts: RunOptions,
+) -> Path:
+    """:func:`run_study` with the folder's lock held."""
+    if restart:
+        discard(paths)
     done = read_results(paths.results)
+    check_identity(paths.folder, study, paths.results.exists())
     todo, retried = pending_ids(wanted, done)
     info = {
         "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
@@ -151,7 +228,6 @@ def run_study(
         "machine": machine(),
     }
     if todo or not paths.results.is_file():
-        opts = RunOptions(scheduler, workers, batch, keep, chunk)
         _execute(str(Path(study_path).resolve()), todo, paths, done, info, opts)
     from sweep.report import write_report
 

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from core.artifacts import atomic_write_text
 from core.errors import ExpressionError, ScenarioError
 from core.faults import FAULT_TYPES
 from core.scenario import Scenario, scenario_from_dict
@@ -191,9 +192,10 @@ def _draw_losses(losses: LinkLosses, data: dict, params: dict, rng: np.random.Ge
     perhaps restored to its weight ``recovery`` seconds later (dropped past the horizon)."""
     A = np.asarray(data["graph"]["adjacency"], float)
     b = np.asarray(data["graph"]["pinning"], float)
-    links = [(int(i), int(j) + 1, A[i, j]) for i, j in zip(*np.nonzero(A), strict=True)]
+    # plain Python numbers: the weights are written into the scenario table
+    links = [(int(i), int(j) + 1, float(A[i, j])) for i, j in zip(*np.nonzero(A), strict=True)]
     if losses.pinning:
-        links += [(int(i), 0, b[i]) for i in np.flatnonzero(b)]
+        links += [(int(i), 0, float(b[i])) for i in np.flatnonzero(b)]
     n = int(rng.integers(losses.count[0], losses.count[1], endpoint=True))
     chosen = rng.choice(len(links), size=min(n, len(links)), replace=False)
     horizon = data.get("integration", {}).get("horizon", math.inf)
@@ -283,6 +285,8 @@ def _key(k: str) -> str:
 
 
 def _value(v: Any) -> str:
+    if isinstance(v, np.generic):  # a numpy scalar's repr is not TOML (np.float64(1.0))
+        v = v.item()
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
@@ -290,7 +294,7 @@ def _value(v: Any) -> str:
     if isinstance(v, float):
         if not math.isfinite(v):
             return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")
-        return repr(v)
+        return repr(float(v))
     if isinstance(v, str):
         return json.dumps(v, ensure_ascii=False)
     if isinstance(v, list):
@@ -315,10 +319,5 @@ def write_scenario(sample: Sample, folder: str | Path) -> Path:
     Path
         The file written.
     """
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f"{sample.scenario_data['name']}.toml"
-    tmp = path.with_suffix(".toml.tmp")
-    tmp.write_text(scenario_toml(sample.scenario_data), encoding="utf-8")
-    tmp.replace(path)
-    return path
+    path = Path(folder) / f"{sample.scenario_data['name']}.toml"
+    return atomic_write_text(path, scenario_toml(sample.scenario_data))

@@ -279,7 +279,8 @@ def _fixed(f: str, raw: Any) -> dict[str, Any]:
 # --------------------------------------------------------------------------- keys apply
 def _check_keys_apply(study: Study) -> None:
     """Every ``[set]`` and ``[params]`` key applies to the base (resized to the smallest N)
-    and names a field; every fault type of ``[faults]`` is accepted with representative values.
+    and the loader accepts its values (:func:`_check_values`); every fault type of
+    ``[faults]`` is accepted with representative values.
 
     Other refusals of the loader depend on the drawn values and are reported per sample.
     """
@@ -292,8 +293,13 @@ def _check_keys_apply(study: Study) -> None:
         resize_followers(data, study.graph.n_range[0])
     _apply(study, data, "set", study.fixed)
     fixed = copy.deepcopy(data)
-    _apply(study, data, "params", {k: representative(d) for k, d in study.params.items()})
-    _check_unknown(study, data)
+    _apply(
+        study,
+        copy.deepcopy(data),
+        "params",
+        {k: representative(d) for k, d in study.params.items()},
+    )
+    _check_values(study, fixed)
     if study.faults is not None:
         _check_faults(study, fixed)
 
@@ -311,24 +317,102 @@ def _validate(study: Study, data: dict) -> None:
     scenario_from_dict(data, path=study.path, sha256=hashlib.sha256(b"").hexdigest())
 
 
-def _check_unknown(study: Study, data: dict) -> None:
-    """A key of ``[set]`` or ``[params]`` the scenario loader does not know is refused."""
+#: most values of one ``[params]`` key tried on load (a ``choice``'s options beyond are not)
+MAX_TRIALS = 16
+
+
+def trial_values(d: Distribution) -> list[Any]:
+    """The values of ``d`` tried on load: its ends and middle (a ``normal``: the mean and
+    mean +- 3 std, within ``truncate``), or a ``choice``'s options; lists when sized.
+
+    Parameters
+    ----------
+    d : Distribution
+        The distribution.
+    """
+    if d.kind == "choice":
+        vals = list(d.args[:MAX_TRIALS])
+    elif d.kind == "normal":
+        mean, std = d.args
+        lo, hi = d.truncate or (mean - 3 * std, mean + 3 * std)
+        vals = [min(max(mean, lo), hi), lo, hi]
+    elif d.kind == "integers":
+        lo, hi = d.args
+        vals = [lo, hi, (lo + hi) // 2]
+    else:
+        lo, hi = d.args
+        vals = [lo, hi, lo + (hi - lo) / 2]
+    return vals if d.size is None else [[v] * d.size for v in vals]
+
+
+def _check_values(study: Study, fixed: dict) -> None:
+    """A study whose every sample the loader would refuse for one key fails here.
+
+    The base with ``[set]`` and each ``[params]`` key at its first trial value
+    (:func:`trial_values`) is validated; a refusal at a key of ``[set]`` (not drawn by
+    ``[params]``) fails the study, and one at a ``[params]`` key fails it when every trial
+    value of that key is refused there (the other keys at values the loader accepted).
+    A refusal at no key of the study depends on the families' draws: per sample.
+    """
+    trials = {k: trial_values(d) for k, d in study.params.items()}
+    current = {k: v[0] for k, v in trials.items()}
+    for _ in range(len(trials) + 1):
+        exc = _refusal(study, fixed, current)
+        owner = None if exc is None else _owner(study, exc.key)
+        if owner is None:
+            return
+        table, key = owner
+        if table == "set":
+            raise _key_error(study, table, key, exc)
+        for v in trials[key][1:]:
+            other = _refusal(study, fixed, {**current, key: v})
+            if other is None or _owner(study, other.key) != owner:
+                current[key] = v
+                break
+        else:
+            raise _key_error(study, table, key, exc, len(trials[key]))
+    # each key moved once to an accepted value: what is left is not one key's fault
+
+
+def _refusal(study: Study, fixed: dict, values: dict[str, Any]) -> ScenarioError | None:
+    """The loader's refusal of the base with ``[set]`` and these ``[params]`` values."""
+    data = copy.deepcopy(fixed)
+    for key, v in values.items():
+        set_path(data, study.path, key, copy.deepcopy(v))
     try:
         _validate(study, data)
     except ScenarioError as exc:
-        if exc.problem == "unknown key":
-            bare = re.sub(r"\[\d+\]", "", exc.key)
-            for table, keys in (("set", study.fixed), ("params", study.params)):
-                for key in keys:
-                    if re.sub(r"\[\d+\]", "", key) == bare:
-                        raise StudyError(
-                            study.path,
-                            join_key(table, key),
-                            "names no scenario field",
-                            exc.expected,
-                        ) from None
+        return exc
     except ExpressionError:
-        pass
+        return None
+    return None
+
+
+def _parts(key: str) -> list[str]:
+    """A dotted key's names without indices, and each index as its own part."""
+    return [p for p in re.split(r"[.\[\]]+", key) if p]
+
+
+def _owner(study: Study, error_key: str) -> tuple[str, str] | None:
+    """The ``[params]`` (first) or ``[set]`` key the loader's refused key lies in or under."""
+    err = _parts(error_key)
+    for table, keys in (("params", study.params), ("set", study.fixed)):
+        for key in keys:
+            mine = _parts(key)
+            n = min(len(mine), len(err))
+            if n and mine[:n] == err[:n]:
+                return table, key
+    return None
+
+
+def _key_error(study: Study, table: str, key: str, exc: ScenarioError, n: int = 1) -> StudyError:
+    """The one-line error of a key every sample would be refused for."""
+    if exc.problem == "unknown key":
+        return StudyError(study.path, join_key(table, key), "names no scenario field", exc.expected)
+    at = "" if _parts(exc.key) == _parts(key) else f"{exc.key}: "
+    every = f" at each of its {n} trial values" if n > 1 else ""
+    problem = f"every sample would be refused{every}: {at}{exc.problem}"
+    return StudyError(study.path, join_key(table, key), problem, exc.expected)
 
 
 def _check_faults(study: Study, data: dict) -> None:

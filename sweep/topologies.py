@@ -29,7 +29,6 @@ horizon. Output: ``out/topologies/results.csv`` and
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import multiprocessing as mp
 import time
@@ -39,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from core.artifacts import atomic_write_text
-from core.errors import run_cli
+from core.errors import CliParser, UsageError, run_cli
 from core.memo import MEMO
 from core.provenance import provenance_line
 
@@ -265,13 +264,20 @@ def main(argv: list[str] | None = None) -> int:
     argv : list of str, optional
         Command-line arguments (None: ``sys.argv``).
     """
-    ap = argparse.ArgumentParser(prog="python -m sweep.topologies", description=__doc__)
+    ap = CliParser(prog="python -m sweep.topologies", description=__doc__)
     ap.add_argument("study", nargs="?", default=STUDY)
     ap.add_argument("--count", type=int, default=None, help="only the first COUNT samples")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default="out/topologies")
     ap.add_argument("--build-root", default=None)
     a = ap.parse_args(argv)
+    if a.count is not None and a.count < 1:
+        raise UsageError(f"--count: {a.count} samples: give an integer >= 1 (or no --count)")
+    if a.workers < 1:
+        raise UsageError(f"--workers: {a.workers} processes: give an integer >= 1")
+    for flag, value in (("--out", a.out), ("--build-root", a.build_root)):
+        if value is not None and not value.strip():
+            raise UsageError(f"{flag}: an empty path: give a folder")
     t0 = time.perf_counter()
     rows = run_study(a.study, a.count, a.workers, a.build_root)
     wall = time.perf_counter() - t0

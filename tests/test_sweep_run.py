@@ -416,17 +416,19 @@ def test_failed_samples_fail_the_command_and_a_rerun_retries_them(setup, capsys)
     study.write_text(good)
     assert _sweep_cli([*argv, "--ids", "0"], capsys) == (0, [])
     first = pd.read_parquet(root / "out/retry/results.parquet")
-    # the same draws with a step budget CVODES cannot meet: ids 1 and 2 fail
-    study.write_text(good + '\n[set]\n"integration.max_steps" = 10\n')
-    status, err = _sweep_cli(argv, capsys)
+    # the same study with a build cache the workers cannot use (a file, not a folder):
+    # ids 1 and 2 fail (a changed study would be refused: docs/studies.md, 'Identity')
+    (root / "not-a-folder").write_text("")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("HITL_BUILD_DIR", str(root / "not-a-folder"))  # inherited by the workers
+        status, err = _sweep_cli(argv, capsys)
     assert status == 1 and len(err) == 1, err
-    assert err[0].startswith("study faults: 2 of 3 samples failed; first (id 1): IntegrationError")
+    assert err[0].startswith("study faults: 2 of 3 samples failed; first (id 1): ")
     assert err[0].endswith(f"rerun `make sweep SWEEP={study}` retries them")
     failed = pd.read_parquet(root / "out/retry/results.parquet").set_index("id")
     assert failed.loc[0, "finished_utc"] == first.loc[0, "finished_utc"]  # ok is final
     report = root / "out/retry/report.md"
     assert "Retried in this run: 0 samples" in report.read_text()
-    study.write_text(good)
     assert _sweep_cli(argv, capsys) == (0, [])
     again = pd.read_parquet(root / "out/retry/results.parquet").set_index("id")
     assert (again["status"] == "ok").all() and again.index.is_unique and len(again) == 3
@@ -439,7 +441,10 @@ def test_failed_samples_fail_the_command_and_a_rerun_retries_them(setup, capsys)
 def test_refused_samples_are_final_and_do_not_fail_the_command(setup, capsys):
     root = setup["root"]
     text = STUDY.replace('name = "tiny"', 'name = "allrefused"').replace("count = 4", "count = 2")
-    (root / "allrefused.toml").write_text(text + '"leader.alpha" = { choice = [0.5] }\n')
+    # operator amplitudes above leader.alpha = 2: the loader refuses every drawn sample (a
+    # refusal of the study's own keys, e.g. leader.alpha = 0.5 in [params], fails at load)
+    operator = '[operator]\nu0 = ["A*cos(t)"]\nparams = { A = { uniform = [3.0, 4.0] } }\n'
+    (root / "allrefused.toml").write_text(text + operator)
     argv = ["run", str(root / "allrefused.toml"), "--out", str(root / "out"), "--workers", "1"]
     assert _sweep_cli(argv, capsys) == (0, [])
     rows = pd.read_parquet(root / "out/allrefused/results.parquet")
