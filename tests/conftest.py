@@ -36,6 +36,7 @@ SLOW_MODULES = frozenset(
         "test_breakpoints",
         "test_build_reuse",
         "test_cache_portable",
+        "test_cache_private",
         "test_cli_knobs",
         "test_closed_loop",
         "test_console",
