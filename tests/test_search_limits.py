@@ -178,3 +178,12 @@ def test_finite_requirements_still_score(tmp_path):
     expect = 1 - np.linalg.norm(us, axis=1) * np.exp(-0.5)
     ok = table["arm"].isin(["search", "baseline"]).to_numpy()
     np.testing.assert_allclose(table["rob:req"].to_numpy(float)[ok], expect[ok], rtol=1e-12)
+
+
+def test_an_unreachable_cluster_leaves_no_folder(tmp_path, monkeypatch):
+    """The cluster is asked for before ``out/<name>/`` is made: a bad address writes nothing."""
+    path = write(tmp_path)
+    monkeypatch.setenv("DASK_SCHEDULER", "garbage")
+    with pytest.raises(Exception):  # noqa: B017 - the scheduler's own error (sweep.cluster)
+        run_search(path, out_root=tmp_path / "out", progress=False)
+    assert not (tmp_path / "out").exists()
