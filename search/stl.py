@@ -151,9 +151,11 @@ class _Parser:
         right = self.operand()
         if (left[0] == "name") == (right[0] == "name"):
             raise FormulaError(f"{left[1]} {rel} {right[1]}: compare one signal with a number")
-        if left[0] == "name":
-            return Node("cmp", (left[1], rel, float(right[1]), True))
-        return Node("cmp", (right[1], rel, float(left[1]), False))
+        signal, number = (left[1], right[1]) if left[0] == "name" else (right[1], left[1])
+        c = float(number)
+        if not math.isfinite(c):
+            raise FormulaError(f"{signal} {rel} {number}: give a finite number")
+        return Node("cmp", (signal, rel, c, left[0] == "name"))
 
     def operand(self) -> tuple[str, str]:
         tok = self.peek()

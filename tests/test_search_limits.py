@@ -187,3 +187,10 @@ def test_an_unreachable_cluster_leaves_no_folder(tmp_path, monkeypatch):
     with pytest.raises(Exception):  # noqa: B017 - the scheduler's own error (sweep.cluster)
         run_search(path, out_root=tmp_path / "out", progress=False)
     assert not (tmp_path / "out").exists()
+
+
+def test_an_infinite_constant_is_refused():
+    with pytest.raises(stl.FormulaError, match="give a finite number"):
+        stl.parse("deviation <= 1e999", SIGNALS)
+    with pytest.raises(stl.FormulaError, match="give a finite number"):
+        stl.parse("-1e400 < u", SIGNALS)
