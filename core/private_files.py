@@ -46,7 +46,7 @@ def make_private_dir(path: Path) -> Path:
             os.mkdir(d, 0o700)
         except FileExistsError:  # another process made it meanwhile
             continue
-        os.chmod(d, 0o700)  # the umask may have removed bits: never added any
+        os.chmod(d, 0o700)  # exactly 0700: mkdir's mode went through the umask
     return Path(path)
 
 
