@@ -22,6 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from core.errors import ScenarioError, UsageError
+from core.files import FileRefused, read_regular_file
+from core.model import MAX_SCENARIO_BYTES
 from core.scenario import SECTIONS, TABLES, Scenario, load_scenario, scenario_from_dict
 
 #: deepest nesting of arrays and inline tables a --set value may have (a scenario needs 3)
@@ -288,8 +290,11 @@ def load(
             f"{_brief_text(variant)!r} has {len(variant)} characters",
             f"at most {MAX_VARIANT_CHARS} (it names the folder out/<name>-<variant>/)",
         )
-    raw = Path(path).read_bytes()
-    data = tomllib.loads(raw.decode("utf-8"))
+    try:  # read again, as the loader read it: the file may have changed in between
+        raw = read_regular_file(path, MAX_SCENARIO_BYTES)
+        data = tomllib.loads(raw.decode("utf-8"))
+    except (FileRefused, ValueError, RecursionError) as exc:
+        raise ScenarioError(str(path), "(file)", f"changed while it was read ({exc})") from None
     for k, v in overrides.items():
         set_path(data, str(path), k, v)
     sha = hashlib.sha256((sc.sha256 + "\n" + _canonical(overrides)).encode()).hexdigest()
