@@ -177,3 +177,12 @@ def test_full_cache_disk_names_the_cache(tmp_path, capsys, monkeypatch):
     assert f"free space on the disk of the build cache {root}" in err
     assert "HITL_BUILD_DIR" in err and "output" not in err and "--out" not in err
     assert [p.name for p in root.iterdir()] == []  # the temporary build folder is gone
+
+
+def test_startup_cache_entry_others_may_write_is_refused(tmp_path):
+    """Gains and model entries (core/models/cache.py) follow the libraries' rule."""
+    path = cache.write_entry("models", "3" * 64, {"x": 1}, tmp_path)
+    assert cache.read_entry("models", "3" * 64, tmp_path) == {"x": 1}
+    os.chmod(path, 0o666)
+    with pytest.raises(BuildError, match=f"{path} is writable by its group and others"):
+        cache.read_entry("models", "3" * 64, tmp_path)
