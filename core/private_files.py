@@ -171,6 +171,7 @@ def check_trusted(path: Path, root: Path) -> None:
         )
     entry = Path(root) / Path(path).relative_to(root).parts[0]
     raise BuildError(
-        f"build cache entry refused, not loaded: {why} (remove it: rm -rf {entry}; the "
-        "build cache makes its folders 0700 and files 0600, so a rebuild is private)"
+        f"build cache entry refused, not loaded: {why} (remove it: rm -rf {entry}, or "
+        "empty the cache: python -m generated cache --clear; a rebuild is private, folders "
+        "0700 and files 0600)"
     )
