@@ -29,7 +29,8 @@ from typing import Any
 import numpy as np
 
 from core.artifacts import atomic_write_text
-from core.errors import run_cli
+from core.cli_args import count, positive
+from core.errors import CliParser, UsageError, run_cli
 
 CYCLIC_SEED = 20260126
 PAPER = "scenarios/paper.toml"
@@ -232,27 +233,40 @@ def main(argv: list[str] | None = None) -> int:
     argv : list of str, optional
         Command-line arguments (None: ``sys.argv``).
     """
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.agents", description=__doc__)
+    ap = CliParser(prog="python -m benchmarks.agents", description=__doc__)
     ap.add_argument("--sizes", default="2000", help="comma-separated N of the large runs")
-    ap.add_argument("--horizon", type=float, default=20.0)
+    ap.add_argument("--horizon", type=positive, default=20.0)
     ap.add_argument("--threads", default="1,2")
     ap.add_argument("--solvers", default="auto")
-    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--runs", type=count, default=3)
     ap.add_argument("--out", default="out/bench")
     ap.add_argument("--build-root", default=None)
     a = ap.parse_args(argv)
+    sizes, threads = _counts(a.sizes, "--sizes"), _counts(a.threads, "--threads")
+    solvers = [v for v in a.solvers.split(",") if v]
+    if not solvers:
+        raise UsageError("--solvers: none given (e.g. --solvers auto)")
     rows = paper_rows(a.runs, a.build_root)
     for r in rows:
         print(r, flush=True)
-    threads = [int(v) for v in a.threads.split(",") if v]
-    solvers = [v for v in a.solvers.split(",") if v]
-    for N in (int(v) for v in a.sizes.split(",") if v):
+    for N in sizes:
         rows += large_rows(N, a.horizon, threads, solvers, a.build_root)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "agents.csv", _table(rows))
     print(_table(rows))
     return 0
+
+
+def _counts(text: str, flag: str) -> list[int]:
+    """A comma-separated list of counts >= 1 (``--sizes``, ``--threads``)."""
+    try:
+        out = [count(v) for v in text.split(",") if v.strip()]
+    except argparse.ArgumentTypeError as exc:
+        raise UsageError(f"{flag}: {exc}") from None
+    if not out:
+        raise UsageError(f"{flag}: none given (comma-separated counts, e.g. 1,2)")
+    return out
 
 
 if __name__ == "__main__":

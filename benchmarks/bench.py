@@ -85,7 +85,8 @@ from benchmarks.tables import (
     write_csv,
 )
 from benchmarks.worker import worker
-from core.errors import run_cli
+from core.cli_args import count, positive
+from core.errors import CliParser, run_cli
 from generated.values import Status
 
 
@@ -162,24 +163,22 @@ def run_cell(
 
 def _parser() -> argparse.ArgumentParser:
     """The command line of :func:`main`."""
-    ap = argparse.ArgumentParser(
-        prog="python -m benchmarks.bench", description=__doc__.split("\n")[0]
-    )
+    ap = CliParser(prog="python -m benchmarks.bench", description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="N = 5 only, one run per method")
     ap.add_argument("--sizes", default=None, help="comma-separated N (default 5,50,500,2000)")
     ap.add_argument("--methods", default=None, help=f"comma-separated, from {','.join(METHODS)}")
-    ap.add_argument("--runs", type=int, default=None, help="runs per cell (default 5; quick 1)")
+    ap.add_argument("--runs", type=count, default=None, help="runs per cell (default 5; quick 1)")
     ap.add_argument(
-        "--time-limit", type=float, default=None, help="seconds per cell (default 120; quick 60)"
+        "--time-limit", type=positive, default=None, help="seconds per cell (default 120; quick 60)"
     )
     ap.add_argument(
         "--ours-time-limit",
-        type=float,
+        type=positive,
         default=None,
         help="seconds per cell for ours (default 1500, at least 4x --time-limit: "
         "ours completes N = 2,000 in about 700 s here)",
     )
-    ap.add_argument("--horizon", type=float, default=20.0, help="simulated seconds (default 20)")
+    ap.add_argument("--horizon", type=positive, default=20.0, help="simulated seconds (default 20)")
     ap.add_argument("--out", default=None, help="output folder (default out/bench)")
     ap.add_argument(
         "--warm-cache",
@@ -203,10 +202,6 @@ def main(argv: list[str]) -> int:
     a = _parser().parse_args(argv)
     runs = a.runs if a.runs is not None else (1 if a.quick else 5)
     limit = a.time_limit if a.time_limit is not None else (60.0 if a.quick else 120.0)
-    if runs < 1 and not a.worker:
-        raise BenchError(f"--runs: {runs} must be >= 1")
-    if not (limit > 0 and a.horizon > 0):
-        raise BenchError("--time-limit and --horizon must be > 0")
     if a.worker:
         N, meth = int(a.worker[0]), a.worker[1]
         return worker(N, meth, runs, limit, a.horizon, Path(a.record))

@@ -16,13 +16,12 @@ entry per file in the given order. Outputs go under ``DIR``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
 from pathlib import Path
 
-from core.errors import run_cli
+from core.errors import CliParser, run_cli
 
 
 def sample_times(files: list[Path], out_root: Path) -> list[tuple[float, float]]:
@@ -63,7 +62,7 @@ def main(argv: list[str]) -> int:
     argv : list of str
         Arguments without the program name.
     """
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.lone", description=__doc__)
+    ap = CliParser(prog="python -m benchmarks.lone", description=__doc__)
     ap.add_argument("--out", required=True, help="output root of the runs")
     ap.add_argument("warm", help="scenario run first, untimed")
     ap.add_argument("files", nargs="+", help="scenarios timed, in this order")

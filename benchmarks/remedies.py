@@ -36,7 +36,8 @@ import numpy as np
 import pandas as pd
 
 from core.artifacts import OUT_ROOT, atomic_write_text
-from core.errors import UsageError, run_cli
+from core.cli_args import count
+from core.errors import CliParser, UsageError, run_cli
 from core.provenance import provenance_line
 from core.shaping import DEFAULT_RISE, DEFAULT_SHAPE
 
@@ -282,10 +283,10 @@ def markdown(rows: list[dict[str, Any]], study: Path, count: int, command: str) 
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.remedies", description=__doc__)
+    p = CliParser(prog="python -m benchmarks.remedies", description=__doc__)
     p.add_argument("--study", type=Path, default=DEFAULT_STUDY, help="the step study")
-    p.add_argument("--samples", type=int, default=24, help="samples per remedy (default 24)")
-    p.add_argument("--workers", type=int, default=1, help="sweep workers (default 1)")
+    p.add_argument("--samples", type=count, default=24, help="samples per remedy (default 24)")
+    p.add_argument("--workers", type=count, default=1, help="sweep workers (default 1)")
     p.add_argument("--only", nargs="+", metavar="NAME", help="only these remedies")
     p.add_argument("--out", type=Path, default=OUT_ROOT / "remedies", help="output folder")
     return p
@@ -304,8 +305,6 @@ def main(argv: list[str]) -> int:
     unknown = sorted(set(a.only or []) - set(names))
     if unknown:
         raise UsageError(f"--only {' '.join(unknown)}: unknown remedy; one of {', '.join(names)}")
-    if a.samples < 1:
-        raise UsageError(f"--samples {a.samples}: give at least 1")
     chosen = [r for r in REMEDIES if not a.only or r.name in a.only]
     rows = []
     for remedy in chosen:

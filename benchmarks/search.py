@@ -24,7 +24,6 @@ machine; nothing is asserted.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import shutil
@@ -38,7 +37,8 @@ import pandas as pd
 
 from benchmarks.catalogue import BenchError
 from core.artifacts import OUT_ROOT, atomic_write_text
-from core.errors import run_cli
+from core.cli_args import count, natural
+from core.errors import CliParser, run_cli
 from core.provenance import provenance_line
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -199,12 +199,12 @@ def main(argv: list[str]) -> int:
     argv : list of str
         Arguments without the program name.
     """
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.search")
+    ap = CliParser(prog="python -m benchmarks.search")
     ap.add_argument("--file", type=Path, default=DEFAULT_SEARCH)
-    ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
-    ap.add_argument("--budget", type=int, default=500)
-    ap.add_argument("--baseline", type=int, default=1000)
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--seeds", type=natural, nargs="+", default=[1, 2, 3, 4, 5])
+    ap.add_argument("--budget", type=count, default=500)
+    ap.add_argument("--baseline", type=natural, default=1000)
+    ap.add_argument("--workers", type=count, default=2)
     ap.add_argument("--out", type=Path, default=Path(OUT_ROOT) / "bench")
     a = ap.parse_args(argv)
     work = a.out / "search-runs"

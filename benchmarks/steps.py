@@ -38,6 +38,7 @@ import numpy as np
 import pandas as pd
 
 from core.artifacts import OUT_ROOT, atomic_write_text
+from core.cli_args import count
 from core.errors import CliParser, IntegrationError, UsageError, run_cli
 from core.provenance import write_provenance
 from core.scenario import METHODS
@@ -313,7 +314,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("scenario", nargs="?", default=str(PAPER), help="scenario (default paper)")
     ap.add_argument(
         "--bench-n",
-        type=int,
+        type=count,
         default=None,
         help="profile the benchmark's N-follower scenario instead (no knob table)",
     )
@@ -338,8 +339,6 @@ def main(argv: list[str]) -> int:
     if args.bench_n is not None:
         from benchmarks.scenarios import bench_gains, bench_scenario
 
-        if args.bench_n < 1:
-            raise UsageError(f"--bench-n {args.bench_n}: must be >= 1")
         sc = bench_scenario(args.bench_n)
         gains, _ = bench_gains(sc)
     else:

@@ -76,7 +76,8 @@ import pandas as pd
 from benchmarks.catalogue import BenchError
 from benchmarks.lone import sample_times
 from core.artifacts import OUT_ROOT, atomic_write_text
-from core.errors import run_cli
+from core.cli_args import count
+from core.errors import CliParser, run_cli
 from core.provenance import current_commit, machine
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -542,14 +543,14 @@ def _block_rows(b: StudyBench) -> list[tuple[str, str]]:
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.study", description=__doc__)
+    ap = CliParser(prog="python -m benchmarks.study", description=__doc__)
     ap.add_argument("--study", default=str(DEFAULT_STUDY), help="the study file")
-    ap.add_argument("--samples", type=int, default=1000, help="samples timed with 2 workers")
-    ap.add_argument("--compare", type=int, default=100, help="samples of the 1/2-worker runs")
-    ap.add_argument("--recompile", type=int, default=3, help="samples compiled each")
-    ap.add_argument("--lone", type=int, default=20, help="samples run alone in this process")
-    ap.add_argument("--rounds", type=int, default=6, help="rounds of interleaved blocks")
-    ap.add_argument("--block", type=int, default=20, help="samples per interleaved block")
+    ap.add_argument("--samples", type=count, default=1000, help="samples timed with 2 workers")
+    ap.add_argument("--compare", type=count, default=100, help="samples of the 1/2-worker runs")
+    ap.add_argument("--recompile", type=count, default=3, help="samples compiled each")
+    ap.add_argument("--lone", type=count, default=20, help="samples run alone in this process")
+    ap.add_argument("--rounds", type=count, default=6, help="rounds of interleaved blocks")
+    ap.add_argument("--block", type=count, default=20, help="samples per interleaved block")
     ap.add_argument("--out", default=None, help="output folder (default out/bench)")
     return ap
 
@@ -563,9 +564,6 @@ def main(argv: list[str]) -> int:
         Arguments without the program name.
     """
     a = _parser().parse_args(argv)
-    for name in ("samples", "compare", "recompile", "lone", "rounds", "block"):
-        if getattr(a, name) < 1:
-            raise BenchError(f"--{name} {getattr(a, name)}: give a count of at least 1")
     out = Path(a.out or Path(OUT_ROOT) / "bench")
     date = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
     command = " ".join(["python -m benchmarks.study", *argv])

@@ -14,6 +14,7 @@ import sys
 
 from console.engine import CONSOLE_RISE
 from console.server import FPS_RANGE, is_loopback
+from core.cli_args import port, positive
 from core.errors import CliParser, UsageError, run_cli
 
 
@@ -22,7 +23,7 @@ def _parser() -> CliParser:
     sub = ap.add_subparsers(dest="cmd", required=True)
     s = sub.add_parser("serve", help="serve the console for a scenario")
     s.add_argument("scenario", help="scenario TOML file (make console: scenarios/paper.toml)")
-    s.add_argument("--port", type=int, default=8765)
+    s.add_argument("--port", type=port, default=8765, help="TCP port, 1-65535 (default 8765)")
     s.add_argument("--host", default="127.0.0.1", help="address to bind (default loopback)")
     s.add_argument(
         "--allow-remote",
@@ -34,11 +35,11 @@ def _parser() -> CliParser:
         "drives) and requests naming HOST (repeatable; put it after SCENARIO)",
     )
     s.add_argument("--fps", type=float, default=30.0, help="frames per second to pages (20-60)")
-    s.add_argument("--bias-max", type=float, default=5.0, help="largest bias component")
+    s.add_argument("--bias-max", type=positive, default=5.0, help="largest bias component")
     s.add_argument("--out", default=None, help="output root for gains and records (default out/)")
     s.add_argument(
         "--rise",
-        type=float,
+        type=positive,
         default=None,
         help="seconds over which each change of u0 ramps in (default: the scenarios' "
         "default rise, docs/console.md)",

@@ -21,7 +21,9 @@ record says why, keeping ``u0.csv`` and ``console.csv``.
 :class:`Recorder` writes from the server's record worker thread, not the loop's: each
 logged row is formatted once into the run's :class:`LogSpool` (later saves append only
 the rows logged since) and copied to each record's ``console.csv``; every file appears
-complete or not at all (a temporary file and :func:`os.replace`).
+complete or not at all (a temporary file and :func:`os.replace`). A save that fails (a
+full disk) leaves nothing: the rows it was appending are cut off the spool again, and
+its record folder is removed, so the next save writes every row exactly once.
 """
 
 from __future__ import annotations
@@ -359,12 +361,30 @@ class LogSpool:
 
     def __init__(self, root: Path, columns: Sequence[str]) -> None:
         root.mkdir(parents=True, exist_ok=True)
-        self.file = tempfile.TemporaryFile(dir=root, prefix=".console-log-")
-        self.file.write(_csv_header(columns).encode("utf-8"))
-        self.rows = 0
+        # unbuffered: what write() returns is on file, so a failed append can be cut off
+        self.file = tempfile.TemporaryFile(dir=root, prefix=".console-log-", buffering=0)
+        self.size = self.rows = 0
+        #: a failed append could not be cut off: the spool must not be used again
+        self.broken = False
+        self._append(_csv_header(columns).encode("utf-8"))
+
+    def _append(self, data: bytes) -> None:
+        """Write ``data`` at the end, all of it or nothing (a failed write is truncated)."""
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[self.file.write(view) :]
+        except BaseException:
+            try:
+                self.file.truncate(self.size)
+                self.file.seek(self.size)
+            except OSError:
+                self.broken = True
+            raise
+        self.size += len(data)
 
     def extend(self, t: Sequence[float], x: np.ndarray) -> None:
-        """Append rows.
+        """Append rows, all of them or none (a failed write leaves the spool as it was).
 
         Parameters
         ----------
@@ -373,7 +393,7 @@ class LogSpool:
         x : ndarray, shape (len(t), len(columns))
             Their values.
         """
-        self.file.write(_csv_rows(t, x).encode("utf-8"))
+        self._append(_csv_rows(t, x).encode("utf-8"))
         self.rows += len(t)
 
     def copy_to(self, path: Path) -> None:
@@ -384,7 +404,6 @@ class LogSpool:
         path : Path
             Destination in an existing folder.
         """
-        self.file.flush()
         self.file.seek(0)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         try:
@@ -395,7 +414,7 @@ class LogSpool:
             Path(tmp).unlink(missing_ok=True)
             raise
         finally:
-            self.file.seek(0, os.SEEK_END)
+            self.file.seek(self.size)
 
     def close(self) -> None:
         """Remove the temporary file."""
@@ -407,7 +426,8 @@ class Recorder:
 
     Called with a :class:`~console.session.Snapshot` (from any thread; one save at a
     time): the rows logged since the last save of the same run are added to the run's
-    :class:`LogSpool`, which is copied to the new folder's ``console.csv``.
+    :class:`LogSpool`, which is copied to the new folder's ``console.csv``. A save that
+    fails removes its folder and leaves the spool as it was before it.
 
     Parameters
     ----------
@@ -437,20 +457,27 @@ class Recorder:
         loop = self.loop
         with self.lock:
             folder = new_folder(self.out)
-            self._spool(snap).copy_to(folder / LOG_NAME)
-            nominal = loop.nominal
-            run = (snap.changes, nominal.u0.tolist(), nominal.health.tolist(), snap.restarts)
-            write_events(folder, snap.events)
-            rec = write_replay(
-                folder, self.table, run, snap.t_end, snap.rows, loop.quantum, loop.rise
-            )
+            try:
+                self._spool(snap).copy_to(folder / LOG_NAME)
+                nominal = loop.nominal
+                run = (snap.changes, nominal.u0.tolist(), nominal.health.tolist(), snap.restarts)
+                write_events(folder, snap.events)
+                rec = write_replay(
+                    folder, self.table, run, snap.t_end, snap.rows, loop.quantum, loop.rise
+                )
+            except BaseException:
+                shutil.rmtree(folder, ignore_errors=True)  # no half-written record
+                raise
         return rec.message()
 
     def _spool(self, snap: Snapshot) -> LogSpool:
-        """The run's spool holding the snapshot's rows (a new one for a new run)."""
-        if self.spool is None or self.run != snap.run or self.spool.rows > snap.rows:
-            if self.spool is not None:
-                self.spool.close()
+        """The run's spool holding the snapshot's rows (a new one for a new run, or after
+        a failed append that could not be cut off)."""
+        spool = self.spool
+        if spool is None or spool.broken or self.run != snap.run or spool.rows > snap.rows:
+            if spool is not None:
+                spool.close()
+                self.spool = None
             self.spool, self.run = LogSpool(self.out, self.loop.state_columns()), snap.run
         k = self.spool.rows
         if snap.rows > k:

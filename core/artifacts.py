@@ -27,7 +27,7 @@ def out_dir(name: str) -> Path:
     return d
 
 
-def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
+def atomic_write_bytes(path: str | Path, data: bytes, mode: int | None = None) -> Path:
     """Write ``data`` to ``path`` via a temporary file in the same folder and :func:`os.replace`.
 
     Leftover temporary files of killed writers of the same destination are removed
@@ -39,6 +39,9 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
         Destination; its folder is created.
     data : bytes
         Contents.
+    mode : int, optional
+        The file's permission bits (e.g. 0o600 in the build cache); default those a
+        plain ``open()`` gives under the umask.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -51,7 +54,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
         # mkstemp creates 0600; give the result the permissions a plain open() would
-        os.chmod(tmp, 0o666 & ~_umask())
+        os.chmod(tmp, 0o666 & ~_umask() if mode is None else mode)
         os.replace(tmp, path)
     except OSError as exc:  # a full disk surfaces in write/close, without a file name
         Path(tmp).unlink(missing_ok=True)
@@ -62,7 +65,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     return path
 
 
-def atomic_write_text(path: str | Path, text: str) -> Path:
+def atomic_write_text(path: str | Path, text: str, mode: int | None = None) -> Path:
     """Text version of :func:`atomic_write_bytes` (UTF-8).
 
     Parameters
@@ -71,8 +74,10 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
         Destination; its folder is created.
     text : str
         Contents.
+    mode : int, optional
+        As for :func:`atomic_write_bytes`.
     """
-    return atomic_write_bytes(path, text.encode("utf-8"))
+    return atomic_write_bytes(path, text.encode("utf-8"), mode)
 
 
 def sha256_bytes(data: bytes) -> str:

@@ -22,6 +22,8 @@ from pathlib import Path
 from typing import Any
 
 from core.errors import ScenarioError, UsageError
+from core.files import FileRefused, read_regular_file
+from core.model import MAX_SCENARIO_BYTES
 from core.scenario import SECTIONS, TABLES, Scenario, load_scenario, scenario_from_dict
 
 #: deepest nesting of arrays and inline tables a --set value may have (a scenario needs 3)
@@ -288,14 +290,17 @@ def load(
             f"{_brief_text(variant)!r} has {len(variant)} characters",
             f"at most {MAX_VARIANT_CHARS} (it names the folder out/<name>-<variant>/)",
         )
-    raw = Path(path).read_bytes()
-    data = tomllib.loads(raw.decode("utf-8"))
+    try:  # read again, as the loader read it: the file may have changed in between
+        raw = read_regular_file(path, MAX_SCENARIO_BYTES)
+        data = tomllib.loads(raw.decode("utf-8"))
+    except (FileRefused, ValueError, RecursionError) as exc:
+        raise ScenarioError(str(path), "(file)", f"changed while it was read ({exc})") from None
     for k, v in overrides.items():
         set_path(data, str(path), k, v)
     sha = hashlib.sha256((sc.sha256 + "\n" + _canonical(overrides)).encode()).hexdigest()
     # the loader's own validation, on the modified table
     out = scenario_from_dict(data, path=path, sha256=sha)
-    label = variant or _variant_label(overrides)
+    label = variant if variant is not None else _variant_label(overrides)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", label):
         raise ScenarioError(
             str(path), "variant", f"{_brief_text(label)!r} is not a plain name", "[A-Za-z0-9_.-]"
@@ -351,7 +356,8 @@ def scenario_knobs(
     Raises
     ------
     UsageError
-        A key given twice, or ``--variant`` without an override (it would name nothing).
+        A key given twice, ``--variant`` without an override (it would name nothing), or
+        a ``--variant`` that is not a plain name (empty, blanks, a slash).
     """
     pairs = [parse_override(s) for s in args.overrides] + list((extra or {}).items())
     overrides: dict[str, Any] = {}
@@ -359,6 +365,11 @@ def scenario_knobs(
         if key in overrides:
             raise UsageError(f"--set: {_brief_text(key)} is given twice (give each key once)")
         overrides[key] = value
+    if args.variant is not None and not re.fullmatch(r"[A-Za-z0-9_.-]+", args.variant):
+        raise UsageError(
+            f"--variant {_brief_text(args.variant)!r}: not a plain name (give letters, digits, "
+            "'_', '.' or '-', or leave --variant out for a name made from the overrides)"
+        )
     if args.variant is not None and not overrides:
         raise UsageError(
             f"--variant {_brief_text(args.variant)!r} without --set: a variant names an "

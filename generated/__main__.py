@@ -11,20 +11,23 @@ import argparse
 import sys
 
 from core import methods
-from core.errors import run_cli
+from core.cli_args import positive, word
+from core.errors import CliParser, run_cli
 from core.overrides import add_scenario_knobs, scenario_knobs
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m generated", description=__doc__)
+    ap = CliParser(prog="python -m generated", description=__doc__)
     sub = ap.add_subparsers(dest="cmd", required=True)
     sim = sub.add_parser("sim", help="simulate a scenario with generated C")
     sim.add_argument("scenario", help="scenario TOML file")
     sim.add_argument("--method", choices=methods.METHODS, help="override integration.method")
     add_scenario_knobs(sim)
     sim.add_argument("--ablation", action="store_true", help="same as --set options.ablation=true")
-    sim.add_argument("--opt", default="-O1", help="compiler optimisation flag (default -O1)")
-    sim.add_argument("--compiler", default="gcc")
+    sim.add_argument(
+        "--opt", type=word, default="-O1", help="compiler optimisation flag (default -O1)"
+    )
+    sim.add_argument("--compiler", type=word, default="gcc")
     sim.add_argument(
         "--jacobian",
         choices=("auto", "sparse", "gmres", "jvp"),
@@ -34,11 +37,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     sim.add_argument(
         "--fixed-tol",
-        type=float,
+        type=positive,
         default=None,
         help="error-test tolerance of the fixed-step method's bisection safeguard (default 1e-3)",
     )
-    sim.add_argument("--linear-solver", default="csparse")
+    sim.add_argument("--linear-solver", type=word, default="csparse")
     sim.add_argument("--out", default=None, help="output root (default out/ or $HITL_OUT)")
     sim.add_argument("--no-progress", action="store_true")
     cache = sub.add_parser(

@@ -6,11 +6,17 @@ that records the library's SHA-256; an entry without a valid manifest is never t
 Builds happen in ``.tmp-*`` folders renamed into place (:func:`install_entry`), so an
 entry is either complete or absent. What is built and how it is keyed is
 :mod:`generated.codegen`.
+
+The cache holds code this process runs, so only its user may write it
+(:mod:`core.private_files`): the root and its folders are created 0700 and the files
+0600 (the library 0700) whatever the umask; a root, entry folder or file that another
+user owns or that its group or others may write is refused before anything of it is
+read (:func:`private_root`, :func:`check_entry`).
 """
 
 from __future__ import annotations
 
-import json
+import errno
 import os
 import re
 import shutil
@@ -20,7 +26,10 @@ from pathlib import Path
 from platformdirs import user_cache_dir
 
 from core import artifacts
-from core.artifacts import sha256_file
+from core.artifacts import sha256_bytes
+from core.errors import BuildError
+from core.files import FileRefused, read_json_file, read_regular_file
+from core.private_files import check_trusted, make_private_dir
 
 #: default cache root: the user's cache folder (``$XDG_CACHE_HOME`` or ``~/.cache`` on
 #: Linux), outside the package, so an installed package never writes into site-packages;
@@ -34,6 +43,11 @@ LIBRARY_NAME = "model.so"
 MANIFEST_NAME = "manifest.json"
 #: temporary build folders: ``.tmp-<key[:12]>-<pid>-<random>``
 TMP_PREFIX = ".tmp-"
+#: largest manifest read (a real one has a few kB) and its deepest nesting (a real one: 3)
+MAX_MANIFEST_BYTES = 1 << 20
+MAX_MANIFEST_DEPTH = 16
+#: largest library read and hashed (the N = 50 whole-loop library has tens of MB)
+MAX_LIBRARY_BYTES = 1 << 31
 
 
 def default_build_root() -> Path:
@@ -86,23 +100,130 @@ def entry_problem(folder: Path, key: str) -> str | None:
     key : str
         The key this build needs.
     """
-    try:
-        info = json.loads((folder / MANIFEST_NAME).read_text())
-    except FileNotFoundError:
-        return "no manifest (incomplete entry)"
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        return "manifest unreadable"
+    info, why = read_manifest(folder)
+    if why is not None:
+        return why
     if not isinstance(info, dict) or not isinstance(info.get("library_sha256"), str):
         return "manifest records no library SHA-256"
     if info.get("key") != key:
         return f"manifest is for key {str(info.get('key'))[:12]}…, not this build"
     try:
-        digest = sha256_file(folder / LIBRARY_NAME)
-    except OSError:
-        return f"{LIBRARY_NAME} missing or unreadable"
+        digest = sha256_bytes(read_library(folder))
+    except (OSError, FileRefused):
+        return f"{LIBRARY_NAME} missing, unreadable or not a regular file"
     if digest != info["library_sha256"]:
         return f"{LIBRARY_NAME} does not have the SHA-256 its manifest records (truncated, corrupt or replaced)"
     return None
+
+
+def read_manifest(folder: Path) -> tuple[object, str | None]:
+    """The parsed manifest of ``folder`` and None, or None and why it cannot be read.
+
+    Read only as a regular file of at most :data:`MAX_MANIFEST_BYTES` nested at most
+    :data:`MAX_MANIFEST_DEPTH` deep: a huge or absurdly nested manifest is a corrupt
+    entry (rebuilt), never a ``RecursionError``.
+
+    Parameters
+    ----------
+    folder : Path
+        ``<root>/<key>/``.
+    """
+    try:
+        return read_json_file(folder / MANIFEST_NAME, MAX_MANIFEST_BYTES, MAX_MANIFEST_DEPTH), None
+    except FileNotFoundError:
+        return None, "no manifest (incomplete entry)"
+    except FileRefused as exc:
+        return None, f"manifest {exc} (corrupt)"
+    except (OSError, ValueError):
+        return None, "manifest unreadable"
+
+
+def read_library(folder: Path) -> bytes:
+    """The bytes of the entry's library (a regular file of at most :data:`MAX_LIBRARY_BYTES`).
+
+    Parameters
+    ----------
+    folder : Path
+        ``<root>/<key>/``.
+
+    Raises
+    ------
+    OSError, core.files.FileRefused
+        Missing, unreadable, not a regular file or too large.
+    """
+    return read_regular_file(folder / LIBRARY_NAME, MAX_LIBRARY_BYTES)
+
+
+def private_root(root: Path) -> Path:
+    """The cache root, created 0700 if missing; refused when someone else could write it.
+
+    Parameters
+    ----------
+    root : Path
+        ``$HITL_BUILD_DIR`` or :data:`DEFAULT_BUILD_ROOT` (or a settings' ``build_root``).
+
+    Raises
+    ------
+    BuildError
+        The root is owned by another user or writable by its group or others (e.g. a
+        ``1777`` folder), or it cannot be created: one line with the fix.
+    """
+    try:
+        make_private_dir(root)
+        check_trusted(root, root)
+    except OSError as exc:
+        raise cache_write_error(root, exc) from None
+    return root
+
+
+def check_entry(folder: Path, root: Path) -> None:
+    """Refuse an entry someone else could have written, before any of it is read.
+
+    The root, the entry's folder, its library and its manifest must each be owned by
+    the calling user (or root) and writable by no group or other user; none may be a
+    symbolic link.
+
+    Parameters
+    ----------
+    folder : Path
+        ``<root>/<key>/`` (existing).
+    root : Path
+        The cache root.
+
+    Raises
+    ------
+    BuildError
+        One line naming the path, why, and the fix (remove the entry).
+    """
+    for p in (folder / LIBRARY_NAME, folder / MANIFEST_NAME, folder):
+        if os.path.lexists(p):
+            check_trusted(p, root)
+
+
+def cache_write_error(root: Path, exc: OSError) -> BuildError:
+    """One line for a failed write to the build cache: the path, the reason and the fix.
+
+    The fix names the cache and ``HITL_BUILD_DIR``, never the output folder: a full
+    or read-only cache disk is not the outputs' disk.
+
+    Parameters
+    ----------
+    root : Path
+        The cache root.
+    exc : OSError
+        The failure (``exc.filename`` names the file when known).
+    """
+    reason = exc.strerror or type(exc).__name__
+    what = f"cannot write {exc.filename}" if exc.filename else f"cannot write to {root}"
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        fix = f"free space on the disk of the build cache {root}"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        fix = f"make the build cache {root} writable"
+    else:
+        fix = f"check the build cache {root}"
+    return BuildError(
+        f"{what}: {reason} ({fix}, or set HITL_BUILD_DIR to a folder of your own elsewhere)"
+    )
 
 
 def remove_stale_builds(root: Path, min_age: float = artifacts.STALE_SECONDS) -> list[Path]:

@@ -33,6 +33,7 @@ import casadi as ca
 from core import artifacts
 from core.artifacts import sha256_file
 from core.errors import BuildError
+from core.private_files import make_private_dir, seal
 from generated.build_cache import (
     DEFAULT_BUILD_ROOT,
     ENTRY_PATTERN,
@@ -40,11 +41,14 @@ from generated.build_cache import (
     MANIFEST_NAME,
     SOURCE_NAME,
     TMP_PREFIX,
+    cache_write_error,
+    check_entry,
     clear_cache,
     default_build_root,
     discard_entry,
     entry_problem,
     install_entry,
+    private_root,
     remove_stale_builds,
 )
 from generated.compiler import Toolchain, compile_source, compiler_identity
@@ -208,10 +212,9 @@ def build_library(
     source += tc.appended_source
     t_codegen = time.perf_counter() - t0
     key = cache_key(source, settings, tc.key)
-    root = cache_root(settings)
+    root = private_root(cache_root(settings))
     folder = root / key
-    if root.is_dir():
-        remove_stale_builds(root)
+    remove_stale_builds(root)
     hit = _usable_entry(folder, key, tc)
     t_compile = 0.0 if hit else _compile_entry(root, key, source, names, settings, tc)
     return Library(
@@ -231,13 +234,15 @@ def build_library(
 def _usable_entry(folder: Path, key: str, tc: Toolchain) -> bool:
     """Whether the cache entry ``folder`` exists and may be loaded for ``key``.
 
-    A bad entry is reported on stderr and never dlopen'ed: it would crash (truncated)
-    or silently compute another model. An entry that checks out but cannot be loaded
-    in this process (:func:`load_problem`) is reported in one line and moved aside, so
-    that the rebuild replaces it.
+    An entry someone else could have written is refused (:func:`check_entry`, a
+    ``BuildError``) before any of it is read. A bad entry is reported on stderr and never
+    dlopen'ed: it would crash (truncated) or silently compute another model. An entry
+    that checks out but cannot be loaded in this process (:func:`load_problem`) is
+    reported in one line and moved aside, so that the rebuild replaces it.
     """
-    if not folder.exists():
+    if not os.path.lexists(folder):
         return False
+    check_entry(folder, folder.parent)
     why = entry_problem(folder, key)
     if why is not None:
         print(f"build cache {folder}: {why}; rebuilding", file=sys.stderr)
@@ -261,9 +266,24 @@ def _compile_entry(
     """Compile ``source`` in a temporary folder and install it as ``root/key``.
 
     Returns the compile wall time. On a compile failure the source is kept under
-    ``root/failed/key/`` and the error names it.
+    ``root/failed/key/`` and the error names it. The entry's folders are 0700 and its
+    files 0600 (the library 0700) whatever the umask (:func:`core.private_files.seal`);
+    a failed write (a full disk) names the cache, not the output folder.
     """
-    root.mkdir(parents=True, exist_ok=True)
+    try:
+        return _compile_in(root, key, source, names, settings, tc)
+    except OSError as exc:
+        raise cache_write_error(root, exc) from None
+
+
+def _compile_in(
+    root: Path,
+    key: str,
+    source: str,
+    names: tuple[str, ...],
+    settings: CodegenSettings,
+    tc: Toolchain,
+) -> float:
     tmp = Path(tempfile.mkdtemp(dir=root, prefix=f"{TMP_PREFIX}{key[:12]}-{os.getpid()}-"))
     folder = root / key
     try:
@@ -272,13 +292,15 @@ def _compile_entry(
         except BuildError as exc:
             failed = root / "failed" / key
             shutil.rmtree(failed, ignore_errors=True)
-            failed.parent.mkdir(parents=True, exist_ok=True)
+            make_private_dir(failed.parent)
+            seal(tmp)
             os.replace(tmp, failed)
             raise BuildError(str(exc).replace(str(tmp), str(failed))) from None
+        seal(tmp)
         info = _manifest(key, tmp, names, settings, tc, len(source), t_compile)
         # the manifest is written last: its presence marks a complete entry
         text = json.dumps(info, indent=2, sort_keys=True, default=str)
-        artifacts.atomic_write_text(tmp / MANIFEST_NAME, text)
+        artifacts.atomic_write_text(tmp / MANIFEST_NAME, text, mode=0o600)
         install_entry(tmp, folder)
     finally:
         if tmp.exists() and tmp != folder:

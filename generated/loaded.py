@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import json
 import os
 import shutil
 import tempfile
@@ -24,8 +23,10 @@ from typing import Any
 import casadi as ca
 
 from core.errors import BuildError
+from core.files import FileRefused
 from core.memo import MEMO
 from generated import native
+from generated.build_cache import check_entry, read_library, read_manifest
 from generated.codegen import (
     MANIFEST_NAME,
     TMP_PREFIX,
@@ -87,14 +88,19 @@ def verified_bytes(lib: Library) -> tuple[bytes, tuple[int, ...]]:
     Raises
     ------
     BuildError
-        If the entry does not check out, or changed while it was read.
+        If the entry someone else could have written (:func:`check_entry`), does not
+        check out, or changed while it was read.
     """
+    try:
+        check_entry(lib.folder, lib.folder.parent)
+    except OSError:
+        pass  # a missing file: entry_problem below names it
     stamp = library_stamp(lib)
     try:
-        data = lib.path.read_bytes()
-        info = json.loads((lib.folder / MANIFEST_NAME).read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-        data, info = b"", None
+        data = read_library(lib.folder)
+    except (OSError, FileRefused):
+        data = b""
+    info, _ = read_manifest(lib.folder)
     ok = (
         isinstance(info, dict)
         and info.get("key") == lib.key

@@ -9,7 +9,6 @@ of them are unchanged and ``trajectory.csv`` is the file meta.json describes.
 from __future__ import annotations
 
 import hashlib
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -17,6 +16,7 @@ import casadi as ca
 import numpy as np
 
 from core.artifacts import sha256_file
+from core.files import FileRefused, read_json_file
 from core.memo import MEMO
 from core.scenario import Scenario
 from generated.trajectory_file import INCOMPLETE_MARK, data_rows
@@ -26,6 +26,9 @@ if TYPE_CHECKING:
 
 #: packages whose sources shape a trajectory (their hash is part of the reuse key)
 CODE_PACKAGES = ("symbolic", "synthesis", "generated")
+#: largest meta.json read back (a run's has a few kB) and its deepest nesting
+MAX_META_BYTES = 16 << 20
+MAX_META_DEPTH = 32
 
 
 @MEMO.memoize("code-sha256", 1)
@@ -116,9 +119,9 @@ def reuse_problem(
     if not (meta_p.is_file() and csv_p.is_file()):
         return "no previous run", None
     try:
-        meta = json.loads(meta_p.read_text())
+        meta = read_json_file(meta_p, MAX_META_BYTES, MAX_META_DEPTH)
         data = csv_p.read_bytes()
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+    except (OSError, ValueError, FileRefused):  # not JSON, too large or too deep
         return "meta.json unreadable", None
     if not isinstance(meta, dict) or not isinstance(meta.get("inputs"), dict):
         return "meta.json records no inputs (older run)", None

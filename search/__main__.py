@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import sys
 
-from core.errors import CliParser, UsageError, run_cli
+from core.cli_args import count, natural
+from core.errors import CliParser, run_cli
 
 
 def main(argv: list[str]) -> int:
@@ -22,9 +23,9 @@ def main(argv: list[str]) -> int:
     rp = sub.add_parser("run", help="run or continue a search (resumable)")
     rp.add_argument("file", help="the search TOML file")
     rp.add_argument("--out", default=None, help="output root (default out/ or $HITL_OUT)")
-    rp.add_argument("--workers", type=int, default=None, help="local worker processes")
-    for key in ("seed", "budget", "baseline"):
-        rp.add_argument(f"--{key}", type=int, default=None, help=f"replace [search] {key}")
+    rp.add_argument("--workers", type=count, default=None, help="local worker processes")
+    for key, kind in (("seed", natural), ("budget", count), ("baseline", natural)):
+        rp.add_argument(f"--{key}", type=kind, default=None, help=f"replace [search] {key}")
     cp = sub.add_parser("check", help="load and validate a search file")
     cp.add_argument("file", help="the search TOML file")
     args = ap.parse_args(argv)
@@ -34,8 +35,6 @@ def main(argv: list[str]) -> int:
         s = load_search(args.file)
         print(f"{args.file}: {len(s.requirements)} requirements, ok")
         return 0
-    if args.workers is not None and args.workers < 1:
-        raise UsageError("--workers: give a number of worker processes >= 1")
     from core.artifacts import OUT_ROOT
     from search.run import run_search
 

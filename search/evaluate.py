@@ -25,6 +25,8 @@ from sweep.sampler import Sample
 
 #: rows whose observed value is the fraction of output times at which a check holds
 FRACTION = "fraction"
+#: status of a run a requirement cannot score (robustness ±inf or NaN), :func:`unscored`
+UNSCORED = "unscored"
 
 
 def signals(sample: Sample, run: Any) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -133,6 +135,36 @@ def robustness(
     return out
 
 
+def unscored(reqs: tuple[Requirement, ...], row: dict[str, Any]) -> str | None:
+    """The status of a run some requirement cannot score, or None when all are finite.
+
+    An ``always`` or ``eventually`` window that holds no sample of the run (it begins
+    past the horizon) has robustness +inf or -inf, and a guaranteed-rows requirement
+    whose claims have no guaranteed row in the table +inf: such a number ranks nothing,
+    so the run is recorded as ``unscored: <requirement> ...`` (not told to CMA-ES, not
+    the least robust run) and the report lists it.
+
+    Parameters
+    ----------
+    reqs : tuple of Requirement
+        The search file's requirements.
+    row : dict
+        The run's row with its ``rob:<name>`` columns (:func:`robustness`).
+    """
+    for r in reqs:
+        v = float(row[f"rob:{r.name}"])
+        if math.isfinite(v):
+            continue
+        if math.isnan(v):
+            why = "is not a number (the run's signals hold NaN)"
+        elif r.guaranteed:
+            why = f"is {v:+g}: the bound table has no guaranteed row of its claims"
+        else:
+            why = f"is {v:+g}: a time window of its formula holds no sample (past the horizon)"
+        return f"{UNSCORED}: {r.name} robustness {why}"
+    return None
+
+
 def verify_table(run: Any) -> pd.DataFrame:
     """The run's bound table (:func:`verify.pipeline.verify_run`).
 
@@ -204,7 +236,7 @@ def evaluate(search: SearchFile, point: dict[str, Any], folder: str) -> dict[str
             run = run_in_memory(sample, StudyPaths(Path(folder)))
             row.update(robustness(search.requirements, sample, run, verify_table(run)))
             row["library"] = run.meta.get("library", {}).get("key", "")
-            row["status"] = "ok"
+            row["status"] = unscored(search.requirements, row) or "ok"
         except Exception as exc:  # noqa: BLE001 - one point's failure is recorded
             row["status"] = f"failed: {one_line(exc)}"
     row["wall_s"] = time.perf_counter() - t0

@@ -12,10 +12,12 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from core.artifacts import atomic_write_text
 from core.provenance import provenance_line
+from search.evaluate import UNSCORED
 from search.minimise import MINIMISED, STATE, WORST, least_robust
 from search.spec import SearchFile
 from sweep.run import read_results
@@ -55,15 +57,21 @@ def plot(table: pd.DataFrame, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    drawn = False
     for arm, style in (("search", "-"), ("baseline", "--")):
         s = best_so_far(table, arm)
+        s = s[np.isfinite(s.to_numpy())]  # before the arm's first scored run: nothing to draw
         if len(s):
             ax.step(s.index + 1, s.to_numpy(), style, where="post", label=arm)
+            drawn = True
     ax.axhline(0.0, color="k", lw=0.8)
     ax.set_xlabel("evaluations")
     ax.set_ylabel("least robustness so far")
-    ax.set_xscale("log")
-    ax.legend()
+    if drawn:
+        ax.set_xscale("log")
+        ax.legend()
+    else:
+        ax.text(0.5, 0.5, "no scored run", ha="center", transform=ax.transAxes)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -90,6 +98,7 @@ def write_report(search: SearchFile, results: Path) -> Path:
     lines = [f"# Search {search.name}", "", provenance_line(), ""]
     lines += _defect(search, worst, state, folder)
     lines += _summary(search, table)
+    lines += _unscored(table)
     lines += ["", f"![least robustness so far]({FIGURE})", ""]
     lines += _worst(search, worst, state, folder)
     return atomic_write_text(folder / "report.md", "\n".join(lines) + "\n")
@@ -162,6 +171,29 @@ def _summary(search: SearchFile, table: pd.DataFrame) -> list[str]:
             vals.append(f"{ok[col].astype(float).min():.4g}" if len(ok) and col in ok else "-")
         what = "every guaranteed row: observed <= bound" if r.guaranteed else f"`{r.formula}`"
         out.append(f"| {r.name} | {what} | {vals[0]} | {vals[1]} |")
+    return out
+
+
+def _unscored(table: pd.DataFrame) -> list[str]:
+    """The runs a requirement could not score (``unscored: ...``, search.evaluate.unscored)."""
+    if not len(table) or "status" not in table.columns:
+        return []
+    status = table["status"].astype(str)
+    counts = status[status.str.startswith(f"{UNSCORED}:")].value_counts()
+    if not len(counts):
+        return []
+    out = [
+        "",
+        "## Runs a requirement cannot score",
+        "",
+        "Their robustness is infinite or not a number, which ranks nothing: they are not "
+        "told to CMA-ES and never the least robust run. Give every window a start within "
+        "the horizon, and guaranteed-rows requirements claims with guaranteed rows.",
+        "",
+        "| runs | why |",
+        "|---|---|",
+    ]
+    out += [f"| {n} | {why.removeprefix(UNSCORED + ': ')} |" for why, n in counts.items()]
     return out
 
 

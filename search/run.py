@@ -108,7 +108,6 @@ def run_search(
     """
     search = load_search(path, overrides)
     folder = Path(out_root) / search.name
-    folder.mkdir(parents=True, exist_ok=True)
     results = folder / RESULTS
     info = {
         "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
@@ -127,6 +126,7 @@ def run_search(
     else:
         threads = workers or 1
     try:
+        folder.mkdir(parents=True, exist_ok=True)  # once the cluster is there: no empty folder
         _loop(search, results, executor, info, population(search, threads), progress)
         from search.minimise import minimise
 

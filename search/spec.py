@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from search.space import dimensions
 from search.stl import FormulaError, Node, parse
 from sweep import study as ST
 from sweep.study_fields import read_integer, read_string, read_table
@@ -159,6 +160,13 @@ def load_search(path: str | Path, overrides: dict[str, int] | None = None) -> Se
         raise _err(f, "graph", "random graphs are not searchable", "a study without [graph]")
     if study.operator is not None and study.operator.traces:
         raise _err(f, "operator.traces", "recorded traces are not searchable", "[operator] u0")
+    if not dimensions(study):
+        raise _err(
+            f,
+            "params",
+            "nothing to vary: the study's space has no dimension to search",
+            "a [params] entry, a [faults] family or [operator] params",
+        )
     n = len(study.base_data.get("followers", []))
     signals = {*SIGNALS, *(f"{s}{i}" for s in SIGNALS for i in range(1, n + 1))}
     if not isinstance(reqs, list) or not all(isinstance(r, dict) for r in reqs):

@@ -9,6 +9,11 @@ maximum, ``not`` the negation, ``always[a, b] phi`` at time t the minimum of ``p
 the samples in ``[t + a, t + b]`` and ``eventually`` the maximum; a window reaching past
 the last sample uses the samples it holds. A formula's robustness is its value at the
 first sample: negative means violated.
+
+A formula is bounded: at most :data:`MAX_CHARS` characters, :data:`MAX_ATOMS` comparisons
+and :data:`MAX_DEPTH` nested operators (``not``, ``always``, ``eventually``, parentheses);
+beyond these it is refused in one line, and ``and``/``or`` chains are one node however
+long, so neither parsing nor evaluation recurses deeper than the nesting.
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ class Node:
         ``cmp``, ``not``, ``and``, ``or``, ``always``, ``eventually``.
     args : tuple
         ``cmp``: (signal, relation, constant, signal_on_left); temporal: (a, b, child);
-        ``not``: (child,); ``and``/``or``: (left, right).
+        ``not``: (child,); ``and``/``or``: the operands of the chain, two or more.
     """
 
     op: str
@@ -47,6 +52,10 @@ _TOKEN = re.compile(
     r"|(?P<rel><=|>=|<|>)|(?P<punct>[()\[\],]))"
 )
 _TEMPORAL = {"always": "always", "G": "always", "eventually": "eventually", "F": "eventually"}
+#: the bounds of a formula (module docstring)
+MAX_CHARS = 100_000
+MAX_ATOMS = 500
+MAX_DEPTH = 50
 
 
 def _tokens(text: str) -> list[tuple[str, str]]:
@@ -65,6 +74,7 @@ def _tokens(text: str) -> list[tuple[str, str]]:
 class _Parser:
     def __init__(self, text: str, signals: frozenset[str]):
         self.toks, self.k, self.signals = _tokens(text), 0, signals
+        self.depth = self.atoms = 0
 
     def peek(self) -> tuple[str, str] | None:
         return self.toks[self.k] if self.k < len(self.toks) else None
@@ -85,20 +95,32 @@ class _Parser:
         return node
 
     def disjunction(self) -> Node:
-        node = self.conjunction()
+        parts = [self.conjunction()]
         while self.peek() == ("name", "or"):
             self.take()
-            node = Node("or", (node, self.conjunction()))
-        return node
+            parts.append(self.conjunction())
+        return parts[0] if len(parts) == 1 else Node("or", tuple(parts))
 
     def conjunction(self) -> Node:
-        node = self.unary()
+        parts = [self.unary()]
         while self.peek() == ("name", "and"):
             self.take()
-            node = Node("and", (node, self.unary()))
-        return node
+            parts.append(self.unary())
+        return parts[0] if len(parts) == 1 else Node("and", tuple(parts))
 
     def unary(self) -> Node:
+        self.depth += 1
+        if self.depth > MAX_DEPTH:
+            raise FormulaError(
+                f"nested more than {MAX_DEPTH} levels deep (not, always, eventually, "
+                "parentheses); write a shallower formula"
+            )
+        try:
+            return self._unary()
+        finally:
+            self.depth -= 1
+
+    def _unary(self) -> Node:
         tok = self.peek()
         if tok == ("name", "not"):
             self.take()
@@ -121,14 +143,19 @@ class _Parser:
         return self.comparison()
 
     def comparison(self) -> Node:
+        self.atoms += 1
+        if self.atoms > MAX_ATOMS:
+            raise FormulaError(f"more than {MAX_ATOMS} comparisons; write a shorter formula")
         left = self.operand()
         rel = self.take(kind="rel")
         right = self.operand()
         if (left[0] == "name") == (right[0] == "name"):
             raise FormulaError(f"{left[1]} {rel} {right[1]}: compare one signal with a number")
-        if left[0] == "name":
-            return Node("cmp", (left[1], rel, float(right[1]), True))
-        return Node("cmp", (right[1], rel, float(left[1]), False))
+        signal, number = (left[1], right[1]) if left[0] == "name" else (right[1], left[1])
+        c = float(number)
+        if not math.isfinite(c):
+            raise FormulaError(f"{signal} {rel} {number}: give a finite number")
+        return Node("cmp", (signal, rel, c, left[0] == "name"))
 
     def operand(self) -> tuple[str, str]:
         tok = self.peek()
@@ -159,6 +186,8 @@ def parse(text: str, signals: frozenset[str] | set[str]) -> Node:
     """
     if not isinstance(text, str) or not text.strip():
         raise FormulaError("empty formula")
+    if len(text) > MAX_CHARS:
+        raise FormulaError(f"{len(text)} characters, above {MAX_CHARS}; write a shorter formula")
     return _Parser(text, frozenset(signals)).formula()
 
 
@@ -211,7 +240,10 @@ def trace(node: Node, t: np.ndarray, values: dict[str, np.ndarray]) -> np.ndarra
         return -trace(node.args[0], t, values)
     if node.op in ("and", "or"):
         f = np.minimum if node.op == "and" else np.maximum
-        return f(trace(node.args[0], t, values), trace(node.args[1], t, values))
+        out = trace(node.args[0], t, values)
+        for child in node.args[1:]:
+            out = f(out, trace(child, t, values))
+        return out
     a, b, child = node.args
     r = trace(child, t, values)
     lo = np.searchsorted(t, t + a - 1e-9 * max(1.0, b), side="left")

@@ -17,10 +17,14 @@ import numpy as np
 
 from core.artifacts import atomic_write_text, sha256_bytes
 from core.errors import SynthesisError
+from core.files import FileRefused, parse_json, read_regular_file
 from core.json_types import JSONObject
 from core.scenario import Scenario
 from synthesis.certificate_record import CertificateRecord
 
+#: largest gains.json read (N = 50 gives some 100 kB) and its deepest nesting (matrices: 3)
+MAX_GAINS_BYTES = 64 << 20
+MAX_GAINS_DEPTH = 16
 MATRIX_FIELDS = ("A0", "B0", "C0", "Gamma", "Phi", "Theta", "Omega", "T", "Q", "L_bar", "H", "Z")
 
 
@@ -239,17 +243,23 @@ def read_gains_file(path: str | Path) -> GainsFile:
     Raises
     ------
     SynthesisError
-        Unreadable, not UTF-8, not JSON, or a malformed field (one line naming it).
+        Unreadable, not a regular file of at most :data:`MAX_GAINS_BYTES` (a FIFO or
+        ``/dev/zero`` is refused unread), nested deeper than :data:`MAX_GAINS_DEPTH`,
+        not UTF-8, not JSON, or a malformed field (one line naming it).
     """
     path = Path(path)
     try:
-        data = path.read_bytes()
+        data = read_regular_file(path, MAX_GAINS_BYTES)
     except OSError as exc:
         raise SynthesisError(
             f"{path}: cannot be read ({exc.strerror}); run make synth first"
         ) from None
+    except FileRefused as exc:
+        raise SynthesisError(f"{path}: {exc} (give a gains.json written by make synth)") from None
     try:
-        d = json.loads(data.decode("utf-8"))
+        d = parse_json(data, MAX_GAINS_DEPTH)
+    except FileRefused as exc:
+        raise SynthesisError(f"{path}: not a gains file: it {exc} {_fix(str(path))}") from None
     except UnicodeDecodeError:
         raise SynthesisError(f"{path}: not UTF-8 text (corrupt) {_fix(str(path))}") from None
     except json.JSONDecodeError as exc:

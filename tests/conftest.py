@@ -36,6 +36,7 @@ SLOW_MODULES = frozenset(
         "test_breakpoints",
         "test_build_reuse",
         "test_cache_portable",
+        "test_cache_private",
         "test_cli_knobs",
         "test_closed_loop",
         "test_console",
@@ -72,8 +73,9 @@ SLOW_MODULES = frozenset(
     }
 )
 
-#: single tests of quick modules that take tens of seconds (a large sample's statistics)
-SLOW_TESTS: frozenset[str] = frozenset()
+#: single tests of quick modules that take tens of seconds (a large sample's statistics) or
+#: start a subprocess
+SLOW_TESTS: frozenset[str] = frozenset({"test_certify_refuses_dev_zero_and_a_fifo_unread"})
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

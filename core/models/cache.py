@@ -3,7 +3,11 @@
 An entry is ``<cache root>/<kind>/<key>.json``: ``{"kind", "key", "body", "body_sha256"}``
 with ``body`` plain JSON (numbers, strings, lists, objects). Reading never evaluates
 or pickles anything: an entry whose kind, key or checksum does not match, or that is
-not JSON at all, reads as missing, so the caller recomputes and rewrites it.
+not JSON at all, reads as missing, so the caller recomputes and rewrites it. Entries are
+read only as regular files of bounded size and nesting, and only when the cache root,
+the kind's folder and the file are the user's own (:mod:`core.private_files`: an
+entry someone else could have written is refused in one line); they are written 0600
+in 0700 folders whatever the umask.
 """
 
 from __future__ import annotations
@@ -16,10 +20,15 @@ from pathlib import Path
 from typing import Any
 
 from core.artifacts import atomic_write_text
+from core.files import FileRefused, read_json_file
+from core.private_files import check_trusted, make_private_dir
 
 #: the build cache root unless ``HITL_BUILD_DIR`` is set (the rule of
 #: ``generated.codegen.default_build_root``, which core may not import)
 APP_NAME = "hitl-formation"
+#: largest entry read (a model's derivation is some 100 kB) and its deepest nesting
+MAX_ENTRY_BYTES = 64 << 20
+MAX_ENTRY_DEPTH = 64
 
 
 def cache_root() -> Path:
@@ -59,10 +68,19 @@ def read_entry(kind: str, key: str, root: Path | None = None) -> dict[str, Any] 
     ----------
     kind, key, root :
         As in :func:`entry_path`.
+
+    Raises
+    ------
+    BuildError
+        The cache root, the kind's folder or the entry is another user's or writable by
+        its group or others (:func:`core.private_files.check_trusted`).
     """
+    top = root if root is not None else cache_root()
+    path = entry_path(kind, key, top)
     try:
-        d = json.loads(entry_path(kind, key, root).read_bytes().decode("utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        check_trusted(path, top)
+        d = read_json_file(path, MAX_ENTRY_BYTES, MAX_ENTRY_DEPTH)
+    except (OSError, ValueError, FileRefused):
         return None
     if not isinstance(d, dict) or d.get("kind") != kind or d.get("key") != key:
         return None
@@ -82,7 +100,9 @@ def write_entry(kind: str, key: str, body: dict[str, Any], root: Path | None = N
         Plain JSON values (readers check the numbers they use).
     """
     d = {"kind": kind, "key": key, "body": body, "body_sha256": _digest(body)}
-    return atomic_write_text(entry_path(kind, key, root), json.dumps(d, sort_keys=True))
+    path = entry_path(kind, key, root)
+    make_private_dir(path.parent)
+    return atomic_write_text(path, json.dumps(d, sort_keys=True), mode=0o600)
 
 
 def finite_pair(v: Any) -> tuple[float, float] | None:
