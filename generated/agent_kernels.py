@@ -224,6 +224,8 @@ def kernel_key(
         "gains": {k: np.asarray(getattr(gains, k), float).tolist() for k in KERNEL_GAINS},
         "model": [fo.model, sorted(fo.params.items())],
         "faults": texts,
+        # the leader's u0 is compiled in with its numbers (the structure has its templates)
+        "u0": None if sc.leader.u0 is None else [e.text for e in sc.leader.u0],
         "driver": hashlib.sha256(
             (native.COMMON.read_text() + DRIVER.read_text()).encode()
         ).hexdigest(),

@@ -1,7 +1,6 @@
 """The per-agent driver: the graph as runtime data, one kernel library per follower model.
 
-The whole-loop native build (:mod:`generated.native`) writes the graph into the code, and
-the graph-ordered build (:mod:`generated.dag`) needs an acyclic graph of one model. Here
+The whole-loop native build (:mod:`generated.native`) writes the graph into the code. Here
 the kernels of ONE agent are compiled once per follower model
 (:mod:`generated.agent_kernels`) and the driver ``generated/native/agents.c`` evaluates
 them over the agents in passes (one per jet level), so a cycle is no special case.

@@ -1,7 +1,7 @@
 """One evaluation of a native driver outside a run: its right-hand side and a Newton solve.
 
-The graph-ordered (:mod:`generated.dag`) and per-agent (:mod:`generated.agents`)
-drivers each export a ``hitl_*_probe`` entry point with the same C signature; the
+The per-agent driver (:mod:`generated.agents`) exports a ``hitl_agents_probe`` entry
+point; the
 tests compare what it returns with the whole closed loop. :func:`probe_driver` is the
 one place that calls such an entry point and turns its failure into an error.
 """
