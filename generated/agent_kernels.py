@@ -246,7 +246,7 @@ def driver_toolchain(sc: Scenario) -> Toolchain:
     sc : Scenario
     """
     tc = native.toolchain(DRIVER)
-    na = make_layout(sc.m, sc.n, sc.N, False).agent_size
+    na = make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered").agent_size
     sizes = (
         f"#define HITL_AG_N_LEADER {sc.m}\n#define HITL_AG_N_STATE {na}\n"
         f"#define HITL_AG_N_OUT {sc.n}\n"

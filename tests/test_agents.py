@@ -556,3 +556,61 @@ def test_make_sim_on_new_random_graphs_compiles_nothing(tmp_path):
     assert len({rec.scenario_sha256 for rec in recs}) == len(recs)
     for rec in recs[1:]:
         assert rec.library.cache_hit and rec.wall_seconds.compile == 0.0
+
+
+def test_filtered_derivatives_and_a_formation_start_on_a_cycle(build_root):
+    """``options.derivatives = "filtered"`` and ``initial.start = "formation"`` (x(0) from
+    the closed loop's outputs): the passes are cl.ode and the Newton solves hold, on a
+    cyclic graph of mixed models."""
+    base = _mixed(_with_graph(_bench(6), *_cyclic(6, 3)))
+    opts = dataclasses.replace(base.options, derivatives="filtered")
+    sc = dataclasses.replace(
+        base, options=opts, initial=dataclasses.replace(base.initial, start="formation")
+    )
+    gains = bench_gains(sc)[0]
+    cg = CodegenSettings(optimization="-O0", kernel_optimization="-O0", build_root=build_root)
+    libs, model = agents.build_models(sc, gains, cg)
+    prob = agents.problem(sc, gains, model)
+    cl = build_closed_loop(sc, gains)
+    paths = [lib.path for lib in libs]
+    rng = np.random.default_rng(5)
+    for t in (0.0, 0.2):
+        x = cl.x0 + (0.0 if t == 0.0 else rng.normal(scale=0.2, size=prob.nx))
+        b = rng.normal(size=prob.nx)
+        ref = np.array(cl.ode(t, x)).ravel()
+        M, expected = _newton_reference(cl, t, x, 1e-2, b)
+        xdot, sol = agents.probe(paths, prob, t, x, 1e-2, b)
+        np.testing.assert_allclose(xdot, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+        resid = np.abs(M @ sol - b).max() / (np.abs(M).max() * np.abs(sol).max())
+        assert resid < 1e-12, resid
+
+
+def test_faults_and_two_pinned_followers_against_the_whole_loop(tmp_path):
+    """The two-follower test scenario (a fault switching at t = 0.3 s, both followers
+    pinned, different fault expressions): the per-agent engine and the whole-loop native
+    driver restart at the fault and converge together as the tolerance shrinks."""
+    from helpers import SMALL
+
+    from synthesis import synthesize
+
+    path = tmp_path / "small.toml"
+    path.write_text(SMALL)
+    sc = api.load(path)
+    assert sc.breakpoints() == (0.3,)
+    gains = synthesize(sc)
+    cl = build_closed_loop(sc, gains)
+    cg = CodegenSettings(optimization="-O0", kernel_optimization="-O0")
+    libs, model = agents.build_models(sc, gains, cg)
+    prob = agents.problem(sc, gains, model)
+    built = api.build(sc, gains, "native", cg, closed_loop=cl)
+    assert built.agents is None  # N = 2: the whole loop
+    t_out = output_grid(0.5, 0.01)
+    diffs = []
+    for rtol in (1e-8, 1e-11):
+        s = IntegratorSettings(method="native", rtol=rtol, atol=rtol * 1e-2, max_steps=100000)
+        tr = agents.run([lib.path for lib in libs], prob, cl.x0, t_out, s, breakpoints=(0.3,))
+        ref = api.integrate_built(built, cl.x0, t_out, s, (0.3,))
+        assert tr.complete and ref.complete
+        assert tr.stats["restarts"] == ref.stats["restarts"] == 1
+        diffs.append(_rel(tr.x, ref.x))
+    assert diffs[1] < 1e-6 and diffs[1] < diffs[0] / 10, diffs
