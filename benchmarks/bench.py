@@ -22,9 +22,8 @@ the variable-step methods, the same output grid):
 ``c-cvode-native``
     Our generated C + SUNDIALS CVODE driven from C, one call from Python per run
     (method ``native``): up to N = 20 the whole loop's right-hand side, Jacobian and
-    sparse LU (:mod:`generated.native`); above, one follower's block evaluated along
-    the acyclic graph, Newton systems solved by block forward substitution
-    (:mod:`generated.dag`).
+    sparse LU (:mod:`generated.native`); above, the per-agent engine: one kernel
+    library per follower model, the graph as runtime data (:mod:`generated.agents`).
 ``c-cvodes-direct``, ``c-cvodes-gmres``
     Our generated C + CVODES through CasADi's interface with the two plans of
     :mod:`generated.largescale` (``jacobian="sparse"``: sparse direct Jacobian /

@@ -82,8 +82,7 @@ def ours_method(N: int) -> str:
     """The benchmark method that is ours at N: what ``make sim`` runs for N followers.
 
     ``c-cvode-native`` (method ``native``) at every N: the whole-loop build up to
-    N = 20, the graph-ordered blocks above (:mod:`generated.dag`; the benchmark's graphs
-    are acyclic and its followers share one model).
+    N = 20, the per-agent engine above (:mod:`generated.agents`).
 
     Parameters
     ----------

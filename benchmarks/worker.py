@@ -308,14 +308,14 @@ def _setup_ours(cell: Cell, rec: dict[str, Any]) -> Callable[[], dict[str, Any]]
         rec.update(codegen_s=0.0, compile_s=0.0, c_bytes=0)
         rec["plan"] = f"CasADi VM, CasADi AD Jacobian, {label}"
     else:
-        cascade = solvers.get(meth).prepare(cell.sc, cell.gains)
-        built = build_from_closed_loop(cell.cl, meth, cg, cascade=cascade)
+        prepared = solvers.get(meth).prepare(cell.sc, cell.gains)
+        built = build_from_closed_loop(cell.cl, meth, cg, prepared=prepared)
         dyn = built.dyn
-        dag_bytes = built.dag[0].source_bytes if built.dag else 0  # second library
+        libs = built.agents[0] if built.agents else (built.library,)  # per-agent: its kernels
         rec.update(
             codegen_s=built.timings["codegen"],
             compile_s=built.timings["compile"],
-            c_bytes=built.library.source_bytes + dag_bytes,
+            c_bytes=sum(lib.source_bytes for lib in libs),
             cache_hit=built.library.cache_hit,
             plan=label,
         )

@@ -356,10 +356,11 @@ class LiveLoop(LoopBase):
         from generated import api, solvers
         from symbolic.parameters import layout_of
 
-        if built.outputs_p is None or built.dag is not None:
+        if built.outputs_p is None or built.agents is not None:
             raise BuildError(
                 f"{sc.path}: the console needs a library that takes runtime parameters; "
-                "the graph-ordered native build (above 20 followers) does not "
+                "the per-agent native engine (above 20 followers) compiles the operator's "
+                "command in "
                 '(set integration.method = "cvodes")'
             )
         self.sc, self.gains, self.built = sc, gains, built

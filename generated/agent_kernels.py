@@ -224,6 +224,8 @@ def kernel_key(
         "gains": {k: np.asarray(getattr(gains, k), float).tolist() for k in KERNEL_GAINS},
         "model": [fo.model, sorted(fo.params.items())],
         "faults": texts,
+        # the leader's u0 is compiled in with its numbers (the structure has its templates)
+        "u0": None if sc.leader.u0 is None else [e.text for e in sc.leader.u0],
         "driver": hashlib.sha256(
             (native.COMMON.read_text() + DRIVER.read_text()).encode()
         ).hexdigest(),
@@ -244,7 +246,7 @@ def driver_toolchain(sc: Scenario) -> Toolchain:
     sc : Scenario
     """
     tc = native.toolchain(DRIVER)
-    na = make_layout(sc.m, sc.n, sc.N, False).agent_size
+    na = make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered").agent_size
     sizes = (
         f"#define HITL_AG_N_LEADER {sc.m}\n#define HITL_AG_N_STATE {na}\n"
         f"#define HITL_AG_N_OUT {sc.n}\n"

@@ -1,7 +1,6 @@
 """The per-agent driver: the graph as runtime data, one kernel library per follower model.
 
-The whole-loop native build (:mod:`generated.native`) writes the graph into the code, and
-the graph-ordered build (:mod:`generated.dag`) needs an acyclic graph of one model. Here
+The whole-loop native build (:mod:`generated.native`) writes the graph into the code. Here
 the kernels of ONE agent are compiled once per follower model
 (:mod:`generated.agent_kernels`) and the driver ``generated/native/agents.c`` evaluates
 them over the agents in passes (one per jet level), so a cycle is no special case.
@@ -43,7 +42,6 @@ from generated.agent_kernels import (
     build_models,
     kernel_key,
 )
-from generated.driver_probe import checked_state, probe_driver
 from generated.values import IntegratorSettings, Trajectory
 from symbolic.closed_loop import fault_function, make_layout
 from symbolic.parameters import param_matrix
@@ -461,7 +459,7 @@ def run(
     """
     wall0 = time.perf_counter()
     libs = load(libraries)
-    x = checked_state(x0, prob.nx)
+    x = _checked_state(x0, prob.nx)
     linear = linear or LinearSettings()
     _check_threads(libs, linear)
     call = native.DriverCall.of(x.size, t_out, settings, breakpoints)
@@ -511,9 +509,24 @@ def probe(
     libs = load(libraries)
     linear = linear or LinearSettings()
     _check_threads(libs, linear)
-    x, b = checked_state(x, prob.nx), checked_state(b, prob.nx)
+    x, b = _checked_state(x, prob.nx), _checked_state(b, prob.nx)
     cp, _keep = _c_problem(libs, prob, linear)
-    return probe_driver(libs[0].hitl_agents_probe, cp, t, x, gamma, b, "per-agent driver")
+    xdot, sol = np.zeros_like(x), np.zeros_like(x)
+    msg = ctypes.create_string_buffer(native.MSG_LEN)
+    dp = native.dptr
+    args = (dp(x), float(gamma), dp(b), dp(xdot), dp(sol), msg, native.MSG_LEN)
+    if libs[0].hitl_agents_probe(ctypes.byref(cp), float(t), *args) != 0:
+        why = msg.value.decode(errors="replace") or "solve failed"
+        raise IntegrationError(f"per-agent driver: {why}")
+    return xdot, sol
+
+
+def _checked_state(x: np.ndarray, nx: int) -> np.ndarray:
+    """``x`` as a contiguous float vector of the closed loop's ``nx`` states."""
+    x = np.ascontiguousarray(x, dtype=float).ravel()
+    if x.size != nx:
+        raise IntegrationError(f"x: {x.size} entries, the closed loop has {nx} states")
+    return x
 
 
 def initial_state(sc: Scenario) -> np.ndarray:

@@ -36,6 +36,7 @@ import pandas as pd
 
 from core.artifacts import OUT_ROOT, atomic_write_text
 from core.errors import ScenarioError
+from core.memo import MEMO
 from core.scenario import Scenario
 from generated import solvers
 from generated.built import Built
@@ -63,6 +64,7 @@ from generated.overrides import (
 from generated.progress import progress_bar
 from generated.reuse import CODE_PACKAGES, code_sha256, library_hashes, reuse_problem, run_inputs
 from generated.schedule import output_grid
+from generated.solvers.base import BuildPlan
 from generated.sundials_log import sundials_summary
 from generated.trajectory_file import (
     INCOMPLETE_MARK,
@@ -102,7 +104,6 @@ __all__ = [
     "integrator_settings",
     "library_hashes",
     "load",
-    "native_cascade",
     "parse_override",
     "read_trajectory",
     "resolve_codegen",
@@ -199,10 +200,13 @@ def build(
     settings = resolve_codegen(sc.N, settings)
     method = method or sc.integration.method
     t0 = time.perf_counter()
-    # first: what the method cannot do (e.g. order a cyclic graph) fails before the closed
-    # loop is built
-    cascade = solvers.get(method).prepare(sc, gains)
-    key = (structure_key(sc, gains), method, settings) if cascade is None else None
+    # first: what the method needs of the scenario itself (the per-agent engine's kernels)
+    prepared = solvers.get(method).prepare(sc, gains)
+    key = (structure_key(sc, gains), method, settings)
+    if prepared is not None:  # the method's own libraries: only the closed loop is reused
+        if closed_loop is None:
+            closed_loop = _loop_of(sc, gains, key)
+        return _compile(closed_loop, method, settings, t0, prepared)[0]
     if closed_loop is None and key in BUILDS:
         c = current(BUILDS[key])
         if c is not None:
@@ -211,32 +215,26 @@ def build(
         del BUILDS[key]  # its entry no longer checks out: build again (the cache says why)
     if closed_loop is None:
         closed_loop = build_closed_loop(sc, gains)
-    built, image = _compile(closed_loop, method, settings, t0, cascade)
-    if key is not None and closed_loop.parametric is not None:
+    built, image = _compile(closed_loop, method, settings, t0, prepared)
+    if image is not None and closed_loop.parametric is not None:
         BUILDS[key] = Compiled(built.closed_loop, built.library, built.form, image)
     return built
 
 
-def native_cascade(sc: Scenario, gains: Gains) -> Any:
-    """The per-follower blocks the native method needs at ``sc.N`` (None at N <= 20).
+#: symbolic closed loops of the per-agent builds of this process, by structure (core/memo.py)
+_LOOPS = MEMO.namespace("per-agent-loops", 16)
 
-    Parameters
-    ----------
-    sc : Scenario
-    gains : Gains
 
-    Returns
-    -------
-    Cascade or None
-        :func:`symbolic.cascade.build_cascade` above :data:`generated.native.MAX_AGENTS`
-        followers (the whole-loop build's limit), None below.
-
-    Raises
-    ------
-    ScenarioError
-        Above the limit, if the graph has a cycle or the followers differ in model.
-    """
-    return solvers.get("native").prepare(sc, gains)
+def _loop_of(sc: Scenario, gains: Gains, key: tuple) -> Any:
+    """``sc``'s closed loop: one built before for its structure bound to its numbers, or a
+    new symbolic build (kept for the next scenario of the structure)."""
+    cl = _LOOPS.get(key)
+    if cl is None or cl.parametric is None:
+        cl = build_closed_loop(sc, gains)
+    else:
+        cl = bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks, key=key[0])
+    _LOOPS[key] = cl
+    return cl
 
 
 def build_from_closed_loop(
@@ -245,7 +243,7 @@ def build_from_closed_loop(
     settings: CodegenSettings | None = None,
     *,
     t_symbolic_start: float | None = None,
-    cascade: Any = None,
+    prepared: Any = None,
 ) -> Built:
     """Compile an existing :class:`~symbolic.closed_loop.ClosedLoop` for ``method``.
 
@@ -262,12 +260,12 @@ def build_from_closed_loop(
     t_symbolic_start : float, optional
         ``time.perf_counter()`` when the symbolic build began, so that
         ``timings["symbolic_build"]`` includes it (default: now).
-    cascade : object, optional
-        What the method's :meth:`~generated.solvers.Solver.prepare` returned (method
-        ``native`` above :data:`generated.native.MAX_AGENTS` followers: the per-follower
-        blocks, :func:`native_cascade`, compiled by :mod:`generated.dag`).
+    prepared : object, optional
+        What the method's :meth:`~generated.solvers.Solver.prepare` returned for the
+        scenario (method ``native`` above :data:`generated.native.MAX_AGENTS` followers:
+        what its per-agent kernels are built from).
     """
-    return _compile(cl, method, settings, t_symbolic_start, cascade)[0]
+    return _compile(cl, method, settings, t_symbolic_start, prepared)[0]
 
 
 def _compile(
@@ -275,9 +273,10 @@ def _compile(
     method: str,
     settings: CodegenSettings | None,
     t_symbolic_start: float | None,
-    cascade: Any,
-) -> tuple[Built, Image]:
-    """:func:`build_from_closed_loop`, and the loaded library the Built uses."""
+    prepared: Any,
+) -> tuple[Built, Image | None]:
+    """:func:`build_from_closed_loop`, and the loaded library the Built uses (None when
+    the method runs its own libraries)."""
     solver = solvers.get(method)
     settings = resolve_codegen(cl.layout.N, settings)
     t0 = time.perf_counter() if t_symbolic_start is None else t_symbolic_start
@@ -288,8 +287,9 @@ def _compile(
     check_dyn_signature(src, f"closed loop {form}_dyn")
     dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
     outs = renamed(src_fns.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
-    plan = solver.build(dyn, cl, settings, cascade)
-    dag_lib = plan.companion
+    plan = solver.build(dyn, cl, settings, prepared)
+    if not plan.whole_loop:
+        return _own_libraries(cl, plan, form, time.perf_counter() - t0), None
     t_sym = time.perf_counter() - t0
     lib = build_library(
         [dyn, outs, *plan.functions],
@@ -299,21 +299,59 @@ def _compile(
     )
     timings = {
         "symbolic_build": t_sym,
-        "codegen": lib.codegen_seconds + (dag_lib.codegen_seconds if dag_lib else 0.0),
-        "compile": lib.compile_seconds + (dag_lib.compile_seconds if dag_lib else 0.0),
+        "codegen": lib.codegen_seconds,
+        "compile": lib.compile_seconds,
     }
     image = open_image(lib, form)
-    dag = (dag_lib, plan.data) if dag_lib else None
-    return _bound(cl, lib, image, form, timings, dag), image
+    return _bound(cl, lib, image, form, timings), image
 
 
-def _bound(
-    cl: Any, lib: Library, image: Image, form: str, timings: dict[str, float], dag: Any = None
-) -> Built:
+def _own_libraries(cl: Any, plan: BuildPlan, form: str, t_build: float) -> Built:
+    """The Built of a method that runs its own libraries (``plan.whole_loop`` False).
+
+    Nothing of the closed loop is compiled: its right-hand side and outputs are the
+    symbolic Functions with p filled in (CasADi's virtual machine); :attr:`Built.library`
+    is the first of the method's libraries, a cache hit only when all of them were.
+    """
+    libs = plan.libraries
+    codegen = sum(lib.codegen_seconds for lib in libs)
+    compile_s = sum(lib.compile_seconds for lib in libs)
+    lib = dataclasses.replace(
+        libs[0],
+        cache_hit=all(lib.cache_hit for lib in libs),
+        codegen_seconds=codegen,
+        compile_seconds=compile_s,
+    )
+    timings = {
+        "symbolic_build": t_build - codegen - compile_s,
+        "codegen": codegen,
+        "compile": compile_s,
+    }
+    src = cl if cl.parametric is None else cl.parametric
+    dyn_p = src.dae_dyn if form == "dae" else src.ode_dyn
+    agents = (libs, plan.data)
+    if cl.parametric is None:
+        return Built(cl, lib, dyn_p, src.outputs, form, timings, agents=agents)
+    p = np.asarray(cl.p0, dtype=float)
+    return Built(
+        cl,
+        lib,
+        fix_parameters(dyn_p, p),
+        fix_parameters(src.outputs, p),
+        form,
+        timings,
+        agents=agents,
+        p=p,
+        dyn_p=dyn_p,
+        outputs_p=src.outputs,
+    )
+
+
+def _bound(cl: Any, lib: Library, image: Image, form: str, timings: dict[str, float]) -> Built:
     """The Built of ``cl`` on a loaded library: its Functions with ``cl``'s p filled in."""
     dyn_p, outputs_p, driver = image.dyn_p, image.outputs_p, image.driver
     if cl.parametric is None:
-        return Built(cl, lib, dyn_p, outputs_p, form, timings, dag=dag, driver=driver)
+        return Built(cl, lib, dyn_p, outputs_p, form, timings, driver=driver)
     p = np.asarray(cl.p0, dtype=float)
     return Built(
         cl,
@@ -322,7 +360,6 @@ def _bound(
         fix_parameters(outputs_p, p),
         form,
         timings,
-        dag=dag,
         p=p,
         dyn_p=dyn_p,
         outputs_p=outputs_p,

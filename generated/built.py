@@ -13,8 +13,8 @@ import numpy as np
 if TYPE_CHECKING:
     import ctypes
 
+    from generated.agents import AgentProblem
     from generated.codegen import Library
-    from symbolic.cascade import Cascade
     from symbolic.closed_loop import ClosedLoop
 
 
@@ -41,10 +41,12 @@ class Built:
         ``"ode"`` or ``"dae"``.
     timings : dict
         ``symbolic_build``, ``codegen``, ``compile`` seconds.
-    dag : (Library, Cascade) or None
+    agents : (tuple of Library, AgentProblem) or None
         Method ``native`` above :data:`generated.native.MAX_AGENTS` followers: the
-        graph-ordered library (:mod:`generated.dag`) and the per-follower blocks it was
-        built from; None otherwise.
+        per-agent kernel libraries (:mod:`generated.agents`) and the scenario's runtime
+        data; :attr:`library` is then the first kernel library's record and :attr:`dyn`,
+        :attr:`outputs` the symbolic closed loop's Functions (CasADi's virtual machine).
+        None otherwise.
     p : ndarray
         The runtime parameters the library is called with.
     dyn_p, outputs_p : casadi.Function or None
@@ -60,7 +62,7 @@ class Built:
     outputs: ca.Function
     form: str
     timings: dict[str, float] = field(default_factory=dict)
-    dag: tuple[Library, Cascade] | None = None
+    agents: tuple[tuple[Library, ...], AgentProblem] | None = None
     p: np.ndarray = field(default_factory=lambda: np.zeros(0))
     dyn_p: ca.Function | None = None
     outputs_p: ca.Function | None = None

@@ -25,7 +25,7 @@ mismatched SUNDIALS fails with a clear error instead of corrupting memory.
 
 The drivers take one options struct and fill one result struct, defined once in
 ``generated/native/hitl_native.h`` and mirrored here (:class:`Options`,
-:class:`Result`, :class:`DagProblem`); a library reports the sizes it was compiled
+:class:`Result`); a library reports the sizes it was compiled
 with (``hitl_struct_size``) and :func:`load` refuses one that differs from the mirror.
 """
 
@@ -62,7 +62,7 @@ NATIVE_DIR = Path(__file__).resolve().parent / "native"
 INCLUDE_DIR = NATIVE_DIR / "include"
 COMMON = NATIVE_DIR / "common.c"
 DRIVER = NATIVE_DIR / "driver.c"
-#: the drivers' calling convention (options, result, graph-ordered problem)
+#: the drivers' calling convention (options, result)
 HEADER = NATIVE_DIR / "hitl_native.h"
 #: the SUNDIALS libraries the driver links, from the scikit-sundae wheel
 SUNDIALS_LIBRARIES = (
@@ -129,27 +129,8 @@ class Result(ctypes.Structure):
     ]
 
 
-class DagProblem(ctypes.Structure):
-    """``hitl_dag_problem`` of ``hitl_native.h``: the graph-ordered driver's problem."""
-
-    _fields_ = [
-        ("N", ctypes.c_int),
-        ("m", ctypes.c_int),
-        ("na", ctypes.c_int),
-        ("n", ctypes.c_int),
-        ("order", _IP),
-        ("up_ptr", _IP),
-        ("up_idx", _IP),
-        ("up_w", _DP),
-        ("cpl", _DP),
-        ("npar", ctypes.c_int),
-        ("prm", _DP),
-        ("fidx", _IP),
-    ]
-
-
 #: the mirrored structs, by ``hitl_struct_size``'s argument (HITL_*_SIZE)
-STRUCTS = (Options, Result, DagProblem)
+STRUCTS = (Options, Result)
 
 
 def _sha256_file(path: Path) -> str:
@@ -164,7 +145,8 @@ def toolchain(driver: Path = DRIVER) -> Toolchain:
     ----------
     driver : Path
         The driver appended after ``common.c`` (the shared linear solver and checks):
-        ``driver.c`` (method ``native``) or ``dag.c`` (method ``native`` above the flat build's size, :mod:`generated.dag`).
+        ``driver.c`` (the whole loop) or ``agents.c`` (the per-agent engine,
+        :mod:`generated.agent_kernels`).
 
     Returns
     -------
@@ -280,9 +262,9 @@ def build(ode_dyn: ca.Function, settings: CodegenSettings | None = None) -> Libr
 
 @MEMO.memoize("native-libraries", 16)
 def load(path: Path) -> ctypes.CDLL:
-    """Load a native (whole-loop or graph-ordered) library once per path and check it.
+    """Load a native (whole-loop or per-agent) library once per path and check it.
 
-    Used by the graph-ordered driver (:mod:`generated.dag`). The path names a
+    Used by the per-agent driver (:mod:`generated.agents`). The path names a
     content-hashed cache entry: the cache builds an entry in a temporary folder and
     renames it into place, so a handle loaded before keeps the code of that key. A file
     rewritten in place behind the cache's back is not detected here; ``api.build``
@@ -340,7 +322,7 @@ def open_library(path: Path) -> ctypes.CDLL:
 
 def _declare(lib: ctypes.CDLL) -> None:
     """The entry points' signatures (hitl_native.h's structs passed by pointer)."""
-    ci, cd = ctypes.c_int, ctypes.c_double
+    ci = ctypes.c_int
     opts, res = ctypes.POINTER(Options), ctypes.POINTER(Result)
     lib.hitl_native_check.restype = ci
     lib.hitl_native_check.argtypes = [ctypes.c_char_p, ci]
@@ -349,12 +331,6 @@ def _declare(lib: ctypes.CDLL) -> None:
     if hasattr(lib, "hitl_native_run"):
         lib.hitl_native_run.restype = ci
         lib.hitl_native_run.argtypes = [ci, _DP, opts, res]
-    if hasattr(lib, "hitl_dag_run"):
-        prob = ctypes.POINTER(DagProblem)
-        lib.hitl_dag_run.restype = ci
-        lib.hitl_dag_run.argtypes = [prob, _DP, opts, res]
-        lib.hitl_dag_probe.restype = ci
-        lib.hitl_dag_probe.argtypes = [prob, cd, _DP, cd, _DP, _DP, _DP, ctypes.c_char_p, ci]
 
 
 def dptr(a: np.ndarray) -> ctypes._Pointer:

@@ -42,7 +42,6 @@ SLOW_MODULES = frozenset(
         "test_console",
         "test_console_page",
         "test_console_replay",
-        "test_dag",
         "test_definition1",
         "test_fault_slots",
         "test_faults",

@@ -9,6 +9,7 @@ the whole loop, its own sparse LU) for the trajectories.
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import casadi as ca
@@ -463,3 +464,180 @@ def test_casadi_patterns_parse_dense_and_sparse():
     k, colind, rows = agents.parse_sparsity(list(sp.compress()))
     np.testing.assert_array_equal(colind, sp.colind())
     np.testing.assert_array_equal(rows, sp.row())
+
+
+# ------------------------------------------------------- method native: the per-agent engine
+def _rel(a: np.ndarray, b: np.ndarray) -> float:
+    return float((np.abs(a - b) / np.maximum(1.0, np.abs(b))).max())
+
+
+def test_paper_on_the_per_agent_engine_equals_cvodes():
+    """The paper scenario through the per-agent engine against CasADi's CVODES (the whole
+    closed loop's generated C), both at rtol 1e-10: equal to a relative 1e-6 over the
+    start-up second (measured 6.3e-7; at rtol 1e-8 both move by their own error, 1e-2)."""
+    sc = load_scenario(PAPER)
+    sc = dataclasses.replace(sc, integration=dataclasses.replace(sc.integration, horizon=1.0))
+    gains = bench_gains(sc)[0]
+    cg = CodegenSettings(jacobian="auto")  # the shared build cache
+    ref_built = api.build(sc, gains, "cvodes", cg)
+    s = dataclasses.replace(
+        api.integrator_settings(sc, "cvodes"), rtol=1e-10, atol=1e-12, max_steps=10**6
+    )
+    ref = api.simulate(ref_built, sc, s)
+    libs, model = agents.build_models(sc, gains, cg)
+    tr = agents.run(
+        [lib.path for lib in libs],
+        agents.problem(sc, gains, model),
+        ref_built.closed_loop.x0,
+        ref.t,
+        dataclasses.replace(s, method="native"),
+        breakpoints=api.breakpoints(ref_built, sc),
+    )
+    assert tr.complete and ref.complete
+    assert _rel(tr.x, ref.x) < 1e-6
+
+
+def _random_cyclic(N: int, horizon: float):
+    """The benchmark scenario's random graph with two back edges (two cycles)."""
+    sc = bench_scenario(N, horizon=horizon)
+    A = np.array(sc.graph.adjacency, dtype=float)
+    A[0, N - 1] = A[3, N // 2 + 2] = 1.0
+    return _with_graph(sc, A, sc.graph.pinning)
+
+
+def test_native_above_20_runs_the_per_agent_engine_on_a_cyclic_graph():
+    """N = 30 with cycles through method ``native`` (the per-agent engine, nothing of the
+    whole loop compiled) against CasADi's CVODES: the difference is the integrators' own
+    error and shrinks with the tolerance (measured at horizon 0.2 s: 1.5e-4 at rtol 1e-8,
+    1.1e-6 at rtol 1e-10)."""
+    sc = _random_cyclic(30, 0.1)
+    gains = bench_gains(sc)[0]
+    assert not agents.problem(sc, gains, np.zeros(30)).acyclic
+    cg = CodegenSettings(jacobian="auto")  # the shared build cache
+    built = api.build(sc, gains, "native", cg)
+    assert built.agents is not None and "nat_rhs" not in built.library.names
+    ref_built = api.build(sc, gains, "cvodes", cg)
+    diffs = []
+    for rtol in (1e-8, 1e-10):
+        runs = []
+        for meth, b in (("native", built), ("cvodes", ref_built)):
+            s = api.integrator_settings(sc, meth)
+            s = dataclasses.replace(s, rtol=rtol, atol=rtol * 1e-2, max_steps=10**6)
+            runs.append(api.simulate(b, sc, s))
+        assert all(r.complete for r in runs) and np.array_equal(runs[0].t, runs[1].t)
+        diffs.append(_rel(runs[0].x, runs[1].x))
+    assert diffs[1] < 1e-5 and diffs[1] < diffs[0] / 10, diffs
+    # the frame's outputs come from the symbolic closed loop: u_i of eq. (29) as cvodes's
+    df = api.trajectory_frame(built, sc, runs[0])
+    dr = api.trajectory_frame(ref_built, sc, runs[0])
+    np.testing.assert_allclose(df.to_numpy(), dr.to_numpy(), rtol=1e-9, atol=1e-9)
+
+
+def test_make_sim_on_new_random_graphs_compiles_nothing(tmp_path):
+    """Scenarios that differ in graph and N (random digraphs, N = 30 and 31) served by the
+    per-agent engine: after the first, ``make sim``'s run compiles nothing (meta.json:
+    compile 0 s, cache hit)."""
+    from sweep.sampler import samples, write_scenario
+    from sweep.study import load_study
+
+    study = tmp_path / "g.toml"
+    study.write_text(
+        f'name = "g30"\nbase = "{Path(PAPER).resolve()}"\ncount = 2\nseed = 11\n'
+        '[set]\n"integration.horizon" = 0.2\n'
+        "[graph]\nN = [30, 31]\nedge_probability = 0.1\n"
+    )
+    files = [write_scenario(s, tmp_path / "sc") for s in samples(load_study(study))]
+    recs = []
+    for f in files:
+        r = api.run(f, out_root=tmp_path / "out", progress=False)
+        recs.append(r.record)
+        assert r.trajectory.complete and r.record.method == "native"
+        assert json.loads(r.meta_path.read_text())["library"]["key"] == r.record.library.key
+    assert len({rec.scenario_sha256 for rec in recs}) == len(recs)
+    for rec in recs[1:]:
+        assert rec.library.cache_hit and rec.wall_seconds.compile == 0.0
+
+
+def test_filtered_derivatives_and_a_formation_start_on_a_cycle(build_root):
+    """``options.derivatives = "filtered"`` and ``initial.start = "formation"`` (x(0) from
+    the closed loop's outputs): the passes are cl.ode and the Newton solves hold, on a
+    cyclic graph of mixed models."""
+    base = _mixed(_with_graph(_bench(6), *_cyclic(6, 3)))
+    opts = dataclasses.replace(base.options, derivatives="filtered")
+    sc = dataclasses.replace(
+        base, options=opts, initial=dataclasses.replace(base.initial, start="formation")
+    )
+    gains = bench_gains(sc)[0]
+    cg = CodegenSettings(optimization="-O0", kernel_optimization="-O0", build_root=build_root)
+    libs, model = agents.build_models(sc, gains, cg)
+    prob = agents.problem(sc, gains, model)
+    cl = build_closed_loop(sc, gains)
+    paths = [lib.path for lib in libs]
+    rng = np.random.default_rng(5)
+    for t in (0.0, 0.2):
+        x = cl.x0 + (0.0 if t == 0.0 else rng.normal(scale=0.2, size=prob.nx))
+        b = rng.normal(size=prob.nx)
+        ref = np.array(cl.ode(t, x)).ravel()
+        M, expected = _newton_reference(cl, t, x, 1e-2, b)
+        xdot, sol = agents.probe(paths, prob, t, x, 1e-2, b)
+        np.testing.assert_allclose(xdot, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+        resid = np.abs(M @ sol - b).max() / (np.abs(M).max() * np.abs(sol).max())
+        assert resid < 1e-12, resid
+
+
+def test_faults_and_two_pinned_followers_against_the_whole_loop(tmp_path):
+    """The two-follower test scenario (a fault switching at t = 0.3 s, both followers
+    pinned, different fault expressions): the per-agent engine and the whole-loop native
+    driver restart at the fault and converge together as the tolerance shrinks."""
+    from helpers import SMALL
+
+    from synthesis import synthesize
+
+    path = tmp_path / "small.toml"
+    path.write_text(SMALL)
+    sc = api.load(path)
+    assert sc.breakpoints() == (0.3,)
+    gains = synthesize(sc)
+    cl = build_closed_loop(sc, gains)
+    cg = CodegenSettings(optimization="-O0", kernel_optimization="-O0")
+    libs, model = agents.build_models(sc, gains, cg)
+    prob = agents.problem(sc, gains, model)
+    built = api.build(sc, gains, "native", cg, closed_loop=cl)
+    assert built.agents is None  # N = 2: the whole loop
+    t_out = output_grid(0.5, 0.01)
+    diffs = []
+    for rtol in (1e-8, 1e-11):
+        s = IntegratorSettings(method="native", rtol=rtol, atol=rtol * 1e-2, max_steps=100000)
+        tr = agents.run([lib.path for lib in libs], prob, cl.x0, t_out, s, breakpoints=(0.3,))
+        ref = api.integrate_built(built, cl.x0, t_out, s, (0.3,))
+        assert tr.complete and ref.complete
+        assert tr.stats["restarts"] == ref.stats["restarts"] == 1
+        diffs.append(_rel(tr.x, ref.x))
+    assert diffs[1] < 1e-6 and diffs[1] < diffs[0] / 10, diffs
+
+
+def test_native_above_20_through_a_link_lost_and_restored():
+    """N = 24 with cycles, a back edge lost at 0.05 s and restored at 0.1 s, through
+    method ``native`` (the per-agent engine: the switching times are data) against
+    CasADi's CVODES on the whole loop: both restart at the switches and converge to the
+    same trajectory as the tolerance shrinks."""
+    sc = _random_cyclic(24, 0.15)
+    sw = (Switch(0.05, 0, 23, 0.0), Switch(0.1, 0, 23, 1.0))
+    sc = _with_graph(sc, sc.graph.adjacency, sc.graph.pinning, sw)
+    sc = dataclasses.replace(sc, observer=dataclasses.replace(sc.observer, lambda1=6.0))
+    gains = bench_gains(sc)[0]
+    cg = CodegenSettings(jacobian="auto")  # the shared build cache
+    built = api.build(sc, gains, "native", cg)
+    assert built.agents is not None and len(built.agents[1].topologies) == 3
+    ref_built = api.build(sc, gains, "cvodes", cg)
+    diffs = []
+    for rtol in (1e-8, 1e-10):
+        runs = []
+        for meth, b in (("native", built), ("cvodes", ref_built)):
+            s = api.integrator_settings(sc, meth)
+            s = dataclasses.replace(s, rtol=rtol, atol=rtol * 1e-2, max_steps=10**6)
+            runs.append(api.simulate(b, sc, s))
+        assert all(r.complete for r in runs)
+        assert runs[0].stats["restarts"] == 2
+        diffs.append(_rel(runs[0].x, runs[1].x))
+    assert diffs[1] < 1e-5 and diffs[1] < diffs[0] / 10, diffs

@@ -215,11 +215,10 @@ def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None
     as its tolerance shrinks, and the column is the difference the record files hold.
     """
     import dataclasses
-    import os
 
     from benchmarks.catalogue import OUTPUT_STEP
     from benchmarks.scenarios import bench_gains
-    from generated.api import build_from_closed_loop, integrator_settings, native_cascade, simulate
+    from generated.api import build_from_closed_loop, integrator_settings, simulate
     from symbolic.closed_loop import build_closed_loop
 
     ours = np.load(folder / "cells" / "N5-c-cvode-native.npy")
@@ -234,11 +233,7 @@ def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None
     gains = bench_gains(sc)[0]
     cl = build_closed_loop(sc, gains)
     cg = CodegenSettings(jacobian="auto", build_root=str(folder / "build"))
-    os.environ["HITL_BUILD_DIR"] = cg.build_root  # the dag library of native_cascade too
-    try:
-        built = build_from_closed_loop(cl, "native", cg, cascade=native_cascade(sc, gains))
-    finally:
-        del os.environ["HITL_BUILD_DIR"]
+    built = build_from_closed_loop(cl, "native", cg)
     assert built.library.cache_hit  # the bench's own library
     s0 = dataclasses.replace(integrator_settings(sc, "native", cg), max_steps=10**6)
 
@@ -312,7 +307,7 @@ def test_finish_ratios_and_table_from_synthetic_records() -> None:
 
 
 def test_ours_is_what_make_sim_runs() -> None:
-    """Native CVODE at every N: the whole loop up to N = 20, graph-ordered blocks above."""
+    """Native CVODE at every N: the whole loop up to N = 20, the per-agent engine above."""
     from benchmarks.catalogue import ours_method
     from generated.largescale import DIRECT_MAX_AGENTS
 
@@ -396,10 +391,10 @@ def test_api_auto_picks_the_large_n_plan_and_agrees_with_direct() -> None:
     np.testing.assert_array_equal(traj.t, ref.t)
     rel = np.abs(traj.x - ref.x) / np.maximum(1.0, np.abs(ref.x))
     assert rel.max() < 1e-3
-    # method native above N = 20: the graph-ordered blocks (generated/dag.py), no flat code
-    cgn = CodegenSettings(optimization="-O0")
+    # method native above N = 20: the per-agent engine (generated/agents.py), no flat code
+    cgn = CodegenSettings(optimization="-O0", kernel_optimization="-O0")
     built_n = api.build(sc, gains, "native", cgn, closed_loop=cl)
-    assert built_n.dag is not None and "nat_rhs" not in built_n.library.names
+    assert built_n.agents is not None and "nat_rhs" not in built_n.library.names
     traj_n = api.simulate(built_n, sc, api.integrator_settings(sc, "native", cgn))
     assert traj_n.complete and traj_n.method == "native", traj_n.message
     np.testing.assert_array_equal(traj_n.t, ref.t)

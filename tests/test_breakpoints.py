@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from core.errors import IntegrationError
-from generated import api, dag, native
+from generated import api, native
 from generated.built import Built
 from generated.codegen import build_library
 from generated.schedule import output_grid, schedule, time_tolerance
@@ -317,25 +317,26 @@ def fault_healths(draw):
 
 @settings(max_examples=20, deadline=None, database=None)
 @given(fault_healths(), fault_healths(), paper_schedules())
-def test_graph_ordered_driver_with_drawn_faults(paper_env, faulty, g1, g4, case):
-    """Fault onsets and switch times drawn into the code itself: the graph-ordered native
-    driver (one block's code, compiled in about a second) reaches the horizon."""
-    from symbolic.cascade import build_cascade
+def test_per_agent_driver_with_drawn_faults(paper_env, faulty, g1, g4, case):
+    """Fault onsets and switch times drawn into the code itself: the per-agent native
+    driver (one follower model's kernels, compiled in seconds) reaches the horizon."""
+    from generated import agents
 
     gains, cg = paper_env
     t_out, extra = case
     sc = _paper(1.0, {"followers[1].g": g1, "followers[4].g": g4})
-    cas = build_cascade(sc, gains)
-    lib = dag.build(cas, cg)
+    libs, model = agents.build_models(sc, gains, dataclasses.replace(cg, kernel_optimization="-O0"))
     s = api.integrator_settings(sc)
     x0 = np.asarray(faulty("native")[1].closed_loop.x0)  # the health g_i is not a state
-    tr = dag.run(lib.path, cas, x0, t_out, s, breakpoints=[*sc.breakpoints(), *extra])
+    paths = [lib.path for lib in libs]
+    prob = agents.problem(sc, gains, model)
+    tr = agents.run(paths, prob, x0, t_out, s, breakpoints=[*sc.breakpoints(), *extra])
     assert tr.complete, tr.message
     assert np.array_equal(tr.t, t_out)
 
 
-def test_graph_ordered_driver_at_25_followers_with_a_fault(tmp_path):
-    """N = 25 (the default method runs the graph-ordered driver) with a fault at 0.7 s."""
+def test_per_agent_driver_at_25_followers_with_a_fault(tmp_path):
+    """N = 25 (the default method runs the per-agent engine) with a fault at 0.7 s."""
     from benchmarks.scenarios import bench_gains, bench_scenario
 
     sc = bench_scenario(25, horizon=1.0)
@@ -345,8 +346,8 @@ def test_graph_ordered_driver_at_25_followers_with_a_fault(tmp_path):
     assert sc.breakpoints() == (0.7,) and sc.integration.method == "native"
     gains = bench_gains(sc)[0]
     cg = CodegenSettings(optimization="-O0", build_root=str(tmp_path))
-    built = api.build(sc, gains, settings=cg)
-    assert built.dag is not None
+    built = api.build(sc, gains, settings=dataclasses.replace(cg, kernel_optimization="-O0"))
+    assert built.agents is not None
     tr = api.simulate(built, sc)
     assert tr.complete, tr.message
     assert tr.t[-1] == 1.0 and tr.stats["restarts"] == 1

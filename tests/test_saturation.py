@@ -210,28 +210,51 @@ def test_none_and_per_follower_values_load(tmp_path):
     assert np.array_equal(load_scenario(path).controller.u_max, np.full(5, 7.0))
 
 
-def test_cascade_blocks_apply_the_same_limit():
-    """The graph-order blocks (native above N = 20) clip like the whole closed loop."""
-    from symbolic.cascade import build_cascade
+def test_agent_blocks_apply_the_same_limit():
+    """One follower's block (the per-agent engine's kernels) clips like the whole closed loop.
+
+    Passes by jet level over all followers (as generated/native/agents.c does): the
+    level-l jet reads only the levels < l of the neighbours' sum, so three passes give
+    every block its exact input on any graph.
+    """
+    from symbolic.cascade import agent_block
+    from symbolic.closed_loop import fault_function, make_layout, observer_gains
+    from symbolic.network import graph_matrices
+    from symbolic.parameters import param_matrix
 
     sc = load_scenario(PAPER)
     g = hand_gains(sc)
     sat = _limited(sc, np.full(sc.N, 50.0))
-    cl, cas = build_closed_loop(sat, g), build_cascade(sat, g)
-    lay = cas.layout
-    m, na, n = lay.m, lay.agent_size, cas.n
+    cl = build_closed_loop(sat, g)
+    lay = make_layout(sat.m, sat.n, sat.N, False)
+    m, na, n, N = lay.m, lay.agent_size, sat.n, sat.N
+    block = agent_block(sat, observer_gains(sat, g), lay, 0)
+    gm = graph_matrices(sat.graph, g)
+    off = gm.L_B - np.diag(np.diag(gm.L_B))
+    cpl = np.column_stack([np.diag(gm.L_B), gm.a0h])
+    prm = param_matrix(sat)
+    faults, fidx = fault_function(sat)
+    fidx = np.asarray(fidx).reshape(N, 1 + n)
     x = np.asarray(cl.x0).ravel()
     t = 0.0
     xd, u = _signals(cl, t, x)
     assert np.isclose(np.abs(u), 50.0, rtol=1e-12).any()  # the limit is active here
-    fv = np.array(cas.faults(t)).ravel()
-    jets: dict[int, np.ndarray] = {}
-    for i in cas.order:
-        nb = np.zeros(3 * n)
-        for k in range(cas.upstream_ptr[i], cas.upstream_ptr[i + 1]):
-            nb += cas.upstream_weight[k] * jets[cas.upstream_idx[k]]
-        xb = np.concatenate([x[:m], x[m + i * na : m + (i + 1) * na]])
-        out = cas.block(t, xb, nb, cas.coupling[i], cas.params[:, i], fv[cas.fault_index[i]])
-        jets[i] = np.array(out[1]).ravel()
+    fv = np.array(faults(t)).ravel()
+    jets = np.zeros((N, 3 * n))
+    for _ in range(3):  # pass l fixes the level-l jets
+        nb = off @ jets
+        outs = [
+            block(
+                t,
+                np.concatenate([x[:m], x[m + i * na : m + (i + 1) * na]]),
+                nb[i],
+                cpl[i],
+                prm[:, i],
+                fv[fidx[i]],
+            )
+            for i in range(N)
+        ]
+        jets = np.array([np.array(o[1]).ravel() for o in outs])
+    for i, out in enumerate(outs):
         want = np.concatenate([xd[:m], xd[m + i * na : m + (i + 1) * na]])
         np.testing.assert_allclose(np.array(out[0]).ravel(), want, rtol=1e-12, atol=1e-12)

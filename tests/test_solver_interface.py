@@ -35,9 +35,7 @@ def _c_layout(tmp_path) -> dict[str, int]:
     """``{"Options": size, "Options.rtol": offset, ...}`` as compiled C sees the header."""
     lines = []
     for struct in native.STRUCTS:
-        c_name = {"Options": "hitl_options", "Result": "hitl_result"}.get(
-            struct.__name__, "hitl_dag_problem"
-        )
+        c_name = {"Options": "hitl_options", "Result": "hitl_result"}[struct.__name__]
         lines.append(f'printf("{struct.__name__} %zu\\n", sizeof({c_name}));')
         for field, _ in struct._fields_:
             lines.append(

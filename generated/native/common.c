@@ -3,9 +3,9 @@
  * includes, the context shared by the drivers, the custom direct SUNLinearSolver that
  * factorises M = I - gamma J with the generated nat_lu_factor / nat_lu_solve (sparse
  * LU without pivoting, generated/sparse_lu.py), CVODE's counters and the SUNDIALS
- * version/index check, and the per-follower block matrix of the graph-ordered drivers.
- * Prepended to driver.c (whole closed loop), dag.c (follower by follower in graph
- * order) or agents.c (per-agent kernels, any graph); the generated C comes first. The
+ * version/index check, and the per-follower block matrix of the per-agent driver.
+ * Prepended to driver.c (whole closed loop) or agents.c (per-agent kernels, any
+ * graph); the generated C comes first. The
  * drivers' entry points take hitl_options and fill hitl_result (hitl_native.h).
  */
 #include <math.h>
@@ -308,7 +308,7 @@ static void hitl_cvode_free(hitl_ctx *c, hitl_cvode *s) {
 }
 
 /* ------------------------------------------------- the per-follower block matrix */
-/* The Jacobian of the graph-ordered drivers (dag.c, agents.c): one block K_i per
+/* The Jacobian of the per-agent driver (agents.c): one block K_i per
    follower, laid out by the driver, representing c J (+ I once shifted). */
 typedef struct {
   double *K;
@@ -422,7 +422,6 @@ CASADI_SYMBOL_EXPORT long hitl_struct_size(int which) {
   switch (which) {
     case HITL_OPTIONS_SIZE: return (long)sizeof(hitl_options);
     case HITL_RESULT_SIZE: return (long)sizeof(hitl_result);
-    case HITL_DAG_PROBLEM_SIZE: return (long)sizeof(hitl_dag_problem);
     default: return -1;
   }
 }

@@ -1,7 +1,7 @@
 /*
- * The native drivers' calling convention (generated/native/driver.c, dag.c): a run takes
+ * The native drivers' calling convention (generated/native/driver.c, agents.c): a run takes
  * one options struct and fills one result struct. Defined here once; mirrored once in
- * Python as ctypes Structures (generated/native.py: Options, Result, DagProblem).
+ * Python as ctypes Structures (generated/native.py: Options, Result).
  * tests/test_solver_interface.py compiles this header and compares every field's
  * offset and every struct's size with the ctypes mirror, and every library reports
  * its sizes (hitl_struct_size) when it is loaded.
@@ -53,23 +53,7 @@ typedef struct {
   char msg[HITL_MSG_LEN];  /* "FLAG_NAME: SUNDIALS message" on a failure */
 } hitl_result;
 
-/* The graph-ordered driver's problem (dag.c): sizes, graph lists and per-agent data. */
-typedef struct {
-  int N;               /* followers */
-  int m;               /* leader states */
-  int na;              /* states per follower */
-  int n;               /* joint-space dimension */
-  const int *order;    /* N: a topological order of the graph */
-  const int *up_ptr;   /* N + 1: CSR of the followers each one hears */
-  const int *up_idx;
-  const double *up_w;  /* weights (L + B)_ij */
-  const double *cpl;   /* N x 2 coupling constants */
-  int npar;            /* parameters per follower */
-  const double *prm;   /* N x npar, agent-major */
-  const int *fidx;     /* N x (1 + n) indices into the fault values */
-} hitl_dag_problem;
-
 /* which argument of hitl_struct_size */
-enum { HITL_OPTIONS_SIZE, HITL_RESULT_SIZE, HITL_DAG_PROBLEM_SIZE };
+enum { HITL_OPTIONS_SIZE, HITL_RESULT_SIZE };
 
 #endif

@@ -41,16 +41,21 @@ class BuildPlan:
         Generate ``jac_<dyn>`` (the CasADi integrators' Jacobian).
     toolchain : Toolchain or None
         Extra C sources, include dirs and libraries linked in (the native drivers).
-    companion : Library or None
-        A second library the method runs instead (the graph-ordered native driver).
+    whole_loop : bool
+        Compile the closed loop's right-hand side and outputs. False for a method that
+        runs its own :attr:`libraries` (the per-agent engine): the closed loop's outputs
+        are then evaluated by CasADi's virtual machine, nothing of the loop is compiled.
+    libraries : tuple of Library
+        The libraries the method runs instead of the closed loop's (``whole_loop`` False).
     data : object
-        Whatever ``run`` needs besides the libraries (the graph-ordered blocks).
+        Whatever ``run`` needs besides the libraries (the per-agent engine's problem).
     """
 
     functions: tuple[ca.Function, ...] = ()
     derivatives: bool = True
     toolchain: Toolchain | None = None
-    companion: Library | None = None
+    whole_loop: bool = True
+    libraries: tuple[Library, ...] = ()
     data: Any = None
 
 

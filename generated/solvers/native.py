@@ -1,27 +1,28 @@
 """Method ``native``: SUNDIALS CVODE (BDF) driven from C, one call from Python per run.
 
-Two drivers behind one method. Up to :data:`generated.native.MAX_AGENTS` followers the
-whole closed loop is flat generated code with its sparse LU (:mod:`generated.native`);
-above, one follower's block is evaluated along the acyclic graph and the Newton systems
-are solved by block forward substitution (:mod:`generated.dag`). Both integrate the
-same ODE with the same CVODE settings and agree to rounding (tests/test_dag.py), so the
-size decides the driver as the large-N plan decides the linear algebra: a scenario
-names what is computed, not how the library is laid out, and a shipped scenario keeps
-its method at any N.
+Two engines behind one method. Up to :data:`generated.native.MAX_AGENTS` followers the
+whole closed loop is flat generated code with its sparse LU (:mod:`generated.native`,
+``driver.c``); above, the per-agent engine (:mod:`generated.agents`, ``agents.c``) runs
+one kernel library per follower model with the graph, N and the per-follower numbers as
+runtime data, so any graph (cyclic, signed, switching) and mixed models are carried and
+a new graph compiles nothing. Both integrate the same ODE with the same CVODE settings
+(tests/test_agents.py); the size decides the engine, as the large-N plan decides the
+CasADi methods' linear algebra. The closed loop's outputs of a per-agent run are
+evaluated from the symbolic closed loop by CasADi's virtual machine (nothing compiled).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from core.errors import BuildError, IntegrationError
-from generated import dag, native
+from core.errors import IntegrationError
+from generated import agents, native
 from generated.solvers import register
 from generated.solvers.base import BuildPlan, Solver
-from symbolic.cascade import build_cascade
 
 if TYPE_CHECKING:
     import casadi as ca
@@ -34,8 +35,26 @@ if TYPE_CHECKING:
     from synthesis.gains import Gains
 
 
+@dataclass(frozen=True)
+class PerAgent:
+    """The scenario and gains a per-agent build compiles its kernels from (:meth:`Native.prepare`)."""
+
+    scenario: Scenario
+    gains: Gains
+
+
+def per_agent(sc: Scenario) -> bool:
+    """Whether method ``native`` runs ``sc`` on the per-agent engine (above the flat build's size).
+
+    Parameters
+    ----------
+    sc : Scenario
+    """
+    return sc.N > native.MAX_AGENTS
+
+
 class Native(Solver):
-    """CVODE from C: the whole loop (N <= 20) or the graph-ordered blocks (above)."""
+    """CVODE from C: the whole loop (N <= 20) or the per-agent engine (above)."""
 
     name = "native"
     form = "ode"
@@ -43,26 +62,24 @@ class Native(Solver):
     summary = "BDF (SUNDIALS CVODE) driven from generated C"
 
     def prepare(self, sc: Scenario, gains: Gains) -> Any:
-        """The per-follower blocks above :data:`generated.native.MAX_AGENTS` (None below).
+        """Above :data:`generated.native.MAX_AGENTS`: what the per-agent kernels need.
 
         Parameters
         ----------
         sc : Scenario
         gains : Gains
 
-        Raises
-        ------
-        ScenarioError
-            Above the limit, if the graph has a cycle or the followers differ in model.
+        Returns
+        -------
+        PerAgent or None
+            None for the whole-loop build.
         """
-        if sc.N <= native.MAX_AGENTS:
-            return None
-        return build_cascade(sc, gains)
+        return PerAgent(sc, gains) if per_agent(sc) else None
 
     def build(
         self, dyn: ca.Function, cl: ClosedLoop, settings: CodegenSettings, prepared: Any = None
     ) -> BuildPlan:
-        """The driver's functions and SUNDIALS (whole loop), or the block library (above).
+        """The driver's functions and SUNDIALS (whole loop), or the kernel libraries (above).
 
         CVODES' ``jac_`` is not generated: the drivers bring their own Jacobians.
 
@@ -74,23 +91,25 @@ class Native(Solver):
         if cl.layout.N <= native.MAX_AGENTS:  # whole loop, flat SX
             functions = native.native_functions(dyn, cse=settings.cse)[0]
             return BuildPlan(tuple(functions), derivatives=False, toolchain=native.toolchain())
-        if prepared is None:
-            raise BuildError(
-                f"integration.method 'native' above N = {native.MAX_AGENTS} needs the "
-                "per-follower blocks: call build(sc, gains, method='native') or pass "
-                "cascade=native_cascade(sc, gains)"
+        if not isinstance(prepared, PerAgent):
+            raise IntegrationError(
+                f"integration.method 'native' above N = {native.MAX_AGENTS} runs the per-agent "
+                "engine: call build(sc, gains, method='native')"
             )
-        return BuildPlan(derivatives=False, companion=dag.build(prepared, settings), data=prepared)
+        sc, gains = prepared.scenario, prepared.gains
+        libs, model = agents.build_models(sc, gains, settings)
+        prob = agents.problem(sc, gains, model)
+        return BuildPlan(derivatives=False, whole_loop=False, libraries=tuple(libs), data=prob)
 
     def check_built(self, built: Built) -> None:
-        """The build must hold the native driver (whole loop) or the block library.
+        """The build must hold the native driver (whole loop) or the kernel libraries.
 
         Parameters
         ----------
         built : Built
         """
         super().check_built(built)
-        if built.dag is None and native.RHS_NAME not in built.library.names:
+        if built.agents is None and native.RHS_NAME not in built.library.names:
             raise IntegrationError(
                 "method 'native' needs the native build: call build(..., method='native')"
             )
@@ -105,7 +124,10 @@ class Native(Solver):
         """
         if N <= native.MAX_AGENTS:
             return "native CVODE: generated J (reused by CVODE) and sparse LU without pivoting"
-        return "native CVODE, graph-ordered blocks: block forward substitution"
+        return (
+            "native CVODE, per-agent engine: jets system by forward substitution "
+            "(acyclic topology) or GMRES (cyclic)"
+        )
 
     def run(
         self,
@@ -116,17 +138,18 @@ class Native(Solver):
         breakpoints: Sequence[float] = (),
         progress: Callable[[float], None] | None = None,
     ) -> Trajectory:
-        """:func:`generated.dag.run` or :func:`generated.native.run`.
+        """:func:`generated.agents.run` or :func:`generated.native.run`.
 
         Parameters
         ----------
         built, x0, t_out, settings, breakpoints, progress
             As :meth:`generated.solvers.Solver.run`.
         """
-        if built.dag is not None:
-            lib, cascade = built.dag
-            return dag.run(
-                lib.path, cascade, x0, t_out, settings, breakpoints=breakpoints, progress=progress
+        if built.agents is not None:
+            libs, prob = built.agents
+            paths = [lib.path for lib in libs]
+            return agents.run(
+                paths, prob, x0, t_out, settings, breakpoints=breakpoints, progress=progress
             )
         return native.run(
             built.library.path,
