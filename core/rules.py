@@ -110,6 +110,30 @@ def _switches_fit(s: Scenario) -> Problem | None:
     return None
 
 
+def _design_budget(s: Scenario) -> Problem | None:
+    """A ``[design]`` table must say what torque the gains may use."""
+    if s.design is not None and s.design.u_max is None:
+        return (
+            "is missing: a design needs a torque budget",
+            "u_max = peak |u_i| allowed after the start-up, > 0 (one number or one per follower)",
+        )
+    return None
+
+
+def _design_health(s: Scenario) -> Problem | None:
+    """The declared health range must contain each follower's health over the run."""
+    if s.design is None:
+        return None
+    for i, fo in enumerate(s.followers):
+        if fo.g.minimum < s.design.g_min[i] * (1 - 1e-12):
+            return (
+                f"{s.design.g_min[i]:g} for follower {i + 1} exceeds its smallest health "
+                f"{fo.g.minimum:.4g}",
+                f"g_min <= {fo.g.minimum:.4g}",
+            )
+    return None
+
+
 #: every rule between settings, in the order they are checked
 RULES: tuple[Rule, ...] = (
     Rule("integration.output_step", "≤ horizon", _step_within_horizon("output_step")),
@@ -121,4 +145,6 @@ RULES: tuple[Rule, ...] = (
     Rule("controller.g_min", "", _g_min_below_health),
     Rule("options.sign", "", _exact_sign_needs_fixed_step),
     Rule("graph.switches", "", _switches_fit),
+    Rule("design.u_max", "", _design_budget),
+    Rule("design.g_min", "", _design_health),
 )
