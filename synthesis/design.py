@@ -198,6 +198,70 @@ def design_lmi15(A0: np.ndarray, B0: np.ndarray, lb1: float, q_max: float) -> Ra
     return Rate15(q_max, dmax, delta, T, Q, steps + 1)
 
 
+def _lmi15_given_Q_point(A0, B0, Q, lb1, d1, eps):  # noqa: ANN001, ANN202
+    """T = P⁻¹ with B0ᵀP = Q, P ≻ 0 and LMI (15) at δ1 = d1 (None if infeasible)."""
+    import cvxpy as cp
+
+    from synthesis.lmi import solve
+    from synthesis.lmi_matrices import lmi15_matrix_P
+
+    m = A0.shape[0]
+    P = cp.Variable((m, m), symmetric=True)
+    d_solve = d1 * (1.0 + SOLVE_MARGIN)
+    M = lmi15_matrix_P(A0, Q, P, lb1, d_solve)
+    cons = [P >> eps * np.eye(m), B0.T @ P == Q, 0.5 * (M + M.T) << -eps * np.eye(m)]
+    prob = cp.Problem(cp.Minimize(cp.norm(P, "fro")), cons)
+    info = solve(prob, solvers=BISECT_SOLVERS)
+    if info.status != "optimal" or P.value is None:
+        return None
+    Pv = 0.5 * (P.value + P.value.T)
+    if np.linalg.eigvalsh(Pv).min() <= 0:
+        return None
+    T = np.linalg.inv(Pv)
+    if lmi15_rate(A0, B0, 0.5 * (T + T.T), lb1) < d1:
+        return None
+    return 0.5 * (T + T.T)
+
+
+def design_lmi15_given_Q(A0: np.ndarray, B0: np.ndarray, Q: np.ndarray, lb1: float) -> Rate15:
+    """The largest δ1 of LMI (15) for a *given* Q (an LMI in P = T⁻¹ with B0ᵀP = Q).
+
+    Parameters
+    ----------
+    A0, B0 : ndarray
+        The leader's matrices.
+    Q : ndarray
+        The given p×m gain.
+    lb1 : float
+        λ̄1.
+
+    Returns
+    -------
+    Rate15
+        With ``q_max`` = ‖Q‖.
+    """
+    A0, B0 = np.atleast_2d(A0).astype(float), np.atleast_2d(B0).astype(float)
+    Q = np.atleast_2d(np.asarray(Q, float))
+    m = A0.shape[0]
+    # tr(PA0 + A0ᵀP − λ̄1QᵀQ + δP) < 0: δ < λ̄1‖Q‖²_F/tr P − 2tr(PA0)/tr P; tr P ≥ ‖Q‖²/‖B0ᵀ‖...
+    # no closed form bound on tr P from below is needed: the bisection doubles hi until infeasible
+    eps = 1e-9
+    hi = 1.0
+    while _lmi15_given_Q_point(A0, B0, Q, lb1, hi, eps) is not None and hi < 1e6:
+        hi *= 2.0
+
+    def feasible(d: float) -> bool:
+        return _lmi15_given_Q_point(A0, B0, Q, lb1, d, eps) is not None
+
+    dmax, steps = _bisect(feasible, hi)
+    delta = (1.0 - RATE_BACKOFF) * dmax
+    T = _lmi15_given_Q_point(A0, B0, Q, lb1, delta, eps)
+    if T is None:
+        raise SynthesisError(f"LMI (15) at delta1 = {delta:.4g} not confirmed by eigenvalues")
+    del m
+    return Rate15(float(np.linalg.norm(Q, 2)), dmax, delta, T, Q, steps + 1)
+
+
 def _lmi16_point(Phi, A0, C0, d2, theta_max, eps):  # noqa: ANN001, ANN202
     """(Ω, Θ) with Ω ⪰ I, ‖Y‖ ≤ θ_max, LMI (16) ⪯ −εI at δ2 = d2 (None if infeasible)."""
     import cvxpy as cp
@@ -276,42 +340,50 @@ class ObserverDesign:
     Attributes
     ----------
     front15, front16 : tuple
-        :class:`Rate15` per ‖Q‖ cap, :class:`Rate16` per ‖Θ‖ cap (increasing caps).
-    chosen15, chosen16 : int
-        Indices of the chosen points.
+        :class:`Rate15` per ‖Q‖ cap, :class:`Rate16` per ‖Θ‖ cap (increasing caps; the
+        last is the cap).
+    given15, given16 : Rate15 or Rate16 or None
+        The largest rate of the scenario's own Q (Θ) when it gives one (then kept).
+    designed_Q, designed_Theta : bool
+        Whether Q (Θ) was designed (else the scenario's is kept).
     delta1, delta2 : float
         The designed rates (no more than Theorem 1's δ̃ can use: :func:`useful_rates`).
     T, Q, Omega, Theta : ndarray
         The gains at the designed rates.
-    lambda2 : float
-        (1 + margin) α of the design's operator bound.
+    lambda2 : float or None
+        (1 + margin) α of the design's operator bound when λ2 is left to synthesis.
     """
 
     front15: tuple[Rate15, ...]
     front16: tuple[Rate16, ...]
-    chosen15: int
-    chosen16: int
+    given15: Rate15 | None
+    given16: Rate16 | None
     delta1: float
     delta2: float
     T: np.ndarray
     Q: np.ndarray
     Omega: np.ndarray
     Theta: np.ndarray
-    lambda2: float
+    lambda2: float | None
+    designed_Q: bool
+    designed_Theta: bool
 
     def overrides(self) -> dict[str, object]:
         """The observer's keys of the designed scenario (δ̂ = δ/2; λ1 and k1 by synthesis)."""
-        return {
-            "observer.Q": np.round(self.Q, 12).tolist(),
-            "observer.Theta": np.round(self.Theta, 12).tolist(),
+        out: dict[str, object] = {
             "observer.delta1": float(self.delta1),
             "observer.delta2": float(self.delta2),
             # δ̂(δ − δ̂) is largest at δ̂ = δ/2: k1 ∝ 1/(δ̂1δ̂2) and δ̃ ≤ δ − δ̂ both gain
             "observer.delta1_hat": float(self.delta1) / 2.0,
             "observer.delta2_hat": float(self.delta2) / 2.0,
-            "observer.lambda1": "synthesize",
-            "observer.lambda2": float(self.lambda2),
         }
+        if self.designed_Q:
+            out["observer.Q"] = np.round(self.Q, 12).tolist()
+        if self.designed_Theta:
+            out["observer.Theta"] = np.round(self.Theta, 12).tolist()
+        if self.lambda2 is not None:
+            out["observer.lambda2"] = float(self.lambda2)
+        return out
 
 
 def useful_rates(alpha1_tilde: float, delta2: float) -> tuple[float, float]:
@@ -333,8 +405,31 @@ def _caps(top: float) -> np.ndarray:
     return top * np.geomspace(FRONT_SPAN, 1.0, FRONT_POINTS)
 
 
+def _given_theta_rate(Phi, A0, C0, Theta) -> Rate16:  # noqa: ANN001
+    """The largest δ2 of LMI (16) for a given Θ: −2 max Re λ(ΦA0 − ΘC0), and Ω at 98 % of it.
+
+    With Θ fixed, (16) is a Lyapunov inequality: feasible for some Ω ≻ 0 exactly when
+    ΦA0 − ΘC0 + (δ2/2)I is Hurwitz; Ω solves the Lyapunov equation at the designed rate.
+    """
+    Ac = Phi @ A0 - Theta @ C0
+    dmax = -2.0 * float(np.max(np.linalg.eigvals(Ac).real))
+    if dmax <= 0:
+        raise SynthesisError("the given Theta leaves Phi A0 - Theta C0 unstable: no rate")
+    delta = (1.0 - RATE_BACKOFF) * dmax
+    As = Ac + 0.5 * delta * np.eye(Ac.shape[0])
+    Omega = sla.solve_continuous_lyapunov(As.T, -np.eye(Ac.shape[0]))
+    Omega = 0.5 * (Omega + Omega.T)
+    Omega /= np.linalg.eigvalsh(Omega).min()  # Ω ⪰ I, as the synthesis normalises it
+    return Rate16(float(np.linalg.norm(Theta, 2)), dmax, delta, Omega, np.asarray(Theta), 0)
+
+
 def observer_design(scenario) -> ObserverDesign:  # noqa: ANN001
-    """Design Q, Θ and the rates δ1, δ2 for ``scenario``'s ``[design]`` (docs/synthesis.md).
+    """Design the observer's rates (and Q, Θ where the scenario leaves them to synthesis).
+
+    A gain the scenario gives is kept and its own largest rate is taken (for Q a GEVP in
+    P = T⁻¹, for Θ an eigenvalue); a gain left to synthesis is designed under its cap.
+    Either way the rate is no more than Theorem 1's δ̃ can use (:func:`useful_rates`).
+    The fronts (rate against cap) are computed for the report in both cases.
 
     Parameters
     ----------
@@ -355,38 +450,49 @@ def observer_design(scenario) -> ObserverDesign:  # noqa: ANN001
         np.linalg.norm(obs.Theta, 2) if obs.Theta is not None else DEFAULT_THETA_MAX
     )
     a1 = float(np.min(obs.alpha1))
+    # LMI (16) first: δ1 is useful only up to δ2 (δ̃ = min{δ1/2, α̃1, δ2/2})
     front16 = [design_lmi16(Phi, A0, C0, float(c)) for c in _caps(float(t_top))]
-    # the largest rate under the cap, but no more than Theorem 1's δ̃ can use: a smaller
-    # T (Ω) at the same rate keeps V1's φ floor c_φ/δ̃ small in C0ē_η (Definition 1's bound)
     _, need2 = useful_rates(a1, 0.0)
-    k16 = len(front16) - 1
-    r16 = front16[k16]
+    if obs.Theta is None:
+        r16 = front16[-1]  # the largest rate under the cap
+    else:
+        r16 = _given_theta_rate(Phi, A0, C0, np.atleast_2d(np.asarray(obs.Theta, float)))
     delta2, Omega, Theta = r16.delta, r16.Omega, r16.Theta
     if delta2 > need2:  # more than the theorem uses: re-solved at the useful rate
-        pt = _lmi16_point(Phi, A0, C0, need2, r16.theta_max, 1e-9)
+        if obs.Theta is None:
+            pt = _lmi16_point(Phi, A0, C0, need2, r16.theta_max, 1e-9)
+        else:
+            pt = (_given_theta_rate(Phi, A0, C0, Theta).Omega, Theta)
         if pt is not None:
             delta2, (Omega, Theta) = need2, pt
     front15 = [design_lmi15(A0, B0, obs.lambda_bar1, float(c)) for c in _caps(float(q_top))]
     need1, _ = useful_rates(a1, delta2)
-    k15 = len(front15) - 1
-    r15 = front15[k15]
+    if obs.Q is None:
+        r15 = front15[-1]
+        tau = float(np.linalg.norm(B0, 2)) / r15.q_max
+        solve_at = lambda d: _lmi15_point(A0, B0, obs.lambda_bar1, d, tau, 1e-9 * max(1.0, tau))  # noqa: E731
+    else:
+        Qg = np.atleast_2d(np.asarray(obs.Q, float))
+        r15 = design_lmi15_given_Q(A0, B0, Qg, obs.lambda_bar1)
+        solve_at = lambda d: _lmi15_given_Q_point(A0, B0, Qg, obs.lambda_bar1, d, 1e-9)  # noqa: E731
     delta1, T = r15.delta, r15.T
     if delta1 > need1:
-        tau = float(np.linalg.norm(B0, 2)) / r15.q_max
-        T1 = _lmi15_point(A0, B0, obs.lambda_bar1, need1, tau, 1e-9 * max(1.0, tau))
+        T1 = solve_at(need1)
         if T1 is not None:
             delta1, T = need1, T1
     alpha = spec.alpha if spec.alpha is not None else lead.alpha
     return ObserverDesign(
         front15=tuple(front15),
         front16=tuple(front16),
-        chosen15=k15,
-        chosen16=k16,
+        given15=None if obs.Q is None else r15,
+        given16=None if obs.Theta is None else r16,
         delta1=float(delta1),
         delta2=float(delta2),
         T=T,
-        Q=B0.T @ np.linalg.inv(T),
+        Q=B0.T @ np.linalg.inv(T) if obs.Q is None else np.atleast_2d(np.asarray(obs.Q, float)),
         Omega=Omega,
         Theta=Theta,
-        lambda2=(1.0 + max(obs.margin, 1e-3)) * float(alpha),
+        lambda2=None if obs.lambda2 is not None else (1.0 + max(obs.margin, 1e-3)) * alpha,
+        designed_Q=obs.Q is None,
+        designed_Theta=obs.Theta is None,
     )
