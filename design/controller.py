@@ -199,7 +199,9 @@ def evaluate(
     built = api.build(sc, gains, sc.integration.method, codegen)
     traj = api.simulate(built, sc, api.integrator_settings(sc, sc.integration.method, codegen))
     frame = api.trajectory_frame(built, sc, traj)
-    run = P.Run(sc, frame, traj.x, {}, out_root / sc.name, gains=gains, closed_loop=built.closed_loop)
+    run = P.Run(
+        sc, frame, traj.x, {}, out_root / sc.name, gains=gains, closed_loop=built.closed_loop
+    )
     v = P.verify_run(run, out_root=out_root)
     table = v.table
     t = frame["t"].to_numpy(float)

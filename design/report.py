@@ -33,8 +33,9 @@ def _front(points: list[Point]) -> list[Point]:
     out = []
     for p in points:
         if not any(
-            q.peak_max <= p.peak_max and q.tc_max <= p.tc_max and (q.peak_max, q.tc_max)
-            != (p.peak_max, p.tc_max)
+            q.peak_max <= p.peak_max
+            and q.tc_max <= p.tc_max
+            and (q.peak_max, q.tc_max) != (p.peak_max, p.tc_max)
             for q in points
         ):
             out.append(p)
@@ -66,8 +67,13 @@ def observer_figure(d: Design, path: Path) -> None:
     ax.plot([qn], [od.delta1], "r*", ms=14, label=f"chosen: δ1 = {od.delta1:.3g}")
     if od.given15 is not None:
         ax.plot([od.given15.q_max], [od.given15.delta_max], "ks", label="the scenario's Q (own δ1)")
-        ax.plot([od.given15.q_max], [d.base.observer.delta1], "kx", ms=10,
-                label=f"the scenario's δ1 = {d.base.observer.delta1:g}")
+        ax.plot(
+            [od.given15.q_max],
+            [d.base.observer.delta1],
+            "kx",
+            ms=10,
+            label=f"the scenario's δ1 = {d.base.observer.delta1:g}",
+        )
     ax.set_xscale("log")
     ax.set_xlabel("‖Q‖ (cap)")
     ax.set_ylabel("δ1 of LMI (15)")
@@ -76,9 +82,19 @@ def observer_figure(d: Design, path: Path) -> None:
     ax = axes[1]
     caps = [r.theta_max for r in od.front16]
     ax.plot(caps, [r.delta for r in od.front16], "o-", label="largest δ2 under the cap")
-    ax.plot([float(np.linalg.norm(od.Theta, 2))], [od.delta2], "r*", ms=14,
-            label=f"chosen: δ2 = {od.delta2:.3g}")
-    ax.axhline(d.base.observer.delta2, color="k", ls=":", label=f"the scenario's δ2 = {d.base.observer.delta2:g}")
+    ax.plot(
+        [float(np.linalg.norm(od.Theta, 2))],
+        [od.delta2],
+        "r*",
+        ms=14,
+        label=f"chosen: δ2 = {od.delta2:.3g}",
+    )
+    ax.axhline(
+        d.base.observer.delta2,
+        color="k",
+        ls=":",
+        label=f"the scenario's δ2 = {d.base.observer.delta2:g}",
+    )
     ax.set_xscale("log")
     ax.set_xlabel("‖Θ‖ (cap)")
     ax.set_ylabel("δ2 of LMI (16)")
@@ -104,10 +120,20 @@ def controller_figure(d: Design, path: Path) -> None:
         (axes[0], lambda p: p.tc_max, "time to the guarantee max_i t_c (s)"),
         (axes[1], lambda p: p.bound, "ultimate bound max_i (Definition 1) "),
     ):
-        ax.scatter([p.peak_max for p in ok], [what(p) for p in ok], c="0.6", s=18,
-                   label="candidates (one level for every follower)")
-        ax.plot([p.peak_max for p in front], [what(p) for p in front], "b-", lw=1,
-                label="front (torque against t_c)")
+        ax.scatter(
+            [p.peak_max for p in ok],
+            [what(p) for p in ok],
+            c="0.6",
+            s=18,
+            label="candidates (one level for every follower)",
+        )
+        ax.plot(
+            [p.peak_max for p in front],
+            [what(p) for p in front],
+            "b-",
+            lw=1,
+            label="front (torque against t_c)",
+        )
         ax.plot([d.designed.peak_max], [what(d.designed)], "r*", ms=14, label="designed")
         ax.plot([d.given.peak_max], [what(d.given)], "ks", label="the scenario's gains")
         ax.axvline(budget, color="r", ls=":", label=f"budget {budget:g}")
@@ -166,10 +192,15 @@ def write_report(d: Design, folder: Path, prov: Provenance) -> Path:
         "|---|---|---|---|",
     ]
     for r15, r16 in zip(od.front15, od.front16, strict=False):
-        lines.append(f"| {r15.q_max:.4g} | {r15.delta_max:.4g} | {r16.theta_max:.4g} | {r16.delta_max:.4g} |")
+        lines.append(
+            f"| {r15.q_max:.4g} | {r15.delta_max:.4g} | {r16.theta_max:.4g} | {r16.delta_max:.4g} |"
+        )
     if od.given15 is not None:
-        lines += ["", f"The scenario's Q (‖Q‖ = {od.given15.q_max:.4g}) admits δ1 up to "
-                  f"{od.given15.delta_max:.4g}."]
+        lines += [
+            "",
+            f"The scenario's Q (‖Q‖ = {od.given15.q_max:.4g}) admits δ1 up to "
+            f"{od.given15.delta_max:.4g}.",
+        ]
     lines += [
         "",
         "![observer front](figures/design_observer.png)",

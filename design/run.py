@@ -148,16 +148,28 @@ def make_design(
     say = print if progress else (lambda *a, **k: None)
     od = observer_design(base)
     obs = od.overrides()
-    say(f"[design] observer: delta1 = {od.delta1:.4g}, delta2 = {od.delta2:.4g} "
-        f"({time.perf_counter() - t0:.1f} s)")
-    given = evaluate(path, user, "given", "given", float(np.max(base.controller.k1)),
-                     float(np.max(base.controller.Lambda)), spec.startup, root)
+    say(
+        f"[design] observer: delta1 = {od.delta1:.4g}, delta2 = {od.delta2:.4g} "
+        f"({time.perf_counter() - t0:.1f} s)"
+    )
+    given = evaluate(
+        path,
+        user,
+        "given",
+        "given",
+        float(np.max(base.controller.k1)),
+        float(np.max(base.controller.Lambda)),
+        spec.startup,
+        root,
+    )
     points = []
     for k, (k1, lam) in enumerate(candidates(base)):
         ov = {**user, **obs, **candidate_overrides(base, k1, lam)}
         points.append(evaluate(path, ov, f"candidate{k}", "candidate", k1, lam, spec.startup, root))
-    say(f"[design] {len(points)} controller candidates simulated and verified "
-        f"({time.perf_counter() - t0:.1f} s)")
+    say(
+        f"[design] {len(points)} controller candidates simulated and verified "
+        f"({time.perf_counter() - t0:.1f} s)"
+    )
     budget = _budget(base)
     chosen = choose(points, budget, spec.bound_slack)
     for i, c in enumerate(chosen):
@@ -165,16 +177,19 @@ def make_design(
             raise _refuse_budget(base, points, i)
     ctrl = assemble(base, chosen)  # type: ignore[arg-type]
     variant = variant_of(user_variant, user)
-    designed = evaluate(path, {**user, **obs, **ctrl}, variant, "designed", math.nan, math.nan,
-                        spec.startup, root)
+    designed = evaluate(
+        path, {**user, **obs, **ctrl}, variant, "designed", math.nan, math.nan, spec.startup, root
+    )
     if not (designed.within(budget) and designed.holds and designed.covered_all):
         # the followers' levels interact through the graph: fall back to one common level
         common = [p for p in points if p.within(budget) and p.holds and p.covered_all]
         if not common:
             raise _refuse_budget(base, points, int(np.argmax(designed.peak - budget)))
         best = min(p.bound for p in common)
-        p = min((q for q in common if q.bound <= spec.bound_slack * best),
-                key=lambda q: (q.tc_max, q.bound))
+        p = min(
+            (q for q in common if q.bound <= spec.bound_slack * best),
+            key=lambda q: (q.tc_max, q.bound),
+        )
         ctrl, designed, chosen = candidate_overrides(base, p.k1, p.lam), p, [p] * base.N
     return Design(
         base=base,

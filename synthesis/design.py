@@ -292,9 +292,7 @@ def _lmi16_point(Phi, A0, C0, d2, theta_max, eps):  # noqa: ANN001, ANN202
     return Omega, Theta
 
 
-def design_lmi16(
-    Phi: np.ndarray, A0: np.ndarray, C0: np.ndarray, theta_max: float
-) -> Rate16:
+def design_lmi16(Phi: np.ndarray, A0: np.ndarray, C0: np.ndarray, theta_max: float) -> Rate16:
     """Maximise δ2 of LMI (16) under ‖Θ‖ ≤ θ_max (a GEVP, bisection on feasibility problems).
 
     Parameters
