@@ -4,8 +4,8 @@
   the cap on ‖Θ‖ (:func:`synthesis.design.design_lmi15`, ``design_lmi16``), the chosen rates
   and the scenario's own gains on the same axes;
 - the controller: the time to the guarantee (max_i t_c) and the ultimate bound (largest
-  Definition 1 bound) against the peak torque after the start-up, every candidate, the
-  designed gains and the scenario's own gains.
+  Definition 1 bound) against the peak torque after the start-up, and the two against each
+  other, every candidate, the designed gains and the scenario's own gains.
 """
 
 from __future__ import annotations
@@ -112,7 +112,7 @@ def controller_figure(d: Design, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4))
     budget = float(np.max(d.base.design.u_max))
     ok = [p for p in d.points if p.holds and p.covered_all]
     front = _front(ok)
@@ -142,6 +142,27 @@ def controller_figure(d: Design, path: Path) -> None:
         ax.set_yscale("log")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
+    ax = axes[2]  # the trade the budget leaves: time to the guarantee against its level
+    inb = [p for p in ok if p.within(np.asarray(d.base.design.u_max, float))]
+    out = [p for p in ok if p not in inb]
+    ax.scatter(
+        [p.tc_max for p in inb],
+        [p.bound for p in inb],
+        c="b",
+        s=18,
+        label="candidates within the budget",
+    )
+    ax.scatter(
+        [p.tc_max for p in out], [p.bound for p in out], c="0.7", s=18, label="over the budget"
+    )
+    ax.plot([d.designed.tc_max], [d.designed.bound], "r*", ms=14, label="designed")
+    ax.plot([d.given.tc_max], [d.given.bound], "ks", label="the scenario's gains")
+    ax.set_xlabel("time to the guarantee max_i t_c (s)")
+    ax.set_ylabel("ultimate bound max_i (Definition 1)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
     fig.tight_layout()
     _save(fig, path)
     plt.close(fig)

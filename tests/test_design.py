@@ -199,3 +199,37 @@ def test_designed_observer_gains_certify(monkeypatch):
     g = synthesize(load(PAPER_DESIGN, od.overrides(), "designed"))
     assert g.certificate["passed"], g.certificate
     assert g.delta1 == pytest.approx(od.delta1) and g.delta2 == pytest.approx(od.delta2)
+
+
+def test_a_stored_design_is_reused_only_for_its_own_scenario(tmp_path):
+    import json
+
+    from design.run import FORMAT, VARIANT, stored_overrides
+
+    sc = load(PAPER_DESIGN)
+    folder = tmp_path / f"{sc.name}-{VARIANT}"
+    folder.mkdir()
+    ov = {"observer.delta1": 1.5, "controller.k1": [40.0] * 5}
+    rec = {"format": FORMAT, "scenario_sha256": sc.sha256, "overrides": ov}
+    (folder / "design.json").write_text(json.dumps(rec))
+    assert stored_overrides(PAPER_DESIGN, {}, None, tmp_path) == ov
+    rec["scenario_sha256"] = "0" * 64  # written for another scenario (or an edited file)
+    (folder / "design.json").write_text(json.dumps(rec))
+    assert stored_overrides(PAPER_DESIGN, {}, None, tmp_path) is None
+    (folder / "design.json").write_text("{not json")
+    assert stored_overrides(PAPER_DESIGN, {}, None, tmp_path) is None
+
+
+def test_the_design_keys_reach_the_command_line_unchanged():
+    from core.overrides import parse_override
+    from design.cli import _set_args
+
+    ov = {
+        "observer.Theta": [[0.19591445707, 0.391828914142], [0.003782872584, 0.007565745168]],
+        "observer.lambda1": "synthesize",
+        "controller.k1": [40.0, 40.0, 40.0, 40.0, 40.0],
+        "controller.g_min": 0.5,
+    }
+    args = _set_args(ov)
+    back = dict(parse_override(a) for a in args[1::2])
+    assert back == ov
