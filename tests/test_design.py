@@ -233,3 +233,25 @@ def test_the_design_keys_reach_the_command_line_unchanged():
     args = _set_args(ov)
     back = dict(parse_override(a) for a in args[1::2])
     assert back == ov
+
+
+def test_a_budget_no_candidate_meets_is_refused_by_make_design(monkeypatch, tmp_path):
+    """make_design's path to the refusal, with the simulations replaced by fixed points."""
+    from design import run as R
+
+    class _Obs:
+        delta1 = delta2 = 1.0
+
+        def overrides(self):
+            return {}
+
+    monkeypatch.setattr("synthesis.design.observer_design", lambda sc: _Obs())
+    monkeypatch.setattr(R, "candidates", lambda sc: [(20.0, 40.0), (40.0, 40.0)])
+    monkeypatch.setattr(R, "evaluate", lambda *a, **k: _point([225.4] * 5, [2.0] * 5, [1.0] * 5))
+    f = tmp_path / "tight.toml"
+    f.write_text(PAPER_DESIGN.read_text().replace("u_max = 226.0", "u_max = 100.0"))
+    with pytest.raises(R.DesignError) as exc:
+        R.make_design(f, out_root=tmp_path, progress=False)
+    msg = str(exc.value)
+    assert "\n" not in msg and "design.u_max: 100 for follower 1" in msg
+    assert "use u_max >= 225.4" in msg, msg
