@@ -72,7 +72,14 @@ def demo(argv: list[str]) -> int:
         ov = d.overrides
     else:
         print(f"[design] reusing the design of {base.name} (design.json matches the scenario)")
-    rest = [a for a in argv if a != "--variant" and a != known.variant]
+    rest, skip = [], False
+    for a in argv:  # the designed run's variant replaces the user's
+        if skip:
+            skip = False
+        elif a == "--variant":
+            skip = True
+        elif not a.startswith("--variant="):
+            rest.append(a)
     variant = variant_of(user_variant, user)
     return verify_main(["demo", *rest, *_set_args(ov), "--variant", variant])
 

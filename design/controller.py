@@ -69,7 +69,16 @@ def candidate_overrides(scenario: Scenario, k1: float, lam: float) -> dict[str, 
     }
     if "sigma" in law:
         out["controller.sigma"] = [float(x) for x in sigma]
-    return out
+    return {**out, **disturbance_overrides(scenario)}
+
+
+def disturbance_overrides(scenario: Scenario) -> dict[str, Any]:
+    """``followers[i].d`` = ``design.d``: Theorem 2's χv is designed (and verified) for it."""
+    if scenario.design.d is None:
+        return {}
+    return {
+        f"followers[{i + 1}].d": [float(x) for x in row] for i, row in enumerate(scenario.design.d)
+    }
 
 
 def candidates(scenario: Scenario) -> list[tuple[float, float]]:

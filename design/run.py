@@ -27,6 +27,7 @@ from design.controller import (
     candidate_overrides,
     candidates,
     choose,
+    disturbance_overrides,
     evaluate,
 )
 
@@ -175,7 +176,7 @@ def make_design(
     for i, c in enumerate(chosen):
         if c is None:
             raise _refuse_budget(base, points, i)
-    ctrl = assemble(base, chosen)  # type: ignore[arg-type]
+    ctrl = {**assemble(base, chosen), **disturbance_overrides(base)}  # type: ignore[arg-type]
     variant = variant_of(user_variant, user)
     designed = evaluate(
         path, {**user, **obs, **ctrl}, variant, "designed", math.nan, math.nan, spec.startup, root

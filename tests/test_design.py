@@ -255,3 +255,32 @@ def test_a_budget_no_candidate_meets_is_refused_by_make_design(monkeypatch, tmp_
     msg = str(exc.value)
     assert "\n" not in msg and "design.u_max: 100 for follower 1" in msg
     assert "use u_max >= 225.4" in msg, msg
+
+
+@pytest.mark.parametrize(
+    ("extra", "key", "fix"),
+    [
+        ("u_max = 226.0\nd = 1.0\n", "design.d", "d_ir >= each follower's d"),
+        ("u_max = 226.0\nalpha = 1.0\n", "design.alpha", "alpha >= leader.alpha"),
+    ],
+)
+def test_declared_bounds_must_cover_the_scenarios_own(tmp_path, extra, key, fix):
+    f = tmp_path / "bad.toml"
+    f.write_text(_design_text(extra))
+    with pytest.raises(ScenarioError) as exc:
+        load(f)
+    msg = str(exc.value)
+    assert "\n" not in msg and key in msg and fix in msg, msg
+
+
+def test_a_declared_disturbance_bound_reaches_theorem2s_constants(tmp_path):
+    from design.controller import candidate_overrides
+    from verify.bounds import theorem2_constants
+
+    f = tmp_path / "d.toml"
+    f.write_text(_design_text("u_max = 226.0\nd = 6.0\n"))
+    sc = load(f)
+    s2 = load(f, candidate_overrides(sc, 40.0, 40.0), "cand")
+    np.testing.assert_array_equal(s2.followers[0].d, [6.0, 6.0])
+    c = theorem2_constants(s2, 0)
+    assert c.chi_v == pytest.approx(0.5 * s2.controller.k2[0] * 72.0)
