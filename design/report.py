@@ -21,7 +21,7 @@ from core.artifacts import atomic_write_text
 if TYPE_CHECKING:
     from core.provenance import Provenance
     from design.controller import Point
-    from design.run import Design
+    from design.run import DesignResult
 
 
 def _fmt(x: float, digits: int = 4) -> str:
@@ -51,7 +51,7 @@ def _save(fig, path: Path) -> None:  # noqa: ANN001
     os.replace(tmp, path)
 
 
-def observer_figure(d: Design, path: Path) -> None:
+def observer_figure(d: DesignResult, path: Path) -> None:
     """Rate against gain norm for LMIs (15) and (16), chosen and given points marked."""
     import matplotlib
 
@@ -105,7 +105,7 @@ def observer_figure(d: Design, path: Path) -> None:
     plt.close(fig)
 
 
-def controller_figure(d: Design, path: Path) -> None:
+def controller_figure(d: DesignResult, path: Path) -> None:
     """max_i t_c and the ultimate bound against peak torque; chosen and given gains marked."""
     import matplotlib
 
@@ -176,12 +176,12 @@ def _row(name: str, p: Point) -> str:
     )
 
 
-def write_report(d: Design, folder: Path, prov: Provenance) -> Path:
+def write_report(d: DesignResult, folder: Path, prov: Provenance) -> Path:
     """design.md and figures/design_observer.png, figures/design_controller.png.
 
     Parameters
     ----------
-    d : Design
+    d : DesignResult
     folder : Path
         The designed scenario's folder.
     prov : Provenance

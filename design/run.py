@@ -44,7 +44,7 @@ class DesignError(ToolkitError):
 
 
 @dataclass(frozen=True)
-class Design:
+class DesignResult:
     """A finished design.
 
     Attributes
@@ -109,7 +109,7 @@ def make_design(
     *,
     out_root: Path | None = None,
     progress: bool = True,
-) -> Design:
+) -> DesignResult:
     """Design the gains of the scenario at ``path`` for its ``[design]`` table.
 
     Parameters
@@ -125,7 +125,7 @@ def make_design(
 
     Returns
     -------
-    Design
+    DesignResult
 
     Raises
     ------
@@ -192,7 +192,7 @@ def make_design(
             key=lambda q: (q.tc_max, q.bound),
         )
         ctrl, designed, chosen = candidate_overrides(base, p.k1, p.lam), p, [p] * base.N
-    return Design(
+    return DesignResult(
         base=base,
         overrides={**obs, **ctrl},
         observer=od,
@@ -205,7 +205,7 @@ def make_design(
 
 
 def write_design(
-    d: Design,
+    d: DesignResult,
     user: dict[str, Any],
     user_variant: str | None,
     out_root: Path | None = None,
@@ -214,7 +214,7 @@ def write_design(
 
     Parameters
     ----------
-    d : Design
+    d : DesignResult
     user, user_variant
         The command line's overrides and variant.
     out_root : Path, optional
