@@ -300,3 +300,35 @@ def test_adaptation_gain_keeps_the_ghat_term_a_tenth_of_the_disturbance_term():
         disturbance = 0.5 * k2[i] * float(s2.followers[i].d @ s2.followers[i].d)
         assert c.ghat_term <= GHAT_SHARE * disturbance * (1 + 1e-9)
         assert ov["controller.gamma"][i] >= sc.controller.gamma[i]
+
+
+def test_demo_passes_a_scenario_without_design_to_verify_unchanged(monkeypatch):
+    import verify.__main__ as V
+    from design.cli import demo
+
+    seen = []
+    monkeypatch.setattr(V, "main", lambda argv: seen.append(argv) or 0)
+    args = [str(ROOT / "scenarios" / "paper.toml"), "--no-gif", "--set", "options.sign_width=0.04"]
+    assert demo(args) == 0
+    assert seen == [["demo", *args]]
+
+
+def test_demo_runs_the_stored_design_of_a_design_scenario(monkeypatch, tmp_path):
+    import json
+
+    import verify.__main__ as V
+    from design.cli import demo
+    from design.run import FORMAT, VARIANT
+
+    sc = load(PAPER_DESIGN)
+    folder = tmp_path / f"{sc.name}-{VARIANT}"
+    folder.mkdir()
+    ov = {"observer.delta1": 1.5, "controller.k1": [40.0] * 5}
+    rec = {"format": FORMAT, "scenario_sha256": sc.sha256, "overrides": ov}
+    (folder / "design.json").write_text(json.dumps(rec))
+    seen = []
+    monkeypatch.setattr(V, "main", lambda argv: seen.append(argv) or 0)
+    assert demo([str(PAPER_DESIGN), "--out", str(tmp_path), "--no-gif"]) == 0
+    argv = seen[0]
+    assert argv[:5] == ["demo", str(PAPER_DESIGN), "--out", str(tmp_path), "--no-gif"]
+    assert "observer.delta1=1.5" in argv and argv[-2:] == ["--variant", VARIANT]
