@@ -8,7 +8,7 @@ V̇2 ≤ −ΩV2 + χv with Ω = min{2λ_min(K)/λ_max(M), k2, σ} and
   a smaller one lowers Ω; at the balance χv/Ω, hence the ultimate bound
   χ̄ = sqrt(2χv/(λ_min(M)Ω(1−δ))), barely depends on k1, while the time to the guarantee
   t_c = ln(Ω(1−δ)V2(t_s)/(χv δ))/Ω falls like 1/k1;
-- γ_i from the ĝ term of χv at the declared worst health (:func:`adaptation_gains`);
+- γ is kept: it does not enter Ω (docs/synthesis.md, 'Design', says what a larger γ cost);
 - the projection interval is [1, 1/g_min] of the declared health range (it holds 1/g = 1);
 - the one limit is the torque, which no closed form gives: each candidate (k1, λ) is
   simulated and its peak ‖u_i‖ after the start-up compared with the budget.
@@ -32,8 +32,6 @@ from core.scenario import Scenario
 K1_FACTORS = (1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 14.0)
 #: multiples of the scenario's λ_ir tried
 LAMBDA_FACTORS = (0.5, 1.0, 2.0)
-#: the σ-law's ĝ term of χv may be at most this share of the disturbance term ½k2‖d‖²
-GHAT_SHARE = 0.1
 
 
 def balanced(scenario: Scenario, k1: float) -> tuple[np.ndarray, np.ndarray]:
@@ -72,35 +70,7 @@ def candidate_overrides(scenario: Scenario, k1: float, lam: float) -> dict[str, 
     }
     if "sigma" in law:
         out["controller.sigma"] = [float(x) for x in sigma]
-        out["controller.gamma"] = adaptation_gains(scenario, k2, sigma)
     return {**out, **disturbance_overrides(scenario)}
-
-
-def adaptation_gains(scenario: Scenario, k2: np.ndarray, sigma: np.ndarray) -> list[float]:
-    """γ_i: the σ-law's ĝ term of χv at most :data:`GHAT_SHARE` of the disturbance term.
-
-    σ g(1/g − ĝ0)²/(2γ) ≤ ρ ½k2‖d‖² over the declared health range [g_min, 1] (the term is
-    convex in g, so its largest value is at an end) gives γ ≥ σ max_g g(1/g − ĝ0)²/(ρ k2 ‖d‖²).
-    The scenario's γ is kept when it is larger, or when d_i = 0.
-
-    Parameters
-    ----------
-    scenario : Scenario
-        Its ``[design]`` health range and disturbance bounds, ``controller.ghat_ref``.
-    k2, sigma : ndarray
-        Per follower.
-    """
-    out = []
-    for i, fo in enumerate(scenario.followers):
-        d = np.asarray(scenario.design.d[i] if scenario.design.d is not None else fo.d, float)
-        g0, given = float(scenario.controller.ghat_ref[i]), float(scenario.controller.gamma[i])
-        dd = float(d @ d)
-        if dd <= 0.0:
-            out.append(given)
-            continue
-        worst = max(g * (1.0 / g - g0) ** 2 for g in (float(scenario.design.g_min[i]), 1.0))
-        out.append(max(given, float(sigma[i]) * worst / (GHAT_SHARE * float(k2[i]) * dd)))
-    return out
 
 
 def disturbance_overrides(scenario: Scenario) -> dict[str, Any]:

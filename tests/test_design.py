@@ -286,22 +286,6 @@ def test_a_declared_disturbance_bound_reaches_theorem2s_constants(tmp_path):
     assert c.chi_v == pytest.approx(0.5 * s2.controller.k2[0] * 72.0)
 
 
-def test_adaptation_gain_keeps_the_ghat_term_a_tenth_of_the_disturbance_term():
-    from design.controller import GHAT_SHARE, balanced, candidate_overrides
-    from verify.bounds import theorem2_constants
-
-    sc = load(PAPER_DESIGN)
-    k2, sigma = balanced(sc, 40.0)
-    ov = candidate_overrides(sc, 40.0, 40.0)
-    # at the declared worst health g_min = 0.5 (an end of the range), on a scenario with it
-    s2 = load(PAPER_DESIGN, {**ov, **{f"followers[{i}].g": 0.5 for i in range(1, 6)}}, "worst")
-    for i in range(sc.N):
-        c = theorem2_constants(s2, i)
-        disturbance = 0.5 * k2[i] * float(s2.followers[i].d @ s2.followers[i].d)
-        assert c.ghat_term <= GHAT_SHARE * disturbance * (1 + 1e-9)
-        assert ov["controller.gamma"][i] >= sc.controller.gamma[i]
-
-
 def test_demo_passes_a_scenario_without_design_to_verify_unchanged(monkeypatch):
     import verify.__main__ as V
     from design.cli import demo
