@@ -316,3 +316,30 @@ def test_demo_runs_the_stored_design_of_a_design_scenario(monkeypatch, tmp_path)
     argv = seen[0]
     assert argv[:5] == ["demo", str(PAPER_DESIGN), "--out", str(tmp_path), "--no-gif"]
     assert "observer.delta1=1.5" in argv and argv[-2:] == ["--variant", VARIANT]
+
+
+def test_a_study_on_a_design_base_runs_its_designed_gains(monkeypatch, tmp_path):
+    import json
+
+    import design.run as R
+    from sweep.sampler import make_sample
+    from sweep.study import StudyError, load_study
+
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'name = "s"\nbase = "{PAPER_DESIGN}"\ncount = 2\nseed = 1\n'
+        '[set]\n"controller.Lambda" = 30.0\n'
+    )
+    monkeypatch.setattr(R, "OUT_ROOT", tmp_path)
+    with pytest.raises(StudyError) as exc:  # no design yet: refused in one line
+        load_study(study)
+    assert "\n" not in str(exc.value) and "make design" in str(exc.value)
+    sc = load(PAPER_DESIGN)
+    folder = tmp_path / f"{sc.name}-{R.VARIANT}"
+    folder.mkdir()
+    ov = {"controller.k1": [40.0] * 5, "controller.Lambda": 80.0}
+    rec = {"format": R.FORMAT, "scenario_sha256": sc.sha256, "overrides": ov}
+    (folder / "design.json").write_text(json.dumps(rec))
+    s = make_sample(load_study(study), 0).scenario
+    assert np.all(s.controller.k1 == 40.0)
+    assert np.all(s.controller.Lambda == 30.0)  # the study's own [set] wins
