@@ -74,7 +74,13 @@ def candidate_overrides(scenario: Scenario, k1: float, lam: float) -> dict[str, 
 
 
 def disturbance_overrides(scenario: Scenario) -> dict[str, Any]:
-    """``followers[i].d`` = ``design.d``: Theorem 2's χv is designed (and verified) for it."""
+    """``followers[i].d`` = ``design.d``: Theorem 2's χv is designed (and verified) for it.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        With its ``[design]`` table.
+    """
     if scenario.design.d is None:
         return {}
     return {
@@ -140,7 +146,13 @@ class Point:
     overrides: dict[str, Any]
 
     def within(self, budget: np.ndarray) -> bool:
-        """Whether every follower's peak torque after the start-up is within its budget."""
+        """Whether every follower's peak torque after the start-up is within its budget.
+
+        Parameters
+        ----------
+        budget : ndarray
+            Per follower, ``design.u_max``.
+        """
         return bool(np.all(np.asarray(self.peak) <= budget))
 
     @property

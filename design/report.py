@@ -52,7 +52,14 @@ def _save(fig, path: Path) -> None:  # noqa: ANN001
 
 
 def observer_figure(d: DesignResult, path: Path) -> None:
-    """Rate against gain norm for LMIs (15) and (16), chosen and given points marked."""
+    """Rate against gain norm for LMIs (15) and (16), chosen and given points marked.
+
+    Parameters
+    ----------
+    d : DesignResult
+    path : Path
+        The PNG written.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -106,7 +113,14 @@ def observer_figure(d: DesignResult, path: Path) -> None:
 
 
 def controller_figure(d: DesignResult, path: Path) -> None:
-    """max_i t_c and the ultimate bound against peak torque; chosen and given gains marked."""
+    """max_i t_c and the ultimate bound against peak torque; chosen and given gains marked.
+
+    Parameters
+    ----------
+    d : DesignResult
+    path : Path
+        The PNG written.
+    """
     import matplotlib
 
     matplotlib.use("Agg")

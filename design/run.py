@@ -77,7 +77,15 @@ class DesignResult:
 
 
 def variant_of(user_variant: str | None, user_overrides: dict[str, Any] | None) -> str:
-    """The designed scenario's name suffix (after the user's own variant, if any)."""
+    """The designed scenario's name suffix (after the user's own variant, if any).
+
+    Parameters
+    ----------
+    user_variant : str or None
+        ``--variant`` of the command line.
+    user_overrides : dict or None
+        ``--set`` of the command line.
+    """
     if not user_overrides:
         return VARIANT
     from core.overrides import _variant_label

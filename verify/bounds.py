@@ -451,6 +451,17 @@ def projection_why_not(scenario: Scenario, agent: int, gbar: float, needs_start:
     The removed part points outward only at the ends of [1, 1/g_min], so its term is
     ≤ 0 when 1/g lies in that interval. Without σ the bound also needs ĝ(0) inside the
     band-widened interval, which the projection then keeps ĝ in.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its ``controller.g_min`` and ``initial.ghat``.
+    agent : int
+        0-based follower.
+    gbar : float
+        1/g_i.
+    needs_start : bool
+        Whether ĝ(0) must lie in the band-widened interval (the projection-only law).
     """
     hi = 1.0 / scenario.controller.g_min
     if hi - 1.0 <= 1e-12:
