@@ -153,7 +153,6 @@ def make_design(
             f"{path}: has no [design] table: add one with at least u_max (the torque budget), "
             "docs/scenario-format.md, '[design]'"
         )
-    spec = base.design
     say = print if progress else (lambda *a, **k: None)
     od = observer_design(base)
     obs = od.overrides()
@@ -161,45 +160,14 @@ def make_design(
         f"[design] observer: delta1 = {od.delta1:.4g}, delta2 = {od.delta2:.4g} "
         f"({time.perf_counter() - t0:.1f} s)"
     )
-    given = evaluate(
-        path,
-        user,
-        "given",
-        "given",
-        float(np.max(base.controller.k1)),
-        float(np.max(base.controller.Lambda)),
-        spec.startup,
-        root,
-    )
-    points = []
-    for k, (k1, lam) in enumerate(candidates(base)):
-        ov = {**user, **obs, **candidate_overrides(base, k1, lam)}
-        points.append(evaluate(path, ov, f"candidate{k}", "candidate", k1, lam, spec.startup, root))
+    given, points = _grid(path, base, user, obs, root)
     say(
         f"[design] {len(points)} controller candidates simulated and verified "
         f"({time.perf_counter() - t0:.1f} s)"
     )
-    budget = _budget(base)
-    chosen = choose(points, budget, spec.bound_slack)
-    for i, c in enumerate(chosen):
-        if c is None:
-            raise _refuse_budget(base, points, i)
-    ctrl = {**assemble(base, chosen), **disturbance_overrides(base)}  # type: ignore[arg-type]
-    variant = variant_of(user_variant, user)
-    designed = evaluate(
-        path, {**user, **obs, **ctrl}, variant, "designed", math.nan, math.nan, spec.startup, root
+    ctrl, designed, chosen = _settle(
+        path, base, user, variant_of(user_variant, user), obs, points, root
     )
-    if not (designed.within(budget) and designed.holds and designed.covered_all):
-        # the followers' levels interact through the graph: fall back to one common level
-        common = [p for p in points if p.within(budget) and p.holds and p.covered_all]
-        if not common:
-            raise _refuse_budget(base, points, int(np.argmax(designed.peak - budget)))
-        best = min(p.bound for p in common)
-        p = min(
-            (q for q in common if q.bound <= spec.bound_slack * best),
-            key=lambda q: (q.tc_max, q.bound),
-        )
-        ctrl, designed, chosen = candidate_overrides(base, p.k1, p.lam), p, [p] * base.N
     return DesignResult(
         base=base,
         overrides={**obs, **ctrl},
@@ -210,6 +178,54 @@ def make_design(
         chosen=chosen,  # type: ignore[arg-type]
         seconds=time.perf_counter() - t0,
     )
+
+
+def _grid(
+    path: str | Path, base: Scenario, user: dict, obs: dict, root: Path
+) -> tuple[Point, list[Point]]:
+    """The scenario's own gains and every candidate of the grid, simulated and verified."""
+    spec = base.design
+    k0, l0 = float(np.max(base.controller.k1)), float(np.max(base.controller.Lambda))
+    given = evaluate(path, user, "given", "given", k0, l0, spec.startup, root)
+    points = []
+    for k, (k1, lam) in enumerate(candidates(base)):
+        ov = {**user, **obs, **candidate_overrides(base, k1, lam)}
+        points.append(evaluate(path, ov, f"candidate{k}", "candidate", k1, lam, spec.startup, root))
+    return given, points
+
+
+def _settle(
+    path: str | Path,
+    base: Scenario,
+    user: dict,
+    variant: str,
+    obs: dict,
+    points: list[Point],
+    root: Path,
+) -> tuple[dict, Point, list[Point]]:
+    """Each follower's level (:func:`design.controller.choose`), confirmed by one run; one
+    common level by the same rule when the assembled levels break the budget or a row."""
+    spec, budget = base.design, _budget(base)
+    chosen = choose(points, budget, spec.bound_slack)
+    for i, c in enumerate(chosen):
+        if c is None:
+            raise _refuse_budget(base, points, i)
+    ctrl = {**assemble(base, chosen), **disturbance_overrides(base)}  # type: ignore[arg-type]
+    designed = evaluate(
+        path, {**user, **obs, **ctrl}, variant, "designed", math.nan, math.nan, spec.startup, root
+    )
+    if designed.within(budget) and designed.holds and designed.covered_all:
+        return ctrl, designed, chosen  # type: ignore[return-value]
+    # the followers' levels interact through the graph: fall back to one common level
+    common = [p for p in points if p.within(budget) and p.holds and p.covered_all]
+    if not common:
+        raise _refuse_budget(base, points, int(np.argmax(np.asarray(designed.peak) - budget)))
+    best = min(p.bound for p in common)
+    p = min(
+        (q for q in common if q.bound <= spec.bound_slack * best),
+        key=lambda q: (q.tc_max, q.bound),
+    )
+    return candidate_overrides(base, p.k1, p.lam), p, [p] * base.N
 
 
 def write_design(
