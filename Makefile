@@ -17,7 +17,7 @@ VARIANT ?=
 export SET VARIANT
 KNOBS = set -f; set --; IFS=';'; for s in $$SET; do case "$$s" in *[!\ ]*) set -- "$$@" --set "$$s";; esac; done; unset IFS; \
 	if [ -n "$$VARIANT" ]; then set -- "$$@" --variant "$$VARIANT"; fi;
-KNOB_GOALS := all demo synth sim verify report venv
+KNOB_GOALS := all demo design synth sim verify report venv
 ifeq ($(MAKELEVEL),0)
 # a misspelt knob on the command line is refused, not dropped
 MISSPELT := set=SET Set=SET SETS=SET sets=SET OVERRIDE=SET OVERRIDES=SET override=SET \
@@ -27,12 +27,12 @@ $(foreach p,$(MISSPELT),$(if $(filter command line,$(origin $(firstword $(subst 
 	$(error $(firstword $(subst =, ,$(p)))= is not a variable of this Makefile: use $(lastword $(subst =, ,$(p)))=)))
 ifneq ($(SET)$(VARIANT),)
 ifneq ($(filter-out $(KNOB_GOALS),$(MAKECMDGOALS)),)
-$(error SET=/VARIANT= are taken by synth, sim, verify, report and demo, not by $(filter-out $(KNOB_GOALS),$(MAKECMDGOALS)))
+$(error SET=/VARIANT= are taken by design, synth, sim, verify, report and demo, not by $(filter-out $(KNOB_GOALS),$(MAKECMDGOALS)))
 endif
 endif
 endif
 
-.PHONY: all demo synth sim sweep topologies search console chromium verify report check test lint bench clean clean-cache distclean
+.PHONY: all demo design synth sim sweep topologies search console chromium verify report check test lint bench clean clean-cache distclean
 
 all: demo
 
@@ -45,8 +45,13 @@ $(STAMP): pyproject.toml constraints.txt
 
 venv: $(STAMP)
 
+# a scenario with a [design] table runs its designed gains (designed first if needed)
 demo: $(STAMP)
-	@$(KNOBS) set -x; $(PY) -m verify demo $(SCENARIO) "$$@"
+	@$(KNOBS) set -x; $(PY) -m design demo $(SCENARIO) "$$@"
+
+# gains designed for the guarantees: out/<name>-designed/{gains.json,design.md} (docs/synthesis.md)
+design: $(STAMP)
+	@$(KNOBS) set -x; $(PY) -m design run $(if $(filter command line environment,$(origin SCENARIO)),$(SCENARIO),scenarios/paper-design.toml) "$$@"
 
 synth: $(STAMP)
 	@$(KNOBS) set -x; $(PY) -m synthesis synth $(SCENARIO) "$$@"
@@ -84,8 +89,8 @@ report: $(STAMP)
 	@$(KNOBS) set -x; $(PY) -m verify report $(SCENARIO) "$$@"
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check core synthesis symbolic generated verify benchmarks sweep search console tests
-	$(VENV)/bin/ruff format --check core synthesis symbolic generated verify benchmarks sweep search console tests
+	$(VENV)/bin/ruff check core synthesis symbolic generated verify design benchmarks sweep search console tests
+	$(VENV)/bin/ruff format --check core synthesis symbolic generated verify design benchmarks sweep search console tests
 	$(VENV)/bin/lint-imports
 
 # the quick tier for the edit loop: ruff, the import contract and the tests not marked slow

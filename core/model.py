@@ -55,6 +55,7 @@ MAX_HORIZON = 1e6  # s; far beyond any study here, and keeps time arithmetic fin
 
 # range checks beyond the sign, with the messages the loader has always given
 _G_MIN_RANGE = Check("≤ 1", lambda x: x <= 1.0, "{v} is outside (0, 1]", "0 < g_min <= 1")
+_AT_LEAST_ONE = Check("≥ 1", lambda x: x >= 1.0, "{v} is below 1", "a factor >= 1")
 _BELOW_ONE = Check("< 1", lambda x: x < 1.0, "{v} >= 1", "a relative tolerance < 1")
 _HORIZON_RANGE = Check(
     "≤ 1e6",
@@ -247,6 +248,31 @@ class Integration:
     max_steps: int = setting(200000, "integer", POSITIVE, WHOLE)
 
 
+@dataclass(frozen=True, kw_only=True)
+class Design:
+    """What designed gains must tolerate and respect (``[design]``, docs/synthesis.md, 'Design').
+
+    Absent, a scenario is run with its own gains (``Scenario.design`` is None). Every
+    per-follower entry may be one number for every follower.
+    """
+
+    # tolerate: g_i in [g_min_i, 1] (the ĝ projection interval [1, 1/g_min] follows)
+    g_min: np.ndarray = setting(0.5, "per_follower", POSITIVE, _G_MIN_RANGE)  # N
+    # |f_ir| <= d_ir; "none" = each follower's own d (given or sup |f_ir|)
+    d: np.ndarray | None = setting(OFF, "per_coordinate", NONNEG, off=True)  # N×n
+    # ‖u0‖ <= alpha; "none" = leader.alpha
+    alpha: float | None = setting(OFF, "number", POSITIVE, off=True)
+    # respect: peak ‖u_i‖ after the start-up (a rule requires it)
+    u_max: np.ndarray | None = setting(OFF, "per_follower", POSITIVE, off=True)  # N
+    startup: float = setting(1.0, "number", POSITIVE)  # s: the start-up the budget excludes
+    # optional gain-norm caps: ‖Q‖, ‖Θ‖ (spectral), max k1ir; "none" = no cap
+    Q_max: float | None = setting(OFF, "number", POSITIVE, off=True)
+    Theta_max: float | None = setting(OFF, "number", POSITIVE, off=True)
+    k1_max: float | None = setting(OFF, "number", POSITIVE, off=True)
+    # the ultimate bound may be this factor above the best one within the budget (time for level)
+    bound_slack: float = setting(1.5, "number", _AT_LEAST_ONE)
+
+
 #: the sections declared with :func:`core.settings.setting`, by their table name
 SECTIONS: dict[str, type] = {
     "observer": Observer,
@@ -255,6 +281,8 @@ SECTIONS: dict[str, type] = {
     "initial": Initial,
     "integration": Integration,
 }
+#: declared sections that may be absent (held as None): today's behaviour without them
+OPTIONAL_SECTIONS: dict[str, type] = {"design": Design}
 
 
 @dataclass(frozen=True)
@@ -277,6 +305,7 @@ class Scenario:
     options: Options
     initial: Initial
     integration: Integration
+    design: Design | None = None
 
     def __post_init__(self) -> None:
         self.validate()
@@ -289,8 +318,10 @@ class Scenario:
         ScenarioError
             The first violation, naming the key (and the 0-based position in a list).
         """
-        for section, cls in SECTIONS.items():
+        for section, cls in {**SECTIONS, **OPTIONAL_SECTIONS}.items():
             obj = getattr(self, section)
+            if obj is None:  # an optional section that is absent
+                continue
             for name, s in settings_of(cls).items():
                 bad = s.violation(getattr(obj, name))
                 if bad is not None:

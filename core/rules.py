@@ -110,6 +110,56 @@ def _switches_fit(s: Scenario) -> Problem | None:
     return None
 
 
+def _design_budget(s: Scenario) -> Problem | None:
+    """A ``[design]`` table must say what torque the gains may use."""
+    if s.design is not None and s.design.u_max is None:
+        return (
+            "is missing: a design needs a torque budget",
+            "u_max = peak |u_i| allowed after the start-up, > 0 (one number or one per follower)",
+        )
+    return None
+
+
+def _design_health(s: Scenario) -> Problem | None:
+    """The declared health range must contain each follower's health over the run."""
+    if s.design is None:
+        return None
+    for i, fo in enumerate(s.followers):
+        if fo.g.minimum < s.design.g_min[i] * (1 - 1e-12):
+            return (
+                f"{s.design.g_min[i]:g} for follower {i + 1} exceeds its smallest health "
+                f"{fo.g.minimum:.4g}",
+                f"g_min <= {fo.g.minimum:.4g}",
+            )
+    return None
+
+
+def _design_bounds(s: Scenario) -> Problem | None:
+    """The declared disturbance bounds must cover the followers' own."""
+    if s.design is None:
+        return None
+    if s.design.d is not None:
+        for i, fo in enumerate(s.followers):
+            own = np.asarray(fo.d, float)
+            if np.any(s.design.d[i] < own * (1 - 1e-12)):
+                return (
+                    f"{s.design.d[i].tolist()} for follower {i + 1} is below its "
+                    f"|f_ir| bound {own.tolist()}",
+                    'd_ir >= each follower\'s d (given or sup |f_ir|), or d = "none"',
+                )
+    return None
+
+
+def _design_alpha(s: Scenario) -> Problem | None:
+    """The declared operator bound must cover the leader's."""
+    if s.design is not None and s.design.alpha is not None and s.design.alpha < s.leader.alpha:
+        return (
+            f"alpha = {s.design.alpha:g} is below leader.alpha = {s.leader.alpha:g}",
+            'alpha >= leader.alpha, or alpha = "none"',
+        )
+    return None
+
+
 #: every rule between settings, in the order they are checked
 RULES: tuple[Rule, ...] = (
     Rule("integration.output_step", "≤ horizon", _step_within_horizon("output_step")),
@@ -121,4 +171,8 @@ RULES: tuple[Rule, ...] = (
     Rule("controller.g_min", "", _g_min_below_health),
     Rule("options.sign", "", _exact_sign_needs_fixed_step),
     Rule("graph.switches", "", _switches_fit),
+    Rule("design.u_max", "", _design_budget),
+    Rule("design.g_min", "", _design_health),
+    Rule("design.d", "", _design_bounds),
+    Rule("design.alpha", "", _design_alpha),
 )

@@ -36,10 +36,12 @@ from core.model import (  # noqa: F401  (the data model, re-exported)
     MAX_SCENARIO_BYTES,
     MAX_TABLE_ROWS,
     METHODS,
+    OPTIONAL_SECTIONS,
     SECTIONS,
     SIGN_MODES,
     START_MODES,
     Controller,
+    Design,
     Follower,
     Graph,
     Health,
@@ -185,6 +187,9 @@ def _build(ctx: ReadingContext, data: dict, path: Path, sha: str) -> Scenario:
         options=options,
         initial=read_section(ctx, Initial, data.get("initial", {}), "initial", dims),
         integration=integ,
+        design=read_section(ctx, Design, data["design"], "design", dims)
+        if "design" in data
+        else None,
     )
 
 

@@ -39,6 +39,7 @@ from core.model import (
     MAX_FAULTS,
     MAX_GRAPH_SWITCHES,
     MAX_TABLE_ROWS,
+    OPTIONAL_SECTIONS,
     SECTIONS,
     Controller,
     Follower,
@@ -77,6 +78,7 @@ TOP: dict[str, Setting] = {
     "graph": declare(REQUIRED, "table"),
     "followers": declare(REQUIRED, "tables"),
     **{section: declare(Derived("all defaults"), "table") for section in SECTIONS},
+    "design": declare(Derived("none"), "table"),
 }
 #: ``[leader]``, eq. (3); A0 sets m, B0 sets p, C0 sets n
 LEADER: dict[str, Setting] = {
@@ -133,7 +135,7 @@ def type_text(section: str, name: str) -> str:
     if section in TABLES:
         return TABLES[section][name].type_text()
     words = tuple(r.text for r in RULES if r.key == f"{section}.{name}" and r.text)
-    return settings_of(SECTIONS[section])[name].type_text(words)
+    return settings_of({**SECTIONS, **OPTIONAL_SECTIONS}[section])[name].type_text(words)
 
 
 # --------------------------------------------------------------------------- declared sections

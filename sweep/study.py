@@ -160,7 +160,7 @@ def study_from_data(path: str | Path, data: dict) -> Study:
         params=_params(f, data.get("params", {})),
         graph=graph_family(f, data["graph"]) if "graph" in data else None,
         operator=operator_family(f, path, data["operator"]) if "operator" in data else None,
-        fixed=_fixed(f, data.get("set", {})),
+        fixed={**_designed(f, base, base_data), **_fixed(f, data.get("set", {}))},
         faults=fault_family(f, data["faults"]) if "faults" in data else None,
     )
     _check_keys_apply(study)
@@ -252,6 +252,24 @@ def _base(f: str, path: Path, v: Any) -> tuple[str, dict]:
     if "u0_csv" in leader:
         leader["u0_csv"] = str((base.parent / leader["u0_csv"]).resolve())
     return str(base), data
+
+
+def _designed(f: str, base: str, base_data: dict) -> dict[str, Any]:
+    """A base with a ``[design]`` table runs its designed gains: the keys of its design.json
+    (``make design``, docs/synthesis.md, 'Design') join ``[set]`` (which may override them)."""
+    if "design" not in base_data:
+        return {}
+    from design.run import stored_overrides
+
+    ov = stored_overrides(base, {}, None, None)
+    if ov is None:
+        raise StudyError(
+            f,
+            "base",
+            f"{base} has a [design] table but out/ holds no design of it",
+            f"`make design SCENARIO={base}` first",
+        )
+    return ov
 
 
 def _params(f: str, raw: Any) -> dict[str, Distribution]:

@@ -27,6 +27,7 @@ PACKAGES = (
     "symbolic",
     "generated",
     "verify",
+    "design",
     "benchmarks",
     "sweep",
     "console",

@@ -13,7 +13,17 @@ import pytest
 from core.memo import MEMO, ProcessCache
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("core", "synthesis", "symbolic", "generated", "verify", "sweep", "search", "console")
+PACKAGES = (
+    "core",
+    "synthesis",
+    "symbolic",
+    "generated",
+    "verify",
+    "design",
+    "sweep",
+    "search",
+    "console",
+)
 #: module-level mappings that are registries (filled once by registration), not caches
 REGISTRIES = {
     "core/models/base.py": {"REGISTRY"},

@@ -278,6 +278,7 @@ PACKAGES = (
     "symbolic",
     "generated",
     "verify",
+    "design",
     "sweep",
     "benchmarks",
     "search",

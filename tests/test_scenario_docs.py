@@ -61,7 +61,9 @@ def _same_default(cell: str, declared: object) -> bool:
 def mismatches(text: str) -> list[str]:
     """Every difference between the document's tables and the loader's declarations."""
     tables, out = doc_tables(text), []
-    declared_tables = {section: settings_of(cls) for section, cls in S.SECTIONS.items()}
+    declared_tables = {
+        section: settings_of(cls) for section, cls in {**S.SECTIONS, **S.OPTIONAL_SECTIONS}.items()
+    }
     declared_tables.update(S.TABLES)
     for section, declared in declared_tables.items():
         rows = tables.get(section, [])

@@ -387,7 +387,7 @@ def _variant_terms(
             (
                 w
                 for g in ends
-                if (w := _projection_why_not(scenario, agent, 1.0 / g, law == "projection"))
+                if (w := projection_why_not(scenario, agent, 1.0 / g, law == "projection"))
             ),
             "",
         )
@@ -424,18 +424,50 @@ def _run_health(scenario: Scenario, agent: int) -> tuple[float, float, float]:
     )
 
 
-def _projection_why_not(scenario: Scenario, agent: int, gbar: float, needs_start: bool) -> str:
+def outside_projection(scenario: Scenario, agent: int, gbar: float) -> str:
+    """Why 1/g_i = ``gbar`` is outside the projection interval [1, 1/g_min] ('' if inside).
+
+    The interval always contains 1/g = 1 (a healthy follower): its lower end is 1, and the
+    projection band lies outside it (:mod:`symbolic.adaptive`).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its ``controller.g_min``.
+    agent : int
+        0-based follower (for the message).
+    gbar : float
+        1/g_i.
+    """
+    hi = 1.0 / scenario.controller.g_min
+    if not 1.0 <= gbar <= hi:
+        return f"1/g_{agent + 1} = {gbar:.4g} outside the projection interval [1, {hi:.4g}]"
+    return ""
+
+
+def projection_why_not(scenario: Scenario, agent: int, gbar: float, needs_start: bool) -> str:
     """Why the projection's term (g/γ)(ĝ − 1/g)·(removed rate) could be positive ('' if not).
 
     The removed part points outward only at the ends of [1, 1/g_min], so its term is
     ≤ 0 when 1/g lies in that interval. Without σ the bound also needs ĝ(0) inside the
     band-widened interval, which the projection then keeps ĝ in.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Its ``controller.g_min`` and ``initial.ghat``.
+    agent : int
+        0-based follower.
+    gbar : float
+        1/g_i.
+    needs_start : bool
+        Whether ĝ(0) must lie in the band-widened interval (the projection-only law).
     """
     hi = 1.0 / scenario.controller.g_min
     if hi - 1.0 <= 1e-12:
         return "controller.g_min = 1 freezes ghat: the adaptive term does not cancel"
-    if not 1.0 <= gbar <= hi:
-        return f"1/g_{agent + 1} = {gbar:.4g} outside the projection interval [1, {hi:.4g}]"
+    if why := outside_projection(scenario, agent, gbar):
+        return why
     band = BAND * (hi - 1.0)
     g0 = float(scenario.initial.ghat[agent])
     if needs_start and not 1.0 - band <= g0 <= hi + band:

@@ -129,20 +129,15 @@ def theorem2_guaranteed(scenario: Scenario, agent: int | None = None) -> tuple[b
         return False, "filtered derivatives: their error joins the disturbance (section 6)"
     agents = range(scenario.N) if agent is None else (agent,)
     if "projection" in o.ghat_law:
-        from symbolic.adaptive import BAND
-
-        hi = 1.0 / scenario.controller.g_min
-        band = BAND * (hi - 1.0)
-        from verify.bounds import _run_health
+        # P = (g/γ) g̃ (Proj(ρ) − ρ) ≤ 0 needs 1/g_i in [1, 1/g_min] over g_i's range: the band
+        # lies outside that interval, so its ends, 1/g = 1 (a healthy follower) included, qualify
+        from verify.bounds import _run_health, outside_projection
 
         for i in agents:
             g_lo, g_hi, _ = _run_health(scenario, i)  # the range of g_i over the run
             for gi in (g_lo, g_hi):
-                if not 1.0 + band <= 1.0 / gi <= hi - band:
-                    return False, (
-                        f"1/g_{i + 1} = {1 / gi:.4g} outside the projection interval "
-                        f"[{1 + band:.4g}, {hi - band:.4g}]: the projection may increase dV2/dt"
-                    )
+                if why := outside_projection(scenario, i, 1.0 / gi):
+                    return False, why + ": the projection may increase dV2/dt"
     return True, "exact feedforward (oracle): must hold up to round-off"
 
 

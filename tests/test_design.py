@@ -1,0 +1,345 @@
+"""Gains designed for the guarantees (docs/synthesis.md, 'Design').
+
+Independent truth: each GEVP's rate against the largest rate its answer admits, computed
+as a generalised eigenvalue (no bisection, no solver), and against a solver-free search
+over T; the unobservable mode's bound on δ2; the designed observer gains through the
+certificate; the specification's refusals; the choice rule on hand-made points.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+from core.errors import ScenarioError, run_cli
+from core.overrides import load
+from synthesis import design as SD
+from synthesis.assumptions import uio_matrices
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER_DESIGN = ROOT / "scenarios" / "paper-design.toml"
+A0 = np.array([[0.0, 1.0], [0.0, 0.0]])
+B0 = np.array([[0.0], [1.0]])
+C0 = np.array([[1.0, 1.0], [2.0, 2.0]])
+
+
+def _search_lmi15(tau: float, lb1: float, starts: int = 12) -> float:
+    """The largest lmi15_rate over T = τI + LLᵀ found by Nelder–Mead (no solver, no bisection)."""
+    rng = np.random.default_rng(1)
+    best = -math.inf
+
+    def neg(x: np.ndarray) -> float:
+        L = np.array([[x[0], 0.0], [x[1], x[2]]])
+        return -SD.lmi15_rate(A0, B0, tau * np.eye(2) + L @ L.T, lb1)
+
+    for _ in range(starts):
+        x0 = rng.normal(0.0, np.sqrt(tau) * 3, 3)
+        r = minimize(neg, x0, method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-12})
+        best = max(best, -r.fun)
+    return best
+
+
+@pytest.mark.parametrize("q_max", [2.0, 10.0])
+def test_lmi15_gevp_rate_is_the_largest_the_cap_admits(q_max):
+    r = SD.design_lmi15(A0, B0, 1.0, q_max)
+    # the answer admits its rate (eigenvalue check of the LMI at the returned T)
+    assert SD.lmi15_rate(A0, B0, r.T, 1.0) >= r.delta
+    assert np.linalg.eigvalsh(r.T).min() >= np.linalg.norm(B0, 2) / q_max
+    assert np.linalg.norm(r.Q, 2) <= q_max
+    assert r.delta == pytest.approx((1 - SD.RATE_BACKOFF) * r.delta_max)
+    # no T of the constrained set does better than the bisection's rate (beyond its width)
+    found = _search_lmi15(np.linalg.norm(B0, 2) / q_max, 1.0)
+    assert found <= r.delta_max * (1 + 2 * SD.REL_TOL)
+    assert found >= r.delta_max * (1 - 2 * SD.REL_TOL)  # and the search reaches it: it is tight
+
+
+def test_lmi15_rate_grows_with_the_cap():
+    rates = [SD.design_lmi15(A0, B0, 1.0, q).delta_max for q in (1.0, 4.0, 16.0)]
+    assert rates[0] < rates[1] < rates[2]
+
+
+def test_lmi16_gevp_rate_and_the_unobservable_mode():
+    _, Phi = uio_matrices(B0, C0)
+    r = SD.design_lmi16(Phi, A0, C0, 1.0)
+    assert SD.lmi16_rate(Phi, A0, C0, r.Theta, r.Omega) >= r.delta
+    assert np.linalg.norm(r.Theta, 2) <= 1.0
+    assert np.linalg.eigvalsh(r.Omega).min() >= 1.0 - 1e-9
+    # δ2 < −2 max Re λ(ΦA0 − ΘC0) for every Θ: the mode at −1 no Θ moves caps it at 2
+    eig = np.linalg.eigvals(Phi @ A0 - r.Theta @ C0)
+    assert r.delta <= -2 * eig.real.max() + 1e-9
+    assert 1.9 < r.delta_max < 2.0
+
+
+def test_given_Q_keeps_the_gain_and_its_rate_is_confirmed():
+    Q = np.array([[35.4, 14.9]])
+    r = SD.design_lmi15_given_Q(A0, B0, Q, 1.0)
+    np.testing.assert_allclose(B0.T @ np.linalg.inv(r.T), Q, rtol=1e-6)
+    assert SD.lmi15_rate(A0, B0, r.T, 1.0) >= r.delta
+    # the scenario's δ1 = 0.5 is far inside what its Q admits
+    assert r.delta_max > 4.0
+
+
+def test_useful_rates():
+    assert SD.useful_rates(1.0, 1.9) == (1.9, 2.0)
+    assert SD.useful_rates(0.5, 1.9) == (1.0, 1.0)
+
+
+def _design_text(extra: str) -> str:
+    text = (ROOT / "scenarios" / "paper.toml").read_text()
+    return text + "\n[design]\n" + extra
+
+
+@pytest.mark.parametrize(
+    ("extra", "key", "fix"),
+    [
+        ("g_min = 0.5\n", "design.u_max", "u_max = peak"),
+        ("u_max = []\n", "design.u_max", "entries"),
+        ("u_max = 200.0\ng_min = 0.0\n", "design.g_min", "a value > 0"),
+        ("u_max = 200.0\ng_min = 1.5\n", "design.g_min", "0 < g_min <= 1"),
+        ("u_max = 200.0\ng_min = -1.0\n", "design.g_min", "a value > 0"),
+        ("u_max = 200.0\ng_min = 0.99\n", "design.g_min", "g_min <= 0.95"),
+        ("u_max = 0.0\n", "design.u_max", "a value > 0"),
+        ("u_max = 200.0\nbound_slack = 0.5\n", "design.bound_slack", ">= 1"),
+        ("u_max = 200.0\nspeed = 1\n", "design", "speed"),
+    ],
+)
+def test_bad_specifications_are_refused_in_one_line(tmp_path, extra, key, fix):
+    f = tmp_path / "bad.toml"
+    f.write_text(_design_text(extra))
+    with pytest.raises(ScenarioError) as exc:
+        load(f)
+    msg = str(exc.value)
+    assert "\n" not in msg and key in msg and fix in msg, msg
+
+
+def test_a_scenario_without_design_is_refused_by_design_run(capsys):
+    from design.cli import main
+
+    code = run_cli(main, ["run", str(ROOT / "scenarios" / "paper.toml")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err and "[design]" in err and "u_max" in err, err
+
+
+def test_without_design_the_scenario_is_unchanged():
+    sc = load(ROOT / "scenarios" / "paper.toml")
+    assert sc.design is None
+
+
+def test_the_projection_interval_of_a_design_holds_one():
+    from design.controller import candidate_overrides
+
+    sc = load(PAPER_DESIGN)
+    for g_min in (0.2, 0.5, 0.95):
+        ov = candidate_overrides(sc, 40.0, 40.0)
+        ov["controller.g_min"] = g_min
+        lo, hi = 1.0, 1.0 / ov["controller.g_min"]
+        assert lo <= 1.0 <= hi
+
+
+def test_balanced_gains_make_the_three_rates_equal():
+    from design.controller import balanced
+    from verify.bounds import theorem2_constants
+
+    sc = load(PAPER_DESIGN)
+    k2, sigma = balanced(sc, 40.0)
+    ov = {
+        "controller.k1": 40.0,
+        "controller.k2": k2.tolist(),
+        "controller.sigma": sigma.tolist(),
+    }
+    s2 = load(PAPER_DESIGN, ov, "balanced")
+    c = theorem2_constants(s2, 0)
+    assert c.provable
+    # Ω = min{2λ_min(K)/λ_max(M), k2, σ}: all three equal
+    assert 2 * 40.0 / c.lam_max_M == pytest.approx(k2[0]) == pytest.approx(c.Omega_var)
+
+
+def _point(peak, tc, d1, holds=True):
+    from design.controller import Point
+
+    n = len(peak)
+    return Point(
+        "candidate", 1.0, 1.0, list(peak), list(tc), [1.0] * n, list(d1), 0.5, holds, True, True, {}
+    )
+
+
+def test_the_choice_rule_on_hand_made_points():
+    from design.controller import choose
+
+    a = _point([100, 100], [10, 10], [1.0, 1.0])  # slow, best bound
+    b = _point([150, 300], [2, 2], [1.4, 1.4])  # faster, bound within 1.5x, 2 over budget
+    c = _point([150, 150], [1, 1], [2.0, 2.0])  # fastest, bound beyond 1.5x
+    d = _point([150, 150], [0.5, 0.5], [1.2, 1.2], holds=False)  # a failing row: never
+    got = choose([a, b, c, d], np.array([200.0, 200.0]), 1.5)
+    assert got[0] is b and got[1] is a
+    assert choose([a, b, c], np.array([50.0, 200.0]), 1.5)[0] is None
+
+
+def test_the_refusal_names_the_budget_and_what_would_work():
+    from design.run import _refuse_budget
+
+    sc = load(PAPER_DESIGN)
+    pts = [_point([230.0] * 5, [1] * 5, [1.0] * 5), _point([240.0] * 5, [1] * 5, [1.0] * 5)]
+    msg = str(_refuse_budget(sc, pts, 1))
+    assert "\n" not in msg and "design.u_max" in msg and "u_max >= 230" in msg, msg
+
+
+def test_designed_observer_gains_certify(monkeypatch):
+    """The observer's designed keys go through synthesis and its whole certificate."""
+    from synthesis.api import synthesize
+
+    monkeypatch.setattr(SD, "FRONT_POINTS", 2)
+    sc = load(PAPER_DESIGN)
+    od = SD.observer_design(sc)
+    assert od.delta1 > sc.observer.delta1 and od.delta2 > sc.observer.delta2
+    g = synthesize(load(PAPER_DESIGN, od.overrides(), "designed"))
+    assert g.certificate["passed"], g.certificate
+    assert g.delta1 == pytest.approx(od.delta1) and g.delta2 == pytest.approx(od.delta2)
+
+
+def test_a_stored_design_is_reused_only_for_its_own_scenario(tmp_path):
+    import json
+
+    from design.run import FORMAT, VARIANT, stored_overrides
+
+    sc = load(PAPER_DESIGN)
+    folder = tmp_path / f"{sc.name}-{VARIANT}"
+    folder.mkdir()
+    ov = {"observer.delta1": 1.5, "controller.k1": [40.0] * 5}
+    rec = {"format": FORMAT, "scenario_sha256": sc.sha256, "overrides": ov}
+    (folder / "design.json").write_text(json.dumps(rec))
+    assert stored_overrides(PAPER_DESIGN, {}, None, tmp_path) == ov
+    rec["scenario_sha256"] = "0" * 64  # written for another scenario (or an edited file)
+    (folder / "design.json").write_text(json.dumps(rec))
+    assert stored_overrides(PAPER_DESIGN, {}, None, tmp_path) is None
+    (folder / "design.json").write_text("{not json")
+    assert stored_overrides(PAPER_DESIGN, {}, None, tmp_path) is None
+
+
+def test_the_design_keys_reach_the_command_line_unchanged():
+    from core.overrides import parse_override
+    from design.cli import _set_args
+
+    ov = {
+        "observer.Theta": [[0.19591445707, 0.391828914142], [0.003782872584, 0.007565745168]],
+        "observer.lambda1": "synthesize",
+        "controller.k1": [40.0, 40.0, 40.0, 40.0, 40.0],
+        "controller.g_min": 0.5,
+    }
+    args = _set_args(ov)
+    back = dict(parse_override(a) for a in args[1::2])
+    assert back == ov
+
+
+def test_a_budget_no_candidate_meets_is_refused_by_make_design(monkeypatch, tmp_path):
+    """make_design's path to the refusal, with the simulations replaced by fixed points."""
+    from design import run as R
+
+    class _Obs:
+        delta1 = delta2 = 1.0
+
+        def overrides(self):
+            return {}
+
+    monkeypatch.setattr("synthesis.design.observer_design", lambda sc: _Obs())
+    monkeypatch.setattr(R, "candidates", lambda sc: [(20.0, 40.0), (40.0, 40.0)])
+    monkeypatch.setattr(R, "evaluate", lambda *a, **k: _point([225.4] * 5, [2.0] * 5, [1.0] * 5))
+    f = tmp_path / "tight.toml"
+    f.write_text(PAPER_DESIGN.read_text().replace("u_max = 226.0", "u_max = 100.0"))
+    with pytest.raises(R.DesignError) as exc:
+        R.make_design(f, out_root=tmp_path, progress=False)
+    msg = str(exc.value)
+    assert "\n" not in msg and "design.u_max: 100 for follower 1" in msg
+    assert "use u_max >= 225.4" in msg, msg
+
+
+@pytest.mark.parametrize(
+    ("extra", "key", "fix"),
+    [
+        ("u_max = 226.0\nd = 1.0\n", "design.d", "d_ir >= each follower's d"),
+        ("u_max = 226.0\nalpha = 1.0\n", "design.alpha", "alpha >= leader.alpha"),
+    ],
+)
+def test_declared_bounds_must_cover_the_scenarios_own(tmp_path, extra, key, fix):
+    f = tmp_path / "bad.toml"
+    f.write_text(_design_text(extra))
+    with pytest.raises(ScenarioError) as exc:
+        load(f)
+    msg = str(exc.value)
+    assert "\n" not in msg and key in msg and fix in msg, msg
+
+
+def test_a_declared_disturbance_bound_reaches_theorem2s_constants(tmp_path):
+    from design.controller import candidate_overrides
+    from verify.bounds import theorem2_constants
+
+    f = tmp_path / "d.toml"
+    f.write_text(_design_text("u_max = 226.0\nd = 6.0\n"))
+    sc = load(f)
+    s2 = load(f, candidate_overrides(sc, 40.0, 40.0), "cand")
+    np.testing.assert_array_equal(s2.followers[0].d, [6.0, 6.0])
+    c = theorem2_constants(s2, 0)
+    assert c.chi_v == pytest.approx(0.5 * s2.controller.k2[0] * 72.0)
+
+
+def test_demo_passes_a_scenario_without_design_to_verify_unchanged(monkeypatch):
+    import verify.__main__ as V
+    from design.cli import demo
+
+    seen = []
+    monkeypatch.setattr(V, "main", lambda argv: seen.append(argv) or 0)
+    args = [str(ROOT / "scenarios" / "paper.toml"), "--no-gif", "--set", "options.sign_width=0.04"]
+    assert demo(args) == 0
+    assert seen == [["demo", *args]]
+
+
+def test_demo_runs_the_stored_design_of_a_design_scenario(monkeypatch, tmp_path):
+    import json
+
+    import verify.__main__ as V
+    from design.cli import demo
+    from design.run import FORMAT, VARIANT
+
+    sc = load(PAPER_DESIGN)
+    folder = tmp_path / f"{sc.name}-{VARIANT}"
+    folder.mkdir()
+    ov = {"observer.delta1": 1.5, "controller.k1": [40.0] * 5}
+    rec = {"format": FORMAT, "scenario_sha256": sc.sha256, "overrides": ov}
+    (folder / "design.json").write_text(json.dumps(rec))
+    seen = []
+    monkeypatch.setattr(V, "main", lambda argv: seen.append(argv) or 0)
+    assert demo([str(PAPER_DESIGN), "--out", str(tmp_path), "--no-gif"]) == 0
+    argv = seen[0]
+    assert argv[:5] == ["demo", str(PAPER_DESIGN), "--out", str(tmp_path), "--no-gif"]
+    assert "observer.delta1=1.5" in argv and argv[-2:] == ["--variant", VARIANT]
+
+
+def test_a_study_on_a_design_base_runs_its_designed_gains(monkeypatch, tmp_path):
+    import json
+
+    import design.run as R
+    from sweep.sampler import make_sample
+    from sweep.study import StudyError, load_study
+
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'name = "s"\nbase = "{PAPER_DESIGN}"\ncount = 2\nseed = 1\n'
+        '[set]\n"controller.Lambda" = 30.0\n'
+    )
+    monkeypatch.setattr(R, "OUT_ROOT", tmp_path)
+    with pytest.raises(StudyError) as exc:  # no design yet: refused in one line
+        load_study(study)
+    assert "\n" not in str(exc.value) and "make design" in str(exc.value)
+    sc = load(PAPER_DESIGN)
+    folder = tmp_path / f"{sc.name}-{R.VARIANT}"
+    folder.mkdir()
+    ov = {"controller.k1": [40.0] * 5, "controller.Lambda": 80.0}
+    rec = {"format": R.FORMAT, "scenario_sha256": sc.sha256, "overrides": ov}
+    (folder / "design.json").write_text(json.dumps(rec))
+    s = make_sample(load_study(study), 0).scenario
+    assert np.all(s.controller.k1 == 40.0)
+    assert np.all(s.controller.Lambda == 30.0)  # the study's own [set] wins
