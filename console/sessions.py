@@ -39,14 +39,11 @@ from pathlib import Path
 import numpy as np
 
 from console.engine import CONSOLE_RISE
+from console.session import PEAK_BOUND, PEAK_FROM
 from core.errors import UsageError, run_cli
 
 #: frames per second of the scripted page (the server's default)
 FPS = 30.0
-#: |u_i| is measured from this time on (the start-up transient before it is the loop's own)
-PEAK_FROM = 1.0
-#: the bound on the peak |u_i| after PEAK_FROM a session must keep (torques of the order of 1e3)
-PEAK_BOUND = 1e3
 DEFAULT_SCENARIO = "scenarios/paper.toml"
 
 

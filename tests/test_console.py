@@ -214,7 +214,7 @@ def test_bad_messages_get_errors_and_the_loop_keeps_its_pace() -> None:
     wall-clock rate is asserted; rates are load-dependent and belong to benchmarks);
     afterwards a good command still acts.
     """
-    hub = fake_hub()
+    hub = fake_hub(deadman=None)  # the client holds u0 without keepalives
     with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
         _drive(ws)
         _states(ws, 0.3)
@@ -275,7 +275,7 @@ def test_integrator_failure_holds_the_loop_resume_retries_reset_restarts() -> No
     from the last good state (not t = 0) and reset starts again from t = 0."""
     from console.engine import MAX_ATTEMPTS
 
-    hub = fake_hub(fail_at=0.3)
+    hub = fake_hub(fail_at=0.3, deadman=None)  # the client holds u0 without keepalives
     loop = hub.session.loop
     with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
         _drive(ws)
@@ -341,7 +341,7 @@ def test_pause_scale_and_held_command_against_closed_form() -> None:
     """A command u0 = a landing at t_a ramps in as a S((t − t_a)/r) and moves the leader
     as :func:`ramp_position`; pause freezes the clock; the scale command sets the pace's
     scale (the achieved wall-clock ratio is load-dependent and is not asserted)."""
-    hub = fake_hub()
+    hub = fake_hub(deadman=None)  # the client holds u0 without keepalives
     with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
         _drive(ws)
         ws.send(json.dumps({"type": "pause"}))
