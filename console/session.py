@@ -212,7 +212,8 @@ class Session:
         self._measure(now, wall, advanced, busy)
         frame = self.frame()
         self._peak(frame)
-        return {**frame, "peak_u": self.peak_u, "peak_t": self.peak_t}
+        frame["peak_u"], frame["peak_t"] = list(self.peak_u), list(self.peak_t)
+        return frame
 
     def _peak(self, frame: dict[str, Any]) -> None:
         """The largest |u_i| of the frames from :data:`PEAK_FROM` on (a non-finite one wins)."""
@@ -273,6 +274,8 @@ class Session:
             "slots_full": len(loop.ramps) >= RAMP_SLOTS,
             "changes": len(loop.changes),
             "log_full": self.log_full,
+            "peak_u": list(self.peak_u),
+            "peak_t": list(self.peak_t),
         }
 
     def snapshot(self) -> Snapshot:
