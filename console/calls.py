@@ -2,7 +2,7 @@
 
 The native integrator is one C call that Python cannot interrupt: an attempt that needs
 10⁶ steps runs for tens of seconds whatever the caller wants. :class:`ChildCalls` runs
-such calls in one child process (``spawn``: no thread of this process is copied) and
+such calls in one child process (a new interpreter: nothing of this one is copied) and
 waits for the answer at most ``timeout`` seconds of wall time; past it the child is
 killed (SIGKILL), a fresh one is started in the background for the next call, and
 :class:`CallTimeout` is raised. Arguments and results travel pickled through a pipe.
@@ -11,12 +11,19 @@ killed (SIGKILL), a fresh one is started in the background for the next call, an
 from __future__ import annotations
 
 import contextlib
-import multiprocessing as mp
+import ctypes
+import signal
+import socket
+import subprocess
+import sys
 import threading
 from collections.abc import Callable
+from multiprocessing.connection import Connection
 from typing import Any
 
 
+#: prctl option: the signal a child gets when its parent dies (linux/prctl.h)
+PR_SET_PDEATHSIG = 1
 #: longest wall time a new child may take to start and make its first (``init``) call
 START_SECONDS = 120.0
 
@@ -25,8 +32,23 @@ class CallTimeout(Exception):
     """A call ran past its wall-time budget; the child that ran it was killed."""
 
 
-def _serve(conn: Any, init: tuple | None) -> None:
-    """The child's loop: ``(fn, args)`` in, ``(ok, result or error text)`` out, until EOF."""
+def child_main(fd: int) -> None:
+    """The child's loop on the socket ``fd``: first the ``init`` call, then ``(fn, args)``
+    in, ``(ok, result or error text)`` out, until the parent closes its end.
+
+    Parameters
+    ----------
+    fd : int
+        The child's end of the socket pair (inherited).
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the group: the parent decides
+    with contextlib.suppress(OSError, AttributeError):  # Linux: die with the parent
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    conn = Connection(fd)
+    try:
+        init = conn.recv()
+    except (EOFError, OSError):
+        return
     try:
         if init is not None:
             init[0](*init[1])
@@ -59,24 +81,28 @@ class ChildCalls:
 
     def __init__(self, name: str = "console-integrator", init: tuple | None = None) -> None:
         self.name, self.init = name, init
-        self._ctx = mp.get_context("spawn")
         self._lock = threading.Lock()
         self._proc: Any = None
         self._conn: Any = None
         self.kills = 0  #: children killed past their budget
 
     def _start(self) -> None:
-        parent, child = self._ctx.Pipe()
-        proc = self._ctx.Process(target=_serve, args=(child, self.init), name=self.name, daemon=True)
-        proc.start()
-        child.close()
-        self._proc, self._conn = proc, parent
-        ok, why = parent.recv() if parent.poll(START_SECONDS) else (False, "no answer")
+        """A new child (``python -c``: the caller's ``__main__`` is not run again in it)."""
+        ours, theirs = socket.socketpair()
+        code = f"from console.calls import child_main; child_main({theirs.fileno()})"
+        proc = subprocess.Popen(
+            [sys.executable, "-c", code], pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL
+        )
+        theirs.close()
+        conn = Connection(ours.detach())
+        self._proc, self._conn = proc, conn
+        conn.send(self.init)
+        ok, why = conn.recv() if conn.poll(START_SECONDS) else (False, "no answer")
         if not ok:
             self._proc, self._conn = None, None
             proc.kill()
-            proc.join(timeout=5)
-            parent.close()
+            proc.wait(timeout=5)
+            conn.close()
             raise RuntimeError(f"the integrator process did not start: {why}")
 
     def warm(self) -> None:
@@ -105,7 +131,7 @@ class ChildCalls:
             ``fn`` raised in the child (its type and text), or the child died.
         """
         with self._lock:
-            if self._proc is None or not self._proc.is_alive():
+            if self._proc is None or self._proc.poll() is not None:
                 self._start()
             conn = self._conn
             conn.send((fn, args))
@@ -127,7 +153,7 @@ class ChildCalls:
         self.kills += 1
         if proc is not None:
             proc.kill()
-            proc.join(timeout=5)
+            proc.wait(timeout=5)
         if self._conn is not None:
             self._conn.close()
         threading.Thread(target=self._rewarm, daemon=True, name=f"{self.name}-restart").start()
@@ -145,5 +171,5 @@ class ChildCalls:
                 self._conn = None
         if proc is not None:
             proc.kill()
-            proc.join(timeout=5)
+            proc.wait(timeout=5)
 
