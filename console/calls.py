@@ -21,7 +21,6 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
-
 #: prctl option: the signal a child gets when its parent dies (linux/prctl.h)
 PR_SET_PDEATHSIG = 1
 #: longest wall time a new child may take to start and make its first (``init``) call
@@ -172,4 +171,3 @@ class ChildCalls:
         if proc is not None:
             proc.kill()
             proc.wait(timeout=5)
-

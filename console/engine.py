@@ -39,11 +39,11 @@ from typing import Any
 
 import numpy as np
 
+from console.calls import CallTimeout, ChildCalls
 from console.changes import Change, Settings, pending_changes
 from console.frames import desired_formation, page_signals, state_columns, state_table
 from console.protocol import Limits, MessageError
 from console.ramps import CONSOLE_RISE, RAMP_SLOTS, Ramp, command_at, fold_finished, u0_literals
-from console.calls import CallTimeout, ChildCalls
 from console.recovery import ATTEMPT_WALL, MAX_ATTEMPTS, Event, restart_settings, run_attempts
 from core.errors import BuildError
 
@@ -643,4 +643,6 @@ def native_attempt(
     from generated import native
 
     image = load_native(library, form)
-    return native.run(library.path, x0, t_out, settings, breakpoints=breaks, p=p, driver=image.driver)
+    return native.run(
+        library.path, x0, t_out, settings, breakpoints=breaks, p=p, driver=image.driver
+    )

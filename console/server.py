@@ -54,8 +54,8 @@ from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
 from console.protocol import (
     DRIVER_ONLY,
-    SCALES,
     MAX_MESSAGE_BYTES,
+    SCALES,
     Command,
     Limits,
     MessageError,

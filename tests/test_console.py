@@ -472,7 +472,7 @@ def test_record_refuses_a_replay_the_loader_refuses(tmp_path: Path) -> None:
     assert sc.followers[2].g.expr.numpy(0.7) == pytest.approx(0.6)
 
 
-# --------------------------------------------------------------------------- issue 51/52
+# ------------------------------------------------------------ letting go, saves, dead sockets
 def test_a_held_command_without_keepalives_returns_to_zero() -> None:
     """Dead-man's handle on the server: a driver that holds u0 = 2 and re-sends it every
     0.2 s keeps it; once it stops sending, u0 is 0 within the dead-man time (0.5 s, plus a

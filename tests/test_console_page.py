@@ -267,7 +267,7 @@ def test_the_page_shows_a_recovery_and_a_hold_and_resume_retries() -> None:
         assert page.text_content("#health") == "ok"
 
 
-# --------------------------------------------------------------------------- issue 51
+# --------------------------------------------------------------- letting go, frames, layout
 def test_closing_the_driving_tab_mid_press_returns_u0_to_zero() -> None:
     """Dead-man's handle: the driving tab closes while → is held; the command goes back
     to 0 (the server's release when the socket closes) and the shaped u0 ramps to 0; a
@@ -406,7 +406,9 @@ def test_a_stick_sweeping_at_half_a_hertz_never_fills_the_ramp_slots() -> None:
       axes: [Math.sin(Math.PI * performance.now() / 1000), 0]}];"""
     with browser_on(hub) as (port, browser, errors):
         page = _open(browser, port, errors, script=pad)
-        page.evaluate("window.__full = 0; setInterval(() => { if (last && last.slots_full) window.__full++; }, 30)")
+        page.evaluate(
+            "window.__full = 0; setInterval(() => { if (last && last.slots_full) window.__full++; }, 30)"
+        )
         time.sleep(4.0)
         assert page.evaluate("window.__full") == 0
         page.close()

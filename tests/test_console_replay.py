@@ -420,8 +420,17 @@ def test_a_signal_stops_the_served_console_within_a_second(tmp_path: Path, sig: 
 
     port = free_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "console", "serve", str(_three_followers(tmp_path)),
-         "--port", str(port), "--out", str(tmp_path / "out")],
+        [
+            sys.executable,
+            "-m",
+            "console",
+            "serve",
+            str(_three_followers(tmp_path)),
+            "--port",
+            str(port),
+            "--out",
+            str(tmp_path / "out"),
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
