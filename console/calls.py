@@ -110,6 +110,11 @@ class ChildCalls:
             if self._proc is None:
                 self._start()
 
+    def warm_later(self) -> None:
+        """Start the child on a thread of its own (a call made before it is up waits for it,
+        outside the call's budget)."""
+        threading.Thread(target=self._rewarm, daemon=True, name=f"{self.name}-start").start()
+
     def call(self, fn: Callable[..., Any], args: tuple, timeout: float) -> Any:
         """``fn(*args)`` in the child; its result, or :class:`CallTimeout` after ``timeout`` s.
 

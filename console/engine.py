@@ -460,7 +460,7 @@ class LiveLoop(LoopBase):
         self.calls: ChildCalls | None = None
         if not self.method.integrates_dyn and built.driver is not None:
             self.calls = ChildCalls(init=(load_native, (built.library, built.form)))
-            self.calls.warm()
+            self.calls.warm_later()
         super().__init__(
             limits, sc.integration.output_step, nominal, built.closed_loop.x0, rise=rise
         )
