@@ -11,7 +11,6 @@ killed (SIGKILL), a fresh one is started in the background for the next call, an
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import signal
 import socket
 import subprocess
@@ -21,8 +20,6 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
-#: prctl option: the signal a child gets when its parent dies (linux/prctl.h)
-PR_SET_PDEATHSIG = 1
 #: longest wall time a new child may take to start and make its first (``init``) call
 START_SECONDS = 120.0
 
@@ -40,9 +37,9 @@ def child_main(fd: int) -> None:
     fd : int
         The child's end of the socket pair (inherited).
     """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the group: the parent decides
-    with contextlib.suppress(OSError, AttributeError):  # Linux: die with the parent
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    # Ctrl-C reaches the whole group: the parent decides. A child whose parent is gone
+    # reads the end of its socket and exits (after the call it is in, if any).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     conn = Connection(fd)
     try:
         init = conn.recv()
@@ -145,8 +142,10 @@ class ChildCalls:
             try:
                 ok, out = conn.recv()
             except (EOFError, OSError):
+                code = self._proc.wait(timeout=5) if self._proc is not None else None
                 self._kill()
-                raise RuntimeError("the integrator process died") from None
+                how = f"signal {-code}" if code is not None and code < 0 else f"exit {code}"
+                raise RuntimeError(f"the integrator process died ({how})") from None
         if not ok:
             raise RuntimeError(out)
         return out

@@ -558,6 +558,9 @@ class LiveLoop(LoopBase):
                     f"{ATTEMPT_WALL:g} s (working towards t = {float(t_out[-1]):.6g} s)"
                 )
                 return Advance(t_out[:1], np.asarray(x0)[None, :], why, 0, timed_out=True)
+            except RuntimeError as exc:  # the child died or raised: held, saying so
+                why = f"attempt {attempt + 1}: {exc}"
+                return Advance(t_out[:1], np.asarray(x0)[None, :], why, 0, timed_out=True)
         fail = "" if traj.complete else traj.message
         return Advance(traj.t, traj.x, fail, int(traj.stats.get("steps", 0) or 0))
 

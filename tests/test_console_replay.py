@@ -459,3 +459,47 @@ def test_a_signal_stops_the_served_console_within_a_second(tmp_path: Path, sig: 
     finally:
         proc.kill()
         proc.wait()
+
+
+def test_scripted_sessions_with_link_cuts_and_faults(tmp_path: Path) -> None:
+    """The short version of ``python -m console.sessions --network``: two 3 s sessions on
+    the three-follower console with presses, link cuts and restores and faults. Each runs
+    to its end or is held saying why; the cuts and faults reach the loop as changes, and
+    the cuts the console refused are exactly those after which the graph fails
+    Assumption 1 by core.graph's own check (check_network); the report counts them."""
+    from console.protocol import MessageError
+    from console.sessions import report, run_session, session_script
+    from core.errors import SynthesisError
+    from core.graph import check_network
+
+    con = open_console(_three_followers(tmp_path), out_root=tmp_path / "out")
+    lim = con.loop.limits
+    results = []
+    for index in range(2):
+        script = session_script(np.random.default_rng([5, index]), 3.0, lim, True)
+        refusable = 0
+        weights = dict(con.loop.nominal.weights)
+        for _, m in script:  # which cuts break Assumption 1, replaying the links alone
+            if m["type"] != "link":
+                continue
+            key = (m["follower"] - 1, m["neighbour"] - 1)
+            trial = {**weights, key: 0.0 if m["cut"] else con.loop.nominal.weights[key]}
+            A, a0 = np.zeros((lim.N, lim.N)), np.zeros(lim.N)
+            for (i, j), w in trial.items():
+                (a0.__setitem__(i, w) if j < 0 else A.__setitem__((i, j), w))
+            try:
+                check_network(A, a0)
+                weights = trial
+            except SynthesisError:
+                refusable += 1
+        r = run_session(con, index, 5, 3.0, network=True)
+        results.append(r)
+        assert r.network == sum(m["type"] != "u0" for _, m in script) > 0
+        assert r.refused == refusable
+        assert r.held or r.t_end == pytest.approx(3.0, abs=0.05)
+        kinds = {c.kind for c in con.loop.changes}
+        assert kinds & {"link", "health", "bias"}
+    assert MessageError  # the refusals are MessageError lines (counted, not raised)
+    text = report(results, "python -m console.sessions --network", "three", "prov", 2.0)
+    assert f"cuts refused as breaking Assumption 1: {sum(r.refused for r in results)}" in text
+    con.loop.close()
