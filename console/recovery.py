@@ -4,10 +4,11 @@ When the integrator stops inside a call, the loop restarts it from the last stat
 reached with a smaller first step (the ``attempt`` of
 :meth:`console.engine.LoopBase.integrate`), up to :data:`MAX_ATTEMPTS` times; each
 failure is an :class:`Event` (the session's log, the record's ``events.csv``, the
-page). If every attempt fails the loop is *held* at the last good state (its
-``failure`` says why); ``resume`` tries again from there and ``reset`` goes back to
-t = 0. Nothing is ever retried in a loop without the clock advancing or the loop
-being held.
+page). If every attempt fails, or one runs past its wall-time budget
+(:data:`ATTEMPT_WALL`, enforced where the attempt runs in a child process:
+:mod:`console.calls`), the loop is *held* at the last good state (its ``failure`` says
+why); ``resume`` tries again from there and ``reset`` goes back to t = 0. Nothing is
+ever retried in a loop without the clock advancing or the loop being held.
 """
 
 from __future__ import annotations

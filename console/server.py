@@ -21,7 +21,7 @@ per :data:`SAVE_INTERVAL` seconds of wall time.
 Roles: the first page to send ``drive`` drives; the others watch (their commands get
 an error naming the page's drive button) until the driver's page closes; every frame says
 whether a page drives (``driven``), and a watcher's drive button then takes over.
-Closing a page stops nothing else.
+Closing the driving page sets u0 back to 0; it stops nothing else.
 Connections from addresses that are not loopback are refused unless the server was
 started with ``allow_remote``; a page or WebSocket whose ``Host`` header is not a loopback
 name at the serving port (or one of ``hosts``) is refused (DNS rebinding: another site's
