@@ -576,3 +576,29 @@ def test_an_attempt_past_its_wall_time_budget_is_killed() -> None:
             calls.call(divmod, (1, 0), timeout=30.0)
     finally:
         calls.close()
+
+
+def test_slow_calls_take_fewer_quanta() -> None:
+    """Frame pacing: when each quantum costs 20 ms of wall time (a stiff stretch), calls
+    take at most CALL_WALL / 20 ms = 5 quanta (about 0.1 s each, so the state keeps
+    changing several times a second) instead of a whole tick's 0.25 s of simulated time
+    in one 0.5 s call; the run falls behind the scale and the ratio says so."""
+    from console.session import CALL_WALL, Session
+
+    loop = FakeLoop()
+    plain = loop.integrate
+    per_call: list[int] = []
+
+    def slow(x0, t_out, breaks, attempt=0):
+        per_call.append(len(t_out) - 1)
+        time.sleep(0.02 * (len(t_out) - 1))
+        return plain(x0, t_out, breaks, attempt)
+
+    loop.integrate = slow
+    session = Session(loop)
+    end = time.monotonic() + 2.0
+    while time.monotonic() < end:
+        frame = session.tick()
+        time.sleep(1 / 30)
+    assert len(per_call) > 10 and max(per_call[2:]) <= round(CALL_WALL / 0.02), per_call
+    assert frame["ratio"] < 0.9
