@@ -374,16 +374,21 @@ def test_integrator_failure_on_the_compiled_loop_is_recovered(tmp_path: Path) ->
     assert s.frame()["failure"] == "" and s.frame()["t"] == 0.0 and s.frame()["events"] == []
 
 
-def test_an_attempt_past_its_wall_time_budget_holds_the_compiled_loop(
-    tmp_path: Path, monkeypatch
-) -> None:
+@pytest.fixture(scope="module")
+def three(recorded) -> tuple[Path, Path]:
+    """The recorded run's scenario file and output root (its gains already certified)."""
+    out = recorded[0].out.parent
+    return out.parent / "three.toml", out
+
+
+def test_an_attempt_past_its_wall_time_budget_holds_the_compiled_loop(three, monkeypatch) -> None:
     """On the compiled loop, whose native attempts run in a child process: with a wall-time
     budget no attempt can meet (0 s), the call's first attempt is stopped, the loop is
     held at once (no retry with more steps) saying why, at its last good state; with the
     budget back, resume runs on from there in the replaced child."""
     import console.engine as engine
 
-    con = open_console(_three_followers(tmp_path), out_root=tmp_path / "out")
+    con = open_console(three[0], out_root=three[1])
     s = con.session
     now = [0.0]
     s.clock, s.last_wall = (lambda: now[0]), 0.0
@@ -410,7 +415,7 @@ def test_an_attempt_past_its_wall_time_budget_holds_the_compiled_loop(
 
 
 @pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
-def test_a_signal_stops_the_served_console_within_a_second(tmp_path: Path, sig: str) -> None:
+def test_a_signal_stops_the_served_console_within_a_second(three, sig: str) -> None:
     """``python -m console serve`` with a page connected and the loop running: SIGTERM (or
     SIGINT, Ctrl-C) ends the process, its integrator child included, in under 1 s."""
     import signal
@@ -425,11 +430,11 @@ def test_a_signal_stops_the_served_console_within_a_second(tmp_path: Path, sig: 
             "-m",
             "console",
             "serve",
-            str(_three_followers(tmp_path)),
+            str(three[0]),
             "--port",
             str(port),
             "--out",
-            str(tmp_path / "out"),
+            str(three[1]),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -461,7 +466,7 @@ def test_a_signal_stops_the_served_console_within_a_second(tmp_path: Path, sig: 
         proc.wait()
 
 
-def test_scripted_sessions_with_link_cuts_and_faults(tmp_path: Path) -> None:
+def test_scripted_sessions_with_link_cuts_and_faults(three) -> None:
     """The short version of ``python -m console.sessions --network``: two 3 s sessions on
     the three-follower console with presses, link cuts and restores and faults. Each runs
     to its end or is held saying why; the cuts and faults reach the loop as changes, and
@@ -472,7 +477,7 @@ def test_scripted_sessions_with_link_cuts_and_faults(tmp_path: Path) -> None:
     from core.errors import SynthesisError
     from core.graph import check_network
 
-    con = open_console(_three_followers(tmp_path), out_root=tmp_path / "out")
+    con = open_console(three[0], out_root=three[1])
     lim = con.loop.limits
     results = []
     for index in range(2):
