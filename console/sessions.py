@@ -352,7 +352,7 @@ def _worker(args: tuple[str, str, list[int], int, float, float, bool]) -> list[S
 
     scenario, out_root, indices, seed, seconds, rise, network = args
     con = open_console(scenario, out_root=out_root, rise=rise)
-    if con.loop.calls is not None:  # the integrator's child is up before the first session
+    if con.loop.calls is not None:  # the integrator's child is up before any session starts
         con.loop.calls.warm()
     try:
         return [run_session(con, i, seed, seconds, network) for i in indices]

@@ -254,7 +254,7 @@ setInterval(() => {
 
 function releaseKeys() {
   keys = { left: false, right: false, up: false, down: false };
-  if (info) pushU0(Array(info.p).fill(0));
+  if (info && last && last.role === "driver") pushU0(Array(info.p).fill(0));
 }
 window.addEventListener("blur", releaseKeys);
 window.addEventListener("pagehide", releaseKeys);
