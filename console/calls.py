@@ -166,12 +166,9 @@ class ChildCalls:
             self.warm()
 
     def close(self) -> None:
-        """Stop the child (at shutdown); later calls start a new one."""
-        with self._lock:
-            proc, self._proc = self._proc, None
-            if self._conn is not None:
-                self._conn.close()
-                self._conn = None
+        """Kill the child now (at shutdown), without waiting for a call in progress: that
+        call sees the child die and fails; later calls start a new one."""
+        proc = self._proc
         if proc is not None:
             proc.kill()
             proc.wait(timeout=5)

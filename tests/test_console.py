@@ -602,3 +602,29 @@ def test_slow_calls_take_fewer_quanta() -> None:
         time.sleep(1 / 30)
     assert len(per_call) > 10 and max(per_call[2:]) <= round(CALL_WALL / 0.02), per_call
     assert frame["ratio"] < 0.9
+
+
+def test_closing_the_child_does_not_wait_for_its_call() -> None:
+    """Shutdown while an attempt runs: close() kills the child at once (it does not wait
+    for the call's budget), and the call in progress fails saying the process died."""
+    import threading
+
+    from console.calls import ChildCalls
+
+    calls = ChildCalls()
+    calls.warm()
+    seen: list[str] = []
+
+    def run() -> None:
+        try:
+            calls.call(time.sleep, (30.0,), timeout=20.0)
+        except RuntimeError as exc:
+            seen.append(str(exc))
+
+    th = threading.Thread(target=run)
+    th.start()
+    time.sleep(0.3)
+    t0 = time.monotonic()
+    calls.close()
+    th.join(timeout=10)
+    assert time.monotonic() - t0 < 1.0 and seen and "died (signal 9)" in seen[0], seen
