@@ -229,7 +229,8 @@ class Hub:
         period = 1.0 / self.fps
         nxt = time.perf_counter()
         watcher = asyncio.create_task(self.watch())
-        try:
+        try:  # a frame before the first tick (which may wait for the integrator to start)
+            self.last_frame = await asyncio.wrap_future(self.worker.submit(self.session.frame))
             while True:
                 t0 = self.tick_started = time.perf_counter()
                 frame = await asyncio.wrap_future(self.worker.submit(self._tick))
