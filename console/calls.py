@@ -11,11 +11,13 @@ killed (SIGKILL), a fresh one is started in the background for the next call, an
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import socket
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
@@ -30,7 +32,7 @@ class CallTimeout(Exception):
 
 def child_main(fd: int) -> None:
     """The child's loop on the socket ``fd``: first the ``init`` call, then ``(fn, args)``
-    in, ``(ok, result or error text)`` out, until the parent closes its end.
+    in, ``(ok, result or error text)`` out, until the parent closes its end or dies.
 
     Parameters
     ----------
@@ -38,30 +40,35 @@ def child_main(fd: int) -> None:
         The child's end of the socket pair (inherited).
     """
     # Ctrl-C reaches the whole group: the parent decides. A child whose parent is gone
-    # reads the end of its socket and exits (after the call it is in, if any).
+    # exits at once, even inside a call (the native driver releases the GIL).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_exit_with, args=(os.getppid(),), daemon=True).start()
     conn = Connection(fd)
     try:
         init = conn.recv()
-    except (EOFError, OSError):
-        return
-    try:
-        if init is not None:
-            init[0](*init[1])
-        conn.send((True, None))
-    except Exception as exc:  # noqa: BLE001 - the parent reports it
-        conn.send((False, f"{type(exc).__name__}: {exc}"))
-        return
-    while True:
         try:
-            fn, args = conn.recv()
-        except (EOFError, OSError):
-            return
-        try:
-            out = (True, fn(*args))
+            if init is not None:
+                init[0](*init[1])
+            conn.send((True, None))
         except Exception as exc:  # noqa: BLE001 - the parent reports it
-            out = (False, f"{type(exc).__name__}: {exc}")
-        conn.send(out)
+            conn.send((False, f"{type(exc).__name__}: {exc}"))
+            return
+        while True:
+            fn, args = conn.recv()
+            try:
+                out = (True, fn(*args))
+            except Exception as exc:  # noqa: BLE001 - the parent reports it
+                out = (False, f"{type(exc).__name__}: {exc}")
+            conn.send(out)
+    except (EOFError, OSError):  # the parent closed its end, or is gone
+        return
+
+
+def _exit_with(parent: int) -> None:
+    """End this process as soon as its parent is no longer ``parent``."""
+    while os.getppid() == parent:
+        time.sleep(0.2)
+    os._exit(0)
 
 
 class ChildCalls:
@@ -93,7 +100,10 @@ class ChildCalls:
         conn = Connection(ours.detach())
         self._proc, self._conn = proc, conn
         conn.send(self.init)
-        ok, why = conn.recv() if conn.poll(START_SECONDS) else (False, "no answer")
+        try:
+            ok, why = conn.recv() if conn.poll(START_SECONDS) else (False, "no answer")
+        except (EOFError, OSError):  # killed while starting (a shutdown)
+            ok, why = False, "it ended while starting"
         if not ok:
             self._proc, self._conn = None, None
             proc.kill()
