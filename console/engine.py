@@ -39,11 +39,12 @@ from typing import Any
 
 import numpy as np
 
+from console.calls import CallTimeout, ChildCalls
 from console.changes import Change, Settings, pending_changes
 from console.frames import desired_formation, page_signals, state_columns, state_table
-from console.protocol import Limits
+from console.protocol import Limits, MessageError
 from console.ramps import CONSOLE_RISE, RAMP_SLOTS, Ramp, command_at, fold_finished, u0_literals
-from console.recovery import MAX_ATTEMPTS, Event, restart_settings, run_attempts
+from console.recovery import ATTEMPT_WALL, MAX_ATTEMPTS, Event, restart_settings, run_attempts
 from core.errors import BuildError
 
 #: the names other modules import from here (they live in the modules named above)
@@ -75,12 +76,15 @@ class Advance:
         Empty when every time was reached, else the integrator's reason.
     steps : int
         Integrator steps taken.
+    timed_out : bool
+        The attempt ran past its wall-time budget and was stopped (no retry follows).
     """
 
     t: np.ndarray
     x: np.ndarray
     failure: str = ""
     steps: int = 0
+    timed_out: bool = False
 
 
 class LoopBase:
@@ -203,7 +207,23 @@ class LoopBase:
             Follower heard, 0-based; -1 for the leader (the pinning a_i0).
         cut : bool
             True: weight 0; False: the scenario's weight.
+
+        Raises
+        ------
+        MessageError
+            A cut that would leave a follower unreachable from the leader (Assumption 1):
+            refused, naming them; nothing changes.
         """
+        if cut:
+            lost = unreachable_after(self.target.weights, (i, j), self.limits.N)
+            if lost:
+                names = ", ".join(str(k + 1) for k in lost)
+                edge = f"{i + 1} ← {'leader' if j < 0 else j + 1}"
+                raise MessageError(
+                    f"link {edge}: refused, the cut would leave follower{'s' if len(lost) > 1 else ''}"
+                    f" {names} unreachable from the leader (Assumption 1); restore another "
+                    "link to it first"
+                )
         self.target.weights[(i, j)] = 0.0 if cut else self.nominal.weights[(i, j)]
 
     def clear(self, i: int) -> None:
@@ -229,6 +249,8 @@ class LoopBase:
             The time they are dated (when they land).
         """
         room = len(self.ramps) < RAMP_SLOTS
+        if self.ramps:  # changes land at most every rise / RAMP_SLOTS: the slots never fill
+            room = room and t - self.ramps[-1].c >= self.rise / RAMP_SLOTS - 1e-9
         return pending_changes(self.settings, self.target, self.limits.N, room, t)
 
     def parameters_changed(self) -> None:
@@ -329,6 +351,33 @@ class LoopBase:
         return X
 
 
+def unreachable_after(
+    weights: dict[tuple[int, int], float], cut: tuple[int, int], N: int
+) -> list[int]:
+    """0-based followers the leader cannot reach once ``cut`` is cut (core.graph, Assumption 1).
+
+    Parameters
+    ----------
+    weights : dict
+        (i, j) -> a_ij, j = -1 for the leader's pinning a_i0 (the links as they are asked for).
+    cut : (int, int)
+        The link to cut.
+    N : int
+        Followers.
+    """
+    from core.graph import unreachable_followers
+
+    A, a0 = np.zeros((N, N)), np.zeros(N)
+    for (i, j), w in weights.items():
+        if (i, j) == cut:
+            continue
+        if j < 0:
+            a0[i] = w
+        else:
+            A[i, j] = w
+    return unreachable_followers(A, a0)
+
+
 # --------------------------------------------------------------------------- the real loop
 
 
@@ -407,6 +456,12 @@ class LiveLoop(LoopBase):
         )
         self.layout = built.closed_loop.layout
         self._bound: Any = None
+        # the native driver is one C call: it runs in a child process killed past the
+        # attempt's wall-time budget (console/calls.py); other methods run in this process
+        self.calls: ChildCalls | None = None
+        if not self.method.integrates_dyn and built.driver is not None:
+            self.calls = ChildCalls(init=(load_native, (built.library, built.form)))
+            self.calls.warm_later()
         super().__init__(
             limits, sc.integration.output_step, nominal, built.closed_loop.x0, rise=rise
         )
@@ -491,9 +546,29 @@ class LiveLoop(LoopBase):
         # step; the native C drivers take none (CVODE chooses it)
         first_step = self.method.integrates_dyn
         s, breaks = restart_settings(self.settings_int, t_out, breaks, attempt, first_step)
-        traj = integrate_built(self.bound(), x0, t_out, s, breaks)
+        b = self.bound()
+        if self.calls is None:
+            traj = integrate_built(b, x0, t_out, s, breaks)
+        else:
+            args = (b.library, b.form, x0, t_out, s, breaks, b.p)
+            try:
+                traj = self.calls.call(native_attempt, args, ATTEMPT_WALL)
+            except CallTimeout:
+                why = (
+                    f"attempt {attempt + 1} stopped after its wall-time budget of "
+                    f"{ATTEMPT_WALL:g} s (working towards t = {float(t_out[-1]):.6g} s)"
+                )
+                return Advance(t_out[:1], np.asarray(x0)[None, :], why, 0, timed_out=True)
+            except RuntimeError as exc:  # the child died or raised: held, saying so
+                why = f"attempt {attempt + 1}: {exc}"
+                return Advance(t_out[:1], np.asarray(x0)[None, :], why, 0, timed_out=True)
         fail = "" if traj.complete else traj.message
         return Advance(traj.t, traj.x, fail, int(traj.stats.get("steps", 0) or 0))
+
+    def close(self) -> None:
+        """Stop the integrator's child process (at shutdown)."""
+        if self.calls is not None:
+            self.calls.close()
 
     def signals(self, x: np.ndarray) -> dict[str, Any]:
         """Leader output, followers, formation slots, error norms, ĝ_i and |u_i|.
@@ -521,3 +596,57 @@ class LiveLoop(LoopBase):
             States, one row per time.
         """
         return state_table(X, self.layout, self.sc.N)
+
+
+# --------------------------------------------------------------------------- the child's side
+#: the library this (child) process loaded, by cache key (kept: its code stays mapped)
+_IMAGES: dict[str, Any] = {}
+
+
+def load_native(library: Any, form: str) -> Any:
+    """Load a native build's library in this process, from its verified bytes, once per key.
+
+    Parameters
+    ----------
+    library : generated.codegen.Library
+        The cache entry (checked as :func:`generated.loaded.open_image` checks it).
+    form : str
+        ``"ode"`` or ``"dae"``.
+    """
+    from generated.loaded import open_image
+
+    if library.key not in _IMAGES:
+        _IMAGES[library.key] = open_image(library, form)
+    return _IMAGES[library.key]
+
+
+def native_attempt(
+    library: Any,
+    form: str,
+    x0: np.ndarray,
+    t_out: np.ndarray,
+    settings: Any,
+    breaks: list[float],
+    p: np.ndarray,
+) -> Any:
+    """One integrator attempt with the native driver (run in the integrator's child process).
+
+    Parameters
+    ----------
+    library, form
+        As :func:`load_native`.
+    x0, t_out, settings, breaks
+        As :func:`generated.api.integrate_built`.
+    p : ndarray
+        The runtime parameters.
+
+    Returns
+    -------
+    Trajectory
+    """
+    from generated import native
+
+    image = load_native(library, form)
+    return native.run(
+        library.path, x0, t_out, settings, breakpoints=breaks, p=p, driver=image.driver
+    )

@@ -36,6 +36,8 @@ from core.errors import ToolkitError
 MAX_MESSAGE_BYTES = 4096
 #: time scale bounds: simulated seconds per wall-clock second
 SCALE_RANGE = (0.05, 20.0)
+#: the scales the page's + and − step through (1 among them, the ends the bounds)
+SCALES = (0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0)
 #: commands only the driving page may send (the others watch)
 DRIVER_ONLY = frozenset({"u0", "pause", "resume", "reset", "scale", "health", "bias", "link"})
 DRIVER_ONLY |= {"clear", "save"}

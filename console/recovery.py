@@ -4,10 +4,11 @@ When the integrator stops inside a call, the loop restarts it from the last stat
 reached with a smaller first step (the ``attempt`` of
 :meth:`console.engine.LoopBase.integrate`), up to :data:`MAX_ATTEMPTS` times; each
 failure is an :class:`Event` (the session's log, the record's ``events.csv``, the
-page). If every attempt fails the loop is *held* at the last good state (its
-``failure`` says why); ``resume`` tries again from there and ``reset`` goes back to
-t = 0. Nothing is ever retried in a loop without the clock advancing or the loop
-being held.
+page). If every attempt fails, or one runs past its wall-time budget
+(:data:`ATTEMPT_WALL`, enforced where the attempt runs in a child process:
+:mod:`console.calls`), the loop is *held* at the last good state (its ``failure`` says
+why); ``resume`` tries again from there and ``reset`` goes back to t = 0. Nothing is
+ever retried in a loop without the clock advancing or the loop being held.
 """
 
 from __future__ import annotations
@@ -26,6 +27,9 @@ if TYPE_CHECKING:  # the loop calls in here; only its type is needed
 MAX_ATTEMPTS = 4
 #: first step (s) of the first restart after a failure; each further restart takes 1/100 of it
 FIRST_STEP = 1e-6
+#: wall-time budget (s) of one integrator attempt: past it the attempt is stopped and the
+#: loop is held (a retry with more steps would only take longer)
+ATTEMPT_WALL = 2.0
 
 
 @dataclass(frozen=True)
@@ -93,9 +97,12 @@ def run_attempts(loop: LoopBase, ks: np.ndarray) -> tuple[list[float], list[np.n
         loop.events.append(Event(loop.t, "failure", res.failure))
         if loop.k > int(rest[0]):  # progress was made: restarts begin there
             loop.restarts.append(loop.t)
+        if res.timed_out:
+            break
+    tried = f"{attempt + 1} integrator attempt{'s' if attempt else ''} failed"
     why = (
-        f"held at t = {loop.t:g} s: {MAX_ATTEMPTS} integrator attempts failed "
-        f"({loop.events[-1].text}); resume retries from here, reset starts again at t = 0"
+        f"held at t = {loop.t:g} s: {tried} ({loop.events[-1].text}); "
+        "resume retries from here, reset starts again at t = 0"
     )
     loop.events.append(Event(loop.t, "held", why))
     return ts, xs, steps, why

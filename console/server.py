@@ -1,17 +1,27 @@
 """The console's web server: one page, one WebSocket, one loop shared by every page.
 
-Starlette (ASGI routing, static files, WebSockets) served by uvicorn: the page and
-its socket share one asyncio thread with the loop, so a command is applied between
-two integrator calls without locks (README, 'Operator console', says why this
-library). The loop task ticks the :class:`~console.session.Session` at ``fps`` and
-hands the frame to every page's writer; a slow page only misses frames (each page
-keeps the newest), it never slows the loop. Replies (errors, saves) are queued per
-page and never dropped below :data:`MAX_REPLIES`.
+Starlette (ASGI routing, static files, WebSockets) served by uvicorn. The event loop
+only exchanges messages: every tick of the :class:`~console.session.Session` (the
+integrator calls) and every command runs on the session's own thread
+(:class:`~console.worker.Worker`), in order, so a command still falls between two
+integrator calls without locks and a long call never stops the sockets. The loop task
+asks for a tick at ``fps`` and hands the frame to every page's writer; while a tick is
+still running, the pages get the last frame again with ``busy`` (the seconds the
+integrator call has run), so a page always knows whether the server is alive. A slow
+page only misses frames (each page keeps the newest), it never slows the loop.
+Replies (errors, saves) are queued per page and never dropped below
+:data:`MAX_REPLIES`.
+
+**Dead-man's handle.** The driving page re-sends a non-zero command at least every
+:data:`KEEPALIVE` seconds while it is held; when :data:`DEADMAN` seconds pass without
+one, or the driving page closes, or another page takes over, the command goes back to
+0 (through the ramps, as any change). **Saves** are limited to one at a time and one
+per :data:`SAVE_INTERVAL` seconds of wall time.
 
 Roles: the first page to send ``drive`` drives; the others watch (their commands get
 an error naming the page's drive button) until the driver's page closes; every frame says
 whether a page drives (``driven``), and a watcher's drive button then takes over.
-Closing a page stops nothing else.
+Closing the driving page sets u0 back to 0; it stops nothing else.
 Connections from addresses that are not loopback are refused unless the server was
 started with ``allow_remote``; a page or WebSocket whose ``Host`` header is not a loopback
 name at the serving port (or one of ``hosts``) is refused (DNS rebinding: another site's
@@ -40,10 +50,19 @@ from starlette.applications import Starlette
 from starlette.requests import Request
 from starlette.responses import FileResponse, PlainTextResponse, Response
 from starlette.routing import Route, WebSocketRoute
-from starlette.websockets import WebSocket, WebSocketDisconnect
+from starlette.websockets import WebSocket, WebSocketDisconnect, WebSocketState
 
-from console.protocol import DRIVER_ONLY, MAX_MESSAGE_BYTES, Limits, MessageError, parse_message
-from console.session import Session
+from console.protocol import (
+    DRIVER_ONLY,
+    MAX_MESSAGE_BYTES,
+    SCALES,
+    Command,
+    Limits,
+    MessageError,
+    parse_message,
+)
+from console.session import PEAK_BOUND, PEAK_FROM, Session
+from console.worker import Worker
 
 STATIC = Path(__file__).parent / "static"
 #: frame rates the page may be streamed at (the issue's 20-60 Hz)
@@ -55,6 +74,14 @@ MAX_REPLIES = 4096
 MAX_FRAME_BYTES = 4 * MAX_MESSAGE_BYTES
 #: Host names every console accepts (with the serving port)
 LOOPBACK_NAMES = frozenset({"127.0.0.1", "localhost", "::1"})
+#: seconds between two sends of a held non-zero command by the driving page (its keepalive)
+KEEPALIVE = 0.2
+#: seconds without a command from the driving page after which a non-zero u0 returns to 0
+DEADMAN = 0.5
+#: a tick running longer than this (s) makes the pages get the last frame with ``busy``
+BUSY_AFTER = 0.25
+#: shortest wall time (s) between two saves (a record holds the whole log so far)
+SAVE_INTERVAL = 10.0
 
 
 def is_loopback(host: str | None) -> bool:
@@ -158,6 +185,11 @@ class Hub:
         ``Host`` names accepted besides the loopback ones (``--allow-remote HOST``).
     title : str
         Shown on the page (the scenario's name).
+    deadman : float or None
+        Seconds without a command from the driving page after which a non-zero u0
+        returns to 0 (:data:`DEADMAN`); None: never (scripted clients in tests).
+    save_interval : float
+        Shortest wall time between two saves (:data:`SAVE_INTERVAL`).
     """
 
     def __init__(
@@ -168,38 +200,90 @@ class Hub:
         allow_remote: bool = False,
         title: str = "",
         hosts: Iterable[str] = (),
+        deadman: float | None = DEADMAN,
+        save_interval: float = SAVE_INTERVAL,
     ) -> None:
         if not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:
             raise MessageError(f"--fps: {fps:g} (expected {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g})")
         self.session, self.limits, self.fps = session, limits, fps
         self.allow_remote, self.title = allow_remote, title
         self.hosts = frozenset(host_name(h) for h in hosts)
+        self.deadman, self.save_interval = deadman, save_interval
         self.records = ThreadPoolExecutor(max_workers=1, thread_name_prefix="console-record")
+        self.worker = Worker()
         self.pages: set[Page] = set()
         self.driver: Page | None = None
         self.frames = 0
         self.tick_seconds: deque = deque(maxlen=256)
+        self.last_frame: dict[str, Any] | None = None
+        self.tick_started: float | None = None  # perf_counter of the tick in progress
+        self.u0_wall = 0.0  # perf_counter of the driving page's last u0 message
+        self.u0_held = False  # whether the command it holds is non-zero
+        self.save_wall: float | None = None  # perf_counter of the last save accepted
+        self.saving = False
 
     # ---------------------------------------------------------------- loop
     async def run(self) -> None:
-        """Tick the session at ``fps`` and hand each frame to every page, until cancelled."""
+        """Tick the session at ``fps`` (on the worker) and hand each frame to every page,
+        until cancelled; meanwhile :meth:`watch` keeps the pages informed."""
         period = 1.0 / self.fps
         nxt = time.perf_counter()
+        watcher = asyncio.create_task(self.watch())
+        try:  # a frame before the first tick (which may wait for the integrator to start)
+            self.last_frame = await asyncio.wrap_future(self.worker.submit(self.session.frame))
+            while True:
+                t0 = self.tick_started = time.perf_counter()
+                frame = await asyncio.wrap_future(self.worker.submit(self._tick))
+                self.tick_started = None
+                self.tick_seconds.append(time.perf_counter() - t0)
+                self.frames += 1
+                self.last_frame = frame
+                self._broadcast(frame)
+                nxt += period
+                delay = nxt - time.perf_counter()
+                if delay < -period:  # fell behind: do not burst to catch up
+                    nxt, delay = time.perf_counter(), 0.0
+                await asyncio.sleep(max(delay, 0.0))
+        finally:
+            watcher.cancel()
+
+    def _tick(self) -> dict[str, Any]:
+        """One tick on the worker; an exception holds the loop and the frame says why."""
+        try:
+            return self.session.tick()
+        except Exception as exc:  # noqa: BLE001 - the loop must survive; the page says why
+            self.session.loop.failure = f"{type(exc).__name__}: {exc}"
+            return self.session.frame()
+
+    async def watch(self) -> None:
+        """Every frame period: the last frame again with ``busy`` while a tick runs long,
+        and the dead-man's handle (:data:`DEADMAN`)."""
+        period = 1.0 / self.fps
         while True:
-            t0 = time.perf_counter()
-            try:
-                frame = self.session.tick()
-            except Exception as exc:  # noqa: BLE001 - the loop must survive; the page says why
-                self.session.loop.failure = f"{type(exc).__name__}: {exc}"
-                frame = self.session.frame()
-            self.tick_seconds.append(time.perf_counter() - t0)
-            self.frames += 1
-            self._broadcast(frame)
-            nxt += period
-            delay = nxt - time.perf_counter()
-            if delay < -period:  # fell behind: do not burst to catch up
-                nxt, delay = time.perf_counter(), 0.0
-            await asyncio.sleep(max(delay, 0.0))
+            await asyncio.sleep(period)
+            now = time.perf_counter()
+            started = self.tick_started
+            if started is not None and now - started > BUSY_AFTER and self.last_frame:
+                self._broadcast({**self.last_frame, "busy": now - started})
+            late = self.deadman is not None and now - self.u0_wall > self.deadman
+            if self.driver is not None and self.u0_held and late:
+                self.release(self.driver, f"no command for {self.deadman:g} s")
+
+    def release(self, page: Page | None, why: str) -> None:
+        """Set u0 back to 0 (through the ramps) and tell ``page`` why.
+
+        Parameters
+        ----------
+        page : Page or None
+            The page that drove (None: it has gone).
+        why : str
+            One line, shown by the page.
+        """
+        self.u0_held = False
+        zero = Command("u0", values=(0.0,) * self.limits.p)
+        self.worker.submit(self.session.handle, zero)
+        if page is not None:
+            page.push_reply({"type": "released", "reason": why})
 
     def _broadcast(self, frame: dict[str, Any]) -> None:
         text = json.dumps(_finite(frame), separators=(",", ":"))
@@ -272,6 +356,7 @@ class Hub:
             self.pages.discard(page)
             if self.driver is page:
                 self.driver = None
+                self.release(None, "the driving page closed")
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await writer
@@ -293,7 +378,9 @@ class Hub:
                     raise MessageError(
                         "drive: another page drives (the drive button takes over once it closes)"
                     )
-                self.driver = page
+                if self.driver is not page:  # a new driver starts from u0 = 0
+                    self.driver = page
+                    self.release(None, "a new page drives")
                 page.push_reply({"type": "role", "role": "driver"})
                 return
             if cmd.kind in DRIVER_ONLY and page is not self.driver:
@@ -303,30 +390,74 @@ class Hub:
             if cmd.kind == "save":
                 self._save(page)
                 return
-            reply = self.session.handle(cmd)
-            if reply is not None:
-                page.push_reply(reply)
+            if cmd.kind == "u0":
+                self.u0_wall, self.u0_held = time.perf_counter(), any(cmd.values)
+            elif cmd.kind == "reset":
+                self.u0_held = False
+            done = asyncio.wrap_future(self.worker.submit(self.session.handle, cmd))
+            done.add_done_callback(lambda f: self._answer(page, f, ""))
         except MessageError as exc:
             page.push_reply({"type": "error", "message": str(exc)})
         except Exception as exc:  # noqa: BLE001 - one page's message must not stop the server
             page.push_reply({"type": "error", "message": f"{type(exc).__name__}: {exc}"})
 
+    @staticmethod
+    def _answer(page: Page, done: asyncio.Future, prefix: str) -> None:
+        """A command's reply (if any), or its error, to the page that sent it."""
+        if done.cancelled():
+            return
+        exc = done.exception()
+        if exc is None:
+            if done.result() is not None:
+                page.push_reply(done.result())
+            return
+        text = str(exc) if isinstance(exc, MessageError) else f"{type(exc).__name__}: {exc}"
+        page.push_reply({"type": "error", "message": prefix + text})
+
     def _save(self, page: Page) -> None:
-        """Snapshot the log now; write the record on the record worker; reply when done."""
-        job = self.session.save_job()
-        done = asyncio.get_running_loop().run_in_executor(self.records, job)
-        done.add_done_callback(lambda f: page.push_reply(_saved(f)))
+        """Snapshot the log on the worker; write the record on the record thread; reply when
+        done. One save at a time, at most one per :attr:`save_interval` seconds."""
+        now = time.perf_counter()
+        if self.saving:
+            raise MessageError("save: a save is being written (wait for its reply)")
+        if self.save_wall is not None and now - self.save_wall < self.save_interval:
+            wait = self.save_interval - (now - self.save_wall)
+            raise MessageError(
+                f"save: the last save was {now - self.save_wall:.1f} s ago "
+                f"(at most one save every {self.save_interval:g} s; try again in {wait:.1f} s)"
+            )
+        self.saving, self.save_wall = True, now
+        loop = asyncio.get_running_loop()
+
+        def write() -> dict[str, Any]:
+            job = self.worker.submit(self.session.save_job).result()  # the snapshot, in order
+            return job()
+
+        def done(f: asyncio.Future) -> None:
+            self.saving = False
+            page.push_reply(_saved(f))
+
+        loop.run_in_executor(self.records, write).add_done_callback(done)
 
     async def _write(self, page: Page) -> None:
-        """Send a page its replies (all, in order) and then its newest frame."""
+        """Send a page its replies (all, in order) and then its newest frame.
+
+        Each send yields to the event loop first, so a connection that was lost is seen
+        (the socket's disconnect arrives) before the next send, and the first failed
+        send ends the writer: a dead socket is not written to again.
+        """
         try:
             while True:
                 await page.wake.wait()
                 page.wake.clear()
-                while page.replies:
-                    await page.ws.send_text(page.replies.popleft())
-                if page.frame is not None:
-                    text, page.frame = page.frame, None
+                while page.replies or page.frame is not None:
+                    await asyncio.sleep(0)
+                    if page.ws.client_state != WebSocketState.CONNECTED:
+                        return
+                    if page.replies:
+                        text = page.replies.popleft()
+                    else:
+                        text, page.frame = page.frame, None
                     await page.ws.send_text(text)
         except (WebSocketDisconnect, RuntimeError, OSError):
             pass
@@ -347,6 +478,12 @@ class Hub:
             "quantum": loop.quantum,
             "fps": self.fps,
             "nominal_health": loop.nominal.health.tolist(),
+            "keepalive": KEEPALIVE,
+            "deadman": self.deadman,
+            "peak_bound": PEAK_BOUND,
+            "peak_from": PEAK_FROM,
+            "scales": list(SCALES),
+            "rise": loop.rise,
         }
 
 
@@ -405,6 +542,7 @@ def create_app(hub: Hub) -> Starlette:
             task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await task
+            hub.worker.stop()
 
     def guarded(name: str, media: str):
         async def endpoint(request: Request) -> Response:

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from console.engine import Change, Event, LoopBase
+from console.engine import RAMP_SLOTS, Change, Event, LoopBase
 from console.protocol import Command, MessageError
 
 #: most wall-clock seconds one tick pays for (a longer stall slows the run down instead)
@@ -39,6 +39,15 @@ RATIO_WINDOW = 1.0
 EVENTS_SHOWN = 5
 #: the console's log: the integrator's failures, restarts and holds
 LOG = logging.getLogger("console")
+#: wall time (s) one integrator call aims at: fewer quanta per call when calls are slow
+#: (a stiff stretch), so states keep coming at several per second instead of one per call
+CALL_WALL = 0.1
+#: |u_i| counts towards the page's peak from this simulated time on (the start-up
+#: transient before it is the loop's own, not the operator's)
+PEAK_FROM = 1.0
+#: the bound on the peak |u_i| after PEAK_FROM the page and the scripted sessions check
+#: (torques of the order of 1e3; an unshaped press gives 1e4 and more)
+PEAK_BOUND = 1e3
 
 
 @dataclass
@@ -120,11 +129,14 @@ class Session:
         self.owed = 0.0
         self.last_wall = clock()
         self.run = 0
+        self.wall_per_quantum = 0.0  # of the last integrator call
         self._start_log()
 
     def _start_log(self) -> None:
         self.run += 1
         self.events_logged = 0
+        self.peak_u = [0.0] * self.loop.limits.N  # largest |u_i| in a frame from PEAK_FROM on
+        self.peak_t = [float("nan")] * self.loop.limits.N
         self.log_t: list[float] = [self.loop.t]
         self.log_x: list[np.ndarray] = [self.loop.x.copy()]
         self.log_full = False
@@ -180,20 +192,38 @@ class Session:
         self.last_wall = now
         advanced, busy = 0.0, 0.0
         if not self.pace.paused and not self.loop.failure:
-            self.owed += wall * self.pace.scale
+            # owed time never exceeds one tick's worth: a loop that cannot keep up runs
+            # slower than the scale asked for (the ratio says so), it does not burst later
+            self.owed = min(self.owed + wall * self.pace.scale, MAX_LAG * self.pace.scale)
             h = self.loop.quantum
             quanta = min(int(math.floor(self.owed / h + 1e-9)), MAX_QUANTA)
+            if self.wall_per_quantum > 0:  # frame pacing: a call of about CALL_WALL
+                quanta = min(quanta, max(1, int(CALL_WALL / self.wall_per_quantum)))
             if quanta >= 1:
                 t_before = self.loop.t
                 w0 = self.clock()
                 adv = self.loop.advance(quanta)
                 busy = self.clock() - w0
                 advanced = self.loop.t - t_before
+                self.wall_per_quantum = busy / quanta
                 self.owed = 0.0 if adv.failure else max(self.owed - quanta * h, 0.0)
                 self._log(adv.t, adv.x)
         self._report_events()
         self._measure(now, wall, advanced, busy)
-        return self.frame()
+        frame = self.frame()
+        self._peak(frame)
+        frame["peak_u"], frame["peak_t"] = list(self.peak_u), list(self.peak_t)
+        return frame
+
+    def _peak(self, frame: dict[str, Any]) -> None:
+        """The largest |u_i| of the frames from :data:`PEAK_FROM` on (a non-finite one wins)."""
+        un = frame.get("unorm")
+        if un is None or frame["t"] < PEAK_FROM:
+            return
+        for i, v in enumerate(un):
+            v = float("inf") if v is None or not math.isfinite(v) else float(v)
+            if v > self.peak_u[i]:
+                self.peak_u[i], self.peak_t[i] = v, float(frame["t"])
 
     def _report_events(self) -> None:
         """The integrator's new events into the console's log (logger ``console``)."""
@@ -241,8 +271,11 @@ class Session:
             "recoveries": sum(e.kind == "recovered" for e in loop.events),
             "ramps": len(loop.ramps),
             "queued": bool(np.any(loop.settings.u0 != st.u0)),
+            "slots_full": len(loop.ramps) >= RAMP_SLOTS,
             "changes": len(loop.changes),
             "log_full": self.log_full,
+            "peak_u": list(self.peak_u),
+            "peak_t": list(self.peak_t),
         }
 
     def snapshot(self) -> Snapshot:

@@ -1,9 +1,9 @@
 """Scripted console sessions: a random operator at the keys, the loop's health measured.
 
 ``python -m console.sessions [SCENARIO] [--sessions 200] [--seconds 6] [--seed 0]
-[--workers 2] [--out out/console-sessions]`` opens the console of ``SCENARIO`` (default
-the paper's) without a server and, for each session, resets the loop and plays a random
-operator through the session layer exactly as the server does (validated ``u0``
+[--workers 2] [--network] [--out out/console-sessions]`` opens the console of ``SCENARIO``
+(default the paper's) without a server and, for each session, resets the loop and plays a
+random operator through the session layer exactly as the server does (validated
 messages between frames of a wall clock the script advances at 30 frames per second):
 
 * **holds**: a key pressed for 0.2-2.5 s, then released;
@@ -12,10 +12,17 @@ messages between frames of a wall clock the script advances at 30 frames per sec
 * **stick moves**: a gamepad axis at a random value, moved or released;
 
 each command of random size up to the protocol's bound (|u0_k| ≤ α/√p) and random sign,
-with pauses of 50 ms to 1.5 s between actions. Measured per session: integrator
-failures (attempts that stopped), holds (every attempt failed), the largest |u_i| over
-the logged states from t = 1 s on (the quanta, every ``integration.output_step``), the
-commands that waited for a ramp slot, integrator steps and wall time.
+with pauses of 50 ms to 1.5 s between actions. With ``--network`` the operator also
+cuts links (a random edge of the graph; a cut the console refuses because it would
+leave a follower unreachable from the leader is counted) and restores them 0.3-2 s
+later, and injects faults (a health g_i between g_min and 1, a bias up to
+``--bias-max`` on each coordinate, ``clear``). Measured per session: integrator
+failures (attempts that stopped), holds (every attempt failed), attempts stopped by
+their wall-time budget, the largest |u_i| over the logged states from t = 1 s on (the
+quanta, every ``integration.output_step``), the commands that waited for a ramp slot,
+integrator steps, the longest tick (wall time of one frame's integrator call: in a
+served console the state on the page does not change for that long, though frames
+go on) and the ticks over 1 s (*freezes*), and wall time.
 
 Writes ``sessions.csv`` (one row per session), ``report.md`` (provenance line, the
 command, the totals) and ``provenance.json`` into ``--out``.
@@ -35,18 +42,16 @@ from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from console.engine import CONSOLE_RISE
+from console.session import PEAK_BOUND, PEAK_FROM
 from core.errors import UsageError, run_cli
 
 #: frames per second of the scripted page (the server's default)
 FPS = 30.0
-#: |u_i| is measured from this time on (the start-up transient before it is the loop's own)
-PEAK_FROM = 1.0
-#: the bound on the peak |u_i| after PEAK_FROM a session must keep (torques of the order of 1e3)
-PEAK_BOUND = 1e3
 DEFAULT_SCENARIO = "scenarios/paper.toml"
 
 
@@ -80,6 +85,16 @@ class SessionResult:
         Integrator steps.
     wall_s : float
         Wall time of the session.
+    network : int
+        Link cuts, restores and faults sent.
+    refused : int
+        Messages the console refused (a cut breaking Assumption 1).
+    timeouts : int
+        Attempts stopped by their wall-time budget.
+    longest_tick_s : float
+        Longest wall time of one tick.
+    freezes : int
+        Ticks longer than :data:`FREEZE` s.
     """
 
     session: int
@@ -94,6 +109,55 @@ class SessionResult:
     t_end: float
     steps: int
     wall_s: float
+    network: int = 0
+    refused: int = 0
+    timeouts: int = 0
+    longest_tick_s: float = 0.0
+    freezes: int = 0
+
+
+#: a tick (one frame's integrator call) longer than this is a freeze of the page's state (s)
+FREEZE = 1.0
+
+
+def network_script(
+    rng: np.random.Generator, seconds: float, edges: Sequence[tuple[int, int]], N: int, lim: Any
+) -> list[tuple[float, dict]]:
+    """Random link cuts with their restores and faults: (time, message) pairs, sorted.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    seconds : float
+        Length of the session (simulated s).
+    edges : sequence of (int, int)
+        The graph's edges, 1-based (follower, neighbour; 0 the leader).
+    N : int
+        Followers.
+    lim : console.protocol.Limits
+        ``g_min``, ``bias_max`` and ``n``.
+    """
+    out: list[tuple[float, dict]] = []
+    t = float(rng.uniform(1.0, 2.0))
+    edges = sorted(edges)
+    while t < seconds:
+        kind = rng.choice(["cut", "health", "bias", "clear"], p=[0.5, 0.2, 0.2, 0.1])
+        i = int(rng.integers(1, N + 1))
+        if kind == "cut":
+            f, j = edges[int(rng.integers(len(edges)))]
+            out.append((t, {"type": "link", "follower": f, "neighbour": j, "cut": True}))
+            back = t + float(rng.uniform(0.3, 2.0))
+            out.append((back, {"type": "link", "follower": f, "neighbour": j, "cut": False}))
+        elif kind == "health":
+            g = float(rng.uniform(lim.g_min, 1.0))
+            out.append((t, {"type": "health", "follower": i, "value": g}))
+        elif kind == "bias":
+            b = [float(v) for v in rng.uniform(-lim.bias_max, lim.bias_max, lim.n)]
+            out.append((t, {"type": "bias", "follower": i, "value": b}))
+        else:
+            out.append((t, {"type": "clear", "follower": i}))
+        t += float(rng.uniform(0.5, 2.0))
+    return sorted(((tk, m) for tk, m in out if tk < seconds), key=lambda e: e[0])
 
 
 def operator_script(
@@ -153,7 +217,29 @@ def operator_script(
     return [(tk, u) for tk, u in out if tk < seconds]
 
 
-def run_session(con, index: int, seed: int, seconds: float) -> SessionResult:
+def session_script(
+    rng: np.random.Generator, seconds: float, lim: Any, network: bool
+) -> list[tuple[float, dict]]:
+    """A session's messages: (time, message) pairs, sorted.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    seconds : float
+        Length of the session (simulated s).
+    lim : console.protocol.Limits
+    network : bool
+        Add :func:`network_script`'s link cuts, restores and faults.
+    """
+    ops = operator_script(rng, seconds, lim.p, lim.u_max)
+    script = [(t, {"type": "u0", "value": list(u)}) for t, u in ops]
+    if network:
+        script += network_script(rng, seconds, lim.edges, lim.N, lim)
+        script.sort(key=lambda e: e[0])
+    return script
+
+
+def run_session(con, index: int, seed: int, seconds: float, network: bool = False) -> SessionResult:
     """Reset the console's loop and play one random operator; its measurements.
 
     Parameters
@@ -166,28 +252,39 @@ def run_session(con, index: int, seed: int, seconds: float) -> SessionResult:
         The run's seed (the script's is (seed, index)).
     seconds : float
         Simulated seconds.
+    network : bool
+        Also cut and restore links and inject faults (:func:`network_script`).
     """
-    from console.protocol import parse_message
+    from console.protocol import MessageError, parse_message
 
     loop, s = con.loop, con.session
     lim = loop.limits
     s.handle(parse_message('{"type": "reset"}', lim))
-    script = operator_script(np.random.default_rng([seed, index]), seconds, lim.p, lim.u_max)
+    script = session_script(np.random.default_rng([seed, index]), seconds, lim, network)
     now = [0.0]
     s.clock, s.last_wall = (lambda: now[0]), 0.0
     frames = int(math.ceil(seconds * FPS))
-    k, waited, sent, logged = 0, 0, 0, 1
+    k, waited, sent, logged, net, refused = 0, 0, 0, 1, 0, 0
+    longest, freezes = 0.0, 0
     peak, peak_t = -1.0, float("nan")
     w0 = time.perf_counter()
     for f in range(frames):
         t_page = f / FPS  # wall time of the page = simulated time at scale 1
         while k < len(script) and script[k][0] <= t_page:
-            msg = json.dumps({"type": "u0", "value": list(script[k][1])})
-            s.handle(parse_message(msg, lim))
-            k, sent = k + 1, sent + 1
+            msg = script[k][1]
+            try:
+                s.handle(parse_message(json.dumps(msg), lim))
+            except MessageError:  # a cut that would break Assumption 1
+                refused += 1
+            sent += msg["type"] == "u0"
+            net += msg["type"] != "u0"
+            k += 1
         now[0] += 1.0 / FPS
+        tick0 = time.perf_counter()
         frame = s.tick()
-        waited += bool(frame["queued"])
+        tick = time.perf_counter() - tick0
+        longest, freezes = max(longest, tick), freezes + (tick > FREEZE)
+        waited += bool(frame["queued"] and frame["slots_full"])
         t_new, x_new = s.log_t[logged:], s.log_x[logged:]
         logged = len(s.log_t)
         u, tu = peak_torque(loop, np.array(t_new), np.array(x_new))
@@ -210,6 +307,11 @@ def run_session(con, index: int, seed: int, seconds: float) -> SessionResult:
         t_end=loop.t,
         steps=loop.steps,
         wall_s=wall,
+        network=net,
+        refused=refused,
+        timeouts=sum(e.kind == "failure" and "wall-time budget" in e.text for e in loop.events),
+        longest_tick_s=longest,
+        freezes=freezes,
     )
 
 
@@ -244,13 +346,18 @@ def peak_torque(loop, t: np.ndarray, X: np.ndarray) -> tuple[float, float]:
     return best, when
 
 
-def _worker(args: tuple[str, str, list[int], int, float, float]) -> list[SessionResult]:
+def _worker(args: tuple[str, str, list[int], int, float, float, bool]) -> list[SessionResult]:
     """Open the console once in this process and run its share of the sessions."""
     from console.app import open_console
 
-    scenario, out_root, indices, seed, seconds, rise = args
+    scenario, out_root, indices, seed, seconds, rise, network = args
     con = open_console(scenario, out_root=out_root, rise=rise)
-    return [run_session(con, i, seed, seconds) for i in indices]
+    if con.loop.calls is not None:  # the integrator's child is up before any session starts
+        con.loop.calls.warm()
+    try:
+        return [run_session(con, i, seed, seconds, network) for i in indices]
+    finally:
+        con.loop.close()
 
 
 def run_sessions(
@@ -261,6 +368,7 @@ def run_sessions(
     workers: int,
     out_root: str,
     rise: float = CONSOLE_RISE,
+    network: bool = False,
 ) -> list[SessionResult]:
     """Every session, split over ``workers`` processes (each opens the console once).
 
@@ -274,9 +382,11 @@ def run_sessions(
         Where the console's gains are cached.
     rise : float
         Rise time of the shaped changes of u0 (s).
+    network : bool
+        Link cuts, restores and faults too.
     """
     shares = [list(range(w, sessions, workers)) for w in range(workers)]
-    jobs = [(scenario, out_root, idx, seed, seconds, rise) for idx in shares if idx]
+    jobs = [(scenario, out_root, idx, seed, seconds, rise, network) for idx in shares if idx]
     if len(jobs) == 1:
         results = _worker(jobs[0])
     else:
@@ -306,6 +416,7 @@ def report(
     fails = sum(r.failures for r in results)
     held = sum(r.held for r in results)
     over = int(np.sum(~(peaks <= PEAK_BOUND)))
+    frozen = sum(r.freezes for r in results)
     worst = sorted(results, key=lambda r: -r.peak_u if np.isfinite(r.peak_u) else -np.inf)[:5]
     lines = [
         prov,
@@ -322,23 +433,32 @@ def report(
         f"- u0 commands sent: {sum(r.commands for r in results)}, changes landed: "
         f"{sum(r.changes for r in results)}, frames with a command waiting for a ramp "
         f"slot: {sum(r.waited for r in results)}",
+        f"- link cuts, restores and faults sent: {sum(r.network for r in results)} (cuts refused "
+        f"as breaking Assumption 1: {sum(r.refused for r in results)})",
         f"- integrator failures: {fails} (restarts that recovered: "
-        f"{sum(r.recoveries for r in results)}), loops held: {held}",
+        f"{sum(r.recoveries for r in results)}), loops held: {held} (sessions with a failure: "
+        f"{sum(r.failures > 0 for r in results)}; attempts stopped by their wall-time budget: "
+        f"{sum(r.timeouts for r in results)})",
+        f"- freezes (a tick's integrator call over {FREEZE:g} s of wall time): "
+        f"{sum(r.freezes for r in results)}; longest tick "
+        f"{max(r.longest_tick_s for r in results):.3g} s",
         f"- peak |u_i| after t = {PEAK_FROM:g} s: largest {np.nanmax(peaks):.4g}, median "
         f"{np.nanmedian(peaks):.4g}; sessions above {PEAK_BOUND:g}: {over}",
         f"- integrator steps per simulated second: "
         f"{sum(r.steps for r in results) / max(sum(r.t_end for r in results), 1e-9):.0f}",
         "",
-        f"Verdict: {'PASS' if fails == 0 and held == 0 and over == 0 else 'FAIL'} "
-        f"(0 failures and peak |u_i| <= {PEAK_BOUND:g} after {PEAK_FROM:g} s in every session)",
+        f"Verdict: {'PASS' if fails == 0 and held == 0 and over == 0 and not frozen else 'FAIL'} "
+        f"(0 failures, 0 freezes and peak |u_i| <= {PEAK_BOUND:g} after {PEAK_FROM:g} s in "
+        "every session)",
         "",
-        "| session | commands | changes | failures | held | peak ‖u_i‖ | at t (s) | steps |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| session | commands | network | changes | failures | held | peak ‖u_i‖ | at t (s) "
+        "| steps | longest tick (s) |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in worst:
         lines.append(
-            f"| {r.session} | {r.commands} | {r.changes} | {r.failures} | {r.held} | "
-            f"{r.peak_u:.4g} | {r.peak_t:.2f} | {r.steps} |"
+            f"| {r.session} | {r.commands} | {r.network} | {r.changes} | {r.failures} | "
+            f"{r.held} | {r.peak_u:.4g} | {r.peak_t:.2f} | {r.steps} | {r.longest_tick_s:.3g} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -386,6 +506,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
     ap.add_argument("--out", default="out/console-sessions")
     ap.add_argument("--rise", type=float, default=CONSOLE_RISE, help="ramp time of u0 (s)")
+    ap.add_argument(
+        "--network", action="store_true", help="also cut and restore links and inject faults"
+    )
     a = ap.parse_args(argv)
     if a.sessions < 1:
         raise UsageError(f"--sessions: {a.sessions} (expected at least 1)")
@@ -398,12 +521,14 @@ def main(argv: list[str] | None = None) -> int:
     if not Path(a.scenario).is_file():
         raise UsageError(f"{a.scenario}: no such scenario file")
     out = Path(a.out)
-    results = run_sessions(a.scenario, a.sessions, a.seconds, a.seed, a.workers, str(out), a.rise)
+    results = run_sessions(
+        a.scenario, a.sessions, a.seconds, a.seed, a.workers, str(out), a.rise, a.network
+    )
     command = "python -m console.sessions " + " ".join(argv or [])
     text = report(results, command.strip(), a.scenario, provenance_line(), a.rise)
     write_outputs(out, results, text)
     print(text, end="")
-    bad = sum(r.failures + r.held for r in results) or any(
+    bad = sum(r.failures + r.held + r.freezes for r in results) or any(
         not r.peak_u <= PEAK_BOUND for r in results
     )
     return 1 if bad else 0

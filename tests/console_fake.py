@@ -20,7 +20,7 @@ import uvicorn
 
 from console.engine import Advance, LoopBase, Settings, desired_formation
 from console.protocol import Limits
-from console.server import Hub, create_app
+from console.server import DEADMAN, SAVE_INTERVAL, Hub, create_app
 from console.session import Session
 
 B0 = np.array([[4.0, 0.0], [0.0, 4.0], [-4.0, 0.0]])
@@ -142,7 +142,19 @@ def running(hub: Hub, host: str = "127.0.0.1"):
         th.join(timeout=10)
 
 
-def fake_hub(fail_at: float | None = None, fps: float = 30.0, p: int = 1, recorder=None) -> Hub:
-    """A hub around a :class:`FakeLoop` (``p`` inputs; an optional recorder for saves)."""
+def fake_hub(
+    fail_at: float | None = None,
+    fps: float = 30.0,
+    p: int = 1,
+    recorder=None,
+    deadman: float | None = DEADMAN,
+    save_interval: float = SAVE_INTERVAL,
+) -> Hub:
+    """A hub around a :class:`FakeLoop` (``p`` inputs; an optional recorder for saves).
+
+    ``deadman=None`` for a scripted client that holds a command without keepalives."""
     loop = FakeLoop(fail_at, p=p)
-    return Hub(Session(loop, recorder=recorder), loop.limits, fps=fps, title="fake")
+    session = Session(loop, recorder=recorder)
+    return Hub(
+        session, loop.limits, fps=fps, title="fake", deadman=deadman, save_interval=save_interval
+    )

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import time
 from pathlib import Path
 
@@ -214,7 +215,7 @@ def test_bad_messages_get_errors_and_the_loop_keeps_its_pace() -> None:
     wall-clock rate is asserted; rates are load-dependent and belong to benchmarks);
     afterwards a good command still acts.
     """
-    hub = fake_hub()
+    hub = fake_hub(deadman=None)  # the client holds u0 without keepalives
     with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
         _drive(ws)
         _states(ws, 0.3)
@@ -275,7 +276,7 @@ def test_integrator_failure_holds_the_loop_resume_retries_reset_restarts() -> No
     from the last good state (not t = 0) and reset starts again from t = 0."""
     from console.engine import MAX_ATTEMPTS
 
-    hub = fake_hub(fail_at=0.3)
+    hub = fake_hub(fail_at=0.3, deadman=None)  # the client holds u0 without keepalives
     loop = hub.session.loop
     with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
         _drive(ws)
@@ -341,7 +342,7 @@ def test_pause_scale_and_held_command_against_closed_form() -> None:
     """A command u0 = a landing at t_a ramps in as a S((t − t_a)/r) and moves the leader
     as :func:`ramp_position`; pause freezes the clock; the scale command sets the pace's
     scale (the achieved wall-clock ratio is load-dependent and is not asserted)."""
-    hub = fake_hub()
+    hub = fake_hub(deadman=None)  # the client holds u0 without keepalives
     with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
         _drive(ws)
         ws.send(json.dumps({"type": "pause"}))
@@ -469,3 +470,161 @@ def test_record_refuses_a_replay_the_loader_refuses(tmp_path: Path) -> None:
         x = min(max((t - 0.5) / r, 0.0), 1.0)
         assert sc.leader.u0_numpy(t)[0] == pytest.approx(2.0 * (3 * x**2 - 2 * x**3), abs=1e-15)
     assert sc.followers[2].g.expr.numpy(0.7) == pytest.approx(0.6)
+
+
+# ------------------------------------------------------------ letting go, saves, dead sockets
+def test_a_held_command_without_keepalives_returns_to_zero() -> None:
+    """Dead-man's handle on the server: a driver that holds u0 = 2 and re-sends it every
+    0.2 s keeps it; once it stops sending, u0 is 0 within the dead-man time (0.5 s, plus a
+    frame) and the driver is told why."""
+    from console.server import DEADMAN, KEEPALIVE
+
+    hub = fake_hub()
+    loop = hub.session.loop
+    with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
+        _drive(ws)
+        end = time.monotonic() + 1.2
+        while time.monotonic() < end:  # keepalives: the command stays
+            ws.send(json.dumps({"type": "u0", "value": [2.0]}))
+            _states(ws, KEEPALIVE)
+        assert tuple(loop.target.u0) == (2.0,)
+        t_last = time.monotonic()
+        released = None
+        while released is None and time.monotonic() < t_last + 2.0:
+            m = json.loads(ws.recv(timeout=2))
+            if m["type"] == "released":
+                released = time.monotonic() - t_last
+        assert released is not None and released < DEADMAN + 0.2, released
+        assert m["reason"] == f"no command for {DEADMAN:g} s"
+        time.sleep(0.1)
+        assert tuple(loop.target.u0) == (0.0,)
+
+
+def test_saves_are_limited_to_one_per_interval() -> None:
+    """Twenty saves at once: one is written, the others are refused in one line (one save
+    at a time); a save within the interval is refused saying when to try again; after the
+    interval it is written."""
+
+    def recorder(snap) -> dict:
+        return {"folder": f"rec-{snap.rows}", "rows": snap.rows}
+
+    hub = fake_hub(recorder=recorder, save_interval=1.0)
+    with running(hub) as port, connect(f"ws://127.0.0.1:{port}/ws") as ws:
+        _drive(ws)
+        replies = []
+        for _ in range(20):
+            ws.send(json.dumps({"type": "save"}))
+        while len(replies) < 20:
+            m = json.loads(ws.recv(timeout=5))
+            if m["type"] in ("saved", "error"):
+                replies.append(m)
+        kinds = [m["type"] for m in replies]
+        assert kinds.count("saved") == 1, kinds
+        refused = [m["message"] for m in replies if m["type"] == "error"]
+        assert all(r.startswith("save: ") and "\n" not in r for r in refused)
+        ws.send(json.dumps({"type": "save"}))  # the first is written: now the interval counts
+        while (m := json.loads(ws.recv(timeout=5)))["type"] not in ("saved", "error"):
+            pass
+        assert "at most one save every 1 s; try again in" in m["message"], m
+        time.sleep(1.1)
+        ws.send(json.dumps({"type": "save"}))
+        while (m := json.loads(ws.recv(timeout=5)))["type"] not in ("saved", "error"):
+            pass
+        assert m["type"] == "saved", m
+
+
+def test_a_dead_socket_is_not_written_to(caplog) -> None:
+    """A client that floods the server with bad messages and resets its TCP connection
+    without reading: the server stops writing to it (no 'socket.send() raised exception'
+    lines in the log) and goes on serving."""
+    import socket
+    import struct
+
+    hub = fake_hub()
+    caplog.set_level(logging.WARNING)
+    with running(hub) as port:
+        for _ in range(3):
+            with connect(f"ws://127.0.0.1:{port}/ws") as ws:
+                _drive(ws)
+                for _ in range(3000):
+                    ws.send("{bad")
+                sock = ws.socket
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+                sock.close()  # RST: every later write of the server fails
+            time.sleep(0.5)
+        with connect(f"ws://127.0.0.1:{port}/ws") as ws:
+            frames, _ = _states(ws, 0.3)
+            assert frames
+    flood = [r for r in caplog.records if "socket.send() raised exception" in r.getMessage()]
+    assert flood == []
+
+
+def test_an_attempt_past_its_wall_time_budget_is_killed() -> None:
+    """A call that would run 30 s in the child is stopped after its 0.5 s budget; the
+    child is replaced and the next call is answered."""
+    from console.calls import CallTimeout, ChildCalls
+
+    calls = ChildCalls()
+    try:
+        calls.warm()
+        t0 = time.monotonic()
+        with pytest.raises(CallTimeout):
+            calls.call(time.sleep, (30.0,), timeout=0.5)
+        assert time.monotonic() - t0 < 1.5 and calls.kills == 1
+        assert calls.call(divmod, (7, 2), timeout=30.0) == (3, 1)
+        with pytest.raises(RuntimeError, match="ZeroDivisionError"):
+            calls.call(divmod, (1, 0), timeout=30.0)
+    finally:
+        calls.close()
+
+
+def test_slow_calls_take_fewer_quanta() -> None:
+    """Frame pacing: when each quantum costs 20 ms of wall time (a stiff stretch), calls
+    take at most CALL_WALL / 20 ms = 5 quanta (about 0.1 s each, so the state keeps
+    changing several times a second) instead of a whole tick's 0.25 s of simulated time
+    in one 0.5 s call; the run falls behind the scale and the ratio says so."""
+    from console.session import CALL_WALL, Session
+
+    loop = FakeLoop()
+    plain = loop.integrate
+    per_call: list[int] = []
+
+    def slow(x0, t_out, breaks, attempt=0):
+        per_call.append(len(t_out) - 1)
+        time.sleep(0.02 * (len(t_out) - 1))
+        return plain(x0, t_out, breaks, attempt)
+
+    loop.integrate = slow
+    session = Session(loop)
+    end = time.monotonic() + 2.0
+    while time.monotonic() < end:
+        frame = session.tick()
+        time.sleep(1 / 30)
+    assert len(per_call) > 10 and max(per_call[2:]) <= round(CALL_WALL / 0.02), per_call
+    assert frame["ratio"] < 0.9
+
+
+def test_closing_the_child_does_not_wait_for_its_call() -> None:
+    """Shutdown while an attempt runs: close() kills the child at once (it does not wait
+    for the call's budget), and the call in progress fails saying the process died."""
+    import threading
+
+    from console.calls import ChildCalls
+
+    calls = ChildCalls()
+    calls.warm()
+    seen: list[str] = []
+
+    def run() -> None:
+        try:
+            calls.call(time.sleep, (30.0,), timeout=20.0)
+        except RuntimeError as exc:
+            seen.append(str(exc))
+
+    th = threading.Thread(target=run)
+    th.start()
+    time.sleep(0.3)
+    t0 = time.monotonic()
+    calls.close()
+    th.join(timeout=10)
+    assert time.monotonic() - t0 < 1.0 and seen and "died (signal 9)" in seen[0], seen

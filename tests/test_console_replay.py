@@ -372,3 +372,139 @@ def test_integrator_failure_on_the_compiled_loop_is_recovered(tmp_path: Path) ->
     assert list(events.kind) == kinds
     s.handle(parse_message('{"type": "reset"}', con.loop.limits))
     assert s.frame()["failure"] == "" and s.frame()["t"] == 0.0 and s.frame()["events"] == []
+
+
+@pytest.fixture(scope="module")
+def three(recorded) -> tuple[Path, Path]:
+    """The recorded run's scenario file and output root (its gains already certified)."""
+    out = recorded[0].out.parent
+    return out.parent / "three.toml", out
+
+
+def test_an_attempt_past_its_wall_time_budget_holds_the_compiled_loop(three, monkeypatch) -> None:
+    """On the compiled loop, whose native attempts run in a child process: with a wall-time
+    budget no attempt can meet (0 s), the call's first attempt is stopped, the loop is
+    held at once (no retry with more steps) saying why, at its last good state; with the
+    budget back, resume runs on from there in the replaced child."""
+    import console.engine as engine
+
+    con = open_console(three[0], out_root=three[1])
+    s = con.session
+    now = [0.0]
+    s.clock, s.last_wall = (lambda: now[0]), 0.0
+    now[0] += 0.1
+    assert s.tick()["failure"] == ""
+    t_good, x_good = con.loop.t, con.loop.x.copy()
+    monkeypatch.setattr(engine, "ATTEMPT_WALL", 0.0)  # the answer is not even looked for
+    s.pace.scale = 20.0  # a call of 5 s of simulated time: milliseconds in the child
+    now[0] += 0.25
+    frame = s.tick()
+    why = frame["failure"]
+    assert "attempt 1 stopped after its wall-time budget of 0 s (working towards t = 5.1" in why
+    assert "held at t = 0.1 s: 1 integrator attempt failed" in why
+    assert [e[1] for e in frame["events"]] == ["failure", "held"]
+    assert con.loop.t == t_good and np.array_equal(con.loop.x, x_good)
+    assert con.loop.calls.kills == 1
+    monkeypatch.setattr(engine, "ATTEMPT_WALL", 2.0)
+    s.pace.scale = 1.0
+    s.handle(parse_message('{"type": "resume"}', con.loop.limits))
+    now[0] += 0.1
+    frame = s.tick()
+    assert frame["failure"] == "" and frame["t"] == pytest.approx(0.2)
+    con.loop.close()
+
+
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+def test_a_signal_stops_the_served_console_within_a_second(three, sig: str) -> None:
+    """``python -m console serve`` with a page connected and the loop running: SIGTERM (or
+    SIGINT, Ctrl-C) ends the process, its integrator child included, in under 1 s."""
+    import signal
+
+    from console_fake import free_port
+    from websockets.sync.client import connect
+
+    port = free_port()
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "console",
+            "serve",
+            str(three[0]),
+            "--port",
+            str(port),
+            "--out",
+            str(three[1]),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert "console: http://" in proc.stdout.readline()
+        deadline = time.monotonic() + 20
+        while True:  # the line comes before uvicorn listens
+            try:
+                ws = connect(f"ws://127.0.0.1:{port}/ws")
+                break
+            except OSError:
+                assert time.monotonic() < deadline and proc.poll() is None
+                time.sleep(0.05)
+        with ws:
+            ws.send(json.dumps({"type": "drive"}))
+            ws.send(json.dumps({"type": "u0", "value": [2.0]}))
+            while json.loads(ws.recv(timeout=10))["type"] != "state":
+                pass
+            t0 = time.monotonic()
+            proc.send_signal(getattr(signal, sig))
+            proc.wait(timeout=10)
+            took = time.monotonic() - t0
+        assert took < 1.0, took
+        assert "Traceback" not in proc.stderr.read()
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def test_scripted_sessions_with_link_cuts_and_faults(three) -> None:
+    """The short version of ``python -m console.sessions --network``: two 3 s sessions on
+    the three-follower console with presses, link cuts and restores and faults. Each runs
+    to its end or is held saying why; the cuts and faults reach the loop as changes, and
+    the cuts the console refused are exactly those after which the graph fails
+    Assumption 1 by core.graph's own check (check_network); the report counts them."""
+    from console.protocol import MessageError
+    from console.sessions import report, run_session, session_script
+    from core.errors import SynthesisError
+    from core.graph import check_network
+
+    con = open_console(three[0], out_root=three[1])
+    lim = con.loop.limits
+    results = []
+    for index in range(2):
+        script = session_script(np.random.default_rng([5, index]), 3.0, lim, True)
+        refusable = 0
+        weights = dict(con.loop.nominal.weights)
+        for _, m in script:  # which cuts break Assumption 1, replaying the links alone
+            if m["type"] != "link":
+                continue
+            key = (m["follower"] - 1, m["neighbour"] - 1)
+            trial = {**weights, key: 0.0 if m["cut"] else con.loop.nominal.weights[key]}
+            A, a0 = np.zeros((lim.N, lim.N)), np.zeros(lim.N)
+            for (i, j), w in trial.items():
+                (a0.__setitem__(i, w) if j < 0 else A.__setitem__((i, j), w))
+            try:
+                check_network(A, a0)
+                weights = trial
+            except SynthesisError:
+                refusable += 1
+        r = run_session(con, index, 5, 3.0, network=True)
+        results.append(r)
+        assert r.network == sum(m["type"] != "u0" for _, m in script) > 0
+        assert r.refused == refusable
+        assert r.held or r.t_end == pytest.approx(3.0, abs=0.05)
+        kinds = {c.kind for c in con.loop.changes}
+        assert kinds & {"link", "health", "bias"}
+    assert MessageError  # the refusals are MessageError lines (counted, not raised)
+    text = report(results, "python -m console.sessions --network", "three", "prov", 2.0)
+    assert f"cuts refused as breaking Assumption 1: {sum(r.refused for r in results)}" in text
+    con.loop.close()

@@ -8,6 +8,7 @@ let info = null, last = null, ws = null;
 let trails = [], hist = [];
 let keys = { left: false, right: false, up: false, down: false };
 let sentU0 = null, wantScale = null;
+let frameWall = null;  // performance.now() of the last frame received
 // what the page drew last (tests read it): the world view's slots and the plots' scales
 window.__drawn = { frames: [], plots: {} };
 
@@ -21,7 +22,8 @@ function connect() {
   ws.onopen = () => send({ type: "drive" });
   ws.onmessage = (ev) => {
     const msg = JSON.parse(ev.data);
-    if (msg.type === "state") onState(msg);
+    if (msg.type === "state") { frameWall = performance.now(); $("stale").style.display = "none"; onState(msg); }
+    else if (msg.type === "released") { releaseKeys(); logError("u0 back to 0: " + msg.reason); }
     else if (msg.type === "hello") onHello(msg);
     else if (msg.type === "error") logError(msg.message);
     else if (msg.type === "saved") onSaved(msg);
@@ -58,13 +60,13 @@ function onHello(msg) {
 
 function buildTable() {
   const tbl = $("followers");
-  let html = "<tr><th>follower</th><th>health g</th><th>ĝ</th><th>|u|</th><th>bias</th><th>links</th><th>faults</th></tr>";
+  let html = "<tr><th>follower</th><th>health g</th><th>ĝ</th><th>|u|</th><th>peak |u|</th><th>bias</th><th>links</th><th>faults</th></tr>";
   for (let i = 0; i < info.N; i++) {
     const links = info.edges.filter((e) => e[0] === i + 1).map((e) =>
       `<button data-link="${i + 1},${e[1]}">${e[1] === 0 ? "leader" : e[1]}</button>`).join("");
     html += `<tr><td style="color:${color(i)}">${i + 1}</td>` +
       `<td><span class="bar" id="gbar${i}"></span> <span id="g${i}"></span></td>` +
-      `<td id="ghat${i}"></td><td id="un${i}"></td><td id="b${i}"></td><td>${links}</td>` +
+      `<td id="ghat${i}"></td><td id="un${i}"></td><td id="pk${i}"></td><td id="b${i}"></td><td>${links}</td>` +
       `<td><button data-health="${i + 1}">g×0.6</button><button data-bias="${i + 1}">bias</button>` +
       `<button data-clear="${i + 1}">clear</button></td></tr>`;
   }
@@ -101,10 +103,17 @@ function onState(s) {
   $("t").textContent = s.t.toFixed(2);
   $("ratio").textContent = s.ratio.toFixed(2);
   $("scale").textContent = s.scale;
-  $("health").textContent = s.failure ? "HELD" : (s.paused ? "paused" : "ok");
+  const health = $("health");
+  health.textContent = s.failure ? "HELD" : (s.busy ? `BUSY ${s.busy.toFixed(1)} s (last state shown)` : (s.paused ? "paused" : "ok"));
+  health.className = s.failure || s.busy ? "alarm" : "";
+  const bound = info.peak_bound, worst = s.peak_u.some((v) => v === null) ? Infinity : Math.max(...s.peak_u);
+  const over = s.peak_u.filter((v) => v === null || !(v <= bound)).length;
+  $("peak").textContent = s.t < info.peak_from ? `— (from t = ${info.peak_from} s)` :
+    `${isFinite(worst) ? fmt(worst) : "∞"} ${over ? `> ${bound}: ${over} follower${over > 1 ? "s" : ""} above the bound` : `≤ ${bound}: ok`}`;
+  $("peak").className = over ? "alarm" : "";
   $("recoveries").textContent = s.recoveries ? `, ${s.recoveries} restart${s.recoveries > 1 ? "s" : ""} after a failure` : "";
   $("events").textContent = (s.events || []).map((e) => `t = ${e[0].toFixed(2)} s ${e[1]}: ${e[2]}`).join("\n");
-  $("queued").textContent = s.queued ? " (waiting for a ramp to end)" : "";
+  $("queued").textContent = s.slots_full ? " (waiting for a ramp to end)" : (s.queued ? " (lands within " + fmtNum(info.rise / 12) + " s)" : "");
   $("steps").textContent = s.steps;
   $("load").textContent = (100 * s.load).toFixed(0) + " %";
   $("u0").textContent = s.u0.map((v) => v.toFixed(2)).join(", ");
@@ -122,6 +131,8 @@ function onState(s) {
     $("gbar" + i).style.background = s.health[i] < info.nominal_health[i] ? "#e53935" : "#43a047";
     $("ghat" + i).textContent = s.ghat ? fmt(s.ghat[i]) : "";
     $("un" + i).textContent = s.unorm ? fmt(s.unorm[i]) : "";
+    $("pk" + i).textContent = s.t < info.peak_from ? "—" : (s.peak_u[i] === null ? "∞" : fmt(s.peak_u[i]));
+    $("pk" + i).className = s.peak_u[i] !== null && s.peak_u[i] <= info.peak_bound ? "" : "alarm";
     $("b" + i).textContent = s.bias[i].map((v) => v.toFixed(1)).join(", ");
   }
   document.querySelectorAll("button[data-link]").forEach((b) => {
@@ -187,7 +198,7 @@ function drawPlot(cv, col) {
   g.clearRect(0, 0, cv.width, cv.height);
   if (!hist.length || !hist[hist.length - 1][col]) return;
   const t1 = hist[hist.length - 1][0], t0 = t1 - PLOT_S;
-  const L = 42, B = 16, T = 6;  // margins: value labels left, time axis below
+  const L = 42, B = 26, T = 6;  // margins: value labels left, time axis and its label below
   const sc = robustTop(hist.flatMap((h) => h[col]));
   const X = (t) => L + (cv.width - L - 5) * (t - t0) / PLOT_S;
   const Y = (v) => cv.height - B - (cv.height - B - T) * Math.min(v, sc.top) / sc.top;
@@ -198,9 +209,10 @@ function drawPlot(cv, col) {
   for (let k = Math.ceil(Math.max(t0, 0)); k <= t1; k += 1) {  // a tick every simulated second
     const x = X(k);
     g.beginPath(); g.moveTo(x, cv.height - B); g.lineTo(x, cv.height - B + 3); g.stroke();
-    if (k % 2 === 0) g.fillText(k + " s", x - 6, cv.height - 3);
+    if (k % 2 === 0) g.fillText(String(k), x - 3, cv.height - B + 12);
     ticks.push(k);
   }
+  g.fillText("simulated time t (s)", cv.width / 2 - 45, cv.height - 2);
   for (let i = 0; i < info.N; i++) {
     g.strokeStyle = color(i); g.beginPath();
     hist.forEach((h, n) => { const v = h[col][i] ?? 0; n ? g.lineTo(X(h[0]), Y(v)) : g.moveTo(X(h[0]), Y(v)); });
@@ -211,7 +223,7 @@ function drawPlot(cv, col) {
     g.fillRect(L, T - 2, cv.width - L - 5, 2);
     g.fillText(`clipped: max ${sc.max.toPrecision(3)}`, cv.width - 130, T + 10);
   }
-  window.__drawn.plots[cv.id] = { top: sc.top, max: sc.max, clipped: sc.clipped, ticks, t0, t1 };
+  window.__drawn.plots[cv.id] = { top: sc.top, max: sc.max, clipped: sc.clipped, ticks, t0, t1, xlabel: "simulated time t (s)" };
 }
 
 // ---- operator input: keyboard and the Gamepad API
@@ -233,12 +245,41 @@ function pushU0(u) {
   if (key !== sentU0) { sentU0 = key; send({ type: "u0", value: u }); }
 }
 
+// dead-man's handle: a held command is sent again every info.keepalive s (the server sets
+// u0 to 0 when none comes for info.deadman s); leaving the page releases every key
+setInterval(() => {
+  const held = sentU0 !== null && JSON.parse(sentU0).some((v) => v !== 0);
+  if (info && held && last && last.role === "driver") send({ type: "u0", value: JSON.parse(sentU0) });
+}, 200);
+
+function releaseKeys() {
+  keys = { left: false, right: false, up: false, down: false };
+  if (info && last && last.role === "driver") pushU0(Array(info.p).fill(0));
+}
+window.addEventListener("blur", releaseKeys);
+window.addEventListener("pagehide", releaseKeys);
+document.addEventListener("visibilitychange", () => { if (document.hidden) releaseKeys(); });
+
+// frames stop: say so (the server sends one at least every frame period while it runs)
+setInterval(() => {
+  if (frameWall === null) return;
+  const gap = (performance.now() - frameWall) / 1000;
+  const el = $("stale");
+  el.textContent = gap > 1 ? `NO FRAMES for ${gap.toFixed(1)} s: the server does not answer (the view is stale)` : "";
+  el.style.display = gap > 1 ? "block" : "none";
+  if (gap > 1) { $("health").textContent = "NO FRAMES"; $("health").className = "alarm"; }
+}, 250);
+
+function askReset() {
+  if (window.confirm("Reset: back to t = 0, the run so far is dropped (save it first). Reset?")) send({ type: "reset" });
+}
+
 const KEYMAP = { ArrowLeft: "left", ArrowRight: "right", ArrowUp: "up", ArrowDown: "down" };
 window.addEventListener("keydown", (e) => {
   if (!info) return;
   if (KEYMAP[e.key]) { keys[KEYMAP[e.key]] = true; pushU0(commandFromKeys()); e.preventDefault(); }
   else if (e.key === " ") { send({ type: last && last.paused ? "resume" : "pause" }); e.preventDefault(); }
-  else if (e.key === "r") send({ type: "reset" });
+  else if (e.key === "r") askReset();
   else if (e.key === "+" || e.key === "=") scaleBy(2);
   else if (e.key === "-") scaleBy(0.5);
 });
@@ -247,9 +288,12 @@ window.addEventListener("keyup", (e) => {
 });
 
 function scaleBy(f) {
-  // from the scale asked for last, not the last frame's: quick presses each count
+  // the next of info.scales up (f > 1) or down from the scale asked for last, not the last
+  // frame's: quick presses each count; 1 is one of the steps
   const base = wantScale !== null ? wantScale : (last ? last.scale : 1);
-  const s = Math.min(20, Math.max(0.05, base * f));
+  const ladder = info.scales;
+  const up = ladder.filter((v) => v > base * (1 + 1e-9)), down = ladder.filter((v) => v < base * (1 - 1e-9));
+  const s = f > 1 ? (up.length ? up[0] : ladder[ladder.length - 1]) : (down.length ? down[down.length - 1] : ladder[0]);
   wantScale = s;
   send({ type: "scale", value: s });
 }
@@ -264,13 +308,13 @@ function pollGamepad() {
     const clip = (v) => Math.max(-info.u_max, Math.min(info.u_max, v));
     u[0] = clip(+(info.u_max * dead(pad.axes[0] || 0)).toFixed(3));
     if (info.p > 1) u[1] = clip(+(-info.u_max * dead(pad.axes[1] || 0)).toFixed(3));  // stick up = +
-    if (!Object.values(keys).some((k) => k)) pushU0(u);
+    if (!Object.values(keys).some((k) => k) && document.hasFocus()) pushU0(u);
   }
   requestAnimationFrame(pollGamepad);
 }
 
 $("pause").onclick = () => send({ type: last && last.paused ? "resume" : "pause" });
-$("reset").onclick = $("reset2").onclick = () => send({ type: "reset" });
+$("reset").onclick = $("reset2").onclick = askReset;
 $("retry").onclick = () => send({ type: "resume" });
 $("drive").onclick = () => send({ type: "drive" });
 $("slower").onclick = () => scaleBy(0.5);
