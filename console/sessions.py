@@ -30,7 +30,6 @@ command, the totals) and ``provenance.json`` into ``--out``.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import io
 import json
@@ -48,7 +47,8 @@ import numpy as np
 
 from console.engine import CONSOLE_RISE
 from console.session import PEAK_BOUND, PEAK_FROM
-from core.errors import UsageError, run_cli
+from core.cli_args import count, positive
+from core.errors import CliParser, UsageError, run_cli
 
 #: frames per second of the scripted page (the server's default)
 FPS = 30.0
@@ -498,26 +498,20 @@ def main(argv: list[str] | None = None) -> int:
     """
     from core.provenance import provenance_line
 
-    ap = argparse.ArgumentParser(prog="python -m console.sessions", description=__doc__)
+    ap = CliParser(prog="python -m console.sessions", description=__doc__)
     ap.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO)
-    ap.add_argument("--sessions", type=int, default=200)
-    ap.add_argument("--seconds", type=float, default=6.0)
+    ap.add_argument("--sessions", type=count, default=200)
+    ap.add_argument("--seconds", type=positive, default=6.0)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    ap.add_argument("--workers", type=count, default=min(2, os.cpu_count() or 1))
     ap.add_argument("--out", default="out/console-sessions")
-    ap.add_argument("--rise", type=float, default=CONSOLE_RISE, help="ramp time of u0 (s)")
+    ap.add_argument("--rise", type=positive, default=CONSOLE_RISE, help="ramp time of u0 (s)")
     ap.add_argument(
         "--network", action="store_true", help="also cut and restore links and inject faults"
     )
     a = ap.parse_args(argv)
-    if a.sessions < 1:
-        raise UsageError(f"--sessions: {a.sessions} (expected at least 1)")
     if not (math.isfinite(a.seconds) and a.seconds > PEAK_FROM):
         raise UsageError(f"--seconds: {a.seconds:g} (expected more than {PEAK_FROM:g})")
-    if a.workers < 1:
-        raise UsageError(f"--workers: {a.workers} (expected at least 1)")
-    if not (math.isfinite(a.rise) and a.rise > 0):
-        raise UsageError(f"--rise: {a.rise:g} (expected a rise time in seconds > 0)")
     if not Path(a.scenario).is_file():
         raise UsageError(f"{a.scenario}: no such scenario file")
     out = Path(a.out)

@@ -19,6 +19,7 @@ from helpers import PAPER, ROOT
 from benchmarks import agents, bench, lone, precision, remedies, steps, study
 from benchmarks import search as bench_search
 from console import __main__ as console_main
+from console import sessions as console_sessions
 from core.errors import run_cli
 from generated import __main__ as generated_main
 from search import __main__ as search_main
@@ -49,6 +50,9 @@ CASES = [
     (console_main.main, ["serve", P, "--port", "0"], "--port"),
     (console_main.main, ["serve", P, "--rise", "nan"], "--rise"),
     (console_main.main, ["serve", P, "--bias-max", "inf"], "--bias-max"),
+    (console_sessions.main, ["--sessions", "0"], "--sessions"),
+    (console_sessions.main, ["--rise", "-1"], "--rise"),
+    (console_sessions.main, ["--bogus"], "--bogus"),
     (search_main.main, ["run", "x.toml", "--workers", "0"], "--workers"),
     (search_main.main, ["run", "x.toml", "--budget", "-3"], "--budget"),
     (bench.main, ["--runs", "0"], "--runs"),
