@@ -248,12 +248,20 @@ def build_cascade(scenario: Scenario, gains: Gains) -> Cascade:
     Raises
     ------
     ScenarioError
-        The graph has a cycle, or the followers have different models or parameters
-        (one generated block serves all followers; method 'native' above N = 20).
+        The graph has a cycle or switches, or the followers have different models or
+        parameters (one generated block serves all followers; method 'native' above N = 20).
     """
     sc = scenario
     n, N = sc.n, sc.N
     _one_model(sc)
+    if sc.graph.switches:  # the blocks are strung along the base graph only
+        raise ScenarioError(
+            sc.path,
+            "graph.switches",
+            "switch the graph, which the graph-ordered native build (above 20 followers) "
+            "does not model",
+            'integration.method = "cvodes" (the whole loop)',
+        )
     order = topological_order(sc.graph.adjacency, sc.path)
     lay = make_layout(sc.m, n, N, sc.options.derivatives == "filtered")
     gm = graph_matrices(sc.graph, gains)  # h and L + B = H L̄ H from the gains
