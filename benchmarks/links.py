@@ -297,7 +297,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=1, help="sweep workers (default 1)")
     p.add_argument("--only", nargs="+", metavar="NAME", help="only these models")
     p.add_argument("--no-kick", action="store_true", help="skip part 1")
-    p.add_argument("--out", type=Path, default=OUT_ROOT / "links", help="output folder")
+    p.add_argument(
+        "--out", type=Path, default=OUT_ROOT / "link-models", help="output folder"
+    )
     return p
 
 

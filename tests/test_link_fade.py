@@ -175,3 +175,26 @@ def test_native_and_cvodes_agree_through_a_fade(loss_runs):
     r = loss_runs["raw"].frame
     cols = [c for c in a.columns if c.startswith("p") and c[1:2].isdigit()]
     assert np.abs(r[cols].to_numpy()[w] - b[cols].to_numpy()[w]).max() > 100 * 2e-4 * 25
+
+
+def test_switch_recoveries_of_every_follower(loss_runs, tmp_path):
+    from verify.link_recovery import peak_u_late, switch_recoveries, switch_summary
+    from verify.operator_steps import deviation
+
+    run = loss_runs["fade"]
+    sc = load_scenario(paper_with(tmp_path, LOSS, SHORT, fade=0.5))
+    h = np.ones(sc.N)
+    items = switch_recoveries(sc, run.frame, h)
+    assert [(r.start, r.end) for r in items[:: sc.N]] == [(1.5, 2.2), (2.2, 3.0 + 1e-12)]
+    assert [r.follower for r in items] == list(range(sc.N)) * 2
+    t = run.frame["t"].to_numpy()
+    dev = deviation(sc, run.frame, h)
+    for r in items:  # the recovery time by hand: the last output time above 0.05, plus one step
+        w = (t >= r.start) & (t < r.end)
+        above = np.flatnonzero(dev[w, r.follower] > 0.05)
+        want = 0.0 if not above.size else t[w][above[-1] + 1] - r.start if above[-1] + 1 < w.sum() else np.inf
+        assert r.time == pytest.approx(want)
+        assert r.outcome == ("recovered" if want <= 2.0 else "undefined" if np.isinf(want) else "late")
+    s = switch_summary(items)
+    assert s["switch_pairs"] == 10 and s["switch_pairs_late"] + s["switch_pairs_undefined"] <= 10
+    assert peak_u_late(run.frame, sc.N, sc.n) == pytest.approx(_peak_u(run.frame, 1.0))
