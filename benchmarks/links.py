@@ -245,8 +245,10 @@ def markdown(
             "state of the raw run at the switch, with the old and the new weights. Peaks: the "
             f"largest norm over [s, s + 1 s] for followers 4 and 5, raw and faded over "
             f"{DEFAULT_LINK_FADE:g} s (the default). Integrator steps: "
-            + ", ".join(f"{k} {v['steps']} ({'complete' if v['complete'] else 'stopped'})"
-                        for k, v in kick_runs.items())
+            + ", ".join(
+                f"{k} {v['steps']} ({'complete' if v['complete'] else 'stopped'})"
+                for k, v in kick_runs.items()
+            )
             + ".",
             "",
             "| switch [s] | output | before | at (raw) | raw peak, 4 | raw peak, 5 "
@@ -297,9 +299,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=1, help="sweep workers (default 1)")
     p.add_argument("--only", nargs="+", metavar="NAME", help="only these models")
     p.add_argument("--no-kick", action="store_true", help="skip part 1")
-    p.add_argument(
-        "--out", type=Path, default=OUT_ROOT / "link-models", help="output folder"
-    )
+    p.add_argument("--out", type=Path, default=OUT_ROOT / "link-models", help="output folder")
     return p
 
 

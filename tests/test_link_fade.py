@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_switching import LB_BASE, LB_CUT, PIN, paper_with
 
 from core.graph import DEFAULT_LINK_FADE, fade_jets, weights_at
 from core.scenario import load_scenario
-from test_switching import LB_BASE, LB_CUT, PIN, paper_with
 
 pytestmark = pytest.mark.slow  # the run fixtures compile and integrate
 
@@ -167,7 +167,9 @@ def test_native_and_cvodes_agree_through_a_fade(loss_runs):
     t = a["t"].to_numpy()
     w = t >= 1.0
     for block, rel in (("p", 2e-4), ("eta", 1e-6)):
-        cols = [c for c in a.columns if c.startswith(block) and c[len(block) : len(block) + 1].isdigit()]
+        cols = [
+            c for c in a.columns if c.startswith(block) and c[len(block) : len(block) + 1].isdigit()
+        ]
         x, y = a[cols].to_numpy()[w], b[cols].to_numpy()[w]
         scale = np.abs(y).max()
         assert np.abs(x - y).max() <= rel * scale, (block, np.abs(x - y).max(), scale)
@@ -192,9 +194,37 @@ def test_switch_recoveries_of_every_follower(loss_runs, tmp_path):
     for r in items:  # the recovery time by hand: the last output time above 0.05, plus one step
         w = (t >= r.start) & (t < r.end)
         above = np.flatnonzero(dev[w, r.follower] > 0.05)
-        want = 0.0 if not above.size else t[w][above[-1] + 1] - r.start if above[-1] + 1 < w.sum() else np.inf
+        want = (
+            0.0
+            if not above.size
+            else t[w][above[-1] + 1] - r.start
+            if above[-1] + 1 < w.sum()
+            else np.inf
+        )
         assert r.time == pytest.approx(want)
-        assert r.outcome == ("recovered" if want <= 2.0 else "undefined" if np.isinf(want) else "late")
+        assert r.outcome == (
+            "recovered" if want <= 2.0 else "undefined" if np.isinf(want) else "late"
+        )
     s = switch_summary(items)
     assert s["switch_pairs"] == 10 and s["switch_pairs_late"] + s["switch_pairs_undefined"] <= 10
     assert peak_u_late(run.frame, sc.N, sc.n) == pytest.approx(_peak_u(run.frame, 1.0))
+
+
+def test_V2_is_continuous_through_a_faded_switch_and_jumps_raw(faded, tmp_path):
+    """Theorem 2's comparison lemma needs V2_i absolutely continuous ('Link losses', item 3)."""
+    from symbolic.closed_loop import build_closed_loop
+    from verify.reference import hand_gains
+
+    sc, cl, _ = faded
+    raw_sc = load_scenario(paper_with(tmp_path, [(5.0, 4, 2, 0.0), (5.5, 4, 2, 1.0)], fade=0.0))
+    raw = build_closed_loop(raw_sc, hand_gains(raw_sc))
+    x = _state(cl, np.random.default_rng(5))
+    k = cl.outputs.name_out().index("V2")
+    for loop, jumps in ((cl, False), (raw, True)):
+        before = np.asarray(loop.outputs(5.0 - 1e-12, x)[k]).ravel()
+        at = np.asarray(loop.outputs(5.0, x)[k]).ravel()
+        assert np.allclose(before[[0, 1, 2]], at[[0, 1, 2]], rtol=1e-12)  # not downstream
+        if jumps:
+            assert abs(at[3] - before[3]) > 1e-3 * abs(before[3])  # follower 4 loses follower 2
+        else:
+            np.testing.assert_allclose(at, before, rtol=1e-9)

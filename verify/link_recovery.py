@@ -139,5 +139,8 @@ def peak_u_late(df: S.FrameOrView, N: int, n: int, start: float = 1.0) -> float:
     view = S.TrajectoryView.of(df)
     late = view.t >= start
     return float(
-        max(np.linalg.norm(view.block(S.Signal.U, i, n)[late], axis=1).max() for i in range(1, N + 1))
+        max(
+            np.linalg.norm(view.block(S.Signal.U, i, n)[late], axis=1).max()
+            for i in range(1, N + 1)
+        )
     )
