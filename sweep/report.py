@@ -359,6 +359,14 @@ def link_lines(ok: pd.DataFrame) -> list[str]:
         f"| slowest return after a switch, where defined [s] | "
         f"{np.max(slowest) if len(slowest) else float('nan'):.4g} |",
     ]
+    if "switch_pairs_late_nolosses" in ok.columns:
+        late0 = int(np.nansum(_num(ok, "switch_pairs_late_nolosses")))
+        undef0 = int(np.nansum(_num(ok, "switch_pairs_undefined_nolosses")))
+        lines.append(
+            f"| the same pairs in the same samples without losses (switches made no-ops) | "
+            f"{int(pairs) - late0 - undef0} of {int(pairs)} back ({late0} late; {undef0} "
+            "undefined) |"
+        )
     late_u, base_u = _num(ok, "peak_u_late"), _num(ok, "peak_u_late_nolosses")
     both = np.isfinite(late_u) & np.isfinite(base_u) & (base_u > 0)
     if both.any():

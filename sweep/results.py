@@ -46,6 +46,8 @@ BASE_COLUMNS = [
     "switch_pairs_out_before",
     "switch_deviation_max",
     "peak_u_late_nolosses",
+    "switch_pairs_late_nolosses",
+    "switch_pairs_undefined_nolosses",
     "guaranteed_held",
     "guaranteed_failed",
     "consistency_held",
