@@ -307,6 +307,38 @@ def _u0_literals(sc: Scenario, pv: Any) -> Any:
     return ca.vertcat(*lits) if lits else type(pv)(0, 1)
 
 
+def _oracle_psi(
+    sc: Scenario,
+    og: ObserverGains,
+    assembly: str,
+    gm: GraphMatrices,
+    jets: tuple[Any, Any, Any, Any, tuple[Any, Any, Any]],
+    weights: tuple[Any, Any, Any],
+) -> tuple[Any, Any]:
+    """ψ̇ and ψ̈ of every agent for the oracle derivatives (symbolic/derivatives.py).
+
+    Passes over the network: η̇ of all agents -> ψ̇ -> η̈ of all agents -> ψ̈. ``jets`` is
+    (E, the agents' (μ, η, φ), ψ, the observer's numbers, (y0, ẏ0, ÿ0)); ``weights`` the
+    graph's weights and their two rates (None without switches,
+    :func:`graph_coupling`).
+    """
+    m, N, C0 = sc.m, sc.N, sc.leader.C0
+    E, SO, psi, Pobs, (y0, y0dot, y0ddot) = jets
+    W, dW, ddW = weights
+    obs = observer_function(og)
+    D1, _ = flow_jets(obs)
+    SOd = apply_agents(obs, N, [SO, psi, Pobs], assembly)[0]
+    dpsi = coupling(C0, SOd[m : 2 * m, :], y0dot, gm, W)
+    if dW is not None:  # fading weights (graph.link_fade): d/dt of eq. (6) has Ẇ's term
+        dpsi = dpsi + coupling(C0, E, y0, gm, dW)
+    SOdd = apply_agents(D1, N, [SO, psi, Pobs, SOd, dpsi], assembly)[0]
+    ddpsi = coupling(C0, SOdd[m : 2 * m, :], y0ddot, gm, W)
+    if ddW is not None:  # ψ̈ = C0Ë Wᵀ + 2 C0Ė Ẇᵀ + C0E Ẅᵀ (and the leader's terms)
+        ddpsi = ddpsi + 2 * coupling(C0, SOd[m : 2 * m, :], y0dot, gm, dW)
+        ddpsi = ddpsi + coupling(C0, E, y0, gm, ddW)
+    return dpsi, ddpsi
+
+
 def _network(
     sc: Scenario,
     gains: Gains,
@@ -337,19 +369,8 @@ def _network(
     if filtered:
         dpsi = ddpsi = ca.DM.zeros(n, N)
     else:
-        # oracle passes over the network: η̇ of all agents -> ψ̇ -> η̈ of all agents -> ψ̈
-        obs = observer_function(og)
-        D1, _ = flow_jets(obs)
-        Pobs = P[poff["obs"], :]
-        SOd = apply_agents(obs, N, [SO, psi, Pobs], assembly)[0]
-        dpsi = coupling(sc.leader.C0, SOd[m : 2 * m, :], y0dot, gm, W)
-        if dW is not None:  # fading weights (graph.link_fade): d/dt of eq. (6) has Ẇ's term
-            dpsi = dpsi + coupling(sc.leader.C0, E, y0, gm, dW)
-        SOdd = apply_agents(D1, N, [SO, psi, Pobs, SOd, dpsi], assembly)[0]
-        ddpsi = coupling(sc.leader.C0, SOdd[m : 2 * m, :], y0ddot, gm, W)
-        if ddW is not None:  # ψ̈ = C0Ë Wᵀ + 2 C0Ė Ẇᵀ + C0E Ẅᵀ (and the leader's terms)
-            ddpsi = ddpsi + 2 * coupling(sc.leader.C0, SOd[m : 2 * m, :], y0dot, gm, dW)
-            ddpsi = ddpsi + coupling(sc.leader.C0, E, y0, gm, ddW)
+        jets = (E, SO, psi, P[poff["obs"], :], (y0, y0dot, y0ddot))
+        dpsi, ddpsi = _oracle_psi(sc, og, assembly, gm, jets, (W, dW, ddW))
     A = ca.reshape(a, n, N)
     groups = model_groups(sc)
     outs: list[Any] | None = None
