@@ -228,3 +228,18 @@ def test_V2_is_continuous_through_a_faded_switch_and_jumps_raw(faded, tmp_path):
             assert abs(at[3] - before[3]) > 1e-3 * abs(before[3])  # follower 4 loses follower 2
         else:
             np.testing.assert_allclose(at, before, rtol=1e-9)
+
+
+def test_switches_made_no_ops_run_the_graph_without_losses(tmp_path):
+    """The study's no-loss baseline (sweep.worker.link_baseline) is the run without switches."""
+    from generated import api
+
+    noop = [(t, i, j, 1.0) for t, i, j, _ in LOSS]  # each switch sets the base weight a_42 = 1
+    runs = {}
+    for key, sw in (("noop", noop), ("none", [])):
+        (tmp_path / key).mkdir()
+        path = paper_with(tmp_path / key, sw, SHORT, fade=0.5)
+        runs[key] = api.run(path, out_root=tmp_path / key / "out", progress=False).frame
+    cols = [c for c in runs["none"].columns if c[:1] in "pu" and c[1:2].isdigit()]
+    a, b = runs["noop"][cols].to_numpy(), runs["none"][cols].to_numpy()
+    assert np.abs(a - b).max() <= 1e-5 * np.abs(b).max()
