@@ -107,6 +107,7 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.precision
 	$(PY) -m benchmarks.study
 	$(PY) -m benchmarks.remedies
+	$(PY) -m benchmarks.links
 	$(PY) -m benchmarks.agents
 	$(PY) -m sweep.topologies
 	$(PY) -m benchmarks.search

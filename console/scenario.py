@@ -73,6 +73,9 @@ def console_table(path: str | Path, bias_max: float = BIAS_MAX) -> dict:
     leader["u0"] = [RAMPED] * base.p
     graph = data["graph"]
     graph.pop("switches", None)
+    # the live loop hands a link change to one integrator call (engine.py): raw switching,
+    # which its records replay (a fade would need the old topology kept in p for T seconds)
+    graph["link_fade"] = 0.0
     # one switch that changes nothing: the compiled loop then has two topologies, the
     # console's old and new graph, and switches between them where a link change lands
     i = int(np.flatnonzero(base.graph.pinning)[0])

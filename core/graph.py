@@ -298,6 +298,30 @@ def m_matrix_violation(L_bar: np.ndarray | sp.spmatrix) -> str | None:
 # Outside the paper's theorems (docs/fidelity.md, 'Switching topology'): the graph is piecewise
 # constant in time; every topology a run reaches must satisfy Assumption 1 with the base gauge.
 
+#: seconds over which a lost or restored link's weight fades (``graph.link_fade``; 0 = raw
+#: switching). A deviation from the paper (docs/fidelity.md, E3; docs/verification.md,
+#: 'Link losses', where the duration is chosen by measurement).
+DEFAULT_LINK_FADE = 1.0
+
+
+def fade_jets(x: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The fade σ(x) = 10x³ − 15x⁴ + 6x⁵ on [0, 1] (0 before, 1 after) and σ', σ''.
+
+    C² (σ' and σ'' vanish at both ends), so the weights' first and second derivatives,
+    which the oracle derivatives of ψ take (eq. (6)), are continuous. Numpy reference of
+    :func:`symbolic.closed_loop.graph_coupling`'s fade.
+
+    Parameters
+    ----------
+    x : ndarray or float
+        (t − s_k)/T.
+    """
+    x = np.clip(np.asarray(x, dtype=float), 0.0, 1.0)
+    s = x**3 * (10.0 - 15.0 * x + 6.0 * x**2)
+    ds = 30.0 * x**2 * (1.0 - x) ** 2
+    dds = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x)
+    return s, ds, dds
+
 
 @dataclass(frozen=True)
 class Switch:
@@ -340,6 +364,7 @@ class SwitchedGraph(Protocol):
 
     adjacency: np.ndarray
     pinning: np.ndarray
+    link_fade: float
 
     def topologies(self) -> tuple[Topology, ...]:
         """The piecewise-constant graph, base graph first (``t_start`` = 0)."""
@@ -433,12 +458,17 @@ def base_gauge(adjacency: np.ndarray | sp.spmatrix, pinning: np.ndarray) -> np.n
     return find_gauge(A, pinning)
 
 
-def weights_at(graph: SwitchedGraph, t: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(L + B, a0 ∘ h)`` of the topology that holds at ``t``, dense (a numpy reference).
+def weights_at(
+    graph: SwitchedGraph, t: float, derivative: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(L + B, a0 ∘ h)`` at ``t``, dense (a numpy reference), or its time derivative.
 
     ψ = C0 E (L + B)ᵀ − y0 (a0 ∘ h)ᵀ with E = [η_1 … η_N] (eq. (6) summed over
     neighbours); h is the base graph's gauge, which every topology keeps (checked on load).
-    For many calls, evaluate it once per topology at ``top.t_start``.
+    With ``graph.link_fade`` = T > 0 each switch at s_k fades in over [s_k, s_k + T]:
+    W(t) = W_0 + Σ_k σ((t − s_k)/T)(W_k − W_{k−1}) (:func:`fade_jets`), a convex
+    combination of the topologies (the σ_k decrease with k); with T = 0 the topology
+    that holds at t (right-continuous).
 
     Parameters
     ----------
@@ -446,6 +476,8 @@ def weights_at(graph: SwitchedGraph, t: float) -> tuple[np.ndarray, np.ndarray]:
         A scenario's graph.
     t : float
         Time.
+    derivative : {0, 1, 2}
+        0: the weights; 1, 2: their first and second time derivatives.
 
     Returns
     -------
@@ -453,9 +485,19 @@ def weights_at(graph: SwitchedGraph, t: float) -> tuple[np.ndarray, np.ndarray]:
         N×N ``L + B`` (``L = D − A``, ``D = diag(Σ_j |a_ij|)``) and N ``a_i0 h_i``.
     """
     tops = graph.topologies()
-    top = tops[topology_index(tops, t)]
     h = base_gauge(graph.adjacency, graph.pinning)
-    return pinned_laplacian(top.adjacency, top.pinning).toarray(), top.pinning * h
+    T = float(graph.link_fade)
+    W = [(pinned_laplacian(tp.adjacency, tp.pinning).toarray(), tp.pinning * h) for tp in tops]
+    if T <= 0.0:
+        if derivative:
+            return np.zeros_like(W[0][0]), np.zeros_like(W[0][1])
+        return W[topology_index(tops, t)]
+    L, a = (W[0][0].copy(), W[0][1].copy()) if derivative == 0 else (0.0 * W[0][0], 0.0 * W[0][1])
+    for k in range(1, len(tops)):
+        c = fade_jets((t - tops[k].t_start) / T)[derivative] / T**derivative
+        L += c * (W[k][0] - W[k - 1][0])
+        a += c * (W[k][1] - W[k - 1][1])
+    return L, a
 
 
 def topology_violation(

@@ -21,6 +21,7 @@ from core.faults import (
     fault_times,
 )
 from core.graph import (
+    DEFAULT_LINK_FADE,
     Switch,
     Topology,
     iter_topologies,
@@ -126,6 +127,7 @@ class Graph:
     adjacency: np.ndarray  # N×N
     pinning: np.ndarray  # N
     switches: tuple[Switch, ...] = ()  # [[graph.switches]], in file order
+    link_fade: float = DEFAULT_LINK_FADE  # s a switched link's weight fades over (0: raw)
 
     @property
     def N(self) -> int:
@@ -366,6 +368,8 @@ class Scenario:
         elif self.leader.u0_hold:  # each row of a held trace is a jump
             times.update(float(t) for t in self.leader.u0_trace[:, 0])
         exact |= set(switch_times(self.graph.switches))  # the graph switches exactly then
+        if self.graph.link_fade > 0:  # and its fades end (σ'' is continuous there: accuracy)
+            exact |= {s + self.graph.link_fade for s in switch_times(self.graph.switches)}
         # a root found numerically in f may differ from a fault's onset by rounding: keep the onset
         times = {t for t in times if not any(_near(t, x) for x in exact)} | exact
         return tuple(sorted(t for t in times if 0.0 < t < H))

@@ -29,6 +29,7 @@ from core.faults import (
     slotted_health,
 )
 from core.graph import (
+    DEFAULT_LINK_FADE,
     Switch,
     base_gauge,
     iter_topologies,
@@ -100,6 +101,7 @@ GRAPH: dict[str, Setting] = {
     "adjacency": declare(REQUIRED, "matrix", dims=("N", "N")),
     "pinning": declare(REQUIRED, "vector", NONNEG, dims=("N", "")),
     "switches": declare(Derived("none"), "tables"),
+    "link_fade": declare(DEFAULT_LINK_FADE, "number", NONNEG),
 }
 #: one ``[[followers]]`` table, eq. (2)
 FOLLOWER: dict[str, Setting] = {
@@ -293,7 +295,8 @@ def read_graph(ctx: ReadingContext, raw: Any, horizon: float) -> Graph:
             "or an edge a_ij != 0 from a reachable agent",
         )
     switches = _switches(ctx, G.get("switches", []), A, pin, horizon)
-    return Graph(adjacency=A, pinning=pin, switches=switches)
+    fade = float(read_key(ctx, GRAPH, G, "graph", "link_fade", {}))
+    return Graph(adjacency=A, pinning=pin, switches=switches, link_fade=fade)
 
 
 def _switches(

@@ -124,6 +124,13 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
     h = np.diag(np.atleast_2d(gains.H)).astype(float)
     if h.shape != (sc.N,) or not np.all(np.abs(h) == 1.0):
         raise ScenarioError("gains", "H", f"gauge has entries {h}", f"{sc.N} signs +1/-1")
+    if sc.graph.switches and sc.graph.link_fade > 0:
+        raise ScenarioError(
+            sc.path,
+            "graph.link_fade",
+            f"is {sc.graph.link_fade:g} s, but the per-agent driver switches links raw",
+            "graph.link_fade = 0, or a whole-loop method (docs/verification.md, 'Link losses')",
+        )
     lay = make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered")
     faults, fidx = fault_function(sc)
     tops = tuple(topology(t.t_start, t.adjacency, t.pinning, h) for t in sc.graph.topologies())

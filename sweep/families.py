@@ -21,7 +21,7 @@ from sweep.study_fields import StudyError, join_key, read_integer, read_number, 
 #: largest random graph (the adjacency is written densely into each sample's file)
 MAX_GRAPH_N = 500
 GRAPH_KEYS = {"N", "edge_probability", "weight", "losses"}
-LOSS_KEYS = {"count", "time", "recovery", "pinning"}
+LOSS_KEYS = {"count", "time", "recovery", "pinning", "baseline"}
 #: the keys of [faults]: which, how many, and a distribution per fault key
 FAULT_KEYS = {"count", "followers", "types", "onset", "severity", "duration", "period", "duty"}
 FAULT_KEYS |= {"amplitude"}
@@ -46,12 +46,16 @@ class LinkLosses:
         How long after its loss each link comes back with its weight; None: lost for good.
     pinning : bool
         Whether a leader link a_i0 may be drawn.
+    baseline : bool
+        Whether each sample is run a second time with its switches made no-ops (same
+        compiled library), for the peak |u_i| without losses (:mod:`sweep.links`).
     """
 
     count: tuple[int, int]
     time: Distribution
     recovery: Distribution | None
     pinning: bool = True
+    baseline: bool = False
 
 
 @dataclass(frozen=True)
@@ -166,15 +170,17 @@ def _count_range(f: str, v: Any, key: str) -> tuple[int, int]:
 
 def _losses(f: str, raw: Any) -> LinkLosses:
     t = read_table(f, raw, "graph.losses", LOSS_KEYS, {"time"})
-    pinning = t.get("pinning", True)
-    if not isinstance(pinning, bool):
-        raise StudyError(f, "graph.losses.pinning", f"{pinning!r} is not a boolean", "true/false")
+    pinning, baseline = t.get("pinning", True), t.get("baseline", False)
+    for key, v in (("pinning", pinning), ("baseline", baseline)):
+        if not isinstance(v, bool):
+            raise StudyError(f, f"graph.losses.{key}", f"{v!r} is not a boolean", "true/false")
     rec = t.get("recovery")
     return LinkLosses(
         count=_count_range(f, t.get("count", 1), "graph.losses.count"),
         time=scalar_distribution(f, t["time"], "graph.losses.time"),
         recovery=None if rec is None else scalar_distribution(f, rec, "graph.losses.recovery"),
         pinning=pinning,
+        baseline=baseline,
     )
 
 

@@ -248,3 +248,25 @@ def step_recovery(sc: Any, run: Any) -> dict[str, Any]:
     view = TrajectoryView.of(run.frame)  # one conversion for both
     items = recoveries(sc, view, gauge(sc, run.gains))
     return {**recovery_summary(items), "step_peak_u": step_peak_u(sc, view)}
+
+
+def link_recovery(sc: Any, run: Any) -> dict[str, Any]:
+    """How every follower came back to its slot after each graph switch.
+
+    Parameters
+    ----------
+    sc : Scenario
+        The sample's scenario (its ``graph.switches``).
+    run : verify.pipeline.Run
+        The sample's run (its gains give the gauge).
+
+    Returns
+    -------
+    dict
+        :func:`verify.link_recovery.switch_summary`'s columns (``switch_pairs`` 0 and NaN
+        times without switches).
+    """
+    from verify.link_recovery import switch_recoveries, switch_summary
+    from verify.table import gauge
+
+    return switch_summary(switch_recoveries(sc, run.frame, gauge(sc, run.gains)))

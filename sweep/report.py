@@ -286,6 +286,7 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
         if len(vals):
             lines.append(f"| largest {label} | {np.max(vals):.4g} |")
     lines += step_lines(ok)
+    lines += link_lines(ok)
     lines += tail_split_lines(ok)
     t2 = entry_times(table)
     lines.append(
@@ -327,6 +328,60 @@ def step_lines(ok: pd.DataFrame) -> list[str]:
         f"within {within} | {back} of {int(pairs)} ({late} late; {undefined} undefined: still "
         f"out when the next step or the horizon came within {within}) |"
     ]
+
+
+def link_lines(ok: pd.DataFrame) -> list[str]:
+    """After each graph switch: the (switch, follower) pairs back within the level in time
+    (:mod:`verify.link_recovery`), and the peak |u_i| after 1 s against the same sample
+    with its switches made no-ops (``[graph.losses] baseline``); no line without switches.
+
+    Parameters
+    ----------
+    ok : DataFrame
+        The ``ok`` rows.
+    """
+    from verify.operator_steps import RECOVERY_LEVEL, RECOVERY_LIMIT
+
+    pairs = np.nansum(_num(ok, "switch_pairs"))
+    if not pairs > 0:
+        return []
+    late = int(np.nansum(_num(ok, "switch_pairs_late")))
+    undefined = int(np.nansum(_num(ok, "switch_pairs_undefined")))
+    before = int(np.nansum(_num(ok, "switch_pairs_out_before")))
+    slowest = _num(ok, "switch_recovery_s")
+    slowest = slowest[~np.isnan(slowest)]
+    back, within = int(pairs) - late - undefined, f"{RECOVERY_LIMIT:g} s"
+    lines = [
+        f"| (graph switch, follower) pairs back within {RECOVERY_LEVEL:g} of the slot within "
+        f"{within} | {back} of {int(pairs)} ({late} late; {undefined} undefined: still out "
+        f"when the next switch or the horizon came within {within}; {before} already out "
+        "before the switch) |",
+        f"| slowest return after a switch, where defined [s] | "
+        f"{np.max(slowest) if len(slowest) else float('nan'):.4g} |",
+    ]
+    if "switch_pairs_late_nolosses" in ok.columns:
+        late0 = int(np.nansum(_num(ok, "switch_pairs_late_nolosses")))
+        undef0 = int(np.nansum(_num(ok, "switch_pairs_undefined_nolosses")))
+        lines.append(
+            f"| the same pairs in the same samples without losses (switches made no-ops) | "
+            f"{int(pairs) - late0 - undef0} of {int(pairs)} back ({late0} late; {undef0} "
+            "undefined) |"
+        )
+    late_u, base_u = _num(ok, "peak_u_late"), _num(ok, "peak_u_late_nolosses")
+    both = np.isfinite(late_u) & np.isfinite(base_u) & (base_u > 0)
+    if both.any():
+        r = late_u[both] / base_u[both]
+        lines.append(
+            f"| peak \\|u_i\\| after t = 1 s over the same sample without losses | median "
+            f"{np.median(r):.4g}, largest {np.max(r):.4g} (sample {_worst_id(ok, both, r)}); "
+            f"{int((r <= 2.0).sum())} of {len(r)} within 2x |"
+        )
+    return lines
+
+
+def _worst_id(ok: pd.DataFrame, mask: np.ndarray, ratio: np.ndarray) -> str:
+    """The id of the row with the largest ratio."""
+    return str(ok["id"].to_numpy()[mask][int(np.argmax(ratio))])
 
 
 def tail_switched(table: pd.DataFrame) -> np.ndarray:

@@ -19,6 +19,7 @@ from core.memo import MEMO
 from sweep.coverage import coverage_columns
 from sweep.measures import (
     library_key,
+    link_recovery,
     step_recovery,
     summarize_table,
     tail_max_et,
@@ -68,6 +69,8 @@ def run_sample(study_path: str, sample_id: int, folder: str, keep: bool = False)
     else:
         try:
             row.update(_simulate_and_verify(sample, paths, keep))
+            if _baseline(_study(study_path)):
+                row.update(link_baseline(sample, paths))
             row["status"] = "ok"
         except Exception as exc:  # noqa: BLE001 - any failure of one sample is recorded
             row["status"] = f"failed: {one_line(exc)}"
@@ -157,6 +160,52 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[
         "tail_max_et": tail_max_et(run.frame, v.config.tail_fraction),
         **topology_in_tail(sample.scenario, run.frame, v.config.tail_fraction),
         **step_recovery(sample.scenario, run),
+        **link_recovery(sample.scenario, run),
+    }
+
+
+def _baseline(study: Study) -> bool:
+    """Whether the study asks for each sample's run without its losses."""
+    g = study.graph
+    return g is not None and g.losses is not None and g.losses.baseline
+
+
+def link_baseline(sample: Sample, paths: StudyPaths) -> dict[str, Any]:
+    """The sample once more with its graph switches made no-ops (each sets the base
+    graph's weight): the same structure, so the same compiled library, and the run the
+    losses are compared with (``peak_u_late_nolosses``; NaN without switches).
+
+    Parameters
+    ----------
+    sample : Sample
+        The drawn sample.
+    paths : StudyPaths
+        The study's folders.
+    """
+    import dataclasses
+
+    from core.graph import Switch
+    from verify.link_recovery import peak_u_late, switch_recoveries, switch_summary
+    from verify.table import gauge
+
+    sc = sample.scenario
+    if sc is None or not sc.graph.switches:
+        return {"peak_u_late_nolosses": float("nan")}
+    A, b = sc.graph.adjacency, sc.graph.pinning
+
+    def same(s: Switch) -> Switch:
+        w = b[s.follower] if s.neighbour is None else A[s.follower, s.neighbour]
+        return dataclasses.replace(s, weight=float(w))
+
+    graph = dataclasses.replace(sc.graph, switches=tuple(same(s) for s in sc.graph.switches))
+    twin = dataclasses.replace(sample, scenario=dataclasses.replace(sc, graph=graph))
+    run = run_in_memory(twin, paths)
+    # the same (switch time, follower) pairs without the losses: what the formation's own
+    # error leaves of the promise "back within 0.05 within 2 s"
+    back = switch_summary(switch_recoveries(sc, run.frame, gauge(sc, run.gains)))
+    return {
+        "peak_u_late_nolosses": peak_u_late(run.frame, sc.N, sc.n),
+        **{f"{k}_nolosses": back[k] for k in ("switch_pairs_late", "switch_pairs_undefined")},
     }
 
 

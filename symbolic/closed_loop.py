@@ -162,13 +162,19 @@ def fault_values(sc: Scenario, lay: ParamLayout) -> ca.Function:
     return ca.Function("faults", [t, p], [ca.horzcat(*cols)], ["t", "p"], ["GF"])
 
 
-def graph_coupling(sc: Scenario, lay: ParamLayout, t: Any, p: Any) -> tuple[Any, Any]:
-    """``L_Bᵀ`` and ``(a0 ∘ h)ᵀ`` at time t as sparse matrices whose nonzeros are read from p.
+def graph_coupling(
+    sc: Scenario, lay: ParamLayout, t: Any, p: Any
+) -> tuple[tuple[Any, Any], tuple[Any, Any], tuple[Any, Any]]:
+    """``L_Bᵀ`` and ``(a0 ∘ h)ᵀ`` at time t and their first two time derivatives.
 
-    The pattern is the union of the topologies the graph reaches (structure); the
-    weights of topology k and its start time are parameters. With switching times
-    s_1 < … < s_{K−1}, the weights are v_0 + Σ_k step(t − s_k)(v_k − v_{k−1}):
-    piecewise constant and right-continuous (the new graph holds from s_k on).
+    Sparse matrices whose nonzeros are read from p. The pattern is the union of the
+    topologies the graph reaches (structure); the weights of topology k, its start time
+    and the fade time T are parameters. With switching times s_1 < … < s_{K−1} the weights
+    are v_0 + Σ_k σ_k(t)(v_k − v_{k−1}): with T = 0, σ_k = step(t − s_k) (piecewise
+    constant and right-continuous, the new graph holds from s_k on; derivatives 0); with
+    T > 0, σ_k = σ((t − s_k)/T), the C² fade of :func:`core.graph.fade_jets`, so ψ of
+    eq. (6) and the oracle's ψ̇, ψ̈ stay continuous through a switch (docs/verification.md,
+    'Link losses').
 
     Parameters
     ----------
@@ -178,20 +184,45 @@ def graph_coupling(sc: Scenario, lay: ParamLayout, t: Any, p: Any) -> tuple[Any,
         Time.
     p : casadi.SX or casadi.MX
         The parameter vector.
+
+    Returns
+    -------
+    W, dW, ddW : tuple of (L_Bᵀ, (a0 ∘ h)ᵀ)
+        The weights and their first and second time derivatives (None without switches).
     """
     L, a = graph_pattern(sc)
     nw = int(L.sum() + a.sum())
     w = lay.get(p, "graph")
     times = lay.get(p, "graph_times")
     v = w[0:nw]
+    if not times.numel():  # one topology: constant weights (no derivative terms)
+        return _sparse_pair(L, a, p, v), None, None
+    dv = ddv = 0 * v
+    if times.numel():
+        T = lay.get(p, "graph_fade")[0]
+        pos = T > 0
+        Ts = ca.if_else(pos, T, 1.0)  # no division by 0 in the branch not taken
     for k in range(times.numel()):
         jump = w[(k + 1) * nw : (k + 2) * nw] - w[k * nw : (k + 1) * nw]
-        v = v + ca.if_else(t >= times[k], 1.0, 0.0) * jump
+        x = ca.fmin(ca.fmax((t - times[k]) / Ts, 0.0), 1.0)
+        inside = ca.logic_and(t > times[k], t < times[k] + Ts)
+        sig = x**3 * (10 - 15 * x + 6 * x**2)  # core.graph.fade_jets
+        dsig = ca.if_else(inside, 30 * x**2 * (1 - x) ** 2, 0.0) / Ts
+        ddsig = ca.if_else(inside, 60 * x * (1 - x) * (1 - 2 * x), 0.0) / Ts**2
+        raw = ca.if_else(t >= times[k], 1.0, 0.0)
+        v = v + ca.if_else(pos, sig, raw) * jump
+        dv = dv + ca.if_else(pos, dsig, 0.0) * jump
+        ddv = ddv + ca.if_else(pos, ddsig, 0.0) * jump
+    return _sparse_pair(L, a, p, v), _sparse_pair(L, a, p, dv), _sparse_pair(L, a, p, ddv)
+
+
+def _sparse_pair(L: np.ndarray, a: np.ndarray, p: Any, vec: Any) -> tuple[Any, Any]:
+    """``(L_Bᵀ, (a0 ∘ h)ᵀ)`` on the patterns ``L``, ``a`` with nonzeros ``vec`` (in order)."""
     out, k = [], 0
     for mask in (L, a):
         cols, rows = np.nonzero(mask.T)
         sp = ca.Sparsity.triplet(mask.shape[0], mask.shape[1], rows.tolist(), cols.tolist())
-        out.append(type(p)(sp, v[k : k + sp.nnz()]))
+        out.append(type(p)(sp, vec[k : k + sp.nnz()]))
         k += sp.nnz()
     return out[0], out[1]
 
@@ -265,7 +296,7 @@ def _parameters_at(sc: Scenario, t: Any, pv: Any) -> tuple[Any, dict, Any, Any, 
     poff, npar = param_layout(sc.n, saturated(sc))
     P = ca.reshape(play.get(pv, "agents"), npar, sc.N)
     GF = fault_values(sc, play)(t, pv)
-    W = graph_coupling(sc, play, t, pv)
+    W = graph_coupling(sc, play, t, pv)  # (weights, their rate, their second derivative)
     return P, poff, GF, W, leader_function(sc.leader, parametric=True)
 
 
@@ -274,6 +305,38 @@ def _u0_literals(sc: Scenario, pv: Any) -> Any:
     play = layout_of(sc)
     lits = [play.get(pv, k) for k in play.slices if k.startswith("expr:leader.u0")]
     return ca.vertcat(*lits) if lits else type(pv)(0, 1)
+
+
+def _oracle_psi(
+    sc: Scenario,
+    og: ObserverGains,
+    assembly: str,
+    gm: GraphMatrices,
+    jets: tuple[Any, Any, Any, Any, tuple[Any, Any, Any]],
+    weights: tuple[Any, Any, Any],
+) -> tuple[Any, Any]:
+    """ψ̇ and ψ̈ of every agent for the oracle derivatives (symbolic/derivatives.py).
+
+    Passes over the network: η̇ of all agents -> ψ̇ -> η̈ of all agents -> ψ̈. ``jets`` is
+    (E, the agents' (μ, η, φ), ψ, the observer's numbers, (y0, ẏ0, ÿ0)); ``weights`` the
+    graph's weights and their two rates (None without switches,
+    :func:`graph_coupling`).
+    """
+    m, N, C0 = sc.m, sc.N, sc.leader.C0
+    E, SO, psi, Pobs, (y0, y0dot, y0ddot) = jets
+    W, dW, ddW = weights
+    obs = observer_function(og)
+    D1, _ = flow_jets(obs)
+    SOd = apply_agents(obs, N, [SO, psi, Pobs], assembly)[0]
+    dpsi = coupling(C0, SOd[m : 2 * m, :], y0dot, gm, W)
+    if dW is not None:  # fading weights (graph.link_fade): d/dt of eq. (6) has Ẇ's term
+        dpsi = dpsi + coupling(C0, E, y0, gm, dW)
+    SOdd = apply_agents(D1, N, [SO, psi, Pobs, SOd, dpsi], assembly)[0]
+    ddpsi = coupling(C0, SOdd[m : 2 * m, :], y0ddot, gm, W)
+    if ddW is not None:  # ψ̈ = C0Ë Wᵀ + 2 C0Ė Ẇᵀ + C0E Ẅᵀ (and the leader's terms)
+        ddpsi = ddpsi + 2 * coupling(C0, SOd[m : 2 * m, :], y0dot, gm, dW)
+        ddpsi = ddpsi + coupling(C0, E, y0, gm, ddW)
+    return dpsi, ddpsi
 
 
 def _network(
@@ -296,7 +359,7 @@ def _network(
     lay = make_layout(m, n, N, filtered)
     gm: GraphMatrices = graph_matrices(sc.graph, gains)
     og = observer_gains(sc, gains)
-    P, poff, GF, W, lead = _parameters_at(sc, t, pv)
+    P, poff, GF, (W, dW, ddW), lead = _parameters_at(sc, t, pv)
     eta0dot, eta0ddot, y0, y0dot, y0ddot, u0, u0dot = lead(t, x[:m], _u0_literals(sc, pv))
     eta0 = x[:m]
     X = ca.reshape(x[m:], lay.agent_size, N)
@@ -306,14 +369,8 @@ def _network(
     if filtered:
         dpsi = ddpsi = ca.DM.zeros(n, N)
     else:
-        # oracle passes over the network: η̇ of all agents -> ψ̇ -> η̈ of all agents -> ψ̈
-        obs = observer_function(og)
-        D1, _ = flow_jets(obs)
-        Pobs = P[poff["obs"], :]
-        SOd = apply_agents(obs, N, [SO, psi, Pobs], assembly)[0]
-        dpsi = coupling(sc.leader.C0, SOd[m : 2 * m, :], y0dot, gm, W)
-        SOdd = apply_agents(D1, N, [SO, psi, Pobs, SOd, dpsi], assembly)[0]
-        ddpsi = coupling(sc.leader.C0, SOdd[m : 2 * m, :], y0ddot, gm, W)
+        jets = (E, SO, psi, P[poff["obs"], :], (y0, y0dot, y0ddot))
+        dpsi, ddpsi = _oracle_psi(sc, og, assembly, gm, jets, (W, dW, ddW))
     A = ca.reshape(a, n, N)
     groups = model_groups(sc)
     outs: list[Any] | None = None

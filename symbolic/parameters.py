@@ -9,9 +9,10 @@ through one flat vector ``p`` instead of being written into the generated C:
 * ``expr:<where>``: the literals of each expression of t (the operator's u0, the health
   g_i(t) with its faults, the bias f_i(t)): ``2*cos(t)`` is the template ``#*cos(t)``
   with the parameter 2 (:meth:`core.expressions.Expr.literals`);
-* ``graph``, ``graph_times``: the nonzero weights of ``L + B`` and ``a0 ∘ h`` (the
-  coupling of eq. (6)) of every topology a switching graph reaches, and the times it
-  switches.
+* ``graph``, ``graph_times``, ``graph_fade``: the nonzero weights of ``L + B`` and
+  ``a0 ∘ h`` (the coupling of eq. (6)) of every topology a switching graph reaches, the
+  times it switches and the time a switch's weights fade over (``graph.link_fade``; only
+  with switches).
 
 What is left is the *structure*: the graph's pattern (the union over its topologies)
 and number of topologies, the follower models, the
@@ -222,7 +223,8 @@ def layout_of(sc: Scenario) -> ParamLayout:
     """The parameter layout of ``sc`` (sizes only: equal for equal structures).
 
     ``graph`` holds the weights of every topology in turn, ``graph_times`` the
-    switching times between them (:func:`symbolic.closed_loop.graph_coupling`).
+    switching times between them and ``graph_fade`` the fade's duration
+    (:func:`symbolic.closed_loop.graph_coupling`).
 
     Parameters
     ----------
@@ -231,6 +233,7 @@ def layout_of(sc: Scenario) -> ParamLayout:
     _, npar = param_layout(sc.n, sc.controller.u_max is not None)
     K = len(sc.graph.topologies())
     sizes = [("agents", npar * sc.N), ("graph", K * nonzeros_count(sc)), ("graph_times", K - 1)]
+    sizes.append(("graph_fade", 1 if K > 1 else 0))
     sizes += [(k, len(e.literals())) for k, e in expressions(sc).items()]
     slices, k = {}, 0
     for name, size in sizes:
@@ -257,6 +260,7 @@ def param_values(sc: Scenario, gains: Gains) -> np.ndarray:
         [graph_values(sc, h, top.adjacency, top.pinning) for top in tops]
     )
     p[lay.slices["graph_times"]] = [top.t_start for top in tops[1:]]
+    p[lay.slices["graph_fade"]] = [sc.graph.link_fade] if len(tops) > 1 else []
     for name, e in expressions(sc).items():
         p[lay.slices[name]] = e.literals()
     return p

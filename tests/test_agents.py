@@ -29,7 +29,13 @@ PAPER = "scenarios/paper.toml"
 
 
 def _with_graph(sc, A, pin, switches=()):
-    g = Graph(adjacency=np.asarray(A, float), pinning=np.asarray(pin, float), switches=switches)
+    # the per-agent driver switches links raw (graph.link_fade = 0; generated/agents.py)
+    g = Graph(
+        adjacency=np.asarray(A, float),
+        pinning=np.asarray(pin, float),
+        switches=switches,
+        link_fade=0.0,
+    )
     return dataclasses.replace(sc, graph=g)
 
 

@@ -119,7 +119,8 @@ def test_switching_weights_follow_the_topology(tmp_path):
         {"time": 0.3, "follower": 4, "neighbour": 2, "weight": 0.0},
         {"time": 0.6, "follower": 4, "neighbour": 2, "weight": 1.0},
     ]
-    sc = api.load(PAPER, overrides={"graph.switches": sw}, variant="switch")
+    ov = {"graph.switches": sw, "graph.link_fade": 0.0}  # raw switching (fades: test_link_fade)
+    sc = api.load(PAPER, overrides=ov, variant="switch")
     gains, _ = api.ensure_gains(sc, tmp_path)
     cl = build_closed_loop(sc, gains)
     names = cl.outputs.name_out()

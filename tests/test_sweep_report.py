@@ -114,3 +114,30 @@ def test_step_lines_count_each_kind_of_step_pair():
     assert "within 0.05 of the slot within 2 s | 3 of 5 (1 late; 1 undefined" in line
     assert step_lines(ok.assign(step_pairs=0)) == []
     assert step_lines(pd.DataFrame({"tail_max_et": [1.0]})) == []
+
+
+def test_link_lines_count_pairs_and_the_ratio_to_the_no_loss_runs():
+    import pandas as pd
+
+    from sweep.report import link_lines
+
+    ok = pd.DataFrame(
+        {
+            "id": [3, 7],
+            "switch_pairs": [10, 6],
+            "switch_pairs_late": [1, 0],
+            "switch_pairs_undefined": [2, 1],
+            "switch_pairs_out_before": [0, 1],
+            "switch_recovery_s": [1.5, float("inf")],
+            "switch_pairs_late_nolosses": [2, 0],
+            "switch_pairs_undefined_nolosses": [2, 1],
+            "peak_u_late": [300.0, 100.0],
+            "peak_u_late_nolosses": [100.0, 100.0],
+        }
+    )
+    text = "\n".join(link_lines(ok))
+    assert "| 12 of 16 (1 late; 3 undefined" in text and "1 already out" in text
+    assert "11 of 16 back (2 late; 3 undefined)" in text
+    assert "median 2, largest 3 (sample 3); 1 of 2 within 2x" in text
+    assert "| inf |" in text  # a follower that never came back
+    assert link_lines(ok.assign(switch_pairs=0)) == []

@@ -69,13 +69,19 @@ def switch_text(switches: list[tuple]) -> str:
     return "\n".join(out)
 
 
-def paper_with(tmp_path, switches: list[tuple] | str, extra: str = "") -> object:
-    """scenarios/paper.toml with switch tables after [graph] (and ``extra`` lines), written."""
+def paper_with(
+    tmp_path, switches: list[tuple] | str, extra: str = "", fade: float | None = 0.0
+) -> object:
+    """scenarios/paper.toml with switch tables after [graph] (and ``extra`` lines), written.
+
+    ``fade``: ``graph.link_fade`` (default 0, raw switching, what most tests here pin;
+    None leaves the loader's default)."""
     text = PAPER.read_text()
     anchor = "pinning = [1.0, 0.0, 0.0, 0.0, 0.0]\n"
     assert text.count(anchor) == 1
     body = switches if isinstance(switches, str) else switch_text(switches)
-    text = text.replace(anchor, anchor + "\n" + body + "\n")
+    fade_line = "" if fade is None else f"link_fade = {fade}\n"
+    text = text.replace(anchor, anchor + fade_line + "\n" + body + "\n")
     for old, new in (l.split(" => ") for l in extra.splitlines() if l):
         assert text.count(old) == 1, old
         text = text.replace(old, new)

@@ -45,7 +45,9 @@ def test_a_run_that_gives_up_reports_where_cvode_stood(tmp_path):
     base = Path("scenarios/paper.toml").resolve().as_posix()
     study = study.replace('base = "../scenarios/paper.toml"', f'base = "{base}"')
     path = tmp_path / "few-steps.toml"
-    path.write_text(study + '\n[set]\n"integration.max_steps" = 1000\n')
+    fade = '"graph.link_fade" = 0.0\n'  # the study's [set] (the per-agent driver switches raw)
+    assert study.count(fade) == 1
+    path.write_text(study.replace(fade, fade + '"integration.max_steps" = 1000\n'))
     (row,) = topologies.run_study(str(path), 1, 1, None)
     assert row["status"] == "incomplete"
     assert row["t_reached"] < row["t_stop"] < row["t_reached"] + 0.01  # the output step

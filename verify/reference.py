@@ -23,6 +23,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from core.expression_tree import BinOp, Call, Neg, Node, Num, Time, Visitor, visit
+from core.graph import fade_jets
 from core.hold import shaped_hold
 from core.scenario import Scenario
 from synthesis.gains import Gains
@@ -219,6 +220,7 @@ class Reference:
             + (tp.pinning * self.h,)
             for tp in sc.graph.topologies()
         ]
+        self.fade = float(sc.graph.link_fade)
         o, c = sc.observer, sc.controller
         self.alpha_sum = np.asarray(o.alpha1) + np.asarray(o.alpha1_bar)
         self.phi_min = float(o.phi_min)
@@ -436,17 +438,33 @@ class Reference:
         out.update(Psi=ctl["Psi"], u=ctl["u"], qdot=qd, u0=u0, u0dot=u0d)
         return out
 
-    def weights(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(L + B, a0 ∘ h)`` of the topology that holds at ``t`` (right-continuous).
+    def weights(self, t: float, derivative: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """``(L + B, a0 ∘ h)`` at ``t``, or its first or second time derivative.
+
+        Raw switching (``graph.link_fade`` = 0): the topology that holds at ``t``
+        (right-continuous), derivatives 0. With a fade T: each switch's change of the
+        weights enters as σ((t − s_k)/T) (:func:`core.graph.fade_jets`).
 
         Parameters
         ----------
         t : float
             Time.
+        derivative : {0, 1, 2}
         """
-        if len(self.tops) == 1:
-            return self.LB, self.a0h
-        return next(tp for tp in reversed(self.tops) if tp[0] <= t)[1:]
+        T = self.fade
+        if len(self.tops) == 1 or T <= 0.0:
+            if derivative:
+                return 0.0 * self.LB, 0.0 * self.a0h
+            if len(self.tops) == 1:
+                return self.LB, self.a0h
+            return next(tp for tp in reversed(self.tops) if tp[0] <= t)[1:]
+        L = self.tops[0][1] * (derivative == 0)
+        a = self.tops[0][2] * (derivative == 0)
+        for prev, top in zip(self.tops, self.tops[1:], strict=False):
+            c = fade_jets((t - top[0]) / T)[derivative] / T**derivative
+            L = L + c * (top[1] - prev[1])
+            a = a + c * (top[2] - prev[2])
+        return L, a
 
     def _observer(
         self, S: dict[str, np.ndarray], e0d: np.ndarray, e0dd: np.ndarray, t: float = 0.0
@@ -467,6 +485,9 @@ class Reference:
         E, mu, phi = S["eta"], S["mu"], S["phi"]
         LB, a0h = self.weights(t)
         a0h = a0h[:, None]
+        dLB, da0h = self.weights(t, 1)  # fading weights: ψ's jets take their rates
+        ddLB, dda0h = self.weights(t, 2)
+        da0h, dda0h = da0h[:, None], dda0h[:, None]
         # eq. (6): ψ_i = Σ_j (|a_ij| C0η_i − a_ij C0η_j) + a_i0 (C0η_i − h_i y0)
         psi = LB @ E @ C0.T - a0h * y0
         ehat = mu + psi @ self.Gamma.T  # eq. (7)
@@ -478,7 +499,7 @@ class Reference:
         Ed = E @ A0.T + v @ B0.T  # eq. (9)
         phid = -self.alpha_sum * (phi - self.phi_min)  # eq. (9), with the floor φ_min
         # oracle: differentiate the observer along the network flow (chain rule by hand)
-        psid = LB @ Ed @ C0.T - a0h * y0d
+        psid = LB @ Ed @ C0.T - a0h * y0d + dLB @ E @ C0.T - da0h * y0
         mudd = mud @ self.F.T + psid @ self.K.T
         yd = (mud + psid @ self.Gamma.T) @ self.Q.T
         phidd = -self.alpha_sum * phid
@@ -486,7 +507,8 @@ class Reference:
         Dd = nd + phid
         vd = -self.l1 * yd - self.l2 * (yd / D[:, None] - y * (Dd / D**2)[:, None])
         Edd = Ed @ A0.T + vd @ B0.T
-        psidd = LB @ Edd @ C0.T - a0h * y0dd
+        psidd = LB @ Edd @ C0.T - a0h * y0dd + 2 * (dLB @ Ed @ C0.T - da0h * y0d)
+        psidd = psidd + ddLB @ E @ C0.T - dda0h * y0
         ydd = (mudd + psidd @ self.Gamma.T) @ self.Q.T
         _, nd, ndd = self._norm_jets(y, yd, ydd)
         Ddd = ndd + phidd

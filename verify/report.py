@@ -411,8 +411,14 @@ def switching_statement(sc: Scenario, table: pd.DataFrame) -> list[str]:
         )
         held.append(f"from {tp.t_start:g} s to {ends[k + 1]} s {links}")
     n = int(table["note"].str.startswith(SWITCHING_NOTE).sum())
+    T = sc.graph.link_fade
+    fade = (
+        f" (each change fading in over {T:g} s, `graph.link_fade`)" if T > 0 else " (raw switching)"
+    )
     return [
-        "The graph switches (`[[graph.switches]]`, outside the paper's theorems): "
+        "The graph switches (`[[graph.switches]]`, outside the paper's theorems)"
+        + fade
+        + ": "
         + "; ".join(held)
         + f". The {n} rows built on V1 of the base graph (Theorem 1's dV1/dt and decay rate, "
         "the derived Definition 1 bound), Lemma 1's reaching time from V2(0) and the paper's "
