@@ -40,7 +40,7 @@ from core.memo import MEMO
 from core.scenario import Scenario
 from generated import solvers
 from generated.built import Built
-from generated.codegen import Library, build_library, check_dyn_signature, renamed
+from generated.codegen import Library, build_library, cache_root, check_dyn_signature, renamed
 from generated.gains_cache import GainsInfo, ensure_gains, scenario_gains
 from generated.largescale import choose_plan
 from generated.loaded import (
@@ -202,7 +202,8 @@ def build(
     t0 = time.perf_counter()
     # first: what the method needs of the scenario itself (the per-agent engine's kernels)
     prepared = solvers.get(method).prepare(sc, gains)
-    key = (structure_key(sc, gains), method, settings)
+    # the cache folder is part of the key: a build of another cache (HITL_BUILD_DIR) is not reused
+    key = (structure_key(sc, gains), method, settings, cache_root(settings))
     if prepared is not None:  # the method's own libraries: only the closed loop is reused
         if closed_loop is None:
             closed_loop = _loop_of(sc, gains, key)

@@ -13,22 +13,20 @@ from __future__ import annotations
 import ast
 import re
 import shutil
+import tomllib
 from pathlib import Path
 
 from helpers import ROOT
 
+#: the project's packages: the import contract's root packages (pyproject.toml)
+PACKAGES = tuple(
+    tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]["root_packages"]
+)
+
 #: what a copy of the tree holds: the packages, their tests, the docs the tests read and
 #: the configuration of ruff, import-linter and pytest
 TREE = (
-    "core",
-    "synthesis",
-    "symbolic",
-    "generated",
-    "verify",
-    "benchmarks",
-    "sweep",
-    "search",
-    "console",
+    *PACKAGES,
     "tests",
     "docs",
     "scenarios",

@@ -22,18 +22,7 @@ import pytest
 import recipes
 
 #: what ``make lint`` lints
-LINTED = (
-    "core",
-    "synthesis",
-    "symbolic",
-    "generated",
-    "verify",
-    "benchmarks",
-    "sweep",
-    "search",
-    "console",
-    "tests",
-)
+LINTED = (*recipes.PACKAGES, "tests")
 #: the quick tests that read what the recipes change
 TOUCHED = (
     "tests/test_models.py",
