@@ -40,7 +40,8 @@ import pandas as pd
 
 from benchmarks.remedies import Remedy, run_variant, study_variant
 from core.artifacts import OUT_ROOT, atomic_write_text
-from core.errors import UsageError, run_cli
+from core.cli_args import count, natural
+from core.errors import CliParser, UsageError, run_cli
 from core.graph import DEFAULT_LINK_FADE
 from core.provenance import provenance_line
 
@@ -293,10 +294,12 @@ def markdown(
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.links", description=__doc__)
+    p = CliParser(prog="python -m benchmarks.links", description=__doc__)
     p.add_argument("--study", type=Path, default=DEFAULT_STUDY, help="the link-loss study")
-    p.add_argument("--samples", type=int, default=6, help="samples per model (default 6)")
-    p.add_argument("--workers", type=int, default=1, help="sweep workers (default 1)")
+    p.add_argument(
+        "--samples", type=natural, default=6, help="samples per model; 0: only the kick (default 6)"
+    )
+    p.add_argument("--workers", type=count, default=1, help="sweep workers (default 1)")
     p.add_argument("--only", nargs="+", metavar="NAME", help="only these models")
     p.add_argument("--no-kick", action="store_true", help="skip part 1")
     p.add_argument("--out", type=Path, default=OUT_ROOT / "link-models", help="output folder")
@@ -316,8 +319,6 @@ def main(argv: list[str]) -> int:
     unknown = sorted(set(a.only or []) - set(names))
     if unknown:
         raise UsageError(f"--only {' '.join(unknown)}: unknown model; one of {', '.join(names)}")
-    if a.samples < 0:
-        raise UsageError(f"--samples {a.samples}: give 0 (only the kick) or more")
     kick_rows, kick_runs = ([], {}) if a.no_kick else kick(a.out / "kick")
     rows = []
     for model in [m for m in MODELS if not a.only or m.name in a.only] if a.samples else []:

@@ -16,7 +16,7 @@ import textwrap
 import pytest
 from helpers import PAPER, ROOT
 
-from benchmarks import agents, bench, lone, precision, remedies, steps, study
+from benchmarks import agents, bench, links, lone, precision, remedies, steps, study
 from benchmarks import search as bench_search
 from console import __main__ as console_main
 from console import sessions as console_sessions
@@ -63,6 +63,10 @@ CASES = [
     (bench_search.main, ["--workers", "0"], "--workers"),
     (lone.main, [], "--out"),
     (remedies.main, ["--samples", "0"], "--samples"),
+    (links.main, ["--samples", "-1"], "--samples"),
+    (links.main, ["--workers", "0"], "--workers"),
+    (links.main, ["--bogus"], "--bogus"),
+    (links.main, ["--only", "bogus"], "--only"),
     (steps.main, ["--bench-n", "0"], "--bench-n"),
     (precision.main, ["--bogus"], "--bogus"),
 ]
