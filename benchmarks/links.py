@@ -38,7 +38,17 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from benchmarks.remedies import Remedy, run_variant, study_variant
+from benchmarks.variants import (
+    Variant,
+    chosen,
+    g,
+    guaranteed_counts,
+    nums,
+    pair_counts,
+    run_variant,
+    stat,
+    study_variant,
+)
 from core.artifacts import OUT_ROOT, atomic_write_text
 from core.cli_args import count, natural
 from core.errors import CliParser, UsageError, run_cli
@@ -67,10 +77,10 @@ CHAIN = (
 )
 
 #: the switching models compared, in the table's order
-MODELS: tuple[Remedy, ...] = (
-    Remedy("raw", {"graph.link_fade": 0.0}, "raw switching (`link_fade = 0`)"),
+MODELS: tuple[Variant, ...] = (
+    Variant("raw", {"graph.link_fade": 0.0}, "raw switching (`link_fade = 0`)"),
     *(
-        Remedy(f"fade-{T:g}", {"graph.link_fade": T}, f"fade over {T:g} s")
+        Variant(f"fade-{T:g}", {"graph.link_fade": T}, f"fade over {T:g} s")
         for T in (0.25, 0.5, 1.0, 2.0)
     ),
 )
@@ -159,60 +169,34 @@ def _norm(a: np.ndarray, i: int) -> float:
 
 
 # ----------------------------------------------------------------------------- part 2
-def _nums(table: pd.DataFrame, col: str) -> np.ndarray:
-    if col not in table.columns:
-        return np.full(len(table), np.nan)
-    return pd.to_numeric(table[col], errors="coerce").to_numpy(float)
-
-
-def _stat(v: np.ndarray, how: str) -> float:
-    v = v[~np.isnan(v)]
-    if not len(v):
-        return math.nan
-    return float({"median": np.median, "max": np.max}[how](v))
-
-
-def summarize(model: Remedy, table: pd.DataFrame) -> dict[str, Any]:
+def summarize(model: Variant, table: pd.DataFrame) -> dict[str, Any]:
     """One line of the comparison from a model's results.
 
     Parameters
     ----------
-    model : Remedy
+    model : Variant
     table : DataFrame
         Its ``results.parquet``.
     """
     ok = table[table["status"] == "ok"]
     status = table["status"].astype(str)
-    failed = ok["guaranteed_failed"].fillna("").astype(str)
-    n_failed = int(sum(len([x for x in f.split("; ") if x]) for f in failed))
-    n_rows = int(np.nansum(_nums(ok, "n_guaranteed")))
-    pairs = int(np.nansum(_nums(ok, "switch_pairs")))
-    late = int(np.nansum(_nums(ok, "switch_pairs_late")))
-    undefined = int(np.nansum(_nums(ok, "switch_pairs_undefined")))
-    ratio = _nums(ok, "peak_u_late") / _nums(ok, "peak_u_late_nolosses")
+    ratio = nums(ok, "peak_u_late") / nums(ok, "peak_u_late_nolosses")
     return {
         "model": model.name,
         "what": model.what,
         "samples": int((~status.str.startswith("refused")).sum()),
         "ok": len(ok),
         "stopped": int(status.str.contains("IntegrationError").sum()),
-        "tail_et_median": _stat(_nums(ok, "tail_max_et"), "median"),
-        "tail_et_max": _stat(_nums(ok, "tail_max_et"), "max"),
-        "peak_u_late_median": _stat(_nums(ok, "peak_u_late"), "median"),
-        "peak_u_late_max": _stat(_nums(ok, "peak_u_late"), "max"),
-        "ratio_median": _stat(ratio, "median"),
-        "ratio_max": _stat(ratio, "max"),
-        "steps_median": _stat(_nums(ok, "steps"), "median"),
-        "pairs": pairs,
-        "pairs_back": pairs - late - undefined,
-        "pairs_undefined": undefined,
-        "guaranteed_held": n_rows - n_failed,
-        "guaranteed_rows": n_rows,
+        "tail_et_median": stat(nums(ok, "tail_max_et"), "median"),
+        "tail_et_max": stat(nums(ok, "tail_max_et"), "max"),
+        "peak_u_late_median": stat(nums(ok, "peak_u_late"), "median"),
+        "peak_u_late_max": stat(nums(ok, "peak_u_late"), "max"),
+        "ratio_median": stat(ratio, "median"),
+        "ratio_max": stat(ratio, "max"),
+        "steps_median": stat(nums(ok, "steps"), "median"),
+        **pair_counts(ok, "switch"),
+        **guaranteed_counts(ok),
     }
-
-
-def _g(x: float) -> str:
-    return "-" if isinstance(x, float) and math.isnan(x) else f"{x:.3g}"
 
 
 def markdown(
@@ -257,9 +241,9 @@ def markdown(
             "|---|---|---|---|---|---|---|---|",
         ]
         out += [
-            f"| {r['switch']:g} | {r['output']} | {_g(r['before'])} | {_g(r['after'])} "
-            f"| {_g(r['raw_peak_4'])} | {_g(r['raw_peak_5'])} | {_g(r['fade_peak_4'])} "
-            f"| {_g(r['fade_peak_5'])} |"
+            f"| {r['switch']:g} | {r['output']} | {g(r['before'])} | {g(r['after'])} "
+            f"| {g(r['raw_peak_4'])} | {g(r['raw_peak_5'])} | {g(r['fade_peak_4'])} "
+            f"| {g(r['fade_peak_5'])} |"
             for r in kick_rows
         ]
         out.append("")
@@ -283,9 +267,9 @@ def markdown(
         ]
         out += [
             f"| {r['what']} | {r['ok']}/{r['samples']} ({r['stopped']}) "
-            f"| {_g(r['tail_et_median'])} ({_g(r['tail_et_max'])}) "
-            f"| {_g(r['peak_u_late_median'])} ({_g(r['peak_u_late_max'])}) "
-            f"| {_g(r['ratio_median'])} ({_g(r['ratio_max'])}) | {_g(r['steps_median'])} "
+            f"| {g(r['tail_et_median'])} ({g(r['tail_et_max'])}) "
+            f"| {g(r['peak_u_late_median'])} ({g(r['peak_u_late_max'])}) "
+            f"| {g(r['ratio_median'])} ({g(r['ratio_max'])}) | {g(r['steps_median'])} "
             f"| {r['pairs_back']}/{r['pairs']} ({r['pairs_undefined']}) "
             f"| {r['guaranteed_held']}/{r['guaranteed_rows']} |"
             for r in rows
@@ -315,13 +299,10 @@ def main(argv: list[str]) -> int:
         Command-line arguments (without the program name).
     """
     a = _parser().parse_args(argv)
-    names = [m.name for m in MODELS]
-    unknown = sorted(set(a.only or []) - set(names))
-    if unknown:
-        raise UsageError(f"--only {' '.join(unknown)}: unknown model; one of {', '.join(names)}")
+    models = chosen(MODELS, a.only, "model")
     kick_rows, kick_runs = ([], {}) if a.no_kick else kick(a.out / "kick")
     rows = []
-    for model in [m for m in MODELS if not a.only or m.name in a.only] if a.samples else []:
+    for model in models if a.samples else []:
         path = study_variant(a.study, model, a.samples, a.out / "studies")
         table = run_variant(path, a.out, a.workers)
         rows.append(summarize(model, table[table["id"] < a.samples]))  # a resumed larger run

@@ -23,21 +23,26 @@ a rerun resumes them.
 from __future__ import annotations
 
 import argparse
-import math
-import os
-import subprocess
 import sys
-import tomllib
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
+from benchmarks.variants import (
+    Variant,
+    chosen,
+    g,
+    guaranteed_counts,
+    nums,
+    pair_counts,
+    run_variant,
+    stat,
+    study_variant,
+)
 from core.artifacts import OUT_ROOT, atomic_write_text
 from core.cli_args import count
-from core.errors import CliParser, UsageError, run_cli
+from core.errors import CliParser, run_cli
 from core.provenance import provenance_line
 from core.shaping import DEFAULT_RISE, DEFAULT_SHAPE
 
@@ -45,43 +50,24 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_STUDY = ROOT / "studies" / "steps.toml"
 
 
-@dataclass(frozen=True)
-class Remedy:
-    """One way of taking operator steps: a name, its ``[set]`` keys and a description.
-
-    Attributes
-    ----------
-    name : str
-        Short name (part of the variant study's name).
-    keys : dict
-        ``--set`` keys applied to every sample.
-    what : str
-        One line for the table.
-    """
-
-    name: str
-    keys: dict[str, Any]
-    what: str
-
-
-def _shaped(shape: str, rise: float, what: str) -> Remedy:
+def _shaped(shape: str, rise: float, what: str) -> Variant:
     name = f"{shape}-{rise:g}"
-    return Remedy(name, {"leader.u0_rise": rise, "leader.u0_shape": shape}, what)
+    return Variant(name, {"leader.u0_rise": rise, "leader.u0_shape": shape}, what)
 
 
 #: the remedies compared, in the table's order
-REMEDIES: tuple[Remedy, ...] = (
-    Remedy("raw", {"leader.u0_rise": 0.0}, "raw steps (`u0_rise = 0`)"),
+REMEDIES: tuple[Variant, ...] = (
+    Variant("raw", {"leader.u0_rise": 0.0}, "raw steps (`u0_rise = 0`)"),
     *(_shaped("smoothstep", T, f"smoothstep over {T:g} s") for T in (0.25, 0.5, 1.0, 1.5, 2.0)),
     *(_shaped("prefilter", T, f"prefilter 1/(1 + {T:g}s)²") for T in (0.25, 0.5)),
     _shaped("ramp", 1.0, "rate limit: ramp over 1 s"),
-    Remedy(
+    Variant(
         "filtered",
         {"leader.u0_rise": 0.0, "options.derivatives": "filtered"},
         "raw steps, filtered derivatives (200 rad/s)",
     ),
     *(
-        Remedy(
+        Variant(
             f"phimin-{f:g}",
             {"leader.u0_rise": 0.0, "observer.phi_min": f},
             f"raw steps, boundary layer floor φ_min = {f:g}",
@@ -91,111 +77,12 @@ REMEDIES: tuple[Remedy, ...] = (
 )
 
 
-def study_variant(study: Path, remedy: Remedy, count: int, folder: Path) -> Path:
-    """The study with ``count`` samples, an absolute base and the remedy's keys in ``[set]``.
-
-    Parameters
-    ----------
-    study : Path
-        The step study.
-    remedy : Remedy
-    count : int
-        Samples (the first ``count`` of the study: same seeds for every remedy).
-    folder : Path
-        Where the variant's file is written.
-
-    Returns
-    -------
-    Path
-        ``<folder>/<study name>-<remedy>.toml``.
-    """
-    data = tomllib.loads(study.read_text(encoding="utf-8"))
-    data["base"] = str((study.parent / data["base"]).resolve())
-    data["count"] = count
-    data["name"] = f"{data['name']}-{remedy.name}".replace(".", "p")
-    data["set"] = {**data.get("set", {}), **remedy.keys}
-    path = folder / f"{data['name']}.toml"
-    folder.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, toml_text(data))
-    return path
-
-
-def toml_text(data: dict[str, Any]) -> str:
-    """A study table as TOML: top-level values, then one ``[table]`` per dict (inline below).
-
-    Parameters
-    ----------
-    data : dict
-        Values are numbers, strings, booleans, lists and dicts.
-    """
-    top = [f"{_key(k)} = {_value(v)}" for k, v in data.items() if not isinstance(v, dict)]
-    out = ["\n".join(top)]
-    for k, v in data.items():
-        if isinstance(v, dict):
-            body = "\n".join(f"{_key(a)} = {_value(b)}" for a, b in v.items())
-            out.append(f"[{_key(k)}]\n{body}")
-    return "\n\n".join(out) + "\n"
-
-
-def _key(k: str) -> str:
-    return k if k.replace("_", "").replace("-", "").isalnum() else _value(k)
-
-
-def _value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int | float):
-        return repr(v)
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, list):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{_key(a)} = {_value(b)}" for a, b in v.items()) + " }"
-    raise UsageError(f"study value {v!r}: not a TOML number, string, list or table")
-
-
-def run_variant(path: Path, out: Path, workers: int) -> pd.DataFrame:
-    """``python -m sweep run PATH``; its results table (failed samples are rows too).
-
-    Parameters
-    ----------
-    path : Path
-        The variant study.
-    out : Path
-        Output root.
-    workers : int
-        Local worker processes.
-    """
-    cmd = [sys.executable, "-m", "sweep", "run", str(path), "--out", str(out)]
-    cmd += ["--workers", str(workers)]
-    proc = subprocess.run(cmd, cwd=ROOT, env=dict(os.environ), capture_output=True, text=True)
-    results = out / tomllib.loads(path.read_text(encoding="utf-8"))["name"] / "results.parquet"
-    if proc.returncode not in (0, 1) or not results.exists():  # 1: some sample failed
-        last = (proc.stderr.strip().splitlines() or ["?"])[-1]
-        raise UsageError(f"python -m sweep run {path} failed: {last}")
-    return pd.read_parquet(results)
-
-
-def _nums(table: pd.DataFrame, col: str) -> np.ndarray:
-    if col not in table.columns:
-        return np.full(len(table), np.nan)
-    return pd.to_numeric(table[col], errors="coerce").to_numpy(float)
-
-
-def _stat(v: np.ndarray, how: str) -> float:
-    v = v[~np.isnan(v)]
-    if not len(v):
-        return math.nan
-    return float(np.median(v) if how == "median" else np.max(v))
-
-
-def summarize(remedy: Remedy, table: pd.DataFrame) -> dict[str, Any]:
+def summarize(remedy: Variant, table: pd.DataFrame) -> dict[str, Any]:
     """One line of the comparison from a variant's results.
 
     Parameters
     ----------
-    remedy : Remedy
+    remedy : Variant
     table : DataFrame
         Its ``results.parquet``.
 
@@ -205,36 +92,23 @@ def summarize(remedy: Remedy, table: pd.DataFrame) -> dict[str, Any]:
         Counts and statistics over the ``ok`` samples (guaranteed rows pooled).
     """
     ok = table[table["status"] == "ok"]
-    failed = ok["guaranteed_failed"].fillna("").astype(str)
-    n_failed = int(sum(len([x for x in f.split("; ") if x]) for f in failed))
-    n_rows = int(np.nansum(_nums(ok, "n_guaranteed")))
-    pairs = int(np.nansum(_nums(ok, "step_pairs")))
-    late = int(np.nansum(_nums(ok, "step_pairs_late")))
-    undefined = int(np.nansum(_nums(ok, "step_pairs_undefined")))
     return {
         "remedy": remedy.name,
         "what": remedy.what,
         "samples": len(table),
         "ok": len(ok),
-        "tail_et_median": _stat(_nums(ok, "tail_max_et"), "median"),
-        "tail_et_max": _stat(_nums(ok, "tail_max_et"), "max"),
-        "peak_u_late_median": _stat(_nums(ok, "peak_u_late"), "median"),
-        "peak_u_late_max": _stat(_nums(ok, "peak_u_late"), "max"),
-        "step_peak_u_max": _stat(_nums(ok, "step_peak_u"), "max"),
-        "steps_median": _stat(_nums(ok, "steps"), "median"),
-        "deviation_max": _stat(_nums(ok, "step_deviation_max"), "max"),
-        "recovery_max_s": _stat(_nums(ok, "step_recovery_s"), "max"),
-        "pairs": pairs,
-        "pairs_back": pairs - late - undefined,
-        "pairs_undefined": undefined,
-        "guaranteed_held": n_rows - n_failed,
-        "guaranteed_rows": n_rows,
+        "tail_et_median": stat(nums(ok, "tail_max_et"), "median"),
+        "tail_et_max": stat(nums(ok, "tail_max_et"), "max"),
+        "peak_u_late_median": stat(nums(ok, "peak_u_late"), "median"),
+        "peak_u_late_max": stat(nums(ok, "peak_u_late"), "max"),
+        "step_peak_u_max": stat(nums(ok, "step_peak_u"), "max"),
+        "steps_median": stat(nums(ok, "steps"), "median"),
+        "deviation_max": stat(nums(ok, "step_deviation_max"), "max"),
+        "recovery_max_s": stat(nums(ok, "step_recovery_s"), "max"),
+        **pair_counts(ok, "step"),
+        **guaranteed_counts(ok),
         "samples_all_held": int(ok["guaranteed_held"].astype(bool).sum()),
     }
-
-
-def _g(x: float) -> str:
-    return "-" if isinstance(x, float) and math.isnan(x) else f"{x:.3g}"
 
 
 def markdown(rows: list[dict[str, Any]], study: Path, count: int, command: str) -> str:
@@ -272,9 +146,9 @@ def markdown(rows: list[dict[str, Any]], study: Path, count: int, command: str) 
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     body = [
-        f"| {r['what']} | {r['ok']}/{r['samples']} | {_g(r['tail_et_median'])} "
-        f"({_g(r['tail_et_max'])}) | {_g(r['peak_u_late_median'])} ({_g(r['peak_u_late_max'])}) "
-        f"| {_g(r['step_peak_u_max'])} | {_g(r['steps_median'])} | {_g(r['deviation_max'])} | {_g(r['recovery_max_s'])} "
+        f"| {r['what']} | {r['ok']}/{r['samples']} | {g(r['tail_et_median'])} "
+        f"({g(r['tail_et_max'])}) | {g(r['peak_u_late_median'])} ({g(r['peak_u_late_max'])}) "
+        f"| {g(r['step_peak_u_max'])} | {g(r['steps_median'])} | {g(r['deviation_max'])} | {g(r['recovery_max_s'])} "
         f"| {r['pairs_back']}/{r['pairs']} ({r['pairs_undefined']}) "
         f"| {r['guaranteed_held']}/{r['guaranteed_rows']} |"
         for r in rows
@@ -301,13 +175,8 @@ def main(argv: list[str]) -> int:
         Command-line arguments (without the program name).
     """
     a = _parser().parse_args(argv)
-    names = [r.name for r in REMEDIES]
-    unknown = sorted(set(a.only or []) - set(names))
-    if unknown:
-        raise UsageError(f"--only {' '.join(unknown)}: unknown remedy; one of {', '.join(names)}")
-    chosen = [r for r in REMEDIES if not a.only or r.name in a.only]
     rows = []
-    for remedy in chosen:
+    for remedy in chosen(REMEDIES, a.only, "remedy"):
         path = study_variant(a.study, remedy, a.samples, a.out / "studies")
         rows.append(summarize(remedy, run_variant(path, a.out, a.workers)))
         print(f"{remedy.name}: {rows[-1]['ok']}/{rows[-1]['samples']} ok", flush=True)
