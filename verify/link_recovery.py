@@ -25,7 +25,14 @@ import numpy as np
 from core.graph import switch_times
 from core.scenario import Scenario
 from verify import signals as S
-from verify.operator_steps import RECOVERY_LEVEL, RECOVERY_LIMIT, classify, deviation, recovery_time
+from verify.operator_steps import (
+    RECOVERY_LEVEL,
+    RECOVERY_LIMIT,
+    deviation,
+    pair_recovery,
+    pooled,
+    windows,
+)
 
 
 @dataclass(frozen=True)
@@ -79,20 +86,17 @@ def switch_recoveries(
     """
     view = S.TrajectoryView.of(df)
     t = view.t
-    horizon = float(t[-1]) + 1e-12
-    starts = [s for s in switch_times(scenario.graph.switches) if s < horizon]
-    if not starts:
+    spans = windows(t, switch_times(scenario.graph.switches))
+    if not spans:
         return []
     dev = deviation(scenario, view, h)
     out = []
-    for a, b in zip(starts, [*starts[1:], horizon], strict=True):
+    for a, b in spans:
         k0 = int(np.searchsorted(t, a, side="left")) - 1
         for i in range(scenario.N):
-            r = recovery_time(t, dev[:, i], a, b, level)
-            w = dev[(t >= a) & (t < b), i]
-            peak = float(w.max()) if len(w) and np.isfinite(w).all() else math.nan
+            measured = pair_recovery(t, dev[:, i], a, b, level, limit)
             before = float(dev[k0, i]) if k0 >= 0 else math.nan
-            out.append(SwitchRecovery(a, b, i, r, classify(r, b - a, limit), peak, before))
+            out.append(SwitchRecovery(a, b, i, *measured, before))
     return out
 
 
@@ -112,14 +116,8 @@ def switch_summary(items: list[SwitchRecovery], level: float = RECOVERY_LEVEL) -
         ``switch_pairs_late``, ``switch_pairs_undefined``, ``switch_pairs_out_before``
         and ``switch_deviation_max``.
     """
-    defined = [r.time for r in items if r.outcome != "undefined"]
-    peaks = [r.peak for r in items if math.isfinite(r.peak)]
     return {
-        "switch_recovery_s": max(defined) if defined else math.nan,
-        "switch_deviation_max": max(peaks) if peaks else math.nan,
-        "switch_pairs": len(items),
-        "switch_pairs_late": sum(r.outcome == "late" for r in items),
-        "switch_pairs_undefined": sum(r.outcome == "undefined" for r in items),
+        **pooled(items, "switch"),
         "switch_pairs_out_before": sum(bool(r.before > level) for r in items),
     }
 

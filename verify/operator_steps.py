@@ -28,7 +28,9 @@ An ``info`` measurement: the theory promises no time.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -200,6 +202,82 @@ def classify(time: float, window: float, limit: float) -> str:
     return "recovered" if time <= limit else "late"
 
 
+def windows(t: np.ndarray, starts: list[float]) -> list[tuple[float, float]]:
+    """Each event's window inside the output times: (start, next start or the horizon).
+
+    Parameters
+    ----------
+    t : ndarray
+        Output times; events after the last one are left out.
+    starts : list of float
+        The events' times, ascending.
+    """
+    horizon = float(t[-1]) + 1e-12  # the last output time is inside the last window
+    inside = [s for s in starts if s < horizon]
+    return list(zip(inside, [*inside[1:], horizon], strict=True))
+
+
+def pair_recovery(
+    t: np.ndarray, dev: np.ndarray, start: float, end: float, level: float, limit: float
+) -> tuple[float, str, float]:
+    """One (event, follower) pair: its recovery time, outcome and peak deviation in the window.
+
+    Parameters
+    ----------
+    t, dev : ndarray
+        Output times and the follower's deviation.
+    start, end : float
+        The window.
+    level, limit : float
+        As in :func:`recovery_time` and :func:`classify`.
+
+    Returns
+    -------
+    (time, outcome, peak)
+        :func:`recovery_time`, :func:`classify`, and the largest deviation in the window
+        (NaN: none or not finite).
+    """
+    r = recovery_time(t, dev, start, end, level)
+    w = dev[(t >= start) & (t < end)]
+    peak = float(w.max()) if len(w) and np.isfinite(w).all() else math.nan
+    return r, classify(r, end - start, limit), peak
+
+
+class _Pair(Protocol):
+    time: float
+    outcome: str
+    peak: float
+
+
+def pooled(items: Sequence[_Pair], prefix: str) -> dict[str, float | int]:
+    """A study's columns from (event, follower) pairs, named ``<prefix>_...``.
+
+    Parameters
+    ----------
+    items : sequence of StepRecovery or verify.link_recovery.SwitchRecovery
+    prefix : str
+        ``step`` or ``switch``.
+
+    Returns
+    -------
+    dict
+        ``<prefix>_recovery_s``: the longest recovery time of the pairs that are not
+        ``undefined`` (inf: one never came back; NaN: none); ``<prefix>_deviation_max``:
+        the largest finite peak deviation (NaN: none); ``<prefix>_pairs``,
+        ``<prefix>_pairs_late``, ``<prefix>_pairs_undefined``: how many pairs in all and of
+        each kind.
+    """
+    defined = [r.time for r in items if r.outcome != "undefined"]
+    peaks = [r.peak for r in items if math.isfinite(r.peak)]
+    return {
+        f"{prefix}_recovery_s": max(defined) if defined else math.nan,
+        f"{prefix}_deviation_max": max(peaks) if peaks else math.nan,
+        f"{prefix}_pairs": len(items),
+        f"{prefix}_pairs_late": sum(r.outcome == "late" for r in items),
+        f"{prefix}_pairs_undefined": sum(r.outcome == "undefined" for r in items),
+    }
+
+
 def recoveries(
     scenario: Scenario,
     df: S.FrameOrView,
@@ -221,21 +299,16 @@ def recoveries(
     """
     view = S.TrajectoryView.of(df)
     t = view.t
-    horizon = float(t[-1]) + 1e-12  # the last output time is inside the last window
-    starts = [s for s in step_starts(scenario) if s < horizon]
+    spans = windows(t, step_starts(scenario))
     pinned = [i for i, b in enumerate(scenario.graph.pinning) if b > 0]
-    if not starts or not pinned:
+    if not spans or not pinned:
         return []
     dev = deviation(scenario, view, h)
-    ends = [*starts[1:], horizon]
-    out = []
-    for a, b in zip(starts, ends, strict=True):
-        for i in pinned:
-            r = recovery_time(t, dev[:, i], a, b, level)
-            w = dev[(t >= a) & (t < b), i]
-            peak = float(w.max()) if len(w) and np.isfinite(w).all() else math.nan
-            out.append(StepRecovery(a, b, i, r, classify(r, b - a, limit), peak))
-    return out
+    return [
+        StepRecovery(a, b, i, *pair_recovery(t, dev[:, i], a, b, level, limit))
+        for a, b in spans
+        for i in pinned
+    ]
 
 
 def recovery_summary(items: list[StepRecovery]) -> dict[str, float | int]:
@@ -254,15 +327,7 @@ def recovery_summary(items: list[StepRecovery]) -> dict[str, float | int]:
         kind; ``step_deviation_max``: the largest deviation from the slot after a step (NaN
         if none is finite).
     """
-    defined = [r.time for r in items if r.outcome != "undefined"]
-    peaks = [r.peak for r in items if math.isfinite(r.peak)]
-    return {
-        "step_recovery_s": max(defined) if defined else math.nan,
-        "step_deviation_max": max(peaks) if peaks else math.nan,
-        "step_pairs": len(items),
-        "step_pairs_late": sum(r.outcome == "late" for r in items),
-        "step_pairs_undefined": sum(r.outcome == "undefined" for r in items),
-    }
+    return pooled(items, "step")
 
 
 def step_peak_u(scenario: Scenario, df: S.FrameOrView, window: float = RECOVERY_LIMIT) -> float:
