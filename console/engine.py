@@ -46,6 +46,7 @@ from console.protocol import Limits, MessageError
 from console.ramps import CONSOLE_RISE, RAMP_SLOTS, Ramp, command_at, fold_finished, u0_literals
 from console.recovery import ATTEMPT_WALL, MAX_ATTEMPTS, Event, restart_settings, run_attempts
 from core.errors import BuildError
+from core.memo import MEMO
 
 #: the names other modules import from here (they live in the modules named above)
 __all__ = [
@@ -599,8 +600,9 @@ class LiveLoop(LoopBase):
 
 
 # --------------------------------------------------------------------------- the child's side
-#: the library this (child) process loaded, by cache key (kept: its code stays mapped)
-_IMAGES: dict[str, Any] = {}
+#: the libraries this (child) process loaded, by cache key (a loop holds its own image, so
+#: an evicted one stays mapped while it is used)
+_IMAGES = MEMO.namespace("console-child-images", 4)
 
 
 def load_native(library: Any, form: str) -> Any:

@@ -21,7 +21,7 @@ from sweep.study_fields import StudyError, join_key, read_integer, read_number, 
 #: largest random graph (the adjacency is written densely into each sample's file)
 MAX_GRAPH_N = 500
 GRAPH_KEYS = {"N", "edge_probability", "weight", "losses"}
-LOSS_KEYS = {"count", "time", "recovery", "pinning", "baseline"}
+LOSS_KEYS = {"count", "time", "recovery", "pinning", "baseline", "reachable"}
 #: the keys of [faults]: which, how many, and a distribution per fault key
 FAULT_KEYS = {"count", "followers", "types", "onset", "severity", "duration", "period", "duty"}
 FAULT_KEYS |= {"amplitude"}
@@ -49,6 +49,9 @@ class LinkLosses:
     baseline : bool
         Whether each sample is run a second time with its switches made no-ops (same
         compiled library), for the peak |u_i| without losses (:mod:`sweep.links`).
+    reachable : bool
+        Whether only losses that keep every follower reachable from the leader in every
+        topology (Assumption 1) are drawn; otherwise such a sample is refused by the loader.
     """
 
     count: tuple[int, int]
@@ -56,6 +59,7 @@ class LinkLosses:
     recovery: Distribution | None
     pinning: bool = True
     baseline: bool = False
+    reachable: bool = False
 
 
 @dataclass(frozen=True)
@@ -171,7 +175,8 @@ def _count_range(f: str, v: Any, key: str) -> tuple[int, int]:
 def _losses(f: str, raw: Any) -> LinkLosses:
     t = read_table(f, raw, "graph.losses", LOSS_KEYS, {"time"})
     pinning, baseline = t.get("pinning", True), t.get("baseline", False)
-    for key, v in (("pinning", pinning), ("baseline", baseline)):
+    reachable = t.get("reachable", False)
+    for key, v in (("pinning", pinning), ("baseline", baseline), ("reachable", reachable)):
         if not isinstance(v, bool):
             raise StudyError(f, f"graph.losses.{key}", f"{v!r} is not a boolean", "true/false")
     rec = t.get("recovery")
@@ -181,6 +186,7 @@ def _losses(f: str, raw: Any) -> LinkLosses:
         recovery=None if rec is None else scalar_distribution(f, rec, "graph.losses.recovery"),
         pinning=pinning,
         baseline=baseline,
+        reachable=reachable,
     )
 
 

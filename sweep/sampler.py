@@ -22,6 +22,7 @@ import numpy as np
 from core.artifacts import atomic_write_text
 from core.errors import ExpressionError, ScenarioError
 from core.faults import FAULT_TYPES
+from core.graph import unreachable_followers
 from core.scenario import Scenario, scenario_from_dict
 from generated.overrides import set_path
 from sweep.distributions import Distribution
@@ -197,22 +198,56 @@ def _draw_losses(losses: LinkLosses, data: dict, params: dict, rng: np.random.Ge
     if losses.pinning:
         links += [(int(i), 0, float(b[i])) for i in np.flatnonzero(b)]
     n = int(rng.integers(losses.count[0], losses.count[1], endpoint=True))
-    chosen = rng.choice(len(links), size=min(n, len(links)), replace=False)
     horizon = data.get("integration", {}).get("horizon", math.inf)
-    switches = []
-    for k, c in enumerate(chosen, 1):
+    if losses.reachable:  # every link a candidate in a drawn order, kept if A1 holds
+        candidates = rng.permutation(len(links))
+    else:
+        candidates = rng.choice(len(links), size=min(n, len(links)), replace=False)
+    switches: list[dict] = []
+    k = 0  # links lost so far
+    for c in candidates:
+        if k == n:
+            break
         i, j, w = links[c]
         t = draw(losses.time, rng)
-        params.update({f"graph.loss[{k}].follower": i + 1, f"graph.loss[{k}].neighbour": j})
-        params[f"graph.loss[{k}].time"] = t
-        switches.append({"time": t, "follower": i + 1, "neighbour": j, "weight": 0.0})
+        key = f"graph.loss[{k + 1}]"
+        drawn = {f"{key}.follower": i + 1, f"{key}.neighbour": j, f"{key}.time": t}
+        new = [{"time": t, "follower": i + 1, "neighbour": j, "weight": 0.0}]
         if losses.recovery is not None:
             back = t + draw(losses.recovery, rng)
-            params[f"graph.loss[{k}].recovery"] = back
+            drawn[f"{key}.recovery"] = back
             if back < horizon:
-                switches.append({"time": back, "follower": i + 1, "neighbour": j, "weight": w})
+                new.append({"time": back, "follower": i + 1, "neighbour": j, "weight": w})
+        if losses.reachable and not keeps_reachable(A, b, switches + new):
+            continue
+        params.update(drawn)
+        switches += new
+        k += 1
     if switches:
         data["graph"]["switches"] = sorted(switches, key=lambda s: s["time"])
+
+
+def keeps_reachable(A: np.ndarray, b: np.ndarray, switches: list[dict]) -> bool:
+    """Whether every topology that ``switches`` make of (A, b) keeps every follower
+    reachable from the leader (Assumption 1; :func:`core.graph.unreachable_followers`).
+
+    Parameters
+    ----------
+    A, b : ndarray
+        The drawn graph's adjacency and pinning.
+    switches : list of dict
+        ``[[graph.switches]]`` entries (time, follower, neighbour (0 = the leader), weight).
+    """
+    A, b = A.copy(), b.copy()
+    for s in sorted(switches, key=lambda s: s["time"]):
+        i, j = s["follower"] - 1, s["neighbour"]
+        if j == 0:
+            b[i] = s["weight"]
+        else:
+            A[i, j - 1] = s["weight"]
+        if unreachable_followers(A, b):
+            return False
+    return True
 
 
 def _draw_faults(

@@ -494,6 +494,27 @@ def test_link_losses_are_links_of_the_graph_restored_with_their_weight(tmp_path)
     assert refused and accepted  # both kinds occur with these settings
 
 
+def test_reachable_losses_keep_assumption_1_in_every_topology(tmp_path):
+    """``reachable = true``: every sample passes the loader and every topology keeps every
+    follower reachable (the test's own fixed point); the losses are links of the graph, at
+    most ``count`` of them; without the key the same study has samples the loader refuses."""
+    head = f'base = "{PAPER}"\ncount = 60\nseed = 11\n'
+    lost_total = 0
+    for s in samples(load_study(_study(tmp_path, LOSSES + "reachable = true\n", head=head))):
+        assert s.scenario is not None, s.reason
+        g = s.scenario_data["graph"]
+        A, b = np.array(g["adjacency"]), np.array(g["pinning"])
+        sw = g.get("switches", [])
+        assert all(_reachable(At, bt).all() for At, bt in _topologies(A, b, sw))
+        lost = {(x["follower"], x["neighbour"]) for x in sw if x["weight"] == 0.0}
+        assert all((b[i - 1] if j == 0 else A[i - 1, j - 1]) > 0 for i, j in lost)
+        assert len(lost) <= 3
+        lost_total += len(lost)
+    assert lost_total >= 60  # most samples lose links
+    plain = samples(load_study(_study(tmp_path, LOSSES, head=head)))
+    assert any(s.scenario is None for s in plain)
+
+
 def test_tail_switch_count_and_last_switch_follow_the_drawn_losses(tmp_path):
     """The row's ``tail_switches`` and ``last_switch_t`` from the drawn loss and recovery
     times (the sampler's parameters, not the scenario's switch list the function reads):
