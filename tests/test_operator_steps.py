@@ -188,3 +188,16 @@ def test_step_peak_u_sees_only_the_seconds_after_each_step():
     assert step_peak_u(sc, df, window=1.0) == pytest.approx(math.sqrt(2.0), rel=1e-15)
     paper = api.load(PAPER, None, variant="paper")
     assert math.isnan(step_peak_u(paper, df))
+
+
+def test_windows_of_no_event_one_event_and_events_past_the_horizon():
+    """Each event's window runs to the next event or just past the last output time; no
+    event (a sample without steps or switches) has no window."""
+    from verify.operator_steps import windows
+
+    t = np.linspace(0.0, 20.0, 201)
+    assert windows(t, []) == []
+    assert windows(t, [25.0]) == []
+    (w,) = windows(t, [5.0, 30.0])
+    assert w[0] == 5.0 and 20.0 < w[1] < 20.0 + 1e-9
+    assert windows(t, [5.0, 10.0])[0] == (5.0, 10.0)

@@ -214,7 +214,7 @@ def windows(t: np.ndarray, starts: list[float]) -> list[tuple[float, float]]:
     """
     horizon = float(t[-1]) + 1e-12  # the last output time is inside the last window
     inside = [s for s in starts if s < horizon]
-    return list(zip(inside, [*inside[1:], horizon], strict=True))
+    return list(zip(inside, [*inside[1:], horizon][: len(inside)], strict=True))
 
 
 def pair_recovery(
