@@ -60,10 +60,9 @@ def observer_figure(d: DesignResult, path: Path) -> None:
     path : Path
         The PNG written.
     """
-    import matplotlib
+    from core.pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     od = d.observer
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
@@ -121,10 +120,9 @@ def controller_figure(d: DesignResult, path: Path) -> None:
     path : Path
         The PNG written.
     """
-    import matplotlib
+    from core.pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4))
     budget = float(np.max(d.base.design.u_max))

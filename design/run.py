@@ -88,9 +88,9 @@ def variant_of(user_variant: str | None, user_overrides: dict[str, Any] | None) 
     """
     if not user_overrides:
         return VARIANT
-    from core.overrides import _variant_label
+    from core.overrides import variant_label
 
-    return f"{user_variant or _variant_label(user_overrides)}-{VARIANT}"
+    return f"{user_variant or variant_label(user_overrides)}-{VARIANT}"
 
 
 def _budget(sc: Scenario) -> np.ndarray:

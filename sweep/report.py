@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from core.artifacts import atomic_write_text
+from core.pyplot import pyplot
 from sweep.coverage import coverage_lines
 
 #: (column, label) of the medians in the summary table
@@ -78,15 +79,6 @@ def entry_times(table: pd.DataFrame) -> np.ndarray:
 
 #: colour of each fault type in the scatter plots
 TYPE_COLOURS = {"abrupt": "C0", "ramp": "C1", "intermittent": "C2", "bias": "C3"}
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _num(table: pd.DataFrame, col: str) -> np.ndarray:
@@ -168,7 +160,7 @@ def fault_figures(points: pd.DataFrame, figs: Path) -> list[Path]:
     """
     if not len(points):
         return []
-    plt = _pyplot()
+    plt = pyplot()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.4), sharey=True)
     _scatter(
         a1, points[points["type"] != "bias"], "severity", "fault severity (loss of effectiveness)"
@@ -198,7 +190,7 @@ def graph_figure(table: pd.DataFrame, figs: Path) -> Path | None:
     good = np.isfinite(N) & np.isfinite(err)
     if not good.any():
         return None
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(5, 3.4))
     lost = links_lost(ok)
     switched = tail_switched(ok)
@@ -243,13 +235,13 @@ def links_lost(table: pd.DataFrame) -> np.ndarray:
 def _save(fig, path: Path) -> Path:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    _pyplot().close(fig)
+    pyplot().close(fig)
     return path
 
 
 def _histogram(values: np.ndarray, xlabel: str, path: Path) -> Path | None:
     """A histogram written to ``path`` (None when there is nothing finite to draw)."""
-    plt = _pyplot()
+    plt = pyplot()
     values = values[np.isfinite(values)]
     if not len(values):
         return None
