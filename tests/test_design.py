@@ -446,6 +446,8 @@ def test_gains_summary_counts_each_gain_set():
     g = gains_summary(table, GIVEN)
     assert (g["ok"], g["held"], g["ultimate"], g["all_ultimate"]) == (3, 3, 3, 1)
     assert g["coverage_min"] == 0.3
+    assert (d["from_median"], d["from_max"]) == (2.5, 3.0)
+    assert (g["from_median"], g["from_max"]) == (13.0, 14.0)
     lines = gains_lines(table)
     assert lines[-2].startswith("| designed") and "| 3 of 4 (75.0%) | 1 of 2 |" in lines[-2]
     assert lines[-1].startswith("| given") and "| 30.0% |" in lines[-1]
