@@ -451,3 +451,37 @@ def test_gains_summary_counts_each_gain_set():
     lines = gains_lines(table)
     assert lines[-2].startswith("| designed") and "| 3 of 4 (75.0%) | 1 of 2 |" in lines[-2]
     assert lines[-1].startswith("| given") and "| 30.0% |" in lines[-1]
+
+
+def test_health_bound_is_the_worst_end_and_its_ghat_term_falls_like_one_over_gamma():
+    """χ̄ over [g_min, 1]: the larger of the constant-health χ̄ at g_min and at 1 (the ĝ term
+    is convex in g), and χ̄² is affine in 1/γ (only the ĝ term of χv holds γ)."""
+    from design.controller import health_bound
+    from verify.bounds import VerifyConfig, theorem2_constants
+
+    inv, sq = [], []
+    for gamma in (0.01, 0.1, 1.0):
+        sc = load(PAPER_DESIGN, {"controller.gamma": gamma})
+        ends = [theorem2_constants(sc, 2, VerifyConfig(), health=(g, g, 0.0)) for g in (0.5, 1.0)]
+        assert health_bound(sc, 2) == pytest.approx(max(c.chi_bar_var for c in ends), rel=1e-12)
+        inv.append(1.0 / gamma)
+        sq.append(health_bound(sc, 2) ** 2)
+    slope = (sq[1] - sq[0]) / (inv[1] - inv[0])
+    assert slope > 0 and sq[2] == pytest.approx(sq[0] + slope * (inv[2] - inv[0]), rel=1e-9)
+
+
+def test_the_gamma_choice_refuses_runs_that_stop_rows_that_fail_and_the_budget():
+    from dataclasses import replace
+
+    from design.controller import GammaPoint, choose_gamma
+
+    base = _point([100, 100], [2, 2], [1.0, 1.0])
+    own = GammaPoint([0.01, 0.01], base, [6.0, 6.0])
+    mid = GammaPoint([0.1, 0.1], replace(base, peak=[100, 250]), [4.0, 4.0])  # 2 over budget
+    best = GammaPoint([0.3, 0.3], replace(base, complete=False), [3.0, 3.0])  # its run stops
+    bad = GammaPoint([1.0, 1.0], replace(base, holds=False), [2.0, 2.0])  # a failing row
+    got = choose_gamma([own, mid, best, bad], np.array([200.0, 200.0]))
+    assert got[0] is mid and got[1] is own
+    same = GammaPoint([0.03, 0.03], base, [6.0, 6.0])  # a tie goes to the smaller gamma
+    assert choose_gamma([same, own], np.array([200.0, 200.0])) == [own, own]
+    assert choose_gamma([own], np.array([50.0, 200.0]))[0] is None
