@@ -10,7 +10,7 @@ import pandas as pd
 
 from core.artifacts import atomic_write_text
 from core.pyplot import pyplot
-from sweep.coverage import coverage_lines
+from sweep.coverage import coverage_lines, gains_lines
 
 #: (column, label) of the medians in the summary table
 MEDIANS = [
@@ -524,6 +524,8 @@ def write_report(results: Path, retried: int | None = None) -> Path:
         *fault_type_lines(points),
         "",
         *coverage_lines(table, points),
+        "",
+        *gains_lines(table),
         "",
         "## Figures",
         "",

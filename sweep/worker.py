@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from core.memo import MEMO
-from sweep.coverage import coverage_columns
+from sweep.coverage import GIVEN, coverage_columns
 from sweep.measures import (
     library_key,
     link_recovery,
@@ -74,6 +74,8 @@ def run_sample(study_path: str, sample_id: int, folder: str, keep: bool = False)
             row["status"] = "ok"
         except Exception as exc:  # noqa: BLE001 - any failure of one sample is recorded
             row["status"] = f"failed: {one_line(exc)}"
+        if _study(study_path).compare_gains:
+            row.update(given_gains(_study(study_path), sample, paths))
     row["wall_s"] = time.perf_counter() - t0
     row["finished_utc"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
     return row
@@ -207,6 +209,35 @@ def link_baseline(sample: Sample, paths: StudyPaths) -> dict[str, Any]:
         "peak_u_late_nolosses": peak_u_late(run.frame, sc.N, sc.n),
         **{f"{k}_nolosses": back[k] for k in ("switch_pairs_late", "switch_pairs_undefined")},
     }
+
+
+def given_gains(study: Study, sample: Sample, paths: StudyPaths) -> dict[str, Any]:
+    """The sample once more with the base scenario's own gains (:meth:`Study.given`: the
+    same draws without the design's keys), in memory; its columns prefixed ``given:``
+    (``given:status`` as ``status``; docs/studies.md, 'Designed gains beside the base's').
+
+    Parameters
+    ----------
+    study : Study
+        A study with ``compare_gains``.
+    sample : Sample
+        The drawn sample (with the designed gains).
+    paths : StudyPaths
+        The study's folders.
+    """
+    twin = make_sample(study.given(), sample.id)
+    out: dict[str, Any] = {}
+    if twin.params != sample.params:  # the draws must not depend on the gains
+        out["status"] = "failed: the draws differ without the design's keys"
+    elif twin.scenario is None:
+        out["status"] = f"refused: {twin.reason}"
+    else:
+        try:
+            out.update(_simulate_and_verify(twin, paths, keep=False))
+            out["status"] = "ok"
+        except Exception as exc:  # noqa: BLE001 - recorded like the sample's own run
+            out["status"] = f"failed: {one_line(exc)}"
+    return {f"{GIVEN}{k}": v for k, v in out.items()}
 
 
 def _run_written(sample: Sample, paths: StudyPaths) -> Any:

@@ -310,7 +310,7 @@ def test_results_path_that_is_a_fifo_is_refused_unread(tmp_path, capsys):
 STUDIES = sorted(p for p in (ROOT / "studies").glob("*.toml") if "search" not in read_study_file(p))
 
 
-def test_written_scenarios_of_every_shipped_study_are_plain_toml(tmp_path):
+def test_written_scenarios_of_every_shipped_study_are_plain_toml(tmp_path, stored_designs):
     switches = 0
     for path in STUDIES:
         study = load_study(path)
