@@ -18,6 +18,8 @@ From the file the console is started on, :func:`console_table` keeps everything 
   the operator injects faults live); one switch that changes nothing is added, so that
   the graph is compiled as two topologies, the weights before and after a link change
   (``graph``, ``graph_times``: :func:`symbolic.closed_loop.graph_coupling`);
+* ``integration.method`` is ``native``: the console runs the per-agent engine
+  (:class:`console.engine.LiveLoop`), and so does the replay of its records;
 * ``name`` gets the suffix ``-console``.
 
 The replay of a record (:mod:`console.record`) is this table plus the recorded changes.
@@ -71,6 +73,8 @@ def console_table(path: str | Path, bias_max: float = BIAS_MAX) -> dict:
     for k in ("u0_csv", "u0_hold", "u0_rise", "u0_shape"):
         leader.pop(k, None)
     leader["u0"] = [RAMPED] * base.p
+    # the console runs the per-agent engine (console/engine.py): its replay runs it too
+    data.setdefault("integration", {})["method"] = "native"
     graph = data["graph"]
     graph.pop("switches", None)
     # the live loop hands a link change to one integrator call (engine.py): raw switching,
