@@ -426,7 +426,7 @@ class LiveLoop(LoopBase):
         codegen: Any = None,
     ) -> None:
         from generated import agents, api
-        from symbolic.closed_loop import closed_loop_for
+        from symbolic.closed_loop import closed_loop_for, observer_gains
         from symbolic.parameters import agent_rows, layout_of, row_layout, row_slices
 
         self.sc, self.gains = sc, gains
@@ -437,8 +437,9 @@ class LiveLoop(LoopBase):
         self.libraries = tuple(libs)
         self.problem = agents.problem(sc, gains, model)
         self.p0 = np.asarray(self.closed_loop.p0, dtype=float)
-        self.rows0 = agent_rows(sc)
-        lay, rows = layout_of(sc), row_slices(sc, row_layout(sc))
+        og = observer_gains(sc, gains)
+        self.rows0 = agent_rows(sc, og)
+        lay, rows = layout_of(sc), row_slices(sc, row_layout(sc, og))
         # where each operator number goes: (name in p, last k literals) -> p's and the rows'
         # columns. u0_k: a + Σ_j d_j*smoothstep((t - c_j)/r_j), literals a, then (d_j, c_j, r_j)
         self.u0_names = [f"expr:leader.u0[{k}]" for k in range(sc.p)]

@@ -19,10 +19,10 @@ option set, the kernels of ONE agent (:func:`symbolic.cascade.agent_block`, as C
 and appends the driver ``generated/native/agents.c``. What is compiled in, and so is the
 library's identity (the cache key is the hash of the C source): the follower model and
 its physical parameters, the options, the leader (A0, B0, C0 and the templates of u0),
-the observer gains and UIO (``gains``), and the templates of the fault expressions;
-never the graph, never N, never an expression's numbers (:func:`kernel_key`): the
-literals of u0, g_i and f_i are columns of each agent's row
-(:func:`symbolic.parameters.row_layout`).
+the patterns of the observer's gain matrices and the templates of the fault
+expressions; never the graph, never N, never a gain's or an expression's numbers
+(:func:`kernel_key`): Q, λ1, λ2, the UIO's matrices and the literals of u0, g_i and f_i
+are columns of each agent's row (:func:`symbolic.parameters.row_layout`).
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ def kernel_functions(
     ----------
     sc : Scenario
     gains : Gains
-        The observer gains and the UIO (compiled in).
+        The observer gains and the UIO (their patterns compiled in, their values rows).
     model_index : int
         0-based follower whose model and parameters the kernels use.
     cse : bool
@@ -185,8 +185,9 @@ def kernel_settings(
 
 #: kernel libraries built in this process, by :func:`kernel_key` (core/memo.py)
 _BUILT = MEMO.namespace("agent-kernels", 64)
-#: the gains the kernels compile in (graph-independent: the leader's LMIs and the UIO)
-KERNEL_GAINS = ("A0", "B0", "C0", "Q", "Gamma", "Phi", "lambda1", "lambda2")
+#: the gains the kernels compile in: the leader's matrices (the observer's Q, λ1, λ2 and
+#: UIO are runtime numbers on their patterns, symbolic.parameters.row_layout)
+KERNEL_GAINS = ("A0", "B0", "C0")
 
 
 def kernel_key(
@@ -201,8 +202,8 @@ def kernel_key(
     The follower model and its parameters, the leader (u0 as templates), the observer's,
     controller's and options' structural settings (:func:`symbolic.parameters.structure`
     without its graph, followers and gains), the gains of :data:`KERNEL_GAINS`, the row
-    layout (:meth:`symbolic.parameters.RowLayout.key`: the fault templates), the driver
-    sources and the compiler settings. Two scenarios
+    layout (:meth:`symbolic.parameters.RowLayout.key`: the fault templates, the patterns
+    of the observer's gain matrices), the driver sources and the compiler settings. Two scenarios
     with equal keys compile to the same library: this process builds it once
     (the build cache keys it again by its source).
 
@@ -221,7 +222,8 @@ def kernel_key(
         "structure": {k: v for k, v in st.items() if k not in ("graph", "followers", "gains")},
         "gains": {k: np.asarray(getattr(gains, k), float).tolist() for k in KERNEL_GAINS},
         "model": [fo.model, sorted(fo.params.items())],
-        "rows": row_layout(sc).key(),  # the fault templates, the row's sizes
+        # the fault templates, the gains' patterns, the row's sizes
+        "rows": row_layout(sc, observer_gains(sc, gains)).key(),
         "driver": hashlib.sha256(
             (native.COMMON.read_text() + DRIVER.read_text()).encode()
         ).hexdigest(),

@@ -43,7 +43,7 @@ from generated.agent_kernels import (
     kernel_key,
 )
 from generated.values import IntegratorSettings, Trajectory
-from symbolic.closed_loop import make_layout
+from symbolic.closed_loop import make_layout, observer_gains
 from symbolic.parameters import agent_rows
 from synthesis.gains import Gains
 
@@ -81,8 +81,8 @@ class AgentProblem:
         Length of the fault kernel's output (1).
     params : ndarray
         N × npar, agent-major: each follower's row of runtime numbers
-        (:func:`symbolic.parameters.agent_rows`: per-agent numbers, u0's and its faults'
-        literals).
+        (:func:`symbolic.parameters.agent_rows`: per-agent numbers, the observer's gains,
+        u0's and its faults' literals).
     topologies : tuple of Topology
         The base graph, then one per switching time.
     """
@@ -115,7 +115,7 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
     ----------
     sc : Scenario
     gains : Gains
-        Supplies the gauge h (checked against the graph).
+        Supplies the gauge h (checked against the graph) and the observer's gains.
     model : ndarray
         From :func:`build_models`.
 
@@ -145,7 +145,7 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
         # the kernels evaluate g_i, f_i from their rows: ag_faults' one 0 is not read
         fault_index=np.zeros((sc.N, 1 + sc.n), np.int32),
         nfaults=1,
-        params=np.ascontiguousarray(agent_rows(sc), dtype=float),
+        params=np.ascontiguousarray(agent_rows(sc, observer_gains(sc, gains)), dtype=float),
         topologies=tops,
     )
 

@@ -21,7 +21,8 @@ compiles it once per follower model (:mod:`generated.agent_kernels`).
 
 Every number a scenario may vary without changing the model's equations is an input: the
 block's ``prm`` is its follower's row of :func:`symbolic.parameters.agent_rows` (the
-per-agent numbers, the leader's u0 literals, the follower's fault template and literals),
+per-agent numbers, the observer's gains Q, λ1, λ2 and the UIO's matrices on their
+patterns, the leader's u0 literals, the follower's fault template and literals),
 from which it evaluates u0(t), g_i(t) and f_i(t) itself; its ``gf`` input is not read
 (kept so the driver's argument list stays the same).
 """
@@ -43,7 +44,8 @@ def agent_block(sc: Scenario, og: ObserverGains, lay: StateLayout, model_index: 
     """Follower i's block ``(t, xb, nb, cpl, prm, gf) -> (xbdot, jets)`` (module docstring).
 
     ``prm`` is a row of :func:`symbolic.parameters.agent_rows` (layout
-    :func:`symbolic.parameters.row_layout` of ``sc``); ``gf`` is not read.
+    :func:`symbolic.parameters.row_layout` of ``sc`` and ``og``); ``gf`` is not read.
+    Only the patterns of ``og``'s matrices are compiled in, never their values.
 
     Parameters
     ----------
@@ -58,7 +60,7 @@ def agent_block(sc: Scenario, og: ObserverGains, lay: StateLayout, model_index: 
     filtered = sc.options.derivatives == "filtered"
     C0 = ca.DM(np.atleast_2d(sc.leader.C0))
     poff, _ = param_layout(n, saturated(sc))
-    rows = row_layout(sc)
+    rows = row_layout(sc, og)
     t = ca.SX.sym("t")
     xb = ca.SX.sym("xb", m + lay.agent_size)
     nb = ca.SX.sym("nb", 3 * n)
@@ -77,15 +79,15 @@ def agent_block(sc: Scenario, og: ObserverGains, lay: StateLayout, model_index: 
     if filtered:
         dpsi = ddpsi = ca.SX.zeros(n)
     else:  # the oracle's time derivatives of the same row (symbolic.closed_loop._network)
-        obs = observer_function(og)
+        obs = observer_function(og, parametric=True)
         D1, _ = flow_jets(obs)
-        Pobs = prm[poff["obs"]]  # the row starts with param_layout's numbers
+        Pobs = ca.vertcat(prm[poff["obs"]], prm[rows.gains])  # (α1+ᾱ1, φ_min), the gains
         sod = obs(so, psi, Pobs)[0]
         dpsi = lii * ca.mtimes(C0, sod[m : 2 * m]) + nb[n : 2 * n] - a0h * y0dot
         sodd = D1(so, psi, Pobs, sod, dpsi)
         ddpsi = lii * ca.mtimes(C0, sodd[m : 2 * m]) + nb[2 * n :] - a0h * y0ddot
-    agent = agent_function(sc, og, model_index)
-    P = prm[: rows.npar]
+    agent = agent_function(sc, og, model_index, parametric_gains=True)
+    P = prm[: rows.gains.stop]  # the per-agent numbers and the observer's gains
     res = dict(
         zip(
             agent.name_out(),

@@ -36,6 +36,7 @@ from core.errors import ScenarioError
 from core.expressions import Expr
 from core.graph import pinned_laplacian
 from core.scenario import Scenario
+from symbolic.observer import ObserverGains, gain_pattern, gain_values
 from synthesis.gains import Gains
 
 #: observer settings that are runtime parameters (in ``agents``) or only initial values
@@ -347,8 +348,9 @@ class RowLayout:
 
     The per-agent kernels (:func:`symbolic.cascade.agent_block`) read every number a
     scenario may vary without changing a model's equations from their agent's row: the
-    per-agent numbers of :func:`param_layout` (columns ``0..npar``), the literals of the
-    leader's u0 expressions (the same in every row: each block evaluates the leader) and,
+    per-agent numbers of :func:`param_layout` (columns ``0..npar``), the observer's gains
+    (:func:`symbolic.observer.gain_values`) and the literals of the leader's u0
+    expressions (both the same in every row: each block evaluates them) and,
     per fault component (g_i, then f_i1 … f_in), the index of the follower's template
     among the scenario's distinct templates of that component and one literal slot per
     template (only the chosen template's slot is filled). What the kernels compile in is
@@ -358,6 +360,10 @@ class RowLayout:
     ----------
     npar : int
         Per-agent numbers (:func:`param_layout`) at the row's start.
+    gains : slice
+        The observer's gains (columns ``npar..``; empty without gains).
+    gain_pattern : tuple
+        Where the observer's gain matrices are nonzero (:func:`symbolic.observer.gain_pattern`).
     u0 : tuple of slice
         The literals of u0_k (``expr:leader.u0[k]``).
     select : tuple of int
@@ -371,6 +377,8 @@ class RowLayout:
     """
 
     npar: int
+    gains: slice
+    gain_pattern: tuple
     u0: tuple[slice, ...]
     select: tuple[int, ...]
     slots: tuple[tuple[slice, ...], ...]
@@ -378,9 +386,10 @@ class RowLayout:
     size: int
 
     def key(self) -> dict[str, Any]:
-        """What the kernels compile in of this layout: sizes and templates, no number."""
+        """What the kernels compile in of this layout: sizes, patterns, templates, no number."""
         return {
             "npar": self.npar,
+            "gains": [self.gains.stop - self.gains.start, _plain(self.gain_pattern)],
             "u0": [sl.stop - sl.start for sl in self.u0],
             "faults": [[e.template() for e in tpl] for tpl in self.templates],
         }
@@ -392,15 +401,20 @@ def _components(sc: Scenario, i: int) -> list[Expr]:
     return [fo.g.expr, *fo.f]
 
 
-def row_layout(sc: Scenario) -> RowLayout:
+def row_layout(sc: Scenario, og: ObserverGains | None = None) -> RowLayout:
     """The per-agent row layout of ``sc`` (:class:`RowLayout`).
 
     Parameters
     ----------
     sc : Scenario
+    og : ObserverGains, optional
+        The observer's gains (their count and patterns; default: no gain columns).
     """
     _, npar = param_layout(sc.n, sc.controller.u_max is not None)
-    k = npar
+    ng = 0 if og is None else gain_values(og).size
+    gains = slice(npar, npar + ng)
+    pattern = () if og is None else tuple(tuple(p) for p in gain_pattern(og))
+    k = npar + ng
     u0 = []
     for e in sc.leader.u0 or ():
         u0.append(slice(k, k + len(e.literals())))
@@ -420,7 +434,9 @@ def row_layout(sc: Scenario) -> RowLayout:
             k += len(e.literals())
         slots.append(tuple(sl))
         templates.append(tpl)
-    return RowLayout(npar, tuple(u0), tuple(select), tuple(slots), tuple(templates), k)
+    return RowLayout(
+        npar, gains, pattern, tuple(u0), tuple(select), tuple(slots), tuple(templates), k
+    )
 
 
 def row_slices(sc: Scenario, lay: RowLayout) -> dict[str, tuple[int | None, slice]]:
@@ -449,23 +465,38 @@ def row_slices(sc: Scenario, lay: RowLayout) -> dict[str, tuple[int | None, slic
     return out
 
 
-def agent_rows(sc: Scenario, lay: RowLayout | None = None) -> np.ndarray:
+def agent_rows(
+    sc: Scenario, og: ObserverGains | None = None, lay: RowLayout | None = None
+) -> np.ndarray:
     """Every follower's row of runtime numbers (N × ``lay.size``, :class:`RowLayout`).
 
     Parameters
     ----------
     sc : Scenario
+    og : ObserverGains, optional
+        The observer's gains (:func:`symbolic.observer.gain_values`).
     lay : RowLayout, optional
-        Default :func:`row_layout` of ``sc``; another layout must hold ``sc``'s templates.
+        Default :func:`row_layout` of ``sc`` and ``og``; another layout must hold
+        ``sc``'s templates and ``og``'s gain patterns.
 
     Raises
     ------
     ScenarioError
-        If ``sc`` has a fault expression whose template ``lay`` lacks.
+        If ``sc`` has a fault expression whose template ``lay`` lacks, or gains on other
+        patterns.
     """
-    lay = lay or row_layout(sc)
+    lay = lay or row_layout(sc, og)
     R = np.zeros((sc.N, lay.size))
     R[:, : lay.npar] = param_matrix(sc).T
+    if og is not None:
+        if tuple(tuple(p) for p in gain_pattern(og)) != lay.gain_pattern:
+            raise ScenarioError(
+                sc.path,
+                "gains",
+                "observer gains with other zeros than the compiled kernels'",
+                "kernels built for these gains",
+            )
+        R[:, lay.gains] = gain_values(og)
     for sl, e in zip(lay.u0, sc.leader.u0 or (), strict=True):
         R[:, sl] = e.literals()
     for i in range(sc.N):

@@ -232,7 +232,7 @@ def test_agent_blocks_apply_the_same_limit():
     gm = graph_matrices(sat.graph, g)
     off = gm.L_B - np.diag(np.diag(gm.L_B))
     cpl = np.column_stack([np.diag(gm.L_B), gm.a0h])
-    prm = agent_rows(sat).T  # the blocks evaluate g_i, f_i from their rows
+    prm = agent_rows(sat, observer_gains(sat, g)).T  # the blocks evaluate g_i, f_i from them
     x = np.asarray(cl.x0).ravel()
     t = 0.0
     xd, u = _signals(cl, t, x)
