@@ -315,7 +315,7 @@ def _paper_variant(folder: Path, name: str, edit) -> Path:
 
 
 def _other_numbers(d: dict) -> None:
-    """Other u0 numbers, fault parameters, gains' settings, graph, N and initial states."""
+    """Other u0 numbers, fault parameters, gains, graph, N and initial states."""
     import copy
 
     d["leader"]["u0"] = ["1.5*cos(t)"]
@@ -334,13 +334,15 @@ def _other_numbers(d: dict) -> None:
     d["graph"] = {"adjacency": A.tolist(), "pinning": [1.0] + [0.0] * (N - 1)}
     d["initial"]["eta"] = [0.1, -0.1]
     d["controller"]["k2"] = 2.0
+    d["observer"]["lambda1"] = 2.5  # gains: λ1, and Θ (so the UIO's F, K) synthesised anew
+    d["observer"]["delta2"] = 0.9
 
 
 def test_a_scenario_differing_in_numbers_compiles_nothing(tmp_path, monkeypatch):
     """``generated sim`` (api.run, the shared build cache as ``make sim`` uses it) on the
     per-agent engine: after the paper's scenario (compiled once per cache), one with other
-    u0 numbers, fault parameters, controller numbers, graph (a cycle), N and initial
-    states reuses its kernel library: its C is the same (the in-process memo is cleared,
+    u0 numbers, fault parameters, controller numbers, observer gains (λ1, Θ), graph (a
+    cycle), N and initial states reuses its kernel library: its C is the same (the in-process memo is cleared,
     so the code is generated again and hashed), nothing is compiled (meta.json: cache
     hit, compile 0 s), and the run completes."""
     from generated import agent_kernels, native
@@ -357,6 +359,8 @@ def test_a_scenario_differing_in_numbers_compiles_nothing(tmp_path, monkeypatch)
     assert metas[1]["library"]["cache_hit"] is True
     assert metas[1]["wall_seconds"]["compile"] == 0.0
     assert metas[0]["library"]["path"] == metas[1]["library"]["path"]
+    g0, g1 = (json.loads(Path(m["gains_path"]).read_text()) for m in metas)
+    assert g0["lambda1"] != g1["lambda1"] and not np.allclose(g0["Theta"], g1["Theta"])
 
 
 def test_threads_give_the_serial_results(cases, build_root):
