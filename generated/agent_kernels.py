@@ -199,9 +199,9 @@ def kernel_key(
 ) -> str:
     """SHA-256 of everything the kernels of one model compile in (never the graph, never N).
 
-    The follower model and its parameters, the leader (u0 as templates), the observer's,
+    The follower model and its parameters, the leader (u0 as templates), the
     controller's and options' structural settings (:func:`symbolic.parameters.structure`
-    without its graph, followers and gains), the gains of :data:`KERNEL_GAINS`, the row
+    without its graph, followers, observer and gains), the gains of :data:`KERNEL_GAINS`, the row
     layout (:meth:`symbolic.parameters.RowLayout.key`: the fault templates, the patterns
     of the observer's gain matrices), the driver sources and the compiler settings. Two scenarios
     with equal keys compile to the same library: this process builds it once
@@ -218,8 +218,11 @@ def kernel_key(
     st = structure(sc, gains)
     fo = sc.followers[model_index]
     desc = {
-        # the leader's u0 as templates: its literals are row columns
-        "structure": {k: v for k, v in st.items() if k not in ("graph", "followers", "gains")},
+        # the leader's u0 as templates (its literals are row columns); the observer's
+        # settings enter only through the gains (their patterns: "rows")
+        "structure": {
+            k: v for k, v in st.items() if k not in ("graph", "followers", "gains", "observer")
+        },
         "gains": {k: np.asarray(getattr(gains, k), float).tolist() for k in KERNEL_GAINS},
         "model": [fo.model, sorted(fo.params.items())],
         # the fault templates, the gains' patterns, the row's sizes

@@ -293,6 +293,8 @@ def test_kernel_key_ignores_the_graph_and_n_but_not_what_is_compiled(cases):
     assert agents.kernel_key(sc_c, gains_c, 0) == key
     other = dataclasses.replace(gains, lambda1=gains.lambda1 * 2)  # a runtime number
     assert agents.kernel_key(sc, other, 0) == key
+    obs = dataclasses.replace(sc.observer, lambda1=3.0, delta2=0.9)  # only through the gains
+    assert agents.kernel_key(dataclasses.replace(sc, observer=obs), other, 0) == key
     zero = np.zeros_like(np.atleast_2d(gains.Q))  # other zeros: other code
     assert agents.kernel_key(sc, dataclasses.replace(gains, Q=zero), 0) != key
     mixed, gm = cases["cyclic-mixed"][:2]
