@@ -16,8 +16,11 @@ From the file the console is started on, :func:`console_table` keeps everything 
   controller's d_i does not change when a bias is set;
 * the file's own faults and graph switches are removed (the console starts healthy;
   the operator injects faults live); one switch that changes nothing is added, so that
-  the graph is compiled as two topologies, the weights before and after a link change
-  (``graph``, ``graph_times``: :func:`symbolic.closed_loop.graph_coupling`);
+  the page's outputs (the symbolic closed loop's) read the graph as two topologies, the
+  weights before and after a link change (``graph``, ``graph_times``:
+  :func:`symbolic.closed_loop.graph_coupling`);
+* ``integration.method`` is ``native``: the console runs the per-agent engine
+  (:class:`console.engine.LiveLoop`), and so does the replay of its records;
 * ``name`` gets the suffix ``-console``.
 
 The replay of a record (:mod:`console.record`) is this table plus the recorded changes.
@@ -71,13 +74,15 @@ def console_table(path: str | Path, bias_max: float = BIAS_MAX) -> dict:
     for k in ("u0_csv", "u0_hold", "u0_rise", "u0_shape"):
         leader.pop(k, None)
     leader["u0"] = [RAMPED] * base.p
+    # the console runs the per-agent engine (console/engine.py): its replay runs it too
+    data.setdefault("integration", {})["method"] = "native"
     graph = data["graph"]
     graph.pop("switches", None)
-    # the live loop hands a link change to one integrator call (engine.py): raw switching,
-    # which its records replay (a fade would need the old topology kept in p for T seconds)
+    # raw switching while the per-agent engine refuses a fade with switches; LiveLoop
+    # already carries every change a fade still runs (engine.py, LiveLoop.topologies)
     graph["link_fade"] = 0.0
-    # one switch that changes nothing: the compiled loop then has two topologies, the
-    # console's old and new graph, and switches between them where a link change lands
+    # one switch that changes nothing: the page's outputs (the symbolic whole loop) then
+    # read two topologies, the console's old and new graph, switching where a change lands
     i = int(np.flatnonzero(base.graph.pinning)[0])
     graph["switches"] = [
         {

@@ -43,8 +43,8 @@ from generated.agent_kernels import (
     kernel_key,
 )
 from generated.values import IntegratorSettings, Trajectory
-from symbolic.closed_loop import fault_function, make_layout
-from symbolic.parameters import param_matrix
+from symbolic.closed_loop import make_layout, observer_gains
+from symbolic.parameters import agent_rows
 from synthesis.gains import Gains
 
 __all__ = [
@@ -75,11 +75,14 @@ class AgentProblem:
     model : ndarray
         N ints: each follower's kernel library.
     fault_index : ndarray
-        N × (1+n): ``gf`` of follower i is ``values[fault_index[i]]``.
+        N × (1+n) zeros: the driver's ``gf`` (``ag_faults``' values), which the kernels
+        do not read (they evaluate g_i, f_i from their rows).
     nfaults : int
-        Length of the fault kernel's output.
+        Length of the fault kernel's output (1).
     params : ndarray
-        N × npar, agent-major.
+        N × npar, agent-major: each follower's row of runtime numbers
+        (:func:`symbolic.parameters.agent_rows`: per-agent numbers, the observer's gains,
+        u0's and its faults' literals).
     topologies : tuple of Topology
         The base graph, then one per switching time.
     """
@@ -112,7 +115,7 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
     ----------
     sc : Scenario
     gains : Gains
-        Supplies the gauge h (checked against the graph).
+        Supplies the gauge h (checked against the graph) and the observer's gains.
     model : ndarray
         From :func:`build_models`.
 
@@ -132,7 +135,6 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
             "graph.link_fade = 0, or a whole-loop method (docs/verification.md, 'Link losses')",
         )
     lay = make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered")
-    faults, fidx = fault_function(sc)
     tops = tuple(topology(t.t_start, t.adjacency, t.pinning, h) for t in sc.graph.topologies())
     return AgentProblem(
         N=sc.N,
@@ -140,9 +142,10 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
         na=lay.agent_size,
         n=sc.n,
         model=np.asarray(model, np.int32),
-        fault_index=np.asarray(fidx, np.int32).reshape(sc.N, 1 + sc.n),
-        nfaults=int(faults.sparsity_out(0).numel()),
-        params=np.ascontiguousarray(param_matrix(sc).T, dtype=float),
+        # the kernels evaluate g_i, f_i from their rows: ag_faults' one 0 is not read
+        fault_index=np.zeros((sc.N, 1 + sc.n), np.int32),
+        nfaults=1,
+        params=np.ascontiguousarray(agent_rows(sc, observer_gains(sc, gains)), dtype=float),
         topologies=tops,
     )
 

@@ -291,10 +291,78 @@ def test_kernel_key_ignores_the_graph_and_n_but_not_what_is_compiled(cases):
     key = agents.kernel_key(sc, gains, 0)
     sc_c, gains_c = cases["cyclic"][:2]
     assert agents.kernel_key(sc_c, gains_c, 0) == key
-    other = dataclasses.replace(gains, lambda1=gains.lambda1 * 2)
-    assert agents.kernel_key(sc, other, 0) != key
+    other = dataclasses.replace(gains, lambda1=gains.lambda1 * 2)  # a runtime number
+    assert agents.kernel_key(sc, other, 0) == key
+    obs = dataclasses.replace(sc.observer, lambda1=3.0, delta2=0.9)  # only through the gains
+    assert agents.kernel_key(dataclasses.replace(sc, observer=obs), other, 0) == key
+    zero = np.zeros_like(np.atleast_2d(gains.Q))  # other zeros: other code
+    assert agents.kernel_key(sc, dataclasses.replace(gains, Q=zero), 0) != key
     mixed, gm = cases["cyclic-mixed"][:2]
     assert agents.kernel_key(mixed, gm, 1) != key  # the point mass
+
+
+def _paper_variant(folder: Path, name: str, edit) -> Path:
+    """The paper's scenario cut to 0.2 s, edited by ``edit(dict)``, written to ``folder``."""
+    import tomllib
+
+    from sweep.sampler import scenario_toml
+
+    d = tomllib.loads(Path(PAPER).read_text(encoding="utf-8"))
+    d["name"] = name
+    d["integration"]["horizon"] = 0.2
+    edit(d)
+    path = folder / f"{name}.toml"
+    path.write_text(scenario_toml(d), encoding="utf-8")
+    return path
+
+
+def _other_numbers(d: dict) -> None:
+    """Other u0 numbers, fault parameters, gains, graph, N and initial states."""
+    import copy
+
+    d["leader"]["u0"] = ["1.5*cos(t)"]
+    d["leader"]["eta0"] = [0.3, -0.2]
+    fol = d["followers"]
+    fol[0]["f"] = ["3*sin(3*t) + 0.5", "2*sin(1*t) + 2"]
+    fol[0]["g"] = 0.8
+    fol[2]["f"] = ["4*cos(t)", "1*sin(t)"]  # follower 4's template, follower 3's
+    fol.append(copy.deepcopy(fol[4]))  # N = 6
+    fol[5]["p0"] = [2.0, -1.0]
+    N = len(fol)
+    A = np.zeros((N, N))
+    for i in range(1, N):
+        A[i, i - 1] = 1.0
+    A[0, N - 1] = 1.0  # a ring: cyclic
+    d["graph"] = {"adjacency": A.tolist(), "pinning": [1.0] + [0.0] * (N - 1)}
+    d["initial"]["eta"] = [0.1, -0.1]
+    d["controller"]["k2"] = 2.0
+    d["observer"]["lambda1"] = 2.5  # gains: λ1, and Θ (so the UIO's F, K) synthesised anew
+    d["observer"]["delta2"] = 0.9
+
+
+def test_a_scenario_differing_in_numbers_compiles_nothing(tmp_path, monkeypatch):
+    """``generated sim`` (api.run, the shared build cache as ``make sim`` uses it) on the
+    per-agent engine: after the paper's scenario (compiled once per cache), one with other
+    u0 numbers, fault parameters, controller numbers, observer gains (λ1, Θ), graph (a
+    cycle), N and initial states reuses its kernel library: its C is the same (the in-process memo is cleared,
+    so the code is generated again and hashed), nothing is compiled (meta.json: cache
+    hit, compile 0 s), and the run completes."""
+    from generated import agent_kernels, native
+
+    monkeypatch.setattr(native, "MAX_AGENTS", 0)  # `native` on the per-agent engine at any N
+    first = _paper_variant(tmp_path, "first", lambda d: None)
+    other = _paper_variant(tmp_path, "other", _other_numbers)
+    metas = []
+    for path in (first, other):
+        agent_kernels._BUILT.clear()
+        r = api.run(path, out_root=tmp_path / "out", progress=False)
+        metas.append(json.loads(r.meta_path.read_text()))
+        assert r.trajectory.complete
+    assert metas[1]["library"]["cache_hit"] is True
+    assert metas[1]["wall_seconds"]["compile"] == 0.0
+    assert metas[0]["library"]["path"] == metas[1]["library"]["path"]
+    g0, g1 = (json.loads(Path(m["gains_path"]).read_text()) for m in metas)
+    assert g0["lambda1"] != g1["lambda1"] and not np.allclose(g0["Theta"], g1["Theta"])
 
 
 def test_threads_give_the_serial_results(cases, build_root):

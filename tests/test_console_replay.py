@@ -47,6 +47,13 @@ SCRIPT = {
     90: {"type": "link", "follower": 3, "neighbour": 2, "cut": False},
 }
 TICKS = 100
+#: ``python -m generated`` with method ``native`` on the per-agent engine at any N, as the
+#: console runs it (until ``native`` routes every N there, it does so above 20 followers)
+REPLAY = (
+    "import sys; from core.errors import run_cli; from generated import native; "
+    "native.MAX_AGENTS = 0; from generated.__main__ import main; "
+    "sys.exit(run_cli(main))"
+)
 
 
 def _three_followers(folder: Path) -> Path:
@@ -81,7 +88,7 @@ def recorded(tmp_path_factory):
     assert not con.loop.failure
     saved = s.handle(parse_message('{"type": "save"}', con.loop.limits))
     assert saved["reason"] == "", saved["reason"]
-    cmd = [sys.executable, "-m", "generated", "sim", saved["scenario"], "--out", str(tmp / "out")]
+    cmd = [sys.executable, "-c", REPLAY, "sim", saved["scenario"], "--out", str(tmp / "out")]
     run = subprocess.run([*cmd, "--no-progress"], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     name = load_scenario(saved["scenario"]).name
@@ -508,3 +515,42 @@ def test_scripted_sessions_with_link_cuts_and_faults(three) -> None:
     text = report(results, "python -m console.sessions --network", "three", "prov", 2.0)
     assert f"cuts refused as breaking Assumption 1: {sum(r.refused for r in results)}" in text
     con.loop.close()
+
+
+def test_a_call_carries_the_link_changes_a_fade_still_runs(three, monkeypatch) -> None:
+    """The per-agent problem of a call holds the graphs the replay's ``[[graph.switches]]``
+    give over it: switching raw (the console scenario's ``link_fade = 0``), the links in
+    force and the change pending at the call's end; with a fade of T s, also every
+    change of the last T s, from the last one whose fade had ended (a fade spanning
+    several calls then runs in each as in the replay). Weights read back from the CSR
+    arrays: follower 3 hears follower 2 with weight 0 while the link is cut."""
+    import dataclasses
+
+    con = open_console(three[0], out_root=three[1])
+    loop = con.loop
+    q = loop.quantum
+
+    def heard(top, i: int, j: int) -> float:
+        row = slice(top.ptr[i], top.ptr[i + 1])
+        return float(sum(w for k, w in zip(top.idx[row], top.w[row], strict=True) if k == j))
+
+    loop.advance(5)
+    loop.set_link(2, 1, True)  # 3 <- 2 cut at the end of the next call (3 still hears 1)
+    loop.advance(5)
+    loop.set_link(2, 1, False)  # restored at the end of the next call
+    loop.advance(5)
+    loop.advance(5)
+    assert loop.t == pytest.approx(20 * q)
+    tops = loop.topologies()
+    assert [t.t_start for t in tops] == [pytest.approx(15 * q)]
+    assert heard(tops[0], 2, 1) != 0.0
+    fade = dataclasses.replace(loop.sc.graph, link_fade=8 * q)  # the cut's fade has ended
+    monkeypatch.setattr(loop, "sc", dataclasses.replace(loop.sc, graph=fade))
+    tops = loop.topologies()
+    assert [t.t_start for t in tops] == [pytest.approx(10 * q), pytest.approx(15 * q)]
+    assert heard(tops[0], 2, 1) == 0.0 and heard(tops[1], 2, 1) != 0.0
+    loop.set_link(2, 1, True)  # pending: the next call ends with it
+    loop.switch_at = 25 * q
+    assert [t.t_start for t in loop.topologies()][-1] == pytest.approx(25 * q)
+    loop.switch_at = None
+    loop.close()
