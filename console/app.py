@@ -77,7 +77,7 @@ def open_console(
     sc = console_scenario(path, table)
     root = Path(out_root or OUT_ROOT)
     gains, _ = api.ensure_gains(sc, root)
-    built = api.build(sc, gains)
+    built = api.build(sc, gains, runtime_parameters=True)  # LiveLoop sets p between attempts
     loop = LiveLoop(sc, gains, built, bias_max, rise=rise)
     out = root / sc.name
     session = Session(loop, recorder=Recorder(out, table, loop))

@@ -204,7 +204,7 @@ def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, na
     """
     sc, gains, cl, libs, prob = cases[name]
     cg = CodegenSettings(optimization="-O0", build_root=build_root)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl)
+    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
     H = 0.15 if name == "link-losses" else 0.25  # through the first loss: its kick is costly
     t_out = output_grid(H, 0.01)
     bps = [b for b in sc.breakpoints() if b < H]
@@ -259,7 +259,7 @@ def test_trajectory_equals_the_whole_loop_native_one_past_the_start_up(cases, bu
     """
     sc, gains, cl, libs, prob = cases[name]
     cg = CodegenSettings(optimization="-O0", build_root=build_root)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl)
+    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
     t0, width = SETTLED[name]
     s = IntegratorSettings(method="native", rtol=1e-12, atol=1e-14, max_steps=2_000_000)
     bps = sc.breakpoints()
@@ -414,7 +414,7 @@ def test_an_operator_press_and_release_on_the_per_agent_driver(build_root):
     gains = api.scenario_gains(sc, "press")
     cg = CodegenSettings(optimization="-O0", build_root=build_root)
     cl = build_closed_loop(sc, gains)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl)
+    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
     libs, model = agents.build_models(sc, gains, cg)
     prob = agents.problem(sc, gains, model)
     t_out = output_grid(1.5, 0.01)
@@ -608,8 +608,8 @@ def test_faults_and_two_pinned_followers_against_the_whole_loop(tmp_path):
     cg = CodegenSettings(optimization="-O0", kernel_optimization="-O0")
     libs, model = agents.build_models(sc, gains, cg)
     prob = agents.problem(sc, gains, model)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl)
-    assert built.agents is None  # N = 2: the whole loop
+    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
+    assert built.agents is None  # runtime p: the whole loop (driver.c)
     t_out = output_grid(0.5, 0.01)
     diffs = []
     for rtol in (1e-8, 1e-11):
