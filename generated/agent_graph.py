@@ -202,7 +202,9 @@ def _union(t_start: float, tops: list[Topology], active: list[int]) -> Segment:
     N = len(tops[0].ptr) - 1
     if len(active) == 1:
         tp = tops[active[0]]
-        return Segment(float(t_start), tp, np.asarray(active, np.int32), tp.w[None, :], tp.cpl[None])
+        return Segment(
+            float(t_start), tp, np.asarray(active, np.int32), tp.w[None, :], tp.cpl[None]
+        )
     rows = [
         sorted({int(j) for k in active for j in tops[k].idx[tops[k].ptr[i] : tops[k].ptr[i + 1]]})
         for i in range(N)
@@ -213,8 +215,12 @@ def _union(t_start: float, tops: list[Topology], active: list[int]) -> Segment:
     for a, k in enumerate(active):
         tp = tops[k]
         for i in range(N):
-            at = {int(j): float(v) for j, v in zip(tp.idx[tp.ptr[i] : tp.ptr[i + 1]],
-                                                    tp.w[tp.ptr[i] : tp.ptr[i + 1]], strict=True)}
+            at = {
+                int(j): float(v)
+                for j, v in zip(
+                    tp.idx[tp.ptr[i] : tp.ptr[i + 1]], tp.w[tp.ptr[i] : tp.ptr[i + 1]], strict=True
+                )
+            }
             w[a, ptr[i] : ptr[i + 1]] = [at.get(j, 0.0) for j in rows[i]]
     order, acyclic = topological_order(ptr, idx)
     order, waves, depth = depth_waves(ptr, idx, order)
