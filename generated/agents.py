@@ -43,6 +43,7 @@ from generated.agent_kernels import (
     build_models,
     kernel_key,
 )
+from generated.loaded import open_kernels
 from generated.values import IntegratorSettings, Trajectory
 from symbolic.closed_loop import fault_function, make_layout
 from symbolic.parameters import param_matrix
@@ -366,7 +367,7 @@ def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
     # enters a parallel region per pass and per wave, microseconds apart, and threads that
     # sleep between them cost more to wake than a wave takes (docs/performance.md)
     os.environ.setdefault("OMP_WAIT_POLICY", "active")
-    libs = [native.load(Path(p)) for p in libraries]
+    libs = [open_kernels(Path(p)) for p in libraries]  # from verified private copies
     ci, cd, prob = ctypes.c_int, ctypes.c_double, ctypes.POINTER(Problem)
     opts, res = ctypes.POINTER(native.Options), ctypes.POINTER(native.Result)
     for lib, p in zip(libs, libraries, strict=True):
