@@ -269,8 +269,8 @@ def build_from_closed_loop(
         ``timings["symbolic_build"]`` includes it (default: now).
     prepared : object, optional
         What the method's :meth:`~generated.solvers.Solver.prepare` returned for the
-        scenario (method ``native`` above :data:`generated.native.MAX_AGENTS` followers:
-        what its per-agent kernels are built from).
+        scenario (method ``native``: what its per-agent kernels are built from; None
+        builds the whole loop).
     """
     return _compile(cl, method, settings, t_symbolic_start, prepared)[0]
 
