@@ -39,6 +39,7 @@ from core.scenario import Scenario
 from generated import native
 from generated.codegen import Library, build_library
 from generated.compiler import Toolchain
+from generated.loaded import library_stamp
 from generated.sparse_lu import sparse_lu
 from generated.values import CodegenSettings
 from symbolic.cascade import agent_block
@@ -287,11 +288,11 @@ def build_models(
     for g, members in enumerate(groups):
         model[members] = g
         key = kernel_key(sc, gains, members[0], settings, openmp)
-        lib = _BUILT.get(key)
-        if lib is None or not lib.path.is_file():
+        lib, stamp = _BUILT.get(key) or (None, None)
+        if lib is None or library_stamp(lib) != stamp:  # its entry changed: check, rebuild
             fns = kernel_functions(sc, gains, members[0], cse=s.cse)
             lib = build_library(fns, s, toolchain=driver_toolchain(sc))
-            _BUILT[key] = lib
+            _BUILT[key] = (lib, library_stamp(lib))
         else:
             lib = dataclasses.replace(lib, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0)
         libs.append(lib)

@@ -13,7 +13,9 @@ leader's and the neighbours':
     ψ_i = l̄_ii C0 η_i − a_i0 h_i y0 + Σ_{j≠i} (L+B)_ij C0 η_j.
 
 The last sum and, for the oracle derivatives (docs/fidelity.md, D9), its first two time derivatives
-are the block's input ``nb`` (3n numbers); the block outputs the jets
+are the block's input ``nb`` (3n numbers), and ``cpl`` = (l̄_ii, a_i0 h_i) with their first two
+time derivatives (6 numbers: nonzero while links fade, ``graph.link_fade``, where the
+derivatives of eq. (6) take the weights' rates by the product rule); the block outputs the jets
 ``(C0 η_i, C0 η̇_i, C0 η̈_i)`` its listeners sum into their ``nb``; the level-l jet reads
 only the levels < l of ``nb``, so passes by jet level over all followers give the whole
 closed loop's right-hand side on any graph (tests/test_agents.py). The per-agent engine
@@ -64,11 +66,12 @@ def agent_block(sc: Scenario, og: ObserverGains, lay: StateLayout, model_index: 
     t = ca.SX.sym("t")
     xb = ca.SX.sym("xb", m + lay.agent_size)
     nb = ca.SX.sym("nb", 3 * n)
-    cpl = ca.SX.sym("cpl", 2)
+    cpl = ca.SX.sym("cpl", 6)  # (l̄_ii, a_i0 h_i) and their first two time derivatives
     prm = ca.SX.sym("prm", rows.size)
     gf = ca.SX.sym("gf", 1 + n)
     eta0, s = xb[:m], xb[m:]
     lii, a0h = cpl[0], cpl[1]
+    dlii, da0h, ddlii, dda0h = cpl[2], cpl[3], cpl[4], cpl[5]
     u0c = ca.vertcat(*(prm[sl] for sl in rows.u0)) if rows.u0 else ca.SX(0, 1)
     lead = leader_function(sc.leader, parametric=True)
     eta0dot, _, y0, y0dot, y0ddot, _, _ = lead(t, eta0, u0c)  # eq. (3)
@@ -83,9 +86,13 @@ def agent_block(sc: Scenario, og: ObserverGains, lay: StateLayout, model_index: 
         D1, _ = flow_jets(obs)
         Pobs = ca.vertcat(prm[poff["obs"]], prm[rows.gains])  # (α1+ᾱ1, φ_min), the gains
         sod = obs(so, psi, Pobs)[0]
-        dpsi = lii * ca.mtimes(C0, sod[m : 2 * m]) + nb[n : 2 * n] - a0h * y0dot
+        C0eta, C0etad = ca.mtimes(C0, eta), ca.mtimes(C0, sod[m : 2 * m])
+        # ψ̇_i = l̄_ii C0η̇_i + nb' − a_i0 h_i ẏ0, plus the fading weights' rates (eq. (6))
+        dpsi = lii * C0etad + nb[n : 2 * n] - a0h * y0dot + dlii * C0eta - da0h * y0
         sodd = D1(so, psi, Pobs, sod, dpsi)
+        # ψ̈_i: the weights' W, 2Ẇ, Ẅ on the second, first and zeroth derivatives
         ddpsi = lii * ca.mtimes(C0, sodd[m : 2 * m]) + nb[2 * n :] - a0h * y0ddot
+        ddpsi = ddpsi + 2 * (dlii * C0etad - da0h * y0dot) + ddlii * C0eta - dda0h * y0
     agent = agent_function(sc, og, model_index, parametric_gains=True)
     P = prm[: rows.gains.stop]  # the per-agent numbers and the observer's gains
     res = dict(

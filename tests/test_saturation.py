@@ -231,7 +231,7 @@ def test_agent_blocks_apply_the_same_limit():
     block = agent_block(sat, observer_gains(sat, g), lay, 0)
     gm = graph_matrices(sat.graph, g)
     off = gm.L_B - np.diag(np.diag(gm.L_B))
-    cpl = np.column_stack([np.diag(gm.L_B), gm.a0h])
+    cpl = np.column_stack([np.diag(gm.L_B), gm.a0h, np.zeros((N, 4))])  # no fade: no rates
     prm = agent_rows(sat, observer_gains(sat, g)).T  # the blocks evaluate g_i, f_i from them
     x = np.asarray(cl.x0).ravel()
     t = 0.0
