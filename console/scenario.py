@@ -78,9 +78,8 @@ def console_table(path: str | Path, bias_max: float = BIAS_MAX) -> dict:
     data.setdefault("integration", {})["method"] = "native"
     graph = data["graph"]
     graph.pop("switches", None)
-    # raw switching while the per-agent engine refuses a fade with switches; LiveLoop
-    # already carries every change a fade still runs (engine.py, LiveLoop.topologies)
-    graph["link_fade"] = 0.0
+    # graph.link_fade stays the file's (default: the fade): LiveLoop carries every link
+    # change whose fade still runs into the next call (engine.py, LiveLoop.topologies)
     # one switch that changes nothing: the page's outputs (the symbolic whole loop) then
     # read two topologies, the console's old and new graph, switching where a change lands
     i = int(np.flatnonzero(base.graph.pinning)[0])

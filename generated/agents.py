@@ -24,6 +24,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -89,9 +90,6 @@ class AgentProblem:
         The base graph, then one per switching time.
     fade : float
         ``graph.link_fade``: seconds a switch's weights fade over (0: raw).
-    segments : tuple of Segment
-        What the driver reads: the active topologies of each stretch of time
-        (:func:`generated.agent_graph.segments`).
     """
 
     N: int
@@ -104,7 +102,13 @@ class AgentProblem:
     params: np.ndarray
     topologies: tuple[Topology, ...]
     fade: float
-    segments: tuple[Segment, ...]
+
+    @cached_property
+    def segments(self) -> tuple[Segment, ...]:
+        """What the driver reads: the active topologies of each stretch of time
+        (:func:`generated.agent_graph.segments`), derived from :attr:`topologies` and
+        :attr:`fade` (a problem with other topologies, as the console's calls, gets its own)."""
+        return segments(self.topologies, self.fade)
 
     @property
     def nx(self) -> int:
@@ -151,7 +155,6 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
         params=np.ascontiguousarray(agent_rows(sc, observer_gains(sc, gains)), dtype=float),
         topologies=tops,
         fade=fade,
-        segments=segments(tops, fade),
     )
 
 

@@ -47,13 +47,6 @@ SCRIPT = {
     90: {"type": "link", "follower": 3, "neighbour": 2, "cut": False},
 }
 TICKS = 100
-#: ``python -m generated`` with method ``native`` on the per-agent engine at any N, as the
-#: console runs it (until ``native`` routes every N there, it does so above 20 followers)
-REPLAY = (
-    "import sys; from core.errors import run_cli; from generated import native; "
-    "native.MAX_AGENTS = 0; from generated.__main__ import main; "
-    "sys.exit(run_cli(main))"
-)
 
 
 def _three_followers(folder: Path) -> Path:
@@ -88,7 +81,7 @@ def recorded(tmp_path_factory):
     assert not con.loop.failure
     saved = s.handle(parse_message('{"type": "save"}', con.loop.limits))
     assert saved["reason"] == "", saved["reason"]
-    cmd = [sys.executable, "-c", REPLAY, "sim", saved["scenario"], "--out", str(tmp / "out")]
+    cmd = [sys.executable, "-m", "generated", "sim", saved["scenario"], "--out", str(tmp / "out")]
     run = subprocess.run([*cmd, "--no-progress"], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     name = load_scenario(saved["scenario"]).name
@@ -519,7 +512,7 @@ def test_scripted_sessions_with_link_cuts_and_faults(three) -> None:
 
 def test_a_call_carries_the_link_changes_a_fade_still_runs(three, monkeypatch) -> None:
     """The per-agent problem of a call holds the graphs the replay's ``[[graph.switches]]``
-    give over it: switching raw (the console scenario's ``link_fade = 0``), the links in
+    give over it: switching raw (``link_fade = 0``), the links in
     force and the change pending at the call's end; with a fade of T s, also every
     change of the last T s, from the last one whose fade had ended (a fade spanning
     several calls then runs in each as in the replay). Weights read back from the CSR
@@ -541,6 +534,9 @@ def test_a_call_carries_the_link_changes_a_fade_still_runs(three, monkeypatch) -
     loop.advance(5)
     loop.advance(5)
     assert loop.t == pytest.approx(20 * q)
+    assert loop.sc.graph.link_fade > 20 * q  # the console keeps the file's fade (default)
+    raw = dataclasses.replace(loop.sc.graph, link_fade=0.0)
+    monkeypatch.setattr(loop, "sc", dataclasses.replace(loop.sc, graph=raw))
     tops = loop.topologies()
     assert [t.t_start for t in tops] == [pytest.approx(15 * q)]
     assert heard(tops[0], 2, 1) != 0.0
