@@ -456,8 +456,9 @@ class LiveLoop(LoopBase):
         self.f_names = [[f"expr:followers[{i}].f[{r}]" for r in range(sc.n)] for i in range(sc.N)]
         self.p_slices, self.row_slices = lay.slices, rows
         self.graph_slice, self.times_slice = lay.slices["graph"], lay.slices["graph_times"]
-        if self.times_slice.stop - self.times_slice.start != 1:
-            raise BuildError(f"{sc.path}: graph: the console scenario needs exactly one switch")
+        self.link_slots = self.times_slice.stop - self.times_slice.start
+        if self.link_slots < 1:
+            raise BuildError(f"{sc.path}: graph: the console scenario needs its link slots")
         A = np.asarray(sc.graph.adjacency, dtype=float)
         a0 = np.asarray(sc.graph.pinning, dtype=float)
         self.h = np.diag(np.atleast_2d(gains.H)).astype(float)
@@ -525,10 +526,12 @@ class LiveLoop(LoopBase):
         for name, v in self.literals().items():
             sl = self.p_slices[name]
             p[sl.stop - v.size : sl.stop] = v
-        old, new, c = self.settings, self.target, self.switch_at
-        # the graph as two topologies, old then new from c on (the replay's graph switches)
-        p[self.graph_slice] = np.concatenate([self._graph(old), self._graph(new)])
-        p[self.times_slice] = 0.0 if c is None else c
+        # the graphs of the next call (the engine's), padded with copies of the last: a
+        # switch to equal weights changes nothing, faded or not
+        hist = self.link_history()
+        hist += [hist[-1]] * (1 + self.link_slots - len(hist))
+        p[self.graph_slice] = np.concatenate([self._graph(w) for _, w in hist])
+        p[self.times_slice] = [t0 for t0, _ in hist[1:]]
         return p
 
     def agent_rows(self) -> np.ndarray:
@@ -540,18 +543,45 @@ class LiveLoop(LoopBase):
             R[slice(None) if i is None else i, sl.stop - v.size : sl.stop] = v
         return R
 
-    def topologies(self) -> tuple[Any, ...]:
-        """The per-agent problem's graphs of the next call: the link changes from the last
-        one whose fade (``graph.link_fade``) has ended by now, then the pending change at
+    def link_history(self) -> list[tuple[float, dict[tuple[int, int], float]]]:
+        """The links of the next call: from the last change whose fade (``graph.link_fade``)
+        has ended by now, every change with its time, then the pending one at
         :attr:`switch_at` (the replay's ``[[graph.switches]]`` as they ran)."""
-        from generated.agent_graph import topology
-
         fade = float(self.sc.graph.link_fade)
         hist = list(self.links)
         if self.switch_at is not None and self.target.weights != self.settings.weights:
             hist.append((self.switch_at, dict(self.target.weights)))
         first = max(k for k, (t0, _) in enumerate(hist) if k == 0 or t0 <= self.t - fade)
-        return tuple(topology(t0, *self._matrices(w), self.h) for t0, w in hist[first:])
+        return hist[first:]
+
+    def topologies(self) -> tuple[Any, ...]:
+        """The per-agent problem's graphs of the next call (:meth:`link_history`)."""
+        from generated.agent_graph import topology
+
+        return tuple(topology(t0, *self._matrices(w), self.h) for t0, w in self.link_history())
+
+    def set_link(self, i: int, j: int, cut: bool) -> None:
+        """As :meth:`LoopBase.set_link`; also refused while :data:`LINK_SLOTS` changes fade.
+
+        Parameters
+        ----------
+        i, j, cut
+            As :meth:`LoopBase.set_link`.
+
+        Raises
+        ------
+        MessageError
+            As :meth:`LoopBase.set_link`, or a new change while the page's outputs hold
+            no more fading graphs (the oldest fade must end first).
+        """
+        pending = self.target.weights != self.settings.weights  # a new change joins it
+        if not pending and len(self.link_history()) > self.link_slots:
+            raise MessageError(
+                f"link {i + 1} ← {'leader' if j < 0 else j + 1}: refused, {self.link_slots} "
+                f"link changes are still fading (graph.link_fade = "
+                f"{self.sc.graph.link_fade:g} s); try again when the oldest has ended"
+            )
+        super().set_link(i, j, cut)
 
     def agent_problem(self) -> Any:
         """The per-agent problem of the next call (:meth:`agent_rows`, :meth:`topologies`)."""
@@ -572,11 +602,11 @@ class LiveLoop(LoopBase):
                 A[i, j] = w
         return A, a0
 
-    def _graph(self, st: Settings) -> np.ndarray:
-        """The ``graph`` weights of one topology: the links of ``st`` on the compiled pattern."""
+    def _graph(self, weights: dict[tuple[int, int], float]) -> np.ndarray:
+        """The ``graph`` weights of one topology: ``weights`` on the compiled pattern."""
         from symbolic.parameters import graph_values
 
-        return graph_values(self.sc, self.h, *self._matrices(st.weights))
+        return graph_values(self.sc, self.h, *self._matrices(weights))
 
     def outputs_at(self, t: float, x: np.ndarray) -> dict[str, Any]:
         """The closed loop's named outputs at (t, x) with the current numbers.

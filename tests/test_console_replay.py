@@ -510,6 +510,55 @@ def test_scripted_sessions_with_link_cuts_and_faults(three) -> None:
     con.loop.close()
 
 
+def test_the_page_reads_the_links_as_they_fade(recorded) -> None:
+    """What the page draws (``outputs_at``: the symbolic whole loop with the console's link
+    slots) equals the replay's own outputs (the record's ``[[graph.switches]]``, faded by
+    the scenario's ``graph.link_fade``) at the replay's states while the restored link
+    still fades in; the torque |u_i| at those states, compared (reading the new weights at
+    once, as a page without the slots would, fails this)."""
+    from generated import api
+
+    con, saved, _, _ = recorded
+    loop = con.loop
+    rec = load_scenario(saved["scenario"])
+    restore = max(c.t for c in loop.changes if c.kind == "link")
+    assert loop.t - restore < rec.graph.link_fade  # the fade still runs at the session's end
+    gains, _ = api.ensure_gains(rec, Path(saved["folder"]).parent / "gains")
+    built = api.build(rec, gains, "native")
+    traj = api.simulate(built, rec, api.integrator_settings(rec, "native"))
+    sel = np.flatnonzero(traj.t > restore)
+    assert sel.size > 10
+    for j in sel:
+        want = np.asarray(built.outputs.call({"t": traj.t[j], "x": traj.x[j]})["u"], float)
+        got = np.asarray(loop.outputs_at(float(traj.t[j]), traj.x[j])["u"], float)
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
+
+
+def test_a_link_change_beyond_the_slots_is_refused_until_a_fade_ends(three) -> None:
+    """Eight link changes fading at once fill the page's slots: a ninth, in its own call,
+    is refused with the reason and changes nothing; once the oldest fade has ended, a
+    change is taken again."""
+    from console.protocol import MessageError
+    from console.scenario import LINK_SLOTS
+
+    con = open_console(three[0], out_root=three[1])
+    loop = con.loop
+    for k in range(LINK_SLOTS):
+        loop.set_link(2, 1, k % 2 == 0)  # 3 <- 2 cut, restored, ... (3 still hears 1)
+        loop.advance(1)
+    assert len(loop.link_history()) == 1 + LINK_SLOTS
+    before = dict(loop.target.weights)
+    with pytest.raises(MessageError, match="still fading"):
+        loop.set_link(2, 1, LINK_SLOTS % 2 == 0)
+    assert loop.target.weights == before
+    fade_end = loop.link_history()[1][0] + loop.sc.graph.link_fade
+    while loop.t <= fade_end:
+        loop.advance(5)
+    loop.set_link(2, 1, LINK_SLOTS % 2 == 0)  # the oldest fade has ended: taken
+    assert loop.target.weights != before
+    loop.close()
+
+
 def test_a_call_carries_the_link_changes_a_fade_still_runs(three, monkeypatch) -> None:
     """The per-agent problem of a call holds the graphs the replay's ``[[graph.switches]]``
     give over it: switching raw (``link_fade = 0``), the links in
