@@ -124,6 +124,7 @@ class LoopBase:
     def reset(self) -> None:
         """Back to t = 0 with the nominal settings; the record starts again."""
         self.k = 0  # quanta elapsed: t = k * quantum exactly
+        self.t_call = 0.0  # where the last integrator call started (its states start there)
         self.x = self.x0.copy()
         self.settings = self.nominal.copy()  # what the loop integrates with
         self.target = self.nominal.copy()  # what the operator asked for
@@ -285,6 +286,7 @@ class LoopBase:
         t_end = float(ks[-1] * self.quantum)
         if self.k > 0:
             self.restarts.append(self.t)
+        self.t_call = self.t
         changes = self.pending(t_end)
         self.switch_at = t_end if any(c.kind != "u0" for c in changes) else None
         self.parameters_changed()
@@ -544,14 +546,18 @@ class LiveLoop(LoopBase):
         return R
 
     def link_history(self) -> list[tuple[float, dict[tuple[int, int], float]]]:
-        """The links of the next call: from the last change whose fade (``graph.link_fade``)
-        has ended by now, every change with its time, then the pending one at
-        :attr:`switch_at` (the replay's ``[[graph.switches]]`` as they ran)."""
+        """The links of the next call, and of the states the last one logged: from the last
+        change whose fade (``graph.link_fade``) had ended where the last call started
+        (:attr:`t_call`; the current time before a call), every change with its time,
+        then the pending one at :attr:`switch_at` (the replay's ``[[graph.switches]]`` as
+        they ran). A fade that has ended weighs its graph by exactly 1 from then on, so
+        starting from an older one changes nothing in value or rates."""
         fade = float(self.sc.graph.link_fade)
         hist = list(self.links)
         if self.switch_at is not None and self.target.weights != self.settings.weights:
             hist.append((self.switch_at, dict(self.target.weights)))
-        first = max(k for k, (t0, _) in enumerate(hist) if k == 0 or t0 <= self.t - fade)
+        since = min(self.t, self.t_call)
+        first = max(k for k, (t0, _) in enumerate(hist) if k == 0 or t0 <= since - fade)
         return hist[first:]
 
     def topologies(self) -> tuple[Any, ...]:

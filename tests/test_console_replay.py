@@ -64,11 +64,8 @@ def _three_followers(folder: Path) -> Path:
     return path
 
 
-@pytest.fixture(scope="module")
-def recorded(tmp_path_factory):
-    """The console run of SCRIPT, its record and the replay's trajectory."""
-    tmp = tmp_path_factory.mktemp("console")
-    con = open_console(_three_followers(tmp), out_root=tmp / "out")
+def _play(con) -> dict:
+    """Play SCRIPT on an opened console at the page's frame rate; its save's answer."""
     now = [0.0]
     s = con.session
     s.clock = lambda: now[0]
@@ -81,6 +78,15 @@ def recorded(tmp_path_factory):
     assert not con.loop.failure
     saved = s.handle(parse_message('{"type": "save"}', con.loop.limits))
     assert saved["reason"] == "", saved["reason"]
+    return saved
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """The console run of SCRIPT, its record and the replay's trajectory."""
+    tmp = tmp_path_factory.mktemp("console")
+    con = open_console(_three_followers(tmp), out_root=tmp / "out")
+    saved = _play(con)
     cmd = [sys.executable, "-m", "generated", "sim", saved["scenario"], "--out", str(tmp / "out")]
     run = subprocess.run([*cmd, "--no-progress"], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
@@ -510,7 +516,7 @@ def test_scripted_sessions_with_link_cuts_and_faults(three) -> None:
     con.loop.close()
 
 
-def test_the_page_reads_the_links_as_they_fade(recorded) -> None:
+def test_the_page_reads_the_links_as_they_fade(three) -> None:
     """What the page draws (``outputs_at``: the symbolic whole loop with the console's link
     slots) equals the replay's own outputs (the record's ``[[graph.switches]]``, faded by
     the scenario's ``graph.link_fade``) at the replay's states while the restored link
@@ -518,7 +524,8 @@ def test_the_page_reads_the_links_as_they_fade(recorded) -> None:
     once, as a page without the slots would, fails this)."""
     from generated import api
 
-    con, saved, _, _ = recorded
+    con = open_console(three[0], out_root=three[1])
+    saved = _play(con)  # SCRIPT, in a console of its own
     loop = con.loop
     rec = load_scenario(saved["scenario"])
     restore = max(c.t for c in loop.changes if c.kind == "link")
@@ -532,6 +539,7 @@ def test_the_page_reads_the_links_as_they_fade(recorded) -> None:
         want = np.asarray(built.outputs.call({"t": traj.t[j], "x": traj.x[j]})["u"], float)
         got = np.asarray(loop.outputs_at(float(traj.t[j]), traj.x[j])["u"], float)
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
+    loop.close()
 
 
 def test_a_link_change_beyond_the_slots_is_refused_until_a_fade_ends(three) -> None:
@@ -552,7 +560,7 @@ def test_a_link_change_beyond_the_slots_is_refused_until_a_fade_ends(three) -> N
         loop.set_link(2, 1, LINK_SLOTS % 2 == 0)
     assert loop.target.weights == before
     fade_end = loop.link_history()[1][0] + loop.sc.graph.link_fade
-    while loop.t <= fade_end:
+    while loop.t_call < fade_end:  # the last call started after the oldest fade ended
         loop.advance(5)
     loop.set_link(2, 1, LINK_SLOTS % 2 == 0)  # the oldest fade has ended: taken
     assert loop.target.weights != before
@@ -589,7 +597,8 @@ def test_a_call_carries_the_link_changes_a_fade_still_runs(three, monkeypatch) -
     tops = loop.topologies()
     assert [t.t_start for t in tops] == [pytest.approx(15 * q)]
     assert heard(tops[0], 2, 1) != 0.0
-    fade = dataclasses.replace(loop.sc.graph, link_fade=8 * q)  # the cut's fade has ended
+    # the cut (10 q) had faded when the last call started (15 q): the graphs from it on
+    fade = dataclasses.replace(loop.sc.graph, link_fade=4 * q)
     monkeypatch.setattr(loop, "sc", dataclasses.replace(loop.sc, graph=fade))
     tops = loop.topologies()
     assert [t.t_start for t in tops] == [pytest.approx(10 * q), pytest.approx(15 * q)]
