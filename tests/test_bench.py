@@ -218,6 +218,7 @@ def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None
 
     from benchmarks.catalogue import OUTPUT_STEP
     from benchmarks.scenarios import bench_gains
+    from generated import solvers
     from generated.api import build_from_closed_loop, integrator_settings, simulate
     from symbolic.closed_loop import build_closed_loop
 
@@ -233,7 +234,8 @@ def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None
     gains = bench_gains(sc)[0]
     cl = build_closed_loop(sc, gains)
     cg = CodegenSettings(jacobian="auto", build_root=str(folder / "build"))
-    built = build_from_closed_loop(cl, "native", cg)
+    prepared = solvers.get("native").prepare(sc, gains)  # the per-agent engine's kernels
+    built = build_from_closed_loop(cl, "native", cg, prepared=prepared)
     assert built.library.cache_hit  # the bench's own library
     s0 = dataclasses.replace(integrator_settings(sc, "native", cg), max_steps=10**6)
 
