@@ -98,8 +98,10 @@ lint: $(STAMP)
 check: lint
 	$(PY) -m pytest -m "not slow"
 
+# one test file per worker, a worker per core (module fixtures are built once); the 25
+# slowest tests are listed at the end
 test: lint chromium
-	$(PY) -m pytest
+	$(PY) -m pytest -n auto --dist loadfile --durations=25
 
 bench: $(STAMP)
 	$(PY) -m benchmarks.bench
