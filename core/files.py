@@ -60,8 +60,12 @@ def read_regular_file(path: str | Path, limit: int) -> bytes:
     # O_NONBLOCK: a file swapped for a FIFO after the stat cannot block the open
     fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     with os.fdopen(fd, "rb") as fh:
-        check(os.fstat(fd))
-        data = fh.read(limit + 1)
+        st = os.fstat(fd)
+        check(st)
+        # a buffer of the file's size, not of the limit (a read of n bytes allocates n)
+        data = fh.read(st.st_size + 1)
+        if len(data) > st.st_size:  # it grows: read on, still no further than the limit
+            data += fh.read(limit + 1 - len(data))
     if len(data) > limit:  # grew after the stat
         raise FileRefused(f"has more than {limit} bytes")
     return data

@@ -203,11 +203,12 @@ def test_quick_smoke_run(tmp_path: Path) -> None:
 
 
 def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None:
-    """Both runs' final states against ours at rtol 1e-11, atol 1e-13 (the same build).
+    """Both runs' final states against ours at rtol 1e-12, atol 1e-14 (the same build).
 
     rel_dx_final_vs_ours is the difference of two approximations at rtol 1e-6, taken at
-    t = 0.02 s, inside the start-up transient. Measured (2026-12-01, this test's
-    scenario): ours (BDF) is 1.4e-2 off the tight reference, in follower 1's ĝ; scipy's
+    t = 0.02 s, inside the start-up transient. Measured (this test's scenario, the
+    whole-loop driver): ours (BDF) is 1.4e-2 off the tight reference, in follower 1's ĝ
+    (the per-agent engine: 7.3e-3); scipy's
     RK45 on the independent numpy right-hand side 3.9e-5; RK45 at rtol 1e-10 2.7e-8. So the
     column is ours' own global error at the scenario's tolerance, not a disagreement of
     the two right-hand sides. What must hold: RK45 (another implementation of the
@@ -218,6 +219,7 @@ def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None
 
     from benchmarks.catalogue import OUTPUT_STEP
     from benchmarks.scenarios import bench_gains
+    from generated import solvers
     from generated.api import build_from_closed_loop, integrator_settings, simulate
     from symbolic.closed_loop import build_closed_loop
 
@@ -233,7 +235,8 @@ def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None
     gains = bench_gains(sc)[0]
     cl = build_closed_loop(sc, gains)
     cg = CodegenSettings(jacobian="auto", build_root=str(folder / "build"))
-    built = build_from_closed_loop(cl, "native", cg)
+    prepared = solvers.get("native").prepare(sc, gains)  # the per-agent engine's kernels
+    built = build_from_closed_loop(cl, "native", cg, prepared=prepared)
     assert built.library.cache_hit  # the bench's own library
     s0 = dataclasses.replace(integrator_settings(sc, "native", cg), max_steps=10**6)
 
@@ -242,7 +245,7 @@ def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None
         assert tr.complete
         return tr.x[-1]
 
-    ref = final(1e-11)
+    ref = final(1e-12)
     scale = np.maximum(1.0, np.abs(ref))
 
     def dist(x: np.ndarray) -> float:
@@ -253,9 +256,11 @@ def _final_states_against_a_tight_reference(folder: Path, rel_dx: float) -> None
     rk_tight = _rk45_final(sc, gains, built.closed_loop.x0, H, 1e-10)
     assert dist(rk_tight) < 1e-6 and dist(rk_tight) < dist(rk) / 100
     assert dist(final(1e-6)) == pytest.approx(dist(ours), rel=1e-6)  # the bench ran ours
-    # ours converges (measured: 1.4e-2, 1.2e-5, 5.0e-8 at rtol 1e-6, 1e-9, 1e-10)
-    d9, d10 = dist(final(1e-9)), dist(final(1e-10))
-    assert d9 < dist(ours) and d10 < 1e-6 and d10 < d9 / 10
+    # ours converges (measured, per-agent engine: 7.3e-3, 4.4e-6, 2.6e-6, 2.1e-8 at rtol
+    # 1e-6, 1e-9, 1e-10, 1e-11; the start-up's discrete amplification, docs/performance.md,
+    # can hold one rung back, as 1e-10 here: two rungs apart are compared)
+    d9, d11 = dist(final(1e-9)), dist(final(1e-11))
+    assert d9 < dist(ours) and d11 < 1e-6 and d11 < d9 / 10
 
 
 def _rk45_final(sc, gains, x0, horizon: float, rtol: float) -> np.ndarray:  # noqa: ANN001
