@@ -2,8 +2,8 @@
 
 Independent truths: the whole closed loop built by symbolic/closed_loop.py with the graph
 written into it (its right-hand side, and its Jacobian by CasADi's AD with numpy's dense
-solve for the Newton systems), and CasADi's CVODES (method ``cvodes``, generated C of
-the whole loop) for the trajectories.
+solve for the Newton systems), and CasADi's CVODES (method ``cvodes``, the closed
+loop's generated C) for the trajectories.
 """
 
 from __future__ import annotations
@@ -597,7 +597,7 @@ def test_native_above_20_runs_the_per_agent_engine_on_a_cyclic_graph():
     assert not agents.problem(sc, gains, np.zeros(30)).acyclic
     cg = CodegenSettings(jacobian="auto")  # the shared build cache
     built = api.build(sc, gains, "native", cg)
-    assert built.agents is not None and "nat_rhs" not in built.library.names
+    assert built.agents is not None
     ref_built = api.build(sc, gains, "cvodes", cg)
     diffs = []
     for rtol in (1e-8, 1e-10):
