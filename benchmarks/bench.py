@@ -21,9 +21,8 @@ the variable-step methods, the same output grid):
     machine, no code generation, CVODES with CasADi's own Jacobian.
 ``c-cvode-native``
     Our generated C + SUNDIALS CVODE driven from C, one call from Python per run
-    (method ``native``): up to N = 20 the whole loop's right-hand side, Jacobian and
-    sparse LU (:mod:`generated.native`); above, the per-agent engine: one kernel
-    library per follower model, the graph as runtime data (:mod:`generated.agents`).
+    (method ``native``): the per-agent engine, one kernel library per follower model,
+    the graph as runtime data (:mod:`generated.agents`).
 ``c-cvodes-direct``, ``c-cvodes-gmres``
     Our generated C + CVODES through CasADi's interface with the two plans of
     :mod:`generated.largescale` (``jacobian="sparse"``: sparse direct Jacobian /

@@ -81,8 +81,8 @@ def integration_method(method: str) -> str:
 def ours_method(N: int) -> str:
     """The benchmark method that is ours at N: what ``make sim`` runs for N followers.
 
-    ``c-cvode-native`` (method ``native``) at every N: the whole-loop build up to
-    N = 20, the per-agent engine above (:mod:`generated.agents`).
+    ``c-cvode-native`` (method ``native``, the per-agent engine, :mod:`generated.agents`)
+    at every N.
 
     Parameters
     ----------

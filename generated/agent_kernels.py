@@ -103,7 +103,7 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
     K's rows are (leader's rates, agent's rates, jets), its columns (leader's state,
     agent's state, neighbour sums): blocks A_s0, A_ss, B_s and C_0, C_s, E
     (generated/native/agents.c, header). D = I + c A_ss is factorised without pivoting
-    (the driver checks the pivots, as the whole-loop driver does). The factorisation
+    (the driver checks the pivots). The factorisation
     packs all a solve reads into one vector P, its LU with U's diagonal inverted
     (:func:`generated.sparse_lu.sparse_lu`, ``reciprocal``) followed by c A_s0, c B_s,
     C_0, C_s and E (nonzeros): a solve then reads one contiguous block per agent and

@@ -1,8 +1,7 @@
 """The per-agent driver: the graph as runtime data, one kernel library per follower model.
 
-The whole-loop native build (:mod:`generated.native`) writes the graph into the code. Here
-the kernels of ONE agent are compiled once per follower model
-(:mod:`generated.agent_kernels`) and the driver ``generated/native/agents.c`` evaluates
+The graph is not written into the code: the kernels of ONE agent are compiled once per
+follower model (:mod:`generated.agent_kernels`) and the driver ``generated/native/agents.c`` evaluates
 them over the agents in passes (one per jet level), so a cycle is no special case.
 Everything about the graph — N, the pattern, the weights (L + B)_ij, the pinning and
 gauge a_i0 h_i, every switching time and the links' fade time ``graph.link_fade`` — is

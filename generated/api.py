@@ -177,8 +177,6 @@ def build(
     method: str | None = None,
     settings: CodegenSettings | None = None,
     closed_loop: Any = None,
-    *,
-    runtime_parameters: bool = False,
 ) -> Built:
     """Symbolic closed loop -> C -> shared library (cached) -> loaded Functions.
 
@@ -198,16 +196,12 @@ def build(
         ``jacobian="auto"`` is resolved from ``sc.N`` (:func:`resolve_codegen`).
     closed_loop : ClosedLoop, optional
         A prebuilt closed loop (skips ``build_closed_loop``).
-    runtime_parameters : bool
-        The caller needs a library whose functions take the runtime parameters p (the
-        console's ``LiveLoop``): method ``native`` then builds the whole loop
-        (``driver.c``, N <= 20) instead of the per-agent engine.
     """
     settings = resolve_codegen(sc.N, settings)
     method = method or sc.integration.method
     t0 = time.perf_counter()
     # first: what the method needs of the scenario itself (the per-agent engine's kernels)
-    prepared = None if runtime_parameters else solvers.get(method).prepare(sc, gains)
+    prepared = solvers.get(method).prepare(sc, gains)
     # the cache folder is part of the key: a build of another cache (HITL_BUILD_DIR) is not reused
     key = (structure_key(sc, gains), method, settings, cache_root(settings))
     if prepared is not None:  # the method's own libraries: only the closed loop is reused
@@ -260,8 +254,8 @@ def build_from_closed_loop(
         Supplies ``ode_dyn``/``dae_dyn`` and ``outputs``.
     method : str
         A registered method: its ``form`` picks ``dae_dyn`` or ``ode_dyn`` and its
-        :meth:`~generated.solvers.Solver.build` what else is compiled (``native``:
-        :func:`generated.native.native_functions` and the driver and SUNDIALS).
+        :meth:`~generated.solvers.Solver.build` what else is compiled (``native``: its
+        per-agent kernel libraries instead of the closed loop).
     settings : CodegenSettings, optional
         ``jacobian="auto"`` is resolved from the closed loop's N (:func:`resolve_codegen`).
     t_symbolic_start : float, optional
@@ -269,8 +263,7 @@ def build_from_closed_loop(
         ``timings["symbolic_build"]`` includes it (default: now).
     prepared : object, optional
         What the method's :meth:`~generated.solvers.Solver.prepare` returned for the
-        scenario (method ``native``: what its per-agent kernels are built from; None
-        builds the whole loop).
+        scenario (method ``native``: what its per-agent kernels are built from).
     """
     return _compile(cl, method, settings, t_symbolic_start, prepared)[0]
 
@@ -302,7 +295,6 @@ def _compile(
         [dyn, outs, *plan.functions],
         settings,
         with_derivatives=[name] if plan.derivatives else [],
-        toolchain=plan.toolchain,
     )
     timings = {
         "symbolic_build": t_sym,
@@ -356,9 +348,9 @@ def _own_libraries(cl: Any, plan: BuildPlan, form: str, t_build: float) -> Built
 
 def _bound(cl: Any, lib: Library, image: Image, form: str, timings: dict[str, float]) -> Built:
     """The Built of ``cl`` on a loaded library: its Functions with ``cl``'s p filled in."""
-    dyn_p, outputs_p, driver = image.dyn_p, image.outputs_p, image.driver
+    dyn_p, outputs_p = image.dyn_p, image.outputs_p
     if cl.parametric is None:
-        return Built(cl, lib, dyn_p, outputs_p, form, timings, driver=driver)
+        return Built(cl, lib, dyn_p, outputs_p, form, timings)
     p = np.asarray(cl.p0, dtype=float)
     return Built(
         cl,
@@ -370,7 +362,6 @@ def _bound(cl: Any, lib: Library, image: Image, form: str, timings: dict[str, fl
         p=p,
         dyn_p=dyn_p,
         outputs_p=outputs_p,
-        driver=driver,
     )
 
 

@@ -11,8 +11,6 @@ import casadi as ca
 import numpy as np
 
 if TYPE_CHECKING:
-    import ctypes
-
     from generated.agents import AgentProblem
     from generated.codegen import Library
     from symbolic.closed_loop import ClosedLoop
@@ -42,8 +40,7 @@ class Built:
     timings : dict
         ``symbolic_build``, ``codegen``, ``compile`` seconds.
     agents : (tuple of Library, AgentProblem) or None
-        Method ``native`` (unless built with ``runtime_parameters``): the
-        per-agent kernel libraries (:mod:`generated.agents`) and the scenario's runtime
+        Method ``native``: the per-agent kernel libraries (:mod:`generated.agents`) and the scenario's runtime
         data; :attr:`library` is then the first kernel library's record and :attr:`dyn`,
         :attr:`outputs` the symbolic closed loop's Functions (CasADi's virtual machine).
         None otherwise.
@@ -51,9 +48,6 @@ class Built:
         The runtime parameters the library is called with.
     dyn_p, outputs_p : casadi.Function or None
         The library's Functions with p as an input.
-    driver : ctypes.CDLL or None
-        The native driver's entry points (:func:`generated.native.open_library`) of the
-        loaded library; None if it has none.
     """
 
     closed_loop: ClosedLoop
@@ -66,4 +60,3 @@ class Built:
     p: np.ndarray = field(default_factory=lambda: np.zeros(0))
     dyn_p: ca.Function | None = None
     outputs_p: ca.Function | None = None
-    driver: ctypes.CDLL | None = None

@@ -50,14 +50,11 @@ class Image:
         :func:`library_stamp` of the cache entry when those bytes were read.
     dyn_p, outputs_p : casadi.Function
         The closed loop's right-hand side and outputs, p an input.
-    driver : ctypes.CDLL or None
-        The native driver's entry points, for a native build.
     """
 
     stamp: tuple[int, ...]
     dyn_p: ca.Function
     outputs_p: ca.Function
-    driver: Any = None
 
 
 def library_stamp(lib: Library) -> tuple[int, ...] | None:
@@ -151,10 +148,9 @@ def open_image(lib: Library, form: str) -> Image:
             raise BuildError(
                 f"build cache {lib.folder}: cannot be loaded ({first[0] if first else exc})"
             ) from None
-        driver = native.open_library(copy) if native.RHS_NAME in lib.names else None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return Image(stamp, dyn_p, outputs_p, driver)
+    return Image(stamp, dyn_p, outputs_p)
 
 
 #: per-agent kernel libraries loaded in this process, by (path, stamp) (core/memo.py)

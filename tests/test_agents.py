@@ -2,8 +2,8 @@
 
 Independent truths: the whole closed loop built by symbolic/closed_loop.py with the graph
 written into it (its right-hand side, and its Jacobian by CasADi's AD with numpy's dense
-solve for the Newton systems), and the whole-loop native integrator (generated C of
-the whole loop, its own sparse LU) for the trajectories.
+solve for the Newton systems), and CasADi's CVODES (method ``cvodes``, the closed
+loop's generated C) for the trajectories.
 """
 
 from __future__ import annotations
@@ -121,6 +121,14 @@ def _newton_reference(cl, t, x, gamma, b):
     return M, np.linalg.solve(M, b)
 
 
+def _cvodes(built, sc, x0, t_out, s, bps=()):
+    """CasADi's CVODES (method ``cvodes``, the whole closed loop's generated C) at the
+    tolerances and step limit of ``s``: the reference the per-agent engine is held to."""
+    cs = api.integrator_settings(sc, "cvodes")
+    cs = dataclasses.replace(cs, rtol=s.rtol, atol=s.atol, max_steps=s.max_steps)
+    return api.integrate_built(built, x0, t_out, cs, bps)
+
+
 @pytest.mark.parametrize("name", list(_cases()))
 @pytest.mark.parametrize("t", [0.05, 0.15, 0.25])  # link losses: each topology
 def test_rhs_and_newton_solves_against_the_whole_loop(cases, name, t):
@@ -188,8 +196,9 @@ def test_the_driver_refuses_sizes_it_was_not_compiled_for(cases):
 
 
 @pytest.mark.parametrize("name", ["paper", "cyclic-mixed", "link-losses"])
-def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, name):
-    """Same integrator (CVODE BDF, exact Newton), kernels against the whole loop's C.
+def test_trajectory_converges_to_the_cvodes_one(cases, build_root, name):
+    """CVODE BDF with exact Newton both, kernels against CasADi's CVODES on the whole
+    loop's generated C (method ``cvodes``).
 
     The two differ by rounding, which the loop's start-up amplifies to the integrators'
     own error level; the difference must shrink with the tolerance, and stay within a
@@ -204,7 +213,7 @@ def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, na
     """
     sc, gains, cl, libs, prob = cases[name]
     cg = CodegenSettings(optimization="-O0", build_root=build_root)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
+    built = api.build(sc, gains, "cvodes", cg, closed_loop=cl)
     H = 0.15 if name == "link-losses" else 0.25  # through the first loss: its kick is costly
     t_out = output_grid(H, 0.01)
     bps = [b for b in sc.breakpoints() if b < H]
@@ -219,7 +228,7 @@ def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, na
     for rtol in (1e-8, 1e-12):
         s = IntegratorSettings(method="native", rtol=rtol, atol=rtol * 1e-2, max_steps=200000)
         tr = agents.run(paths, prob, cl.x0, t_out, s, breakpoints=bps)
-        ref = api.integrate_built(built, cl.x0, t_out, s, bps)
+        ref = _cvodes(built, sc, cl.x0, t_out, s, bps)
         assert tr.complete and ref.complete
         assert tr.stats["restarts"] == ref.stats["restarts"]
         assert 0.8 < tr.stats["steps"] / ref.stats["steps"] < 1.25
@@ -227,7 +236,7 @@ def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, na
         moved = []
         for sg in signs:
             x0 = cl.x0 * (1 + 1e-14 * sg)
-            moved.append(rel(api.integrate_built(built, x0, t_out, s, bps), ref))
+            moved.append(rel(_cvodes(built, sc, x0, t_out, s, bps), ref))
             moved.append(rel(agents.run(paths, prob, x0, t_out, s, breakpoints=bps), tr))
         diffs.append(rel(tr, ref))
         own.append(max(moved))
@@ -246,9 +255,9 @@ SETTLED = {
 
 
 @pytest.mark.parametrize("name", list(SETTLED))
-def test_trajectory_equals_the_whole_loop_native_one_past_the_start_up(cases, build_root, name):
-    """At rtol 1e-12, from the whole loop's state past the start-up, the two codes agree
-    to a relative 1e-9 at every output time.
+def test_trajectory_equals_the_cvodes_one_past_the_start_up(cases, build_root, name):
+    """At rtol 1e-12, from CVODES' state past the start-up, the per-agent engine and
+    CasADi's CVODES (method ``cvodes``) agree to a relative 1e-9 at every output time.
 
     Past the start-up's boundary layer (and clear of kicks: switches, fault onsets) the
     loop no longer amplifies rounding to the integrator's error level, so a fixed
@@ -259,16 +268,16 @@ def test_trajectory_equals_the_whole_loop_native_one_past_the_start_up(cases, bu
     """
     sc, gains, cl, libs, prob = cases[name]
     cg = CodegenSettings(optimization="-O0", build_root=build_root)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
+    built = api.build(sc, gains, "cvodes", cg, closed_loop=cl)
     t0, width = SETTLED[name]
     s = IntegratorSettings(method="native", rtol=1e-12, atol=1e-14, max_steps=2_000_000)
     bps = sc.breakpoints()
     coarse = IntegratorSettings(method="native", rtol=1e-8, atol=1e-10, max_steps=200_000)
-    pre = api.integrate_built(built, cl.x0, np.array([0.0, t0]), coarse, [b for b in bps if b < t0])
+    pre = _cvodes(built, sc, cl.x0, np.array([0.0, t0]), coarse, [b for b in bps if b < t0])
     assert pre.complete and not [b for b in bps if t0 <= b < t0 + width]
     t_out = np.linspace(t0, t0 + width, 31)
     tr = agents.run([lib.path for lib in libs], prob, pre.x[-1], t_out, s)
-    ref = api.integrate_built(built, pre.x[-1], t_out, s)
+    ref = _cvodes(built, sc, pre.x[-1], t_out, s)
     assert tr.complete and ref.complete
 
     def rel(a):
@@ -347,9 +356,8 @@ def test_a_scenario_differing_in_numbers_compiles_nothing(tmp_path, monkeypatch)
     cycle), N and initial states reuses its kernel library: its C is the same (the in-process memo is cleared,
     so the code is generated again and hashed), nothing is compiled (meta.json: cache
     hit, compile 0 s), and the run completes."""
-    from generated import agent_kernels, native
+    from generated import agent_kernels
 
-    monkeypatch.setattr(native, "MAX_AGENTS", 0)  # `native` on the per-agent engine at any N
     first = _paper_variant(tmp_path, "first", lambda d: None)
     other = _paper_variant(tmp_path, "other", _other_numbers)
     metas = []
@@ -469,8 +477,8 @@ def test_newton_kernels_against_numpy(cases, gamma):
 
 def test_an_operator_press_and_release_on_the_per_agent_driver(build_root):
     """A key press and its release in u0 (shaped by the loader's default): the per-agent
-    driver completes without pivot failures, takes the whole loop's steps to within 25 %
-    and converges to its trajectory as the tolerance shrinks."""
+    driver completes without pivot failures, takes CasADi's CVODES' steps (method
+    ``cvodes``) to within 25 % and converges to its trajectory as the tolerance shrinks."""
     import tomllib
 
     from core.scenario import scenario_from_dict
@@ -482,7 +490,7 @@ def test_an_operator_press_and_release_on_the_per_agent_driver(build_root):
     gains = api.scenario_gains(sc, "press")
     cg = CodegenSettings(optimization="-O0", build_root=build_root)
     cl = build_closed_loop(sc, gains)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
+    built = api.build(sc, gains, "cvodes", cg, closed_loop=cl)
     libs, model = agents.build_models(sc, gains, cg)
     prob = agents.problem(sc, gains, model)
     t_out = output_grid(1.5, 0.01)
@@ -491,7 +499,7 @@ def test_an_operator_press_and_release_on_the_per_agent_driver(build_root):
     diffs = []
     for rtol in (1e-7, 1e-9):
         s = IntegratorSettings(method="native", rtol=rtol, atol=rtol * 1e-2, max_steps=2000000)
-        ref = api.integrate_built(built, cl.x0, t_out, s, bps)
+        ref = _cvodes(built, sc, cl.x0, t_out, s, bps)
         tr = agents.run([lib.path for lib in libs], prob, cl.x0, t_out, s, breakpoints=bps)
         assert tr.complete and ref.complete and tr.stats["pivot_failures"] == 0
         assert 0.8 < tr.stats["steps"] / ref.stats["steps"] < 1.25
@@ -589,7 +597,7 @@ def test_native_above_20_runs_the_per_agent_engine_on_a_cyclic_graph():
     assert not agents.problem(sc, gains, np.zeros(30)).acyclic
     cg = CodegenSettings(jacobian="auto")  # the shared build cache
     built = api.build(sc, gains, "native", cg)
-    assert built.agents is not None and "nat_rhs" not in built.library.names
+    assert built.agents is not None
     ref_built = api.build(sc, gains, "cvodes", cg)
     diffs = []
     for rtol in (1e-8, 1e-10):
@@ -659,10 +667,11 @@ def test_filtered_derivatives_and_a_formation_start_on_a_cycle(build_root):
         assert resid < 1e-12, resid
 
 
-def test_faults_and_two_pinned_followers_against_the_whole_loop(tmp_path):
+def test_faults_and_two_pinned_followers_against_cvodes(tmp_path):
     """The two-follower test scenario (a fault switching at t = 0.3 s, both followers
-    pinned, different fault expressions): the per-agent engine and the whole-loop native
-    driver restart at the fault and converge together as the tolerance shrinks."""
+    pinned, different fault expressions): the per-agent engine and CasADi's CVODES
+    (method ``cvodes``) restart at the fault and converge together as the tolerance
+    shrinks."""
     from helpers import SMALL
 
     from synthesis import synthesize
@@ -676,14 +685,13 @@ def test_faults_and_two_pinned_followers_against_the_whole_loop(tmp_path):
     cg = CodegenSettings(optimization="-O0", kernel_optimization="-O0")
     libs, model = agents.build_models(sc, gains, cg)
     prob = agents.problem(sc, gains, model)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
-    assert built.agents is None  # runtime p: the whole loop (driver.c)
+    built = api.build(sc, gains, "cvodes", cg, closed_loop=cl)
     t_out = output_grid(0.5, 0.01)
     diffs = []
     for rtol in (1e-8, 1e-11):
         s = IntegratorSettings(method="native", rtol=rtol, atol=rtol * 1e-2, max_steps=100000)
         tr = agents.run([lib.path for lib in libs], prob, cl.x0, t_out, s, breakpoints=(0.3,))
-        ref = api.integrate_built(built, cl.x0, t_out, s, (0.3,))
+        ref = _cvodes(built, sc, cl.x0, t_out, s, (0.3,))
         assert tr.complete and ref.complete
         assert tr.stats["restarts"] == ref.stats["restarts"] == 1
         diffs.append(_rel(tr.x, ref.x))

@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from core.errors import IntegrationError
-from generated import api, native
+from generated import api
 from generated.built import Built
 from generated.codegen import build_library
 from generated.schedule import output_grid, schedule, time_tolerance
@@ -152,7 +152,6 @@ def jump(tmp_path_factory):
     cg = CodegenSettings(optimization="-O0", build_root=str(tmp_path_factory.mktemp("jump")))
     f_ode, f_dae = _jump_functions()
     return {
-        "native": native.build(f_ode, cg).path,
         "ode": build_library([f_ode], cg, [f_ode.name()]).function(f_ode.name()),
         "dae": build_library([f_dae], cg, [f_dae.name()]).function(f_dae.name()),
     }
@@ -161,8 +160,6 @@ def jump(tmp_path_factory):
 def _run_jump(jump, method: str, t_out: np.ndarray, b: float, bps: list[float]):
     s = IntegratorSettings(method=method, rtol=1e-10, atol=1e-12, fixed_step=0.05)
     x0 = np.array([0.0, b])
-    if method == "native":
-        return native.run(jump["native"], x0, t_out, s, breakpoints=bps)
     f = jump["dae" if method == "idas" else "ode"]
     return integrate(f, x0, t_out, s, breakpoints=bps, z0=np.ones(1))
 
@@ -171,7 +168,7 @@ def _run_jump(jump, method: str, t_out: np.ndarray, b: float, bps: list[float]):
 @given(
     grids(max_horizon=3.0),
     st.data(),
-    st.sampled_from(["native", "native", "cvodes", "idas", "fixed"]),
+    st.sampled_from(["cvodes", "idas", "fixed"]),
 )
 def test_jump_at_drawn_times_has_the_closed_form(jump, t_out, data, method):
     """A jump at an output time moved by a few ulps, or anywhere: every method reaches the
@@ -197,7 +194,7 @@ def test_jump_at_drawn_times_has_the_closed_form(jump, t_out, data, method):
     np.testing.assert_allclose(tr.x[:, 0], exact, rtol=0, atol=1e-8)
 
 
-@pytest.mark.parametrize("method", ["native", "cvodes", "idas", "fixed"])
+@pytest.mark.parametrize("method", ["cvodes", "idas", "fixed"])
 @pytest.mark.parametrize("b", [0.35, 0.57, 0.7])
 def test_jump_at_a_grid_time_written_as_a_literal(jump, method, b):
     t_out = output_grid(1.0, 0.01)  # holds 0.35000000000000003, 0.5700000000000001, ...
@@ -280,7 +277,7 @@ def _paper_run(faulty, method: str, case) -> None:
 @given(paper_schedules())
 def test_paper_default_method_reaches_the_horizon_on_drawn_schedules(faulty, case):
     """50 drawn output grids and restart sets on the paper with switching faults: the
-    default method (whole-loop native at N = 5) reaches every horizon."""
+    default method (native: the per-agent engine) reaches every horizon."""
     _paper_run(faulty, "native", case)
 
 

@@ -1,18 +1,20 @@
 """A build cache entry does not depend on the checkout or environment that built it.
 
-- a freshly built native ``model.so`` records no RPATH/RUNPATH (its SUNDIALS libraries
-  are named by soname only; ``readelf -d``);
+- a freshly built native kernel library (generated/agent_kernels.py) records no
+  RPATH/RUNPATH (its SUNDIALS libraries are named by soname only; ``readelf -d``);
 - an entry built against SUNDIALS libraries in a fake checkout's ``.venv`` (copies of
   scikit-sundae's), whose folder is then deleted, runs from another process with this
   environment's libraries (preloaded before the entry is loaded);
 - an entry that checks out (key, SHA-256) but cannot be loaded here, a native library
   whose NEEDED library is missing or bytes that are no shared library, is rebuilt with
   one line on stderr, never a traceback; a rebuilt entry runs;
-- the per-agent kernel libraries (generated/agents.py) built from one checkout of the
-  packages, that checkout then deleted, are cache hits from another and give the same bits.
+- the per-agent kernel libraries built from one checkout of the packages, that checkout
+  then deleted, are cache hits from another and give the same bits.
 
-The ODE is the two-state rotation x' = (x1, -x0) (x0 = (1, 0): x(t) = (cos t, -sin t)),
-compiled with -O0 into temporary build roots (about a second per build).
+The native libraries are the per-agent kernels of the two-follower test scenario
+(tests/helpers.py SMALL), compiled with -O0 into temporary build roots (about a second
+and a half per build); a run of 0.1 s on a rebuilt or reused entry gives the bits of
+the same run on the first build (the same compiled code).
 """
 
 from __future__ import annotations
@@ -31,58 +33,83 @@ import pytest
 
 from generated import native
 from generated.build_cache import LIBRARY_NAME, MANIFEST_NAME
-from generated.codegen import build_library
+from generated.codegen import Library, build_library
 from generated.compiler import Toolchain
+from generated.schedule import output_grid
 from generated.values import CodegenSettings, IntegratorSettings
 
 PY = sys.executable
 ROOT = Path(__file__).resolve().parent.parent
 LINE = re.compile(r"cache entry [0-9a-f]{12}: cannot be loaded here \(.+\); rebuilding")
 
-#: builds (argv[2] == "build", against the libraries in argv[3]) or runs (argv[2] ==
-#: "run", this environment's toolchain) the rotation ODE in the build root argv[1];
-#: prints the library's path, whether it was a cache hit and x(1)
+#: builds (argv[2] == "build", against the libraries in argv[4]) or runs (argv[2] ==
+#: "run", this environment's toolchain) the kernels of the scenario argv[3] in the build
+#: root argv[1]; prints the library's path, whether it was a cache hit and x(0.1)
 SCRIPT = """
 import dataclasses, json, sys
 from pathlib import Path
-import casadi as ca
-import numpy as np
-from generated import native
-from generated.codegen import build_library
+from generated import agents, native
+from generated.api import load, scenario_gains
+from generated.schedule import output_grid
 from generated.values import CodegenSettings, IntegratorSettings
 
-root, what = sys.argv[1:3]
-E = ca.SX(0, 1)
-t, x = ca.SX.sym("t"), ca.SX.sym("x", 2)
-f = ca.Function("rot", [t, x, E, E, E], [ca.vertcat(x[1], -x[0]), E, E, E],
-                ca.dyn_in(), ca.dyn_out())
-cg = CodegenSettings(optimization="-O0", build_root=root)
+root, what, scenario = sys.argv[1:4]
 if what == "build":
-    libs = tuple(sorted(Path(sys.argv[3]).iterdir()))
-    tc = native.toolchain()
-    tc = dataclasses.replace(tc, libraries=tuple(
-        next(p for p in libs if p.name == lib.name) for lib in tc.libraries))
-    lib = build_library(native.native_functions(f)[0], cg, toolchain=tc)
-    print(json.dumps({"path": str(lib.path), "hit": lib.cache_hit}))
-else:
-    lib = native.build(f, cg)
-    tr = native.run(lib.path, np.array([1.0, 0.0]), np.array([0.0, 1.0]), IntegratorSettings())
-    print(json.dumps({"path": str(lib.path), "hit": lib.cache_hit, "x1": tr.x[-1].tolist()}))
+    libs = tuple(sorted(Path(sys.argv[4]).iterdir()))
+    real = native.toolchain
+
+    def fake(driver=native.DRIVER):
+        tc = real(driver)
+        return dataclasses.replace(tc, libraries=tuple(
+            next(p for p in libs if p.name == lib.name) for lib in tc.libraries))
+
+    native.toolchain = fake
+sc = load(scenario)
+gains = scenario_gains(sc, "portable")
+cg = CodegenSettings(optimization="-O0", kernel_optimization="-O0", build_root=root)
+(lib,), model = agents.build_models(sc, gains, cg)
+tr = agents.run([lib.path], agents.problem(sc, gains, model), agents.initial_state(sc),
+                output_grid(0.1, 0.01), IntegratorSettings(method="native"))
+print(json.dumps({"path": str(lib.path), "hit": lib.cache_hit, "x": tr.x[-1].tolist(),
+                  "complete": tr.complete}))
 """
 
-E = ca.SX(0, 1)
+
+@pytest.fixture
+def small(tmp_path: Path) -> Path:
+    from helpers import SMALL
+
+    path = tmp_path / "small.toml"
+    path.write_text(SMALL)
+    return path
 
 
-def rotation() -> ca.Function:
-    t, x = ca.SX.sym("t"), ca.SX.sym("x", 2)
-    return ca.Function(
-        "rot", [t, x, E, E, E], [ca.vertcat(x[1], -x[0]), E, E, E], ca.dyn_in(), ca.dyn_out()
-    )
+def kernels(scenario: Path, root: Path) -> tuple[Library, tuple]:
+    """The kernel library of ``scenario`` in the build root ``root`` (the process's memo
+    of built kernels bypassed: the cache entry is checked as a new process would)."""
+    from generated import agent_kernels, agents, api
+
+    agent_kernels._BUILT.clear()
+    sc = api.load(scenario)
+    gains = api.scenario_gains(sc, "portable")
+    cg = CodegenSettings(optimization="-O0", kernel_optimization="-O0", build_root=str(root))
+    (lib,), model = agents.build_models(sc, gains, cg)
+    return lib, (agents.problem(sc, gains, model), agents.initial_state(sc))
+
+
+def run_kernels(lib: Library, data: tuple) -> np.ndarray:
+    """x(0.1) of a run on ``lib``."""
+    from generated import agents
+
+    prob, x0 = data
+    tr = agents.run([lib.path], prob, x0, output_grid(0.1, 0.01), IntegratorSettings())
+    assert tr.complete
+    return tr.x[-1]
 
 
 def script(*args: str) -> dict:
     r = subprocess.run(
-        [PY, "-c", SCRIPT, *args], cwd=ROOT, capture_output=True, text=True, timeout=120
+        [PY, "-c", SCRIPT, *args], cwd=ROOT, capture_output=True, text=True, timeout=300
     )
     assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
     return json.loads(r.stdout.splitlines()[-1])
@@ -111,8 +138,8 @@ def rewrite_library(folder: Path, data: bytes) -> None:
     (folder / MANIFEST_NAME).write_text(json.dumps(info))
 
 
-def test_native_library_has_no_rpath_into_an_environment(tmp_path):
-    lib = native.build(rotation(), CodegenSettings(optimization="-O0", build_root=str(tmp_path)))
+def test_native_library_has_no_rpath_into_an_environment(tmp_path, small):
+    lib, _ = kernels(small, tmp_path / "build")
     assert not lib.cache_hit
     paths = run_paths(lib.path)
     assert not [p for p in paths if p.startswith("/")], paths
@@ -122,7 +149,7 @@ def test_native_library_has_no_rpath_into_an_environment(tmp_path):
     assert str(ROOT) not in manifest and sys.prefix not in manifest
 
 
-def test_entry_built_in_a_deleted_checkout_runs_from_another(tmp_path):
+def test_entry_built_in_a_deleted_checkout_runs_from_another(tmp_path, small):
     checkout = tmp_path / "old-checkout"
     libdir = checkout / ".venv" / "lib" / "site-packages" / "scikit_sundae.libs"
     libdir.mkdir(parents=True)
@@ -130,18 +157,18 @@ def test_entry_built_in_a_deleted_checkout_runs_from_another(tmp_path):
     for p in real.iterdir():
         shutil.copy2(p, libdir / p.name)
     root = str(tmp_path / "build")
-    built = script(root, "build", str(libdir))
-    assert not built["hit"]
+    built = script(root, "build", str(small), str(libdir))
+    assert not built["hit"] and built["complete"]
     assert not [p for p in run_paths(Path(built["path"])) if p.startswith(str(checkout))]
     shutil.rmtree(checkout)
-    ran = script(root, "run")
+    ran = script(root, "run", str(small))
     assert ran["hit"] and ran["path"] == built["path"]  # same key: the entry is used
-    np.testing.assert_allclose(ran["x1"], [np.cos(1.0), -np.sin(1.0)], rtol=1e-4, atol=1e-6)
+    assert ran["complete"] and ran["x"] == built["x"]  # the same code: the same bits
 
 
-def test_native_entry_whose_needed_library_is_missing_is_rebuilt(tmp_path, capsys):
-    cg = CodegenSettings(optimization="-O0", build_root=str(tmp_path / "build"))
-    first = native.build(rotation(), cg)
+def test_native_entry_whose_needed_library_is_missing_is_rebuilt(tmp_path, capsys, small):
+    first, data = kernels(small, tmp_path / "build")
+    x = run_kernels(first, data)
     # a library that needs libgone.so, which is removed once it is linked
     (tmp_path / "gone.c").write_text("int gone(void) { return 1; }\n")
     (tmp_path / "use.c").write_text("int gone(void);\nint use(void) { return gone(); }\n")
@@ -154,14 +181,13 @@ def test_native_entry_whose_needed_library_is_missing_is_rebuilt(tmp_path, capsy
     (tmp_path / "libgone.so").unlink()
     rewrite_library(first.folder, bad.read_bytes())
     capsys.readouterr()
-    again = native.build(rotation(), cg)
+    again, data = kernels(small, tmp_path / "build")
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and LINE.fullmatch(err[0]) and "libgone.so" in err[0], err
     assert err[0].startswith(f"cache entry {first.key[:12]}:")
     assert not again.cache_hit and again.path == first.path
-    tr = native.run(again.path, np.array([1.0, 0.0]), np.array([0.0, 1.0]), IntegratorSettings())
-    np.testing.assert_allclose(tr.x[-1], [np.cos(1.0), -np.sin(1.0)], rtol=1e-4, atol=1e-6)
-    assert native.build(rotation(), cg).cache_hit  # the rebuilt entry loads
+    assert np.array_equal(run_kernels(again, data), x)
+    assert kernels(small, tmp_path / "build")[0].cache_hit  # the rebuilt entry loads
 
 
 def test_casadi_entry_that_is_no_shared_library_is_rebuilt(tmp_path, capsys):

@@ -93,14 +93,12 @@ def recorded(tmp_path_factory):
     name = load_scenario(saved["scenario"]).name
     replay = pd.read_csv(tmp / "out" / name / "trajectory.csv", comment="#")
     logged = pd.read_csv(Path(saved["folder"]) / "console.csv")
-    # `make sim` runs method native on the per-agent engine, the console the whole loop
-    # (it needs runtime p): two codes, which the start-up amplifies apart to the
-    # integrator's error (both converge to CVODES's run as rtol shrinks). To the
-    # console's own tolerance, compare the record with a replay on the console's engine.
+    # the same replay in this process (the scenario's method, native: the per-agent
+    # engine the console runs on), its frame compared with the record below
     from generated import api
 
     sc = api.load(saved["scenario"])
-    built = api.build(sc, api.ensure_gains(sc, tmp / "out")[0], runtime_parameters=True)
+    built = api.build(sc, api.ensure_gains(sc, tmp / "out")[0])
     same = api.trajectory_frame(built, sc, api.simulate(built, sc))
     assert list(same.t) == list(replay.t)
     return con, saved, logged, same

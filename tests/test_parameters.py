@@ -139,12 +139,12 @@ def test_switching_weights_follow_the_topology(tmp_path):
 
 
 def test_a_second_scenario_reuses_the_compiled_library(pair, tmp_path):
-    """The whole loop's library takes p (``runtime_parameters``: the console's build; the
-    per-agent engine compiles the gains and u0's numbers into its kernels)."""
+    """The whole loop's library takes p (method ``cvodes``; the per-agent engine of
+    ``native`` compiles the gains and u0's numbers into its kernels)."""
     a, ga, b, gb, _ = pair
     cg = CodegenSettings(optimization="-O0", build_root=str(tmp_path / "build"))
-    first = api.build(a, ga, "native", cg, runtime_parameters=True)
-    second = api.build(b, gb, "native", cg, runtime_parameters=True)
+    first = api.build(a, ga, "cvodes", cg)
+    second = api.build(b, gb, "cvodes", cg)
     assert second.library.path == first.library.path
     assert second.timings["codegen"] == second.timings["compile"] == 0.0
     ref = Reference(b, gb)
@@ -153,5 +153,5 @@ def test_a_second_scenario_reuses_the_compiled_library(pair, tmp_path):
         got = np.array(second.dyn(0.4, x, [], [], [])[0]).ravel()
         want = ref.rhs(0.4, x)
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * np.max(np.abs(want)))
-    tr = api.simulate(second, b, api.integrator_settings(b, "native"))
+    tr = api.simulate(second, b, api.integrator_settings(b, "cvodes"))
     assert tr.complete

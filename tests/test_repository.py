@@ -118,7 +118,7 @@ def test_scan_covers_the_project():
         "Makefile",
         "pyproject.toml",
         "docs/reading.md",
-        "generated/native/driver.c",
+        "generated/native/agents.c",
     )
     assert set(expected) <= files
     assert not any(f.startswith(VENDORED) for f in files)

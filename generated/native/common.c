@@ -1,12 +1,10 @@
 /*
- * Shared part of the hitl-formation CVODE drivers (generated/native.py): SUNDIALS
- * includes, the context shared by the drivers, the custom direct SUNLinearSolver that
- * factorises M = I - gamma J with the generated nat_lu_factor / nat_lu_solve (sparse
- * LU without pivoting, generated/sparse_lu.py), CVODE's counters and the SUNDIALS
- * version/index check, and the per-follower block matrix of the per-agent driver.
- * Prepended to driver.c (whole closed loop) or agents.c (per-agent kernels, any
- * graph); the generated C comes first. The
- * drivers' entry points take hitl_options and fill hitl_result (hitl_native.h).
+ * The SUNDIALS side of the hitl-formation CVODE driver (generated/native.py): SUNDIALS
+ * includes, the driver's context, CVODE's set-up and its output loop with breakpoints,
+ * a custom SUNLinearSolver shell, CVODE's counters, the SUNDIALS version/index check,
+ * and the per-follower block matrix hitl_kmat. Prepended to agents.c (the per-agent
+ * engine); the generated C of the follower kernels comes first. The entry points take
+ * hitl_options and fill hitl_result (hitl_native.h).
  */
 #include <math.h>
 #include <stdio.h>
@@ -30,10 +28,7 @@ typedef struct {
   casadi_int *iw;
   casadi_real *w;
   casadi_real *lu, *piv;
-  casadi_int *jcol, *jrow; /* CCS of nat_jac's output: colind[nx+1], row[nnz] */
-  casadi_int jnnz;
   int nx;
-  const casadi_real *p; /* the run's parameters: third input of nat_rhs and nat_jac */
   long n_rhs, n_jac, n_fac, n_piv_fail;
   char *msg;
   int msglen;
@@ -201,7 +196,7 @@ static int hitl_cvode_outputs(hitl_cvode *s, int nx, const hitl_options *o, hitl
   return filled;
 }
 
-/* Both drivers' linear solvers are direct, custom and freed empty: attach one, with
+/* The driver's linear solver is direct, custom and freed empty: attach it, with
    its content, set-up and solve, to s->LS */
 static SUNLinearSolver_Type hitl_ls_type(SUNLinearSolver S) {
   (void)S;
@@ -304,7 +299,6 @@ static void hitl_cvode_free(hitl_ctx *c, hitl_cvode *s) {
   if (s->ctx) SUNContext_Free(&s->ctx);
   if (s->log) fclose(s->log), s->log = NULL;
   free(c->arg), free(c->res), free(c->iw), free(c->w), free(c->lu), free(c->piv);
-  free(c->jcol), free(c->jrow);
 }
 
 /* ------------------------------------------------- the per-follower block matrix */

@@ -1,5 +1,5 @@
 /*
- * The native drivers' calling convention (generated/native/driver.c, agents.c): a run takes
+ * The native driver's calling convention (generated/native/agents.c): a run takes
  * one options struct and fills one result struct. Defined here once; mirrored once in
  * Python as ctypes Structures (generated/native.py: Options, Result).
  * tests/test_solver_interface.py compiles this header and compares every field's
@@ -24,8 +24,6 @@ typedef struct {
   const double *t_out;  /* nt output times, t_out[0] the start */
   int nb;               /* number of restart times */
   const double *breaks; /* nb restart times, strictly inside (t_out[0], t_out[nt-1]) */
-  int np;               /* length of p (the whole-loop driver's third input; 0 = none) */
-  const double *p;      /* the closed loop's runtime parameters, held over the run */
   const char *log_path; /* SUNDIALS' warnings and errors appended here (NULL: dropped) */
 } hitl_options;
 

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
 
     from core.scenario import Scenario
     from generated.built import Built
-    from generated.codegen import Library, Toolchain
+    from generated.codegen import Library
     from generated.largescale import JacobianPlan as Plan
     from generated.values import CodegenSettings, IntegratorSettings, Trajectory
     from symbolic.closed_loop import ClosedLoop
@@ -39,8 +39,6 @@ class BuildPlan:
         Compiled next to the right-hand side and the outputs.
     derivatives : bool
         Generate ``jac_<dyn>`` (the CasADi integrators' Jacobian).
-    toolchain : Toolchain or None
-        Extra C sources, include dirs and libraries linked in (the native drivers).
     whole_loop : bool
         Compile the closed loop's right-hand side and outputs. False for a method that
         runs its own :attr:`libraries` (the per-agent engine): the closed loop's outputs
@@ -53,7 +51,6 @@ class BuildPlan:
 
     functions: tuple[ca.Function, ...] = ()
     derivatives: bool = True
-    toolchain: Toolchain | None = None
     whole_loop: bool = True
     libraries: tuple[Library, ...] = ()
     data: Any = None

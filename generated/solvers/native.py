@@ -6,13 +6,6 @@ fade and the per-follower numbers as runtime data, so any graph (cyclic, signed,
 switching, fading) and mixed models are carried and a new graph compiles nothing. The
 closed loop's outputs of a run are evaluated from the symbolic closed loop by CasADi's
 virtual machine (nothing compiled).
-
-One exception, named: a caller that needs a library taking the runtime parameters p
-(``generated.api.build(..., runtime_parameters=True)``: the console's ``LiveLoop``, which
-changes u0, faults and weights between attempts) gets the whole closed loop as flat
-generated code with its sparse LU (:mod:`generated.native`, ``driver.c``), up to
-:data:`generated.native.MAX_AGENTS` followers. Both integrate the same ODE with the same
-CVODE settings (tests/test_agents.py).
 """
 
 from __future__ import annotations
@@ -24,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from core.errors import IntegrationError
-from generated import agents, native
+from generated import agents
 from generated.solvers import register
 from generated.solvers.base import BuildPlan, Solver
 
@@ -47,21 +40,8 @@ class PerAgent:
     gains: Gains
 
 
-def per_agent(sc: Scenario, runtime_parameters: bool = False) -> bool:
-    """Whether method ``native`` runs ``sc`` on the per-agent engine: always, unless the
-    caller needs a library taking the runtime parameters p (the whole loop, ``driver.c``).
-
-    Parameters
-    ----------
-    sc : Scenario
-    runtime_parameters : bool
-        ``generated.api.build``'s switch of the same name (the console).
-    """
-    return not runtime_parameters
-
-
 class Native(Solver):
-    """CVODE from C: the per-agent engine (the whole loop where runtime p is required)."""
+    """CVODE from C: the per-agent engine (:mod:`generated.agents`)."""
 
     name = "native"
     form = "ode"
@@ -79,18 +59,15 @@ class Native(Solver):
         Returns
         -------
         PerAgent
-            (``generated.api.build(..., runtime_parameters=True)`` does not call this:
-            the whole-loop build.)
         """
         return PerAgent(sc, gains)
 
     def build(
         self, dyn: ca.Function, cl: ClosedLoop, settings: CodegenSettings, prepared: Any = None
     ) -> BuildPlan:
-        """The kernel libraries (per-agent), or the driver's functions and SUNDIALS (whole
-        loop: nothing ``prepared``, a caller that needs runtime p).
+        """The per-agent kernel libraries (:func:`generated.agents.build_models`).
 
-        CVODES' ``jac_`` is not generated: the drivers bring their own Jacobians.
+        Nothing of the closed loop is compiled: the driver brings its own Jacobians.
 
         Parameters
         ----------
@@ -98,28 +75,24 @@ class Native(Solver):
             As :meth:`generated.solvers.Solver.build`.
         """
         if not isinstance(prepared, PerAgent):
-            if cl.layout.N > native.MAX_AGENTS:
-                raise IntegrationError(
-                    f"integration.method 'native' with runtime parameters p (the whole loop) "
-                    f"is for N <= {native.MAX_AGENTS}; above, the per-agent engine: call "
-                    "build(sc, gains, method='native')"
-                )
-            functions = native.native_functions(dyn, cse=settings.cse)[0]  # whole loop, flat SX
-            return BuildPlan(tuple(functions), derivatives=False, toolchain=native.toolchain())
+            raise IntegrationError(
+                "method 'native' builds from the scenario: call "
+                "generated.api.build(sc, gains, method='native')"
+            )
         sc, gains = prepared.scenario, prepared.gains
         libs, model = agents.build_models(sc, gains, settings)
         prob = agents.problem(sc, gains, model)
         return BuildPlan(derivatives=False, whole_loop=False, libraries=tuple(libs), data=prob)
 
     def check_built(self, built: Built) -> None:
-        """The build must hold the native driver (whole loop) or the kernel libraries.
+        """The build must hold the kernel libraries.
 
         Parameters
         ----------
         built : Built
         """
         super().check_built(built)
-        if built.agents is None and native.RHS_NAME not in built.library.names:
+        if built.agents is None:
             raise IntegrationError(
                 "method 'native' needs the native build: call build(..., method='native')"
             )
@@ -146,28 +119,21 @@ class Native(Solver):
         breakpoints: Sequence[float] = (),
         progress: Callable[[float], None] | None = None,
     ) -> Trajectory:
-        """:func:`generated.agents.run` or :func:`generated.native.run`.
+        """:func:`generated.agents.run` of the build's kernels and problem.
 
         Parameters
         ----------
         built, x0, t_out, settings, breakpoints, progress
             As :meth:`generated.solvers.Solver.run`.
         """
-        if built.agents is not None:
-            libs, prob = built.agents
-            paths = [lib.path for lib in libs]
-            return agents.run(
-                paths, prob, x0, t_out, settings, breakpoints=breakpoints, progress=progress
+        if built.agents is None:
+            raise IntegrationError(
+                "method 'native' needs the native build: call build(..., method='native')"
             )
-        return native.run(
-            built.library.path,
-            x0,
-            t_out,
-            settings,
-            breakpoints=breakpoints,
-            progress=progress,
-            p=built.p,
-            driver=built.driver,
+        libs, prob = built.agents
+        paths = [lib.path for lib in libs]
+        return agents.run(
+            paths, prob, x0, t_out, settings, breakpoints=breakpoints, progress=progress
         )
 
 
