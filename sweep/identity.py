@@ -1,7 +1,7 @@
 """A study's identity, recorded in its folder (``study.json``) and compared on every run.
 
 What the samples depend on: the seed, ``[set]``, ``[params]``, the ``[graph]``,
-``[operator]`` and ``[faults]`` families, the base scenario (path and SHA-256), the
+``[operator]`` and ``[faults]`` families, ``per_agent``, the base scenario (path and SHA-256), the
 operator traces' SHA-256 and the package's version. ``count``, ``name`` and
 ``description`` are not part of it: sample k is the same whatever the count.
 """
@@ -32,6 +32,7 @@ COMPARED = {
     "graph": "[graph]",
     "operator": "[operator]",
     "faults": "[faults]",
+    "per_agent": "per_agent",
     "base": "base (path)",
     "base_sha256": "base scenario (SHA-256)",
     "traces_sha256": "operator traces (SHA-256)",
@@ -81,6 +82,7 @@ def study_identity(study: Study) -> dict[str, Any]:
         "graph": _plain(study.graph),
         "operator": _plain(study.operator),
         "faults": _plain(study.faults),
+        **({"per_agent": True} if study.per_agent else {}),  # absent: the default engine
         "base": study.base,
         "base_sha256": _file_sha(study.base, MAX_SCENARIO_BYTES),
         "traces_sha256": [_file_sha(t, MAX_SCENARIO_BYTES << 6) for t in traces],

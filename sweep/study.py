@@ -59,6 +59,7 @@ TOP_KEYS = {
     "graph",
     "operator",
     "faults",
+    "per_agent",
 }
 #: a ``--set`` key: dotted names, each with an optional 1-based [index]
 KEY_PATTERN = r"[A-Za-z_]\w*(\[\d+\])?(\.[A-Za-z_]\w*(\[\d+\])?)*"
@@ -94,6 +95,8 @@ class Study:
         The operator input family, or None to keep the base's u0.
     faults : FaultFamily or None
         Random faults added to the followers, or None.
+    per_agent : bool
+        Every sample on the per-agent engine, whatever its N (:mod:`sweep.per_agent`).
     """
 
     name: str
@@ -108,6 +111,7 @@ class Study:
     operator: OperatorFamily | None
     fixed: dict[str, Any] = field(default_factory=dict)
     faults: FaultFamily | None = None
+    per_agent: bool = False
 
 
 # --------------------------------------------------------------------------- reading
@@ -162,9 +166,17 @@ def study_from_data(path: str | Path, data: dict) -> Study:
         operator=operator_family(f, path, data["operator"]) if "operator" in data else None,
         fixed={**_designed(f, base, base_data), **_fixed(f, data.get("set", {}))},
         faults=fault_family(f, data["faults"]) if "faults" in data else None,
+        per_agent=_boolean(f, data.get("per_agent", False), "per_agent"),
     )
     _check_keys_apply(study)
     return study
+
+
+def _boolean(f: str, v: Any, key: str) -> bool:
+    """A true/false key of the study file."""
+    if not isinstance(v, bool):
+        raise StudyError(f, key, f"{v!r} is not a boolean", "true/false")
+    return v
 
 
 def read_study_file(path: str | Path) -> dict:
