@@ -59,8 +59,16 @@ class FollowerCoverage:
     gaps: tuple[str, ...] = field(default_factory=tuple)
 
 
-def _per_agent(table: pd.DataFrame, agent: int) -> pd.DataFrame:
-    return table[table["agent"].astype(str) == str(agent)]
+def by_agent(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """The table's rows per follower (``agent`` as text: ``"1"``, ...), split once.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+    """
+    key = table["agent"].astype(str)
+    return {str(a): rows for a, rows in table.groupby(key, sort=False)}
 
 
 def _windows(rows: pd.DataFrame) -> list[tuple[float, float]]:
@@ -128,10 +136,11 @@ def coverage(table: pd.DataFrame, horizon: tuple[float, float]) -> list[Follower
     """
     t0, t1 = horizon
     step = _step(table)
-    agents = sorted({int(a) for a in table["agent"].astype(str) if a.isdigit()})
+    groups = by_agent(table)
+    agents = sorted(int(a) for a in groups if a.isdigit())
     out = []
     for a in agents:
-        rows = _per_agent(table, a)
+        rows = groups[str(a)]
         g = rows[rows["kind"] == CL.Kind.GUARANTEED.value]
         track = g[g["claim_id"].isin(CL.TRACKING)]
         env = g[g["claim_id"].isin(CL.ENVELOPE)]
