@@ -100,20 +100,23 @@ def _gaps(
     step between two windows is the grid at a restart, not a gap)."""
     out, at = [], t0
     pieces = sorted(covered)
+    chi: list | None = None  # the Theorem 2 rows, read once when a gap needs them
     for a, b in [*pieces, (t1, t1)]:
         if a > at + 1.5 * step + 1e-9 or (at == t0 and a > at + 1e-9):
-            out.append(f"[{at:.4g}, {a:.4g}] s: {_why(rows, at, a)}")
+            if chi is None:
+                chi = list(rows[rows["claim_id"] == CL.T2_CHI.id].itertuples(index=False))
+            out.append(f"[{at:.4g}, {a:.4g}] s: {_why(chi, at, a)}")
         at = max(at, b)
     return out
 
 
-def _why(rows: pd.DataFrame, a: float, b: float) -> str:
-    """Why no guaranteed tracking row covers [a, b]: the note of a Theorem 2 row stated there
-    that is not guaranteed, else the transient before the comparison-lemma time."""
-    chi = rows[rows["claim_id"] == CL.T2_CHI.id]
-    if chi.empty:
+def _why(chi: list, a: float, b: float) -> str:
+    """Why no guaranteed tracking row covers [a, b]: the note of a Theorem 2 row (of the
+    follower's ``chi`` rows) stated there that is not guaranteed, else the transient before
+    the comparison-lemma time."""
+    if not chi:
         return "no provable variant for this ghat law (options.ghat_law)"
-    for r in chi.itertuples(index=False):
+    for r in chi:
         if r.kind == CL.Kind.GUARANTEED.value or not (r.t_start <= b and r.t_end >= a):
             continue
         note = str(r.note)
