@@ -541,10 +541,12 @@ def stop_text(r: dict) -> str:
         if switch is None or not np.isfinite(switch)
         else f"{(t_stop - switch) * 1e3:.3g} ms after the last topology switch"
     )
+    before = f"at most {float(r.get('rows_abs')):.3g} in the output rows before; {last})"
+    if f"the largest state is {r.get('stop_state')} = " in str(r.get("status", "")):
+        return f" ({before}"  # the error's message named CVODE's last state already
     return (
         f" (stopped at t = {t_stop:.7g} s, the largest state there {r.get('stop_state')} = "
-        f"{float(r.get('stop_abs')):.3g} in magnitude, at most {float(r.get('rows_abs')):.3g} in "
-        f"the output rows before; {last})"
+        f"{float(r.get('stop_abs')):.3g} in magnitude, {before}"
     )
 
 

@@ -154,9 +154,14 @@ def test_a_run_that_gives_up_reports_where_cvode_stood(tmp_path):
     assert row["rows_abs"] == np.abs(agents.initial_state(sc)).max()  # the only row: x(0)
     assert row["stop_abs"] > 2 * row["rows_abs"]  # so x(0) in its place would fail above
     assert not sc.graph.switches and np.isnan(row["switch_before_stop"])  # sample 0: none
-    note = stop_text(row)
-    assert f"the largest state there {row['stop_state']} = " in note
-    assert "; no topology switch before)" in note
+    assert f"the largest state is {row['stop_state']} = " in row["status"]  # the error says it
+    note = stop_text(row)  # the report's line adds the rows before and the last switch
+    assert (
+        note
+        == f" (at most {row['rows_abs']:.3g} in the output rows before; no topology switch before)"
+    )
+    full = stop_text({**row, "status": "failed: cut"})
+    assert f"the largest state there {row['stop_state']} = " in full and full.endswith(note[2:])
 
 
 def test_the_report_times_a_stop_from_the_last_switch():
