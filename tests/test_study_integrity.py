@@ -415,6 +415,16 @@ def test_bad_input_of_a_per_agent_study_is_one_line(tmp_path, capsys, monkeypatc
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.toml"]
 
 
+def test_identity_names_the_engine_and_a_measured_theorem1_only_when_set():
+    """A study without the new keys keeps the identity it had before them."""
+    from sweep.identity import study_identity
+
+    links = study_identity(load_study(ROOT / "studies" / "links.toml"))
+    assert "per_agent" not in links and "theorem1" not in links["graph"]["losses"]
+    topo = study_identity(load_study(ROOT / "studies" / "topologies.toml"))
+    assert topo["per_agent"] is True and topo["graph"]["losses"]["theorem1"] == "measured"
+
+
 def test_scheduler_that_does_not_answer_leaves_no_folder(tmp_path, capsys, monkeypatch):
     import dask
 
