@@ -108,7 +108,7 @@ def paper_rows(runs: int, build_root: str | None) -> list[dict[str, Any]]:
     sc = load_scenario(PAPER)
     gains = api.scenario_gains(sc, "paper")
     cg = CodegenSettings(build_root=build_root)
-    built = api.build(sc, gains, "native", cg)
+    built = api.build(sc, gains, "native", cg, runtime_parameters=True)  # whole loop: baseline
     settings = api.integrator_settings(sc, "native", cg)
     t_out = output_grid(sc.integration.horizon, sc.integration.output_step)
     x0, bps = built.closed_loop.x0, api.breakpoints(built, sc)

@@ -234,14 +234,12 @@ def plot(records: list[dict[str, Any]], path: Path) -> Path | None:
     path : Path
         The PNG file.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
     import io
 
-    import matplotlib.pyplot as plt
-
     from core.artifacts import atomic_write_bytes
+    from core.pyplot import pyplot
+
+    plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for meth in METHODS:

@@ -1,4 +1,4 @@
-"""Wiring: a scenario file -> console scenario -> gains -> compiled loop -> session -> server.
+"""Wiring: a scenario file -> console scenario -> gains -> per-agent engine -> session -> server.
 
 ``python -m console serve SCENARIO`` (``make console``) calls :func:`open_console` and
 :func:`serve`; tests call :func:`open_console` and run the :class:`~console.server.Hub`
@@ -77,8 +77,7 @@ def open_console(
     sc = console_scenario(path, table)
     root = Path(out_root or OUT_ROOT)
     gains, _ = api.ensure_gains(sc, root)
-    built = api.build(sc, gains)
-    loop = LiveLoop(sc, gains, built, bias_max, rise=rise)
+    loop = LiveLoop(sc, gains, bias_max, rise=rise)
     out = root / sc.name
     session = Session(loop, recorder=Recorder(out, table, loop))
     hub = Hub(session, loop.limits, fps=fps, allow_remote=allow_remote, hosts=hosts, title=sc.name)

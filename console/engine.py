@@ -23,12 +23,13 @@ from the last state reached, up to :data:`MAX_ATTEMPTS` attempts, each failure a
 The operator's numbers and their changes are :mod:`console.changes`; what the page
 draws and the logged states' columns are :mod:`console.frames`.
 
-:class:`LiveLoop` integrates the compiled closed loop, whose numbers are a runtime
-vector ``p`` (``symbolic.parameters``): the console scenario writes u0_k as
+:class:`LiveLoop` integrates the per-agent engine (:mod:`generated.agents`), whose
+numbers are runtime data: the console scenario writes u0_k as
 ``a + Σ_j d_j*smoothstep((t - c_j)/r_j)`` (:data:`RAMP_SLOTS` terms), g_i as
 ``a + d*step(t - c)`` and each f_ir as ``(f_ir) + a + d*step(t - c)``, and the console
-sets their literals; a link's weight is in ``graph`` (it switches between two calls).
-Nothing is regenerated or recompiled while the console runs.
+sets their literals in the agents' rows; the links are the problem's topologies (a
+change switches between two calls). Nothing is regenerated or recompiled while the
+console runs.
 """
 
 from __future__ import annotations
@@ -46,7 +47,6 @@ from console.protocol import Limits, MessageError
 from console.ramps import CONSOLE_RISE, RAMP_SLOTS, Ramp, command_at, fold_finished, u0_literals
 from console.recovery import ATTEMPT_WALL, MAX_ATTEMPTS, Event, restart_settings, run_attempts
 from core.errors import BuildError
-from core.memo import MEMO
 
 #: the names other modules import from here (they live in the modules named above)
 __all__ = [
@@ -132,6 +132,10 @@ class LoopBase:
         self.u0_base = self.nominal.u0.copy()  # u0 with every finished ramp added
         self.ramps: list[Ramp] = []  # running ramps, oldest first
         self.events: list[Event] = []
+        # the links in force from each time on: the nominal ones, then every change landed
+        self.links: list[tuple[float, dict[tuple[int, int], float]]] = [
+            (0.0, dict(self.nominal.weights))
+        ]
         self.failure = ""  # non-empty: the loop is held (every attempt failed), and why
         self.steps = 0
         self.parameters_changed()
@@ -306,6 +310,8 @@ class LoopBase:
         self.settings = self.target.copy()
         if not any(c.kind == "u0" for c in changes):  # a u0 change that waits for a ramp
             self.settings.u0 = u0
+        if self.settings.weights != self.links[-1][1]:
+            self.links.append((t_end, dict(self.settings.weights)))
         self.changes.extend(changes)
 
     def integrate(
@@ -383,7 +389,18 @@ def unreachable_after(
 
 
 class LiveLoop(LoopBase):
-    """The compiled closed loop of a console scenario, stepped with runtime parameters.
+    """The per-agent engine on a console scenario, stepped with its runtime data.
+
+    Integration: the per-agent kernels of the scenario's follower models
+    (:func:`generated.agents.build_models`, compiled or found in the build cache once)
+    run by :func:`generated.agents.run` in a child process killed past the attempt's
+    wall-time budget (:mod:`console.calls`). Every operator number is runtime data of
+    that engine: the literals of the ramps of u0 and of the health and bias steps are
+    columns of the agents' rows (:func:`symbolic.parameters.agent_rows`), the links are
+    the problem's topologies (the link changes since the last that is no longer fading,
+    then the pending one at the end of the call). What the page draws is the symbolic
+    closed loop's outputs with the whole loop's parameter vector p of the same numbers
+    (CasADi's virtual machine: nothing compiled).
 
     Parameters
     ----------
@@ -392,48 +409,56 @@ class LiveLoop(LoopBase):
         bias slot of every f_ir are plain literals.
     gains : Gains
         Its certified gains.
-    built : Built
-        Its compiled closed loop (:func:`generated.api.build`), whose library takes p.
     bias_max : float
         Largest bias component accepted (the scenario's d already includes it).
     rise : float
         Rise time of the shaped changes of u0 (s).
+    codegen : CodegenSettings, optional
+        Compiler settings of the kernels (default: those of ``generated sim``).
     """
 
     def __init__(
-        self, sc: Any, gains: Any, built: Any, bias_max: float, rise: float = CONSOLE_RISE
+        self,
+        sc: Any,
+        gains: Any,
+        bias_max: float,
+        rise: float = CONSOLE_RISE,
+        codegen: Any = None,
     ) -> None:
-        from generated import api, solvers
-        from symbolic.parameters import layout_of
+        from generated import agents, api
+        from symbolic.closed_loop import closed_loop_for, observer_gains
+        from symbolic.parameters import agent_rows, layout_of, row_layout, row_slices
 
-        if built.outputs_p is None or built.agents is not None:
-            raise BuildError(
-                f"{sc.path}: the console needs a library that takes runtime parameters; "
-                "the per-agent native engine (above 20 followers) compiles the operator's "
-                "command in "
-                '(set integration.method = "cvodes")'
-            )
-        self.sc, self.gains, self.built = sc, gains, built
-        self.settings_int = api.integrator_settings(sc)
-        self.method = solvers.get(sc.integration.method)  # what the method does, asked once
-        self.p0 = np.asarray(built.p, dtype=float)
-        lay = layout_of(sc)
-        # u0_k: a + Σ_j d_j*smoothstep((t - c_j)/r_j), literals a, then (d_j, c_j, r_j)
-        self.u0_slices = [lay.slices[f"expr:leader.u0[{k}]"] for k in range(sc.p)]
-        if any(sl.stop - sl.start != 1 + 3 * RAMP_SLOTS for sl in self.u0_slices):
+        self.sc, self.gains = sc, gains
+        self.settings_int = api.integrator_settings(sc, "native")
+        # the symbolic closed loop: x(0) and the page's outputs (nothing compiled)
+        self.closed_loop = closed_loop_for(sc, gains)
+        libs, model = agents.build_models(sc, gains, api.resolve_codegen(sc.N, codegen))
+        self.libraries = tuple(libs)
+        self.problem = agents.problem(sc, gains, model)
+        self.p0 = np.asarray(self.closed_loop.p0, dtype=float)
+        og = observer_gains(sc, gains)
+        self.rows0 = agent_rows(sc, og)
+        lay, rows = layout_of(sc), row_slices(sc, row_layout(sc, og))
+        # where each operator number goes: (name in p, last k literals) -> p's and the rows'
+        # columns. u0_k: a + Σ_j d_j*smoothstep((t - c_j)/r_j), literals a, then (d_j, c_j, r_j)
+        self.u0_names = [f"expr:leader.u0[{k}]" for k in range(sc.p)]
+        if any(
+            len(range(*lay.slices[n].indices(lay.size))) != 1 + 3 * RAMP_SLOTS
+            for n in self.u0_names
+        ):
             raise BuildError(
                 f"{sc.path}: leader.u0: not the console's ramp expressions "
                 "(console.scenario.console_table writes them)"
             )
         # the literals (a, d, c) of a + d*step(t - c): the last three of each expression
-        self.idx_g = [lay.slices[f"expr:followers[{i}].g"].stop - 3 for i in range(sc.N)]
-        self.idx_f = [
-            [lay.slices[f"expr:followers[{i}].f[{r}]"].stop - 3 for r in range(sc.n)]
-            for i in range(sc.N)
-        ]
+        self.g_names = [f"expr:followers[{i}].g" for i in range(sc.N)]
+        self.f_names = [[f"expr:followers[{i}].f[{r}]" for r in range(sc.n)] for i in range(sc.N)]
+        self.p_slices, self.row_slices = lay.slices, rows
         self.graph_slice, self.times_slice = lay.slices["graph"], lay.slices["graph_times"]
-        if self.times_slice.stop - self.times_slice.start != 1:
-            raise BuildError(f"{sc.path}: graph: the console scenario needs exactly one switch")
+        self.link_slots = self.times_slice.stop - self.times_slice.start
+        if self.link_slots < 1:
+            raise BuildError(f"{sc.path}: graph: the console scenario needs its link slots")
         A = np.asarray(sc.graph.adjacency, dtype=float)
         a0 = np.asarray(sc.graph.pinning, dtype=float)
         self.h = np.diag(np.atleast_2d(gains.H)).astype(float)
@@ -450,81 +475,156 @@ class LiveLoop(LoopBase):
             edges=edges,
         )
         nominal = Settings(
-            u0=np.array([self.p0[sl.start] for sl in self.u0_slices]),
-            health=self.p0[self.idx_g].copy(),
+            u0=np.array([self.p0[lay.slices[n].start] for n in self.u0_names]),
+            health=np.array([self.p0[lay.slices[n].stop - 3] for n in self.g_names]),
             bias=np.zeros((sc.N, sc.n)),
             weights=weights,
         )
-        self.layout = built.closed_loop.layout
-        self._bound: Any = None
-        # the native driver is one C call: it runs in a child process killed past the
-        # attempt's wall-time budget (console/calls.py); other methods run in this process
-        self.calls: ChildCalls | None = None
-        if not self.method.integrates_dyn and built.driver is not None:
-            self.calls = ChildCalls(init=(load_native, (built.library, built.form)))
-            self.calls.warm_later()
+        self.layout = self.closed_loop.layout
+        self._p: np.ndarray | None = None
+        # the engine is one C call: it runs in a child process killed past the attempt's
+        # wall-time budget (console/calls.py)
+        paths = tuple(lib.path for lib in self.libraries)
+        self.calls = ChildCalls(init=(load_agents, (paths,)))
+        self.calls.warm_later()
         super().__init__(
-            limits, sc.integration.output_step, nominal, built.closed_loop.x0, rise=rise
+            limits, sc.integration.output_step, nominal, self.closed_loop.x0, rise=rise
         )
 
     # ---------------------------------------------------------------- parameters
     def parameters_changed(self) -> None:
-        """Drop the bound build; the next integrator call binds the new p."""
-        self._bound = None
+        """Drop the current p; the next outputs use the new settings."""
+        self._p = None
+
+    def literals(self) -> dict[str, np.ndarray]:
+        """The operator's numbers as the last literals of each console expression, by name.
+
+        u0_k: all its literals (the base, then each slot's (d, c, r)); g_i and f_ir: the
+        (a, d, c) of a + d*step(t − c), the settings switching to the target at
+        :attr:`switch_at` (the end of the call) when changes are pending.
+        """
+        old, new, c = self.settings, self.target, self.switch_at
+
+        def step(a: float, b: float) -> np.ndarray:  # a + (b − a) step(t − c)
+            return np.array((a, 0.0, 0.0) if c is None else (a, b - a, c))
+
+        out = {
+            # an unused slot: no change (d = 0) with the console's rise time
+            name: np.asarray(u0_literals(self.u0_base[k], self.ramps, k, self.rise), float)
+            for k, name in enumerate(self.u0_names)
+        }
+        for i, name in enumerate(self.g_names):
+            out[name] = step(old.health[i], new.health[i])
+            for r, fname in enumerate(self.f_names[i]):
+                out[fname] = step(old.bias[i, r], new.bias[i, r])
+        return out
 
     def param_vector(self) -> np.ndarray:
-        """The runtime parameter vector p: the settings, switching to the target at
-        :attr:`switch_at` (the end of the call) when changes are pending."""
-        old, new, c = self.settings, self.target, self.switch_at
+        """The whole loop's parameter vector p of the current numbers (the page's outputs):
+        the settings, switching to the target at :attr:`switch_at` when changes are pending."""
         p = self.p0.copy()
-
-        def put(k: int, a: float, b: float) -> None:  # a + (b − a) step(t − c)
-            p[k : k + 3] = (a, 0.0, 0.0) if c is None else (a, b - a, c)
-
-        for k, sl in enumerate(self.u0_slices):
-            # an unused slot: no change (d = 0) with the console's rise time
-            p[sl] = u0_literals(self.u0_base[k], self.ramps, k, self.rise)
-        for i, idx in enumerate(self.idx_g):
-            put(idx, old.health[i], new.health[i])
-            for r, k in enumerate(self.idx_f[i]):
-                put(k, old.bias[i, r], new.bias[i, r])
-        # the graph as two topologies, old then new from c on (the replay's graph switches)
-        p[self.graph_slice] = np.concatenate([self._graph(old), self._graph(new)])
-        p[self.times_slice] = 0.0 if c is None else c
+        for name, v in self.literals().items():
+            sl = self.p_slices[name]
+            p[sl.stop - v.size : sl.stop] = v
+        # the graphs of the next call (the engine's), padded with copies of the last: a
+        # switch to equal weights changes nothing, faded or not
+        hist = self.link_history()
+        hist += [hist[-1]] * (1 + self.link_slots - len(hist))
+        p[self.graph_slice] = np.concatenate([self._graph(w) for _, w in hist])
+        p[self.times_slice] = [t0 for t0, _ in hist[1:]]
         return p
 
-    def _graph(self, st: Settings) -> np.ndarray:
-        """The ``graph`` weights of one topology: the links of ``st`` on the compiled pattern."""
-        from symbolic.parameters import graph_values
+    def agent_rows(self) -> np.ndarray:
+        """The agents' rows of runtime numbers (:func:`symbolic.parameters.agent_rows`) with
+        the operator's numbers of :meth:`literals`."""
+        R = self.rows0.copy()
+        for name, v in self.literals().items():
+            i, sl = self.row_slices[name]
+            R[slice(None) if i is None else i, sl.stop - v.size : sl.stop] = v
+        return R
 
+    def link_history(self) -> list[tuple[float, dict[tuple[int, int], float]]]:
+        """The links of the next call: from the last change whose fade (``graph.link_fade``)
+        has ended by now, every change with its time, then the pending one at
+        :attr:`switch_at` (the replay's ``[[graph.switches]]`` as they ran)."""
+        fade = float(self.sc.graph.link_fade)
+        hist = list(self.links)
+        if self.switch_at is not None and self.target.weights != self.settings.weights:
+            hist.append((self.switch_at, dict(self.target.weights)))
+        first = max(k for k, (t0, _) in enumerate(hist) if k == 0 or t0 <= self.t - fade)
+        return hist[first:]
+
+    def topologies(self) -> tuple[Any, ...]:
+        """The per-agent problem's graphs of the next call (:meth:`link_history`)."""
+        from generated.agent_graph import topology
+
+        return tuple(topology(t0, *self._matrices(w), self.h) for t0, w in self.link_history())
+
+    def set_link(self, i: int, j: int, cut: bool) -> None:
+        """As :meth:`LoopBase.set_link`; also refused while :data:`LINK_SLOTS` changes fade.
+
+        Parameters
+        ----------
+        i, j, cut
+            As :meth:`LoopBase.set_link`.
+
+        Raises
+        ------
+        MessageError
+            As :meth:`LoopBase.set_link`, or a new change while the page's outputs hold
+            no more fading graphs (the oldest fade must end first).
+        """
+        pending = self.target.weights != self.settings.weights  # a new change joins it
+        if not pending and len(self.link_history()) > self.link_slots:
+            raise MessageError(
+                f"link {i + 1} ← {'leader' if j < 0 else j + 1}: refused, {self.link_slots} "
+                f"link changes are still fading (graph.link_fade = "
+                f"{self.sc.graph.link_fade:g} s); try again when the oldest has ended"
+            )
+        super().set_link(i, j, cut)
+
+    def agent_problem(self) -> Any:
+        """The per-agent problem of the next call (:meth:`agent_rows`, :meth:`topologies`)."""
+        import dataclasses
+
+        return dataclasses.replace(
+            self.problem, params=self.agent_rows(), topologies=self.topologies()
+        )
+
+    def _matrices(self, weights: dict[tuple[int, int], float]) -> tuple[np.ndarray, np.ndarray]:
+        """Adjacency and pinning of a set of links."""
         A = np.zeros((self.sc.N, self.sc.N))
         a0 = np.zeros(self.sc.N)
-        for (i, j), w in st.weights.items():
+        for (i, j), w in weights.items():
             if j < 0:
                 a0[i] = w
             else:
                 A[i, j] = w
-        return graph_values(self.sc, self.h, A, a0)
+        return A, a0
 
-    def bound(self) -> Any:
-        """The build with the current p (the library is the same; only p changes)."""
-        import dataclasses
+    def _graph(self, weights: dict[tuple[int, int], float]) -> np.ndarray:
+        """The ``graph`` weights of one topology: ``weights`` on the compiled pattern."""
+        from symbolic.parameters import graph_values
 
-        from generated.api import fix_parameters
+        return graph_values(self.sc, self.h, *self._matrices(weights))
 
-        if self._bound is None:
-            p = self.param_vector()
-            b = dataclasses.replace(self.built, p=p)
-            if self.method.integrates_dyn:  # it calls dyn, so dyn must carry the new p
-                b = dataclasses.replace(b, dyn=fix_parameters(self.built.dyn_p, p))
-            self._bound = b
-        return self._bound
+    def outputs_at(self, t: float, x: np.ndarray) -> dict[str, Any]:
+        """The closed loop's named outputs at (t, x) with the current numbers.
+
+        Parameters
+        ----------
+        t : float
+        x : ndarray
+        """
+        if self._p is None:
+            self._p = self.param_vector()
+        return self.closed_loop.parametric.outputs.call({"t": t, "x": x, "p": self._p})
 
     # ---------------------------------------------------------------- time
     def integrate(
         self, x0: np.ndarray, t_out: np.ndarray, breaks: list[float], attempt: int = 0
     ) -> Advance:
-        """The compiled loop from ``x0`` at ``t_out[0]`` (a restart, as at a breakpoint).
+        """The per-agent engine from ``x0`` at ``t_out[0]`` (a restart, as at a breakpoint).
 
         The first attempt uses the scenario's settings; the k-th restart after a failure
         (``attempt`` = k >= 1) starts again from ``x0``, the last state reached, with the
@@ -541,35 +641,27 @@ class LiveLoop(LoopBase):
         attempt : int
             0, or the restart after a failure.
         """
-        from generated.api import integrate_built
-
-        # a method that integrates dyn does so through CasADi, whose options take a first
-        # step; the native C drivers take none (CVODE chooses it)
-        first_step = self.method.integrates_dyn
-        s, breaks = restart_settings(self.settings_int, t_out, breaks, attempt, first_step)
-        b = self.bound()
-        if self.calls is None:
-            traj = integrate_built(b, x0, t_out, s, breaks)
-        else:
-            args = (b.library, b.form, x0, t_out, s, breaks, b.p)
-            try:
-                traj = self.calls.call(native_attempt, args, ATTEMPT_WALL)
-            except CallTimeout:
-                why = (
-                    f"attempt {attempt + 1} stopped after its wall-time budget of "
-                    f"{ATTEMPT_WALL:g} s (working towards t = {float(t_out[-1]):.6g} s)"
-                )
-                return Advance(t_out[:1], np.asarray(x0)[None, :], why, 0, timed_out=True)
-            except RuntimeError as exc:  # the child died or raised: held, saying so
-                why = f"attempt {attempt + 1}: {exc}"
-                return Advance(t_out[:1], np.asarray(x0)[None, :], why, 0, timed_out=True)
+        # CVODE chooses the first step of the C driver: a restart cuts the first interval
+        s, breaks = restart_settings(self.settings_int, t_out, breaks, attempt, False)
+        paths = tuple(lib.path for lib in self.libraries)
+        args = (paths, self.agent_problem(), x0, t_out, s, breaks)
+        try:
+            traj = self.calls.call(agents_attempt, args, ATTEMPT_WALL)
+        except CallTimeout:
+            why = (
+                f"attempt {attempt + 1} stopped after its wall-time budget of "
+                f"{ATTEMPT_WALL:g} s (working towards t = {float(t_out[-1]):.6g} s)"
+            )
+            return Advance(t_out[:1], np.asarray(x0)[None, :], why, 0, timed_out=True)
+        except RuntimeError as exc:  # the child died or raised: held, saying so
+            why = f"attempt {attempt + 1}: {exc}"
+            return Advance(t_out[:1], np.asarray(x0)[None, :], why, 0, timed_out=True)
         fail = "" if traj.complete else traj.message
         return Advance(traj.t, traj.x, fail, int(traj.stats.get("steps", 0) or 0))
 
     def close(self) -> None:
         """Stop the integrator's child process (at shutdown)."""
-        if self.calls is not None:
-            self.calls.close()
+        self.calls.close()
 
     def signals(self, x: np.ndarray) -> dict[str, Any]:
         """Leader output, followers, formation slots, error norms, ĝ_i and |u_i|.
@@ -579,8 +671,7 @@ class LiveLoop(LoopBase):
         x : ndarray
             The state (at the current time).
         """
-        b = self.bound()
-        out = b.outputs_p.call({"t": self.t, "x": x, "p": b.p})
+        out = self.outputs_at(self.t, x)
         return page_signals(out, x, self.layout, self.sc.N, self.u0_at(self.t))
 
     # ---------------------------------------------------------------- log
@@ -600,55 +691,43 @@ class LiveLoop(LoopBase):
 
 
 # --------------------------------------------------------------------------- the child's side
-#: the libraries this (child) process loaded, by cache key (a loop holds its own image, so
-#: an evicted one stays mapped while it is used)
-_IMAGES = MEMO.namespace("console-child-images", 4)
-
-
-def load_native(library: Any, form: str) -> Any:
-    """Load a native build's library in this process, from its verified bytes, once per key.
+def load_agents(paths: tuple[Any, ...]) -> None:
+    """Load the kernel libraries in this (child) process once (checked as
+    :func:`generated.agents.load` checks them; later loads of the same paths are free).
 
     Parameters
     ----------
-    library : generated.codegen.Library
-        The cache entry (checked as :func:`generated.loaded.open_image` checks it).
-    form : str
-        ``"ode"`` or ``"dae"``.
+    paths : tuple of Path
+        The kernel libraries, in model order.
     """
-    from generated.loaded import open_image
+    from generated import agents
 
-    if library.key not in _IMAGES:
-        _IMAGES[library.key] = open_image(library, form)
-    return _IMAGES[library.key]
+    agents.load(paths)
 
 
-def native_attempt(
-    library: Any,
-    form: str,
+def agents_attempt(
+    paths: tuple[Any, ...],
+    problem: Any,
     x0: np.ndarray,
     t_out: np.ndarray,
     settings: Any,
     breaks: list[float],
-    p: np.ndarray,
 ) -> Any:
-    """One integrator attempt with the native driver (run in the integrator's child process).
+    """One integrator attempt of the per-agent engine (run in the integrator's child process).
 
     Parameters
     ----------
-    library, form
-        As :func:`load_native`.
+    paths : tuple of Path
+        As :func:`load_agents`.
+    problem : generated.agents.AgentProblem
+        The runtime data of the call.
     x0, t_out, settings, breaks
-        As :func:`generated.api.integrate_built`.
-    p : ndarray
-        The runtime parameters.
+        As :func:`generated.agents.run`.
 
     Returns
     -------
     Trajectory
     """
-    from generated import native
+    from generated import agents
 
-    image = load_native(library, form)
-    return native.run(
-        library.path, x0, t_out, settings, breakpoints=breaks, p=p, driver=image.driver
-    )
+    return agents.run(paths, problem, x0, t_out, settings, breakpoints=breaks)

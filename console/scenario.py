@@ -15,9 +15,12 @@ From the file the console is started on, :func:`console_table` keeps everything 
   ``bias_max``, so Assumption 3 holds for every bias the console accepts and the
   controller's d_i does not change when a bias is set;
 * the file's own faults and graph switches are removed (the console starts healthy;
-  the operator injects faults live); one switch that changes nothing is added, so that
-  the graph is compiled as two topologies, the weights before and after a link change
-  (``graph``, ``graph_times``: :func:`symbolic.closed_loop.graph_coupling`);
+  the operator injects faults live); :data:`LINK_SLOTS` switches that change nothing are
+  added, so that the page's outputs (the symbolic closed loop's) read the graphs the
+  engine integrates, the link changes a fade still runs (``graph``, ``graph_times``:
+  :func:`symbolic.closed_loop.graph_coupling`);
+* ``integration.method`` is ``native``: the console runs the per-agent engine
+  (:class:`console.engine.LiveLoop`), and so does the replay of its records;
 * ``name`` gets the suffix ``-console``.
 
 The replay of a record (:mod:`console.record`) is this table plus the recorded changes.
@@ -41,6 +44,9 @@ from sweep.sampler import scenario_toml
 BIAS_MAX = 5.0
 #: a number the console sets, a, switching to a + d at time c (literals a, d, c)
 SWITCHED = "{!r} + 0.0*step(t - 0.0)"
+#: link changes a fade may still run at once (the page's outputs read 1 + LINK_SLOTS graphs;
+#: a change beyond is refused until the oldest fade ends: console/engine.py)
+LINK_SLOTS = 8
 #: the operator's command: a number a and RAMP_SLOTS ramps d*smoothstep((t - c)/r)
 RAMPED = "0.0" + " + 0.0*smoothstep((t - 0.0)/1.0)" * RAMP_SLOTS
 
@@ -71,21 +77,24 @@ def console_table(path: str | Path, bias_max: float = BIAS_MAX) -> dict:
     for k in ("u0_csv", "u0_hold", "u0_rise", "u0_shape"):
         leader.pop(k, None)
     leader["u0"] = [RAMPED] * base.p
+    # the console runs the per-agent engine (console/engine.py): its replay runs it too
+    data.setdefault("integration", {})["method"] = "native"
     graph = data["graph"]
     graph.pop("switches", None)
-    # the live loop hands a link change to one integrator call (engine.py): raw switching,
-    # which its records replay (a fade would need the old topology kept in p for T seconds)
-    graph["link_fade"] = 0.0
-    # one switch that changes nothing: the compiled loop then has two topologies, the
-    # console's old and new graph, and switches between them where a link change lands
+    # graph.link_fade stays the file's (default: the fade): LiveLoop carries every link
+    # change whose fade still runs into the next call (engine.py, LiveLoop.topologies)
+    # LINK_SLOTS switches that change nothing: the page's outputs (the symbolic whole loop)
+    # then read up to 1 + LINK_SLOTS topologies, the link changes a fade still runs
     i = int(np.flatnonzero(base.graph.pinning)[0])
+    T = base.integration.horizon
     graph["switches"] = [
         {
-            "time": base.integration.horizon / 2,
+            "time": T / 2 + k * T / (4 * LINK_SLOTS),  # distinct times: one topology each
             "follower": i + 1,
             "neighbour": 0,
             "weight": float(base.graph.pinning[i]),
         }
+        for k in range(LINK_SLOTS)
     ]
     for fo, tbl in zip(base.followers, data["followers"], strict=True):
         tbl.pop("faults", None)

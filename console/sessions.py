@@ -332,12 +332,10 @@ def peak_torque(loop, t: np.ndarray, X: np.ndarray) -> tuple[float, float]:
     sel = np.flatnonzero(t >= PEAK_FROM) if t.size else np.empty(0, dtype=int)
     if sel.size == 0:
         return -1.0, float("nan")
-    b = loop.bound()
-    f = b.outputs_p
     N = loop.sc.N
     best, when = -1.0, float("nan")
     for j in sel:
-        out = f.call({"t": float(t[j]), "x": X[j], "p": b.p})
+        out = loop.outputs_at(float(t[j]), X[j])
         u = np.linalg.norm(np.asarray(out["u"], dtype=float).reshape(N, -1), axis=1).max()
         if not np.isfinite(u):
             return float("inf"), float(t[j])
@@ -352,8 +350,7 @@ def _worker(args: tuple[str, str, list[int], int, float, float, bool]) -> list[S
 
     scenario, out_root, indices, seed, seconds, rise, network = args
     con = open_console(scenario, out_root=out_root, rise=rise)
-    if con.loop.calls is not None:  # the integrator's child is up before any session starts
-        con.loop.calls.warm()
+    con.loop.calls.warm()  # the integrator's child is up before any session starts
     try:
         return [run_session(con, i, seed, seconds, network) for i in indices]
     finally:

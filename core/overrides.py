@@ -227,7 +227,7 @@ def _exact(key: str, value: Any) -> bool:
     )
 
 
-def _variant_label(overrides: Mapping[str, Any]) -> str:
+def variant_label(overrides: Mapping[str, Any]) -> str:
     """Name suffix made from the overrides (``ablation``, ``method-fixed``).
 
     Every key, index and value is kept (sanitised to the name charset). A label that
@@ -235,6 +235,16 @@ def _variant_label(overrides: Mapping[str, Any]) -> str:
     string with other characters), or that is longer than :data:`MAX_VARIANT_CHARS`,
     ends in :data:`LABEL_HASH_CHARS` hex digits of the SHA-256 of the overrides'
     canonical text, so distinct overrides never share a folder.
+
+    Parameters
+    ----------
+    overrides : Mapping
+        ``--set`` key paths and their values, in the order given.
+
+    Returns
+    -------
+    str
+        The label (the run folder's suffix).
     """
     parts = []
     for k, v in overrides.items():
@@ -300,7 +310,7 @@ def load(
     sha = hashlib.sha256((sc.sha256 + "\n" + _canonical(overrides)).encode()).hexdigest()
     # the loader's own validation, on the modified table
     out = scenario_from_dict(data, path=path, sha256=sha)
-    label = variant if variant is not None else _variant_label(overrides)
+    label = variant if variant is not None else variant_label(overrides)
     if not re.fullmatch(r"[A-Za-z0-9_.-]+", label):
         raise ScenarioError(
             str(path), "variant", f"{_brief_text(label)!r} is not a plain name", "[A-Za-z0-9_.-]"

@@ -8,7 +8,10 @@ V̇2 ≤ −ΩV2 + χv with Ω = min{2λ_min(K)/λ_max(M), k2, σ} and
   a smaller one lowers Ω; at the balance χv/Ω, hence the ultimate bound
   χ̄ = sqrt(2χv/(λ_min(M)Ω(1−δ))), barely depends on k1, while the time to the guarantee
   t_c = ln(Ω(1−δ)V2(t_s)/(χv δ))/Ω falls like 1/k1;
-- γ is kept: it does not enter Ω (docs/synthesis.md, 'Design', says what a larger γ cost);
+- γ does not enter Ω; it divides the ĝ term of χv, largest at the declared health range's
+  worst end: after (k1, λ), each follower's γ is chosen from a grid of simulated and
+  verified candidates (:func:`gamma_candidates`, :func:`choose_gamma`) for the smallest χ̄
+  over the declared range [g_min, 1] (:func:`health_bound`);
 - the projection interval is [1, 1/g_min] of the declared health range (it holds 1/g = 1);
 - the one limit is the torque, which no closed form gives: each candidate (k1, λ) is
   simulated and its peak ‖u_i‖ after the start-up compared with the budget.
@@ -32,6 +35,8 @@ from core.scenario import Scenario
 K1_FACTORS = (1.0, 2.0, 3.0, 5.0, 7.0, 10.0, 14.0)
 #: multiples of the scenario's λ_ir tried
 LAMBDA_FACTORS = (0.5, 1.0, 2.0)
+#: multiples of the scenario's γ_i tried for the ĝ law, once k1 and λ are chosen
+GAMMA_FACTORS = (1.0, 3.0, 10.0, 30.0)
 
 
 def balanced(scenario: Scenario, k1: float) -> tuple[np.ndarray, np.ndarray]:
@@ -314,4 +319,83 @@ def assemble(scenario: Scenario, chosen: list[Point]) -> dict[str, Any]:
     for key in ("controller.sigma", "controller.gamma"):
         if key in per[0]:
             out[key] = [o[key][i] for i, o in enumerate(per)]
+    return out
+
+
+def health_bound(scenario: Scenario, i: int) -> float:
+    """Theorem 2's provable χ̄_i over follower i's declared health range [g_min_i, 1].
+
+    The ĝ term of χv is convex in g, so the constants of a piece whose health spans the
+    range (:func:`verify.bounds.theorem2_constants` with ``health=(g_min_i, 1, 0)``) bound
+    every constant health the design tolerates; inf when the variant is not provable.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        With its ``[design]`` table and the candidate's gains.
+    i : int
+        0-based follower.
+    """
+    from verify.bounds import VerifyConfig, theorem2_constants
+
+    g_min = float(np.asarray(scenario.design.g_min, float)[i])
+    c = theorem2_constants(scenario, i, VerifyConfig(), health=(g_min, 1.0, 0.0))
+    return float(c.chi_bar_var) if c.provable else math.inf
+
+
+def gamma_candidates(scenario: Scenario) -> list[list[float]]:
+    """γ_i of each candidate: the scenario's own times :data:`GAMMA_FACTORS` (first: its own).
+
+    Parameters
+    ----------
+    scenario : Scenario
+    """
+    g0 = np.asarray(scenario.controller.gamma, float)
+    return [[float(x) for x in g0 * f] for f in GAMMA_FACTORS]
+
+
+@dataclass(frozen=True)
+class GammaPoint:
+    """One γ candidate: its γ_i, its simulated and verified run, χ̄_i over the health range.
+
+    Attributes
+    ----------
+    gamma : list of float
+        Per follower, γ_i.
+    point : Point
+        The run with the designed k1, λ, k2, σ and these γ_i.
+    worst : list of float
+        Per follower, :func:`health_bound`.
+    """
+
+    gamma: list[float]
+    point: Point
+    worst: list[float]
+
+    def to_json(self) -> dict[str, Any]:
+        """As a JSON object (inf written as null)."""
+        return {
+            "gamma": self.gamma,
+            "worst": [x if math.isfinite(x) else None for x in self.worst],
+            "point": self.point.to_json(),
+        }
+
+
+def choose_gamma(points: list[GammaPoint], budget: np.ndarray) -> list[GammaPoint | None]:
+    """Per follower, the admissible γ candidate with the smallest χ̄ over the health range.
+
+    Admissible for follower i: its run reaches the horizon, every guaranteed row holds,
+    every follower is covered and its peak torque after the start-up is within its budget
+    (a candidate whose run stops is refused). Ties go to the smaller γ_i. None: none is.
+
+    Parameters
+    ----------
+    points : list of GammaPoint
+    budget : ndarray
+        Per follower, the torque budget.
+    """
+    out: list[GammaPoint | None] = []
+    for i in range(len(budget)):
+        ok = [p for p in points if _level_ok(p.point, i, budget)]
+        out.append(min(ok, key=lambda p: (p.worst[i], p.gamma[i])) if ok else None)
     return out

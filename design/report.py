@@ -60,10 +60,9 @@ def observer_figure(d: DesignResult, path: Path) -> None:
     path : Path
         The PNG written.
     """
-    import matplotlib
+    from core.pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     od = d.observer
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
@@ -121,10 +120,9 @@ def controller_figure(d: DesignResult, path: Path) -> None:
     path : Path
         The PNG written.
     """
-    import matplotlib
+    from core.pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4))
     budget = float(np.max(d.base.design.u_max))
@@ -188,6 +186,35 @@ def _row(name: str, p: Point) -> str:
         f"{_fmt(max(p.chi_bar))} | {_fmt(p.bound)} | {p.coverage:.0%} | "
         f"{'yes' if p.holds else 'NO'} |"
     )
+
+
+def _gamma_lines(d: DesignResult) -> list[str]:
+    """The ĝ law's γ candidates: per follower χ̄ over the declared health range, the run."""
+    if not d.gammas:
+        return []
+    g = np.asarray(d.base.design.g_min, float)
+    out = [
+        "",
+        "## The ĝ law's γ",
+        "",
+        "Each row is one simulated and verified run with the designed k1, λ, k2, σ and γ_i "
+        "(the first: the scenario's own); χ̄_i over the declared health range [g_min_i, 1] "
+        f"(g_min = {', '.join(_fmt(x) for x in g)}) from Theorem 2's closed form. Per follower "
+        "the admissible row (run complete, rows hold, every follower covered, within budget) "
+        "with the smallest χ̄_i is taken.",
+        "",
+        "| γ_i | peak ‖u_i‖ | max t_c (s) | χ̄_i over [g_min, 1] | χ̄_i of the run | complete | rows hold |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for p in d.gammas:
+        q = p.point
+        out.append(
+            f"| {', '.join(_fmt(x) for x in p.gamma)} | "
+            f"{', '.join(_fmt(x) for x in q.peak)} | {_fmt(q.tc_max, 3)} | "
+            f"{', '.join(_fmt(x) for x in p.worst)} | {', '.join(_fmt(x) for x in q.chi_bar)} | "
+            f"{'yes' if q.complete else 'NO'} | {'yes' if q.holds else 'NO'} |"
+        )
+    return out
 
 
 def write_report(d: DesignResult, folder: Path, prov: Provenance) -> Path:
@@ -266,6 +293,7 @@ def write_report(d: DesignResult, folder: Path, prov: Provenance) -> Path:
             f"{_fmt(d.designed.tc[i], 3)} | {_fmt(d.designed.chi_bar[i])} | "
             f"{_fmt(d.designed.def1[i])} | {_fmt(d.given.tc[i], 3)} | {_fmt(d.given.def1[i])} |"
         )
-    lines += ["", "![controller front](figures/design_controller.png)", "", "## Overrides", ""]
+    lines += ["", "![controller front](figures/design_controller.png)", *_gamma_lines(d)]
+    lines += ["", "## Overrides", ""]
     lines += [f"- `{k} = {v}`" for k, v in d.overrides.items()]
     return atomic_write_text(folder / "design.md", "\n".join(lines) + "\n")

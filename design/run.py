@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -22,13 +22,17 @@ from core.artifacts import OUT_ROOT, atomic_write_text
 from core.errors import ToolkitError
 from core.scenario import Scenario
 from design.controller import (
+    GammaPoint,
     Point,
     assemble,
     candidate_overrides,
     candidates,
     choose,
+    choose_gamma,
     disturbance_overrides,
     evaluate,
+    gamma_candidates,
+    health_bound,
 )
 
 #: the suffix of the designed scenario's name
@@ -64,6 +68,8 @@ class DesignResult:
         Per follower, the candidate whose level it took.
     seconds : float
         Wall time of the design.
+    gammas : list of GammaPoint
+        The ĝ law's γ candidates (the first: the scenario's own γ).
     """
 
     base: Scenario
@@ -74,6 +80,7 @@ class DesignResult:
     designed: Point
     chosen: list[Point]
     seconds: float
+    gammas: list[GammaPoint] = field(default_factory=list)
 
 
 def variant_of(user_variant: str | None, user_overrides: dict[str, Any] | None) -> str:
@@ -88,9 +95,9 @@ def variant_of(user_variant: str | None, user_overrides: dict[str, Any] | None) 
     """
     if not user_overrides:
         return VARIANT
-    from core.overrides import _variant_label
+    from core.overrides import variant_label
 
-    return f"{user_variant or _variant_label(user_overrides)}-{VARIANT}"
+    return f"{user_variant or variant_label(user_overrides)}-{VARIANT}"
 
 
 def _budget(sc: Scenario) -> np.ndarray:
@@ -165,8 +172,12 @@ def make_design(
         f"[design] {len(points)} controller candidates simulated and verified "
         f"({time.perf_counter() - t0:.1f} s)"
     )
-    ctrl, designed, chosen = _settle(
-        path, base, user, variant_of(user_variant, user), obs, points, root
+    variant = variant_of(user_variant, user)
+    ctrl, designed, chosen = _settle(path, base, user, variant, obs, points, root)
+    ctrl, designed, gammas = _gamma(path, base, user, variant, obs, ctrl, designed, root)
+    say(
+        f"[design] {len(gammas)} gamma candidates simulated and verified "
+        f"({time.perf_counter() - t0:.1f} s)"
     )
     return DesignResult(
         base=base,
@@ -177,7 +188,45 @@ def make_design(
         designed=designed,
         chosen=chosen,  # type: ignore[arg-type]
         seconds=time.perf_counter() - t0,
+        gammas=gammas,
     )
+
+
+def _gamma(
+    path: str | Path,
+    base: Scenario,
+    user: dict,
+    variant: str,
+    obs: dict,
+    ctrl: dict,
+    designed: Point,
+    root: Path,
+) -> tuple[dict, Point, list[GammaPoint]]:
+    """The ĝ law's γ_i (:func:`design.controller.choose_gamma`), confirmed by one run; the
+    scenario's own γ when the assembled γ_i break the budget or a row."""
+    from generated import api
+
+    spec, budget = base.design, _budget(base)
+    pts = []
+    for k, gamma in enumerate(gamma_candidates(base)):
+        ov = {**user, **obs, **ctrl, "controller.gamma": gamma}
+        sc = api.load(path, ov, f"{variant}-gamma{k}")
+        p = designed  # the first candidate is the scenario's γ: the run just confirmed
+        if k:
+            name, nan = f"{variant}-gamma{k}", math.nan
+            p = evaluate(path, ov, name, "gamma", nan, nan, spec.startup, root)
+        pts.append(GammaPoint(gamma, p, [health_bound(sc, i) for i in range(base.N)]))
+    chosen = choose_gamma(pts, budget)
+    gamma = [pts[0].gamma[i] if c is None else c.gamma[i] for i, c in enumerate(chosen)]
+    if gamma == pts[0].gamma:
+        return ctrl, designed, pts
+    out = {**ctrl, "controller.gamma": gamma}
+    final = evaluate(
+        path, {**user, **obs, **out}, variant, "designed", math.nan, math.nan, spec.startup, root
+    )
+    if final.within(budget) and final.holds and final.covered_all and final.complete:
+        return out, final, pts
+    return ctrl, designed, pts
 
 
 def _grid(
@@ -269,6 +318,7 @@ def write_design(
         "given": d.given.to_json(),
         "designed": d.designed.to_json(),
         "points": [p.to_json() for p in d.points],
+        "gammas": [g.to_json() for g in d.gammas],
     }
     write_report(d, folder, prov)
     atomic_write_text(folder / "design.json", json.dumps(record, indent=1) + "\n")

@@ -159,3 +159,100 @@ def topology(t_start: float, adjacency: np.ndarray, pinning: np.ndarray, h: np.n
     order, waves, depth = depth_waves(p, q, order)
     cpl = np.column_stack([np.diag(L_B), np.asarray(pinning, float) * h]).astype(float)
     return Topology(float(t_start), p, q, np.asarray(w, float), cpl, order, acyclic, waves, depth)
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A stretch of time on which the same topologies are active (the driver's unit).
+
+    With ``graph.link_fade`` = T > 0 the weights are W(t) = Σ_k c_k(t) W_k with
+    c_k = σ_k − σ_{k+1} (σ_0 = 1, σ_K = 0, σ_k = σ((t − s_k)/T), :func:`core.graph.fade_jets`):
+    topology k is active on [s_k, s_{k+1} + T). A segment's pattern is the union of its
+    active topologies' (two acyclic graphs fading into each other may form a cycle: its
+    order and ``acyclic`` are the union's); with T = 0 every segment is one topology.
+
+    Attributes
+    ----------
+    t_start : float
+    graph : Topology
+        The union pattern, its order, waves and depth (its ``w`` and ``cpl``: the
+        first active topology's, on the union pattern).
+    active : ndarray
+        Indices k of the active topologies.
+    w : ndarray
+        nact × nnz: each active topology's off-diagonal (L + B)_ij on the union pattern.
+    cpl : ndarray
+        nact × N × 2: each active topology's (l̄_ii, a_i0 h_i).
+    """
+
+    t_start: float
+    graph: Topology
+    active: np.ndarray
+    w: np.ndarray
+    cpl: np.ndarray
+
+    @property
+    def fading(self) -> bool:
+        """Whether more than one topology is active (the weights move)."""
+        return len(self.active) > 1
+
+
+def _union(t_start: float, tops: list[Topology], active: list[int]) -> Segment:
+    """The segment of ``active`` topologies: union pattern, each one's weights on it."""
+    N = len(tops[0].ptr) - 1
+    if len(active) == 1:
+        tp = tops[active[0]]
+        return Segment(
+            float(t_start), tp, np.asarray(active, np.int32), tp.w[None, :], tp.cpl[None]
+        )
+    rows = [
+        sorted({int(j) for k in active for j in tops[k].idx[tops[k].ptr[i] : tops[k].ptr[i + 1]]})
+        for i in range(N)
+    ]
+    ptr = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int32)
+    idx = np.asarray([j for r in rows for j in r], np.int32)
+    w = np.zeros((len(active), len(idx)))
+    for a, k in enumerate(active):
+        tp = tops[k]
+        for i in range(N):
+            at = {
+                int(j): float(v)
+                for j, v in zip(
+                    tp.idx[tp.ptr[i] : tp.ptr[i + 1]], tp.w[tp.ptr[i] : tp.ptr[i + 1]], strict=True
+                )
+            }
+            w[a, ptr[i] : ptr[i + 1]] = [at.get(j, 0.0) for j in rows[i]]
+    order, acyclic = topological_order(ptr, idx)
+    order, waves, depth = depth_waves(ptr, idx, order)
+    cpl = np.stack([tops[k].cpl for k in active])
+    g = Topology(float(t_start), ptr, idx, w[0], cpl[0], order, acyclic, waves, depth)
+    return Segment(float(t_start), g, np.asarray(active, np.int32), w, cpl)
+
+
+def segments(tops: tuple[Topology, ...], fade: float) -> tuple[Segment, ...]:
+    """The driver's segments of a switched graph whose links fade over ``fade`` seconds.
+
+    Boundaries at every switching time s_k and, with ``fade`` = T > 0, at every s_k + T;
+    topology k is active on [s_k, s_{k+1} + T) (s_0 = 0, s_K = ∞), where its coefficient
+    c_k = σ_k − σ_{k+1} of :class:`Segment` is not identically 0.
+
+    Parameters
+    ----------
+    tops : tuple of Topology
+        The base graph, then one per switching time (``t_start`` increasing).
+    fade : float
+        ``graph.link_fade`` (0: raw switching, one topology per segment).
+    """
+    starts = [t.t_start for t in tops]
+    if fade <= 0.0 or len(tops) == 1:
+        return tuple(_union(s, list(tops), [k]) for k, s in enumerate(starts))
+    bounds = sorted({*starts, *(s + fade for s in starts[1:])})
+    out = []
+    for b in bounds:
+        act = [
+            k
+            for k in range(len(tops))
+            if starts[k] <= b and (k + 1 == len(tops) or b < starts[k + 1] + fade)
+        ]
+        out.append(_union(b, list(tops), act))
+    return tuple(out)

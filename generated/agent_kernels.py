@@ -8,7 +8,8 @@ option set, the kernels of ONE agent (:func:`symbolic.cascade.agent_block`, as C
 * ``ag_rhs``: the agent's rates (and the leader's, eq. (3));
 * ``ag_jac``: their Jacobian block K = ∂(ẋ_b, jets)/∂(x_b, nb), its structural
   nonzeros only (column-compressed, ``ag_jac_sparsity_out(1)``);
-* ``ag_faults``: every distinct fault expression of the scenario;
+* ``ag_faults``: one 0 (the kernels evaluate g_i(t), f_i(t) from their agent's row of
+  runtime numbers, :func:`symbolic.parameters.agent_rows`; the driver still calls it);
 * ``ag_nfac``, ``ag_nsol``, ``ag_gmat``: the agent's part of CVODE's Newton systems on
   the structural pattern of K (:func:`newton_functions`): the LU of D = I + c A_ss without
   pivoting, unrolled (:mod:`generated.sparse_lu`) and packed with the blocks a solve
@@ -17,9 +18,11 @@ option set, the kernels of ONE agent (:func:`symbolic.cascade.agent_block`, as C
 
 and appends the driver ``generated/native/agents.c``. What is compiled in, and so is the
 library's identity (the cache key is the hash of the C source): the follower model and
-its physical parameters, the options, the leader (A0, B0, C0 and u0), the observer
-gains and UIO (``gains``), and the set of distinct fault expressions; never the graph,
-never N (:func:`kernel_key`).
+its physical parameters, the options, the leader (A0, B0, C0 and the templates of u0),
+the patterns of the observer's gain matrices and the templates of the fault
+expressions; never the graph, never N, never a gain's or an expression's numbers
+(:func:`kernel_key`): Q, λ1, λ2, the UIO's matrices and the literals of u0, g_i and f_i
+are columns of each agent's row (:func:`symbolic.parameters.row_layout`).
 """
 
 from __future__ import annotations
@@ -36,10 +39,12 @@ from core.scenario import Scenario
 from generated import native
 from generated.codegen import Library, build_library
 from generated.compiler import Toolchain
+from generated.loaded import library_stamp
 from generated.sparse_lu import sparse_lu
 from generated.values import CodegenSettings
 from symbolic.cascade import agent_block
-from symbolic.closed_loop import fault_function, make_layout, model_groups, observer_gains
+from symbolic.closed_loop import make_layout, model_groups, observer_gains
+from symbolic.parameters import row_layout, structure
 from synthesis.gains import Gains
 
 DRIVER = native.NATIVE_DIR / "agents.c"
@@ -59,7 +64,7 @@ def kernel_functions(
     ----------
     sc : Scenario
     gains : Gains
-        The observer gains and the UIO (compiled in).
+        The observer gains and the UIO (their patterns compiled in, their values rows).
     model_index : int
         0-based follower whose model and parameters the kernels use.
     cse : bool
@@ -87,9 +92,8 @@ def kernel_functions(
     ]
     fns.append(ca.Function(RHS_NAME, args, [xbdot, jets], names, ["xbdot", "jets"], opts))
     fns.append(ca.Function(JAC_NAME, args, [jets, K], names, ["jets", "K"], opts))
-    faults, _ = fault_function(sc)
-    t = ca.SX.sym("t")
-    fns.append(ca.Function(FAULTS_NAME, [t], [faults(t)], ["t"], ["values"], opts))
+    t = ca.SX.sym("t")  # the blocks evaluate their faults from their rows (agent_block)
+    fns.append(ca.Function(FAULTS_NAME, [t], [ca.SX.zeros(1)], ["t"], ["values"], opts))
     return fns + newton_functions(K.sparsity(), sc.m, 3 * n, opts)
 
 
@@ -182,8 +186,9 @@ def kernel_settings(
 
 #: kernel libraries built in this process, by :func:`kernel_key` (core/memo.py)
 _BUILT = MEMO.namespace("agent-kernels", 64)
-#: the gains the kernels compile in (graph-independent: the leader's LMIs and the UIO)
-KERNEL_GAINS = ("A0", "B0", "C0", "Q", "Gamma", "Phi", "lambda1", "lambda2")
+#: the gains the kernels compile in: the leader's matrices (the observer's Q, λ1, λ2 and
+#: UIO are runtime numbers on their patterns, symbolic.parameters.row_layout)
+KERNEL_GAINS = ("A0", "B0", "C0")
 
 
 def kernel_key(
@@ -195,10 +200,11 @@ def kernel_key(
 ) -> str:
     """SHA-256 of everything the kernels of one model compile in (never the graph, never N).
 
-    The follower model and its parameters, the leader, the observer's, controller's and
-    options' structural settings (:func:`symbolic.parameters.structure` without its
-    graph, followers and gains), the gains of :data:`KERNEL_GAINS`, the distinct fault
-    expressions in order, the driver sources and the compiler settings. Two scenarios
+    The follower model and its parameters, the leader (u0 as templates), the
+    controller's and options' structural settings (:func:`symbolic.parameters.structure`
+    without its graph, followers, observer and gains), the gains of :data:`KERNEL_GAINS`, the row
+    layout (:meth:`symbolic.parameters.RowLayout.key`: the fault templates, the patterns
+    of the observer's gain matrices), the driver sources and the compiler settings. Two scenarios
     with equal keys compile to the same library: this process builds it once
     (the build cache keys it again by its source).
 
@@ -210,22 +216,18 @@ def kernel_key(
     settings : CodegenSettings, optional
     openmp : bool
     """
-    from symbolic.parameters import structure
-
     st = structure(sc, gains)
     fo = sc.followers[model_index]
-    texts: list[str] = []
-    for f in sc.followers:
-        for e in (f.g.expr, *f.f):
-            if e.text not in texts:
-                texts.append(e.text)
     desc = {
-        "structure": {k: v for k, v in st.items() if k not in ("graph", "followers", "gains")},
+        # the leader's u0 as templates (its literals are row columns); the observer's
+        # settings enter only through the gains (their patterns: "rows")
+        "structure": {
+            k: v for k, v in st.items() if k not in ("graph", "followers", "gains", "observer")
+        },
         "gains": {k: np.asarray(getattr(gains, k), float).tolist() for k in KERNEL_GAINS},
         "model": [fo.model, sorted(fo.params.items())],
-        "faults": texts,
-        # the leader's u0 is compiled in with its numbers (the structure has its templates)
-        "u0": None if sc.leader.u0 is None else [e.text for e in sc.leader.u0],
+        # the fault templates, the gains' patterns, the row's sizes
+        "rows": row_layout(sc, observer_gains(sc, gains)).key(),
         "driver": hashlib.sha256(
             (native.COMMON.read_text() + DRIVER.read_text()).encode()
         ).hexdigest(),
@@ -286,11 +288,11 @@ def build_models(
     for g, members in enumerate(groups):
         model[members] = g
         key = kernel_key(sc, gains, members[0], settings, openmp)
-        lib = _BUILT.get(key)
-        if lib is None or not lib.path.is_file():
+        lib, stamp = _BUILT.get(key) or (None, None)
+        if lib is None or library_stamp(lib) != stamp:  # its entry changed: check, rebuild
             fns = kernel_functions(sc, gains, members[0], cse=s.cse)
             lib = build_library(fns, s, toolchain=driver_toolchain(sc))
-            _BUILT[key] = lib
+            _BUILT[key] = (lib, library_stamp(lib))
         else:
             lib = dataclasses.replace(lib, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0)
         libs.append(lib)

@@ -5,8 +5,9 @@ the kernels of ONE agent are compiled once per follower model
 (:mod:`generated.agent_kernels`) and the driver ``generated/native/agents.c`` evaluates
 them over the agents in passes (one per jet level), so a cycle is no special case.
 Everything about the graph — N, the pattern, the weights (L + B)_ij, the pinning and
-gauge a_i0 h_i, every switching time — is runtime data (:class:`AgentProblem`, CSR
-arrays per topology, :mod:`generated.agent_graph`) passed to the driver. The Newton
+gauge a_i0 h_i, every switching time and the links' fade time ``graph.link_fade`` — is
+runtime data (:class:`AgentProblem`, CSR arrays per segment of time on which the same
+topologies are active, :mod:`generated.agent_graph`) passed to the driver. The Newton
 systems are reduced to the agents' jets and solved by forward substitution (acyclic), a
 dense LU (small N) or GMRES (any graph); see the driver's header comment. Followers of
 several models run in one CVODE run, each from its own library (the driver gets one
@@ -23,6 +24,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +32,7 @@ import numpy as np
 from core.errors import IntegrationError, ScenarioError
 from core.scenario import Scenario
 from generated import native
-from generated.agent_graph import Topology, topology
+from generated.agent_graph import Segment, Topology, segments, topology
 from generated.agent_kernels import (
     FAULTS_NAME,
     GMAT_NAME,
@@ -42,9 +44,10 @@ from generated.agent_kernels import (
     build_models,
     kernel_key,
 )
+from generated.loaded import open_kernels
 from generated.values import IntegratorSettings, Trajectory
-from symbolic.closed_loop import fault_function, make_layout
-from symbolic.parameters import param_matrix
+from symbolic.closed_loop import make_layout, observer_gains
+from symbolic.parameters import agent_rows
 from synthesis.gains import Gains
 
 __all__ = [
@@ -75,13 +78,18 @@ class AgentProblem:
     model : ndarray
         N ints: each follower's kernel library.
     fault_index : ndarray
-        N × (1+n): ``gf`` of follower i is ``values[fault_index[i]]``.
+        N × (1+n) zeros: the driver's ``gf`` (``ag_faults``' values), which the kernels
+        do not read (they evaluate g_i, f_i from their rows).
     nfaults : int
-        Length of the fault kernel's output.
+        Length of the fault kernel's output (1).
     params : ndarray
-        N × npar, agent-major.
+        N × npar, agent-major: each follower's row of runtime numbers
+        (:func:`symbolic.parameters.agent_rows`: per-agent numbers, the observer's gains,
+        u0's and its faults' literals).
     topologies : tuple of Topology
         The base graph, then one per switching time.
+    fade : float
+        ``graph.link_fade``: seconds a switch's weights fade over (0: raw).
     """
 
     N: int
@@ -93,6 +101,14 @@ class AgentProblem:
     nfaults: int
     params: np.ndarray
     topologies: tuple[Topology, ...]
+    fade: float
+
+    @cached_property
+    def segments(self) -> tuple[Segment, ...]:
+        """What the driver reads: the active topologies of each stretch of time
+        (:func:`generated.agent_graph.segments`), derived from :attr:`topologies` and
+        :attr:`fade` (a problem with other topologies, as the console's calls, gets its own)."""
+        return segments(self.topologies, self.fade)
 
     @property
     def nx(self) -> int:
@@ -101,8 +117,8 @@ class AgentProblem:
 
     @property
     def acyclic(self) -> bool:
-        """Whether every topology is acyclic."""
-        return all(t.acyclic for t in self.topologies)
+        """Whether every segment is acyclic (while links fade: the union of the topologies)."""
+        return all(s.graph.acyclic for s in self.segments)
 
 
 def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
@@ -112,7 +128,7 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
     ----------
     sc : Scenario
     gains : Gains
-        Supplies the gauge h (checked against the graph).
+        Supplies the gauge h (checked against the graph) and the observer's gains.
     model : ndarray
         From :func:`build_models`.
 
@@ -124,26 +140,21 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
     h = np.diag(np.atleast_2d(gains.H)).astype(float)
     if h.shape != (sc.N,) or not np.all(np.abs(h) == 1.0):
         raise ScenarioError("gains", "H", f"gauge has entries {h}", f"{sc.N} signs +1/-1")
-    if sc.graph.switches and sc.graph.link_fade > 0:
-        raise ScenarioError(
-            sc.path,
-            "graph.link_fade",
-            f"is {sc.graph.link_fade:g} s, but the per-agent driver switches links raw",
-            "graph.link_fade = 0, or a whole-loop method (docs/verification.md, 'Link losses')",
-        )
     lay = make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered")
-    faults, fidx = fault_function(sc)
     tops = tuple(topology(t.t_start, t.adjacency, t.pinning, h) for t in sc.graph.topologies())
+    fade = float(sc.graph.link_fade) if len(tops) > 1 else 0.0
     return AgentProblem(
         N=sc.N,
         m=sc.m,
         na=lay.agent_size,
         n=sc.n,
         model=np.asarray(model, np.int32),
-        fault_index=np.asarray(fidx, np.int32).reshape(sc.N, 1 + sc.n),
-        nfaults=int(faults.sparsity_out(0).numel()),
-        params=np.ascontiguousarray(param_matrix(sc).T, dtype=float),
+        # the kernels evaluate g_i, f_i from their rows: ag_faults' one 0 is not read
+        fault_index=np.zeros((sc.N, 1 + sc.n), np.int32),
+        nfaults=1,
+        params=np.ascontiguousarray(agent_rows(sc, observer_gains(sc, gains)), dtype=float),
         topologies=tops,
+        fade=fade,
     )
 
 
@@ -210,6 +221,12 @@ class Problem(ctypes.Structure):
         ("poff", _IP),
         ("lead_nz", _IP),
         ("depth", _IP),
+        ("act_ptr", _IP),
+        ("act_top", _IP),
+        ("w_off", _IP),
+        ("ngraph", ctypes.c_int),
+        ("t_graph", _DP),
+        ("fade", ctypes.c_double),
     ]
 
 
@@ -356,7 +373,7 @@ def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
     # enters a parallel region per pass and per wave, microseconds apart, and threads that
     # sleep between them cost more to wake than a wave takes (docs/performance.md)
     os.environ.setdefault("OMP_WAIT_POLICY", "active")
-    libs = [native.load(Path(p)) for p in libraries]
+    libs = [open_kernels(Path(p)) for p in libraries]  # from verified private copies
     ci, cd, prob = ctypes.c_int, ctypes.c_double, ctypes.POINTER(Problem)
     opts, res = ctypes.POINTER(native.Options), ctypes.POINTER(native.Result)
     for lib, p in zip(libs, libraries, strict=True):
@@ -375,19 +392,26 @@ def _c_problem(
     libs: list[ctypes.CDLL], prob: AgentProblem, ls: LinearSettings
 ) -> tuple[Problem, list]:
     """The driver's problem struct and the arrays it points into (kept alive by the caller)."""
-    tops = prob.topologies
+    segs = prob.segments
+    tops = [s.graph for s in segs]  # each segment's pattern (the union while links fade)
     N = prob.N
     offs = np.cumsum([0] + [len(t.idx) for t in tops])
     ptr = np.concatenate([t.ptr + offs[k] for k, t in enumerate(tops)]).astype(np.int32)
+    nact = [len(s.active) for s in segs]
+    w_off = np.cumsum([0] + [len(t.idx) for s, t in zip(segs, tops, strict=True) for _ in s.active])
     arrays = {
         "model": np.ascontiguousarray(prob.model, np.int32),
         "fidx": np.ascontiguousarray(prob.fault_index.ravel(), np.int32),
         "prm": np.ascontiguousarray(prob.params, float),
-        "t_switch": np.ascontiguousarray([t.t_start for t in tops[1:]] + [0.0], float),
+        "t_switch": np.ascontiguousarray([s.t_start for s in segs[1:]] + [0.0], float),
         "ptr": np.ascontiguousarray(ptr),
         "idx": np.ascontiguousarray(np.concatenate([t.idx for t in tops] + [[0]]), np.int32),
-        "w": np.ascontiguousarray(np.concatenate([t.w for t in tops] + [[0.0]]), float),
-        "cpl": np.ascontiguousarray(np.concatenate([t.cpl.ravel() for t in tops]), float),
+        "w": np.ascontiguousarray(np.concatenate([s.w.ravel() for s in segs] + [[0.0]]), float),
+        "cpl": np.ascontiguousarray(np.concatenate([s.cpl.ravel() for s in segs]), float),
+        "act_ptr": np.concatenate([[0], np.cumsum(nact)]).astype(np.int32),
+        "act_top": np.ascontiguousarray(np.concatenate([s.active for s in segs]), np.int32),
+        "w_off": np.ascontiguousarray(w_off[:-1], np.int32),
+        "t_graph": np.ascontiguousarray([t.t_start for t in prob.topologies], float),
         "order": np.ascontiguousarray(np.concatenate([t.order for t in tops]), np.int32),
         "acyclic": np.asarray([int(t.acyclic) for t in tops], np.int32),
         "nwaves": np.asarray([len(t.waves) - 1 for t in tops], np.int32),
@@ -409,7 +433,9 @@ def _c_problem(
         faults=_fn(libs[0], FAULTS_NAME),
         faults_work=_fn(libs[0], FAULTS_NAME + "_work"),
         nfaults=prob.nfaults,
-        ntop=len(tops),
+        ntop=len(segs),
+        ngraph=len(prob.topologies),
+        fade=float(prob.fade),
         solver=SOLVERS[ls.solver],
         nthreads=int(ls.threads),
         krylov=int(ls.krylov),

@@ -177,6 +177,8 @@ def build(
     method: str | None = None,
     settings: CodegenSettings | None = None,
     closed_loop: Any = None,
+    *,
+    runtime_parameters: bool = False,
 ) -> Built:
     """Symbolic closed loop -> C -> shared library (cached) -> loaded Functions.
 
@@ -196,12 +198,16 @@ def build(
         ``jacobian="auto"`` is resolved from ``sc.N`` (:func:`resolve_codegen`).
     closed_loop : ClosedLoop, optional
         A prebuilt closed loop (skips ``build_closed_loop``).
+    runtime_parameters : bool
+        The caller needs a library whose functions take the runtime parameters p (the
+        console's ``LiveLoop``): method ``native`` then builds the whole loop
+        (``driver.c``, N <= 20) instead of the per-agent engine.
     """
     settings = resolve_codegen(sc.N, settings)
     method = method or sc.integration.method
     t0 = time.perf_counter()
     # first: what the method needs of the scenario itself (the per-agent engine's kernels)
-    prepared = solvers.get(method).prepare(sc, gains)
+    prepared = None if runtime_parameters else solvers.get(method).prepare(sc, gains)
     # the cache folder is part of the key: a build of another cache (HITL_BUILD_DIR) is not reused
     key = (structure_key(sc, gains), method, settings, cache_root(settings))
     if prepared is not None:  # the method's own libraries: only the closed loop is reused
@@ -263,8 +269,8 @@ def build_from_closed_loop(
         ``timings["symbolic_build"]`` includes it (default: now).
     prepared : object, optional
         What the method's :meth:`~generated.solvers.Solver.prepare` returned for the
-        scenario (method ``native`` above :data:`generated.native.MAX_AGENTS` followers:
-        what its per-agent kernels are built from).
+        scenario (method ``native``: what its per-agent kernels are built from; None
+        builds the whole loop).
     """
     return _compile(cl, method, settings, t_symbolic_start, prepared)[0]
 

@@ -42,7 +42,7 @@ class Built:
     timings : dict
         ``symbolic_build``, ``codegen``, ``compile`` seconds.
     agents : (tuple of Library, AgentProblem) or None
-        Method ``native`` above :data:`generated.native.MAX_AGENTS` followers: the
+        Method ``native`` (unless built with ``runtime_parameters``): the
         per-agent kernel libraries (:mod:`generated.agents`) and the scenario's runtime
         data; :attr:`library` is then the first kernel library's record and :attr:`dyn`,
         :attr:`outputs` the symbolic closed loop's Functions (CasADi's virtual machine).

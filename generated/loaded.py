@@ -11,6 +11,7 @@ loaded from (:func:`library_stamp`), else it is checked and loaded again
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 import hashlib
 import os
@@ -154,6 +155,49 @@ def open_image(lib: Library, form: str) -> Image:
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return Image(stamp, dyn_p, outputs_p, driver)
+
+
+#: per-agent kernel libraries loaded in this process, by (path, stamp) (core/memo.py)
+_KERNELS = MEMO.namespace("kernel-images", 32)
+
+
+def open_kernels(path: Path) -> ctypes.CDLL:
+    """A per-agent kernel library (``generated/agents.py``) loaded from a private copy of
+    the bytes its cache entry vouches for, once per entry and stamp.
+
+    As :func:`open_image`: the process never maps the cache file itself, so an in-place
+    rewrite of the entry cannot change code it runs; an entry that changed since it was
+    built does not check out (:func:`verified_bytes`) and is refused.
+
+    Parameters
+    ----------
+    path : Path
+        ``Library.path`` of a kernel library (``<root>/<key>/...``).
+
+    Raises
+    ------
+    BuildError
+        The entry does not check out or cannot be loaded.
+    """
+    folder = Path(path).parent
+    lib = Library(folder.name, folder, folder, Path(path), (), True, 0.0, 0.0, 0)
+    hit = _KERNELS.get((str(path), library_stamp(lib)))
+    if hit is not None:
+        return hit
+    data, stamp = verified_bytes(lib)
+    root = folder.parent
+    try:
+        tmp = Path(tempfile.mkdtemp(dir=root, prefix=f"{TMP_PREFIX}{lib.key[:12]}-{os.getpid()}-"))
+    except OSError:  # a read-only cache root
+        tmp = Path(tempfile.mkdtemp(prefix=f"hitl-{lib.key[:12]}-"))
+    try:
+        copy = tmp / lib.path.name
+        copy.write_bytes(data)
+        cdll = native.open_library(copy)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    _KERNELS[(str(path), stamp)] = cdll
+    return cdll
 
 
 @dataclass(frozen=True)

@@ -264,7 +264,8 @@ def build(ode_dyn: ca.Function, settings: CodegenSettings | None = None) -> Libr
 def load(path: Path) -> ctypes.CDLL:
     """Load a native (whole-loop or per-agent) library once per path and check it.
 
-    Used by the per-agent driver (:mod:`generated.agents`). The path names a
+    The per-agent driver loads its libraries from private copies instead
+    (:func:`generated.loaded.open_kernels`). The path names a
     content-hashed cache entry: the cache builds an entry in a temporary folder and
     renames it into place, so a handle loaded before keeps the code of that key. A file
     rewritten in place behind the cache's back is not detected here; ``api.build``

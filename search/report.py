@@ -51,10 +51,9 @@ def plot(table: pd.DataFrame, path: Path) -> Path:
     path : Path
         The PNG written.
     """
-    import matplotlib
+    from core.pyplot import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
     drawn = False

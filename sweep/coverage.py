@@ -11,9 +11,12 @@ Per sample and follower i (1-based), from the bounds table's rows
 - ``last_covered:<i>``: whether its last interval (after its last restart: health switch,
   operator step, neighbourhood switch) has a guaranteed Theorem 2 row and a guaranteed
   Definition 1 row (at the ultimate level or the envelope), both reaching the horizon;
+- ``ultimate_from:<i>``: the time from which it is covered at the ultimate level on its
+  last interval (:func:`verify.headline.ultimate_from`: its guaranteed ultimate-level
+  tracking rows reach the horizon and all hold), NaN when it is not;
 
-and ``coverage`` (mean of ``covered:<i>``) and ``followers_covered`` (how many
-``last_covered:<i>``).
+and ``coverage`` (mean of ``covered:<i>``), ``followers_covered`` (how many
+``last_covered:<i>``) and ``followers_ultimate`` (how many finite ``ultimate_from:<i>``).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 #: the per-follower coverage columns, by prefix
-PREFIXES = ("t2_rows:", "covered:", "covered_env:", "last_covered:")
+PREFIXES = ("t2_rows:", "covered:", "covered_env:", "last_covered:", "ultimate_from:")
 
 
 def _last_covered(rows: pd.DataFrame, t1: float) -> bool:
@@ -51,25 +54,29 @@ def coverage_columns(table: pd.DataFrame) -> dict[str, Any]:
     table : DataFrame
         The bound-vs-actual table (:func:`verify.table.bounds_table`).
     """
-    from verify.headline import by_agent, coverage
+    from verify.headline import by_agent, coverage, ultimate_from
 
     if not len(table) or "t_start" not in table:
-        return {"coverage": math.nan, "followers_covered": 0}
+        return {"coverage": math.nan, "followers_covered": 0, "followers_ultimate": 0}
     t0 = float(np.nanmin(table["t_start"].astype(float)))
     t1 = float(np.nanmax(table["t_end"].astype(float)))
     out: dict[str, Any] = {}
-    covered, last = [], 0
+    covered, last, ultimate = [], 0, 0
     groups = by_agent(table)
     for c in coverage(table, (t0, t1)):
         ok = _last_covered(groups[str(c.agent)], t1)
+        since = ultimate_from(groups[str(c.agent)], c.agent, t1)
         out[f"t2_rows:{c.agent}"] = c.tracking
         out[f"covered:{c.agent}"] = c.covered
         out[f"covered_env:{c.agent}"] = c.covered_any
         out[f"last_covered:{c.agent}"] = ok
+        out[f"ultimate_from:{c.agent}"] = since
         covered.append(c.covered)
         last += int(ok)
+        ultimate += int(math.isfinite(since))
     out["coverage"] = float(np.mean(covered)) if covered else math.nan
     out["followers_covered"] = last
+    out["followers_ultimate"] = ultimate
     return out
 
 
@@ -127,3 +134,95 @@ def _line(label: str, held: np.ndarray, last: np.ndarray, cov: np.ndarray, env: 
         f"{n} ({share:.1f}%) | {100 * float(np.nanmean(cov)):.1f}% | "
         f"{100 * float(np.nanmean(env)):.1f}% |"
     )
+
+
+#: the prefix of the columns of the run with the base's own gains (``compare_gains``)
+GIVEN = "given:"
+
+
+def gains_summary(table: pd.DataFrame, prefix: str = "") -> dict[str, Any]:
+    """What one gain set guarantees over a study's samples (the columns under ``prefix``).
+
+    Parameters
+    ----------
+    table : DataFrame
+        The study's results.
+    prefix : str
+        ``""`` for the sample's own run, :data:`GIVEN` for its run with the base's gains.
+
+    Returns
+    -------
+    dict
+        ``samples``, ``ok`` (runs to the end), ``held`` (ok samples whose guaranteed rows
+        all hold), ``coverage_mean`` and ``coverage_min`` (the ultimate level's share of
+        follower-time, over the ok samples), ``follower_samples`` and ``ultimate`` (those
+        covered at the ultimate level on their last interval), ``all_ultimate`` (ok samples
+        with every follower so covered), ``from_median`` and ``from_max`` (the median and
+        latest time from which a covered follower-sample is covered).
+    """
+    status = table.get(f"{prefix}status", pd.Series([], dtype=object)).astype(str)
+    ok = table[(status == "ok").to_numpy()]
+    agents = sorted(
+        int(m.group(1))
+        for c in table.columns
+        if (m := re.fullmatch(re.escape(prefix) + r"ultimate_from:(\d+)", c))
+    )
+    since = ok[[f"{prefix}ultimate_from:{a}" for a in agents]].astype(float).to_numpy()
+    covered = np.isfinite(since)
+    cov = ok[f"{prefix}coverage"].astype(float).to_numpy() if len(ok) else np.array([])
+    return {
+        "samples": len(table),
+        "ok": len(ok),
+        "held": int(ok[f"{prefix}guaranteed_held"].astype(bool).sum()) if len(ok) else 0,
+        "coverage_mean": float(np.nanmean(cov)) if cov.size else math.nan,
+        "coverage_min": float(np.nanmin(cov)) if cov.size else math.nan,
+        "follower_samples": int(covered.size),
+        "ultimate": int(covered.sum()),
+        "all_ultimate": int(covered.all(axis=1).sum()) if covered.size else 0,
+        "from_median": float(np.median(since[covered])) if covered.any() else math.nan,
+        "from_max": float(np.max(since[covered])) if covered.any() else math.nan,
+    }
+
+
+def gains_lines(table: pd.DataFrame) -> list[str]:
+    """Markdown: per gain set, samples ok, guaranteed rows held, coverage at the ultimate
+    level (mean, lowest sample) and the follower-samples covered at the ultimate level on
+    their last interval; with ``compare_gains``, the base's own gains on a second line.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The study's results.
+    """
+    if not any(c.startswith("ultimate_from:") for c in table.columns):
+        return []
+    given = f"{GIVEN}status" in table.columns
+    sets = [("designed (the base's design.json)" if given else "the study's", "")]
+    if given:
+        sets.append(("given (the base scenario's own)", GIVEN))
+    lines = [
+        "## Guarantees per gain set",
+        "",
+        "A follower is covered at the ultimate level on its last interval when its guaranteed "
+        "Theorem 2 (provable variant) and Definition 1 (derived bound) rows of the interval "
+        "after its last restart reach the horizon and every guaranteed tracking row there "
+        "holds (docs/verification.md, 'Coverage'), from the time given (median and latest "
+        "over the covered follower-samples: a last interval opened shortly before the "
+        "horizon, e.g. by an intermittent fault, is covered from late on). Coverage: the "
+        "share of follower-time inside the windows of guaranteed rows at the ultimate level.",
+        "",
+        "| gains | samples ok | all guaranteed rows held | coverage at the ultimate level: "
+        "mean | lowest sample | follower-samples covered on their last interval | samples "
+        "with every follower covered | covered from [s]: median | latest |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for label, prefix in sets:
+        s = gains_summary(table, prefix)
+        share = 100.0 * s["ultimate"] / s["follower_samples"] if s["follower_samples"] else 0.0
+        lines.append(
+            f"| {label} | {s['ok']} of {s['samples']} | {s['held']} of {s['ok']} | "
+            f"{100 * s['coverage_mean']:.1f}% | {100 * s['coverage_min']:.1f}% | "
+            f"{s['ultimate']} of {s['follower_samples']} ({share:.1f}%) | "
+            f"{s['all_ultimate']} of {s['ok']} | {s['from_median']:.3g} | {s['from_max']:.4g} |"
+        )
+    return lines

@@ -58,7 +58,7 @@ class LinkLosses:
         ``"required"``: a switched topology on which the sample's given λ1 fails Theorem 1
         refuses its gains (the sample fails), as for ``make sim``; ``"measured"``: the
         gains are certified on the base graph and the condition on every topology is a
-        column of the row (:func:`sweep.per_agent.topology_columns`).
+        column of the row (:func:`sweep.switched_gains.topology_columns`).
     """
 
     count: tuple[int, int]

@@ -1,7 +1,7 @@
 """A study's identity, recorded in its folder (``study.json``) and compared on every run.
 
 What the samples depend on: the seed, ``[set]``, ``[params]``, the ``[graph]``,
-``[operator]`` and ``[faults]`` families, ``per_agent``, the base scenario (path and SHA-256), the
+``[operator]`` and ``[faults]`` families, ``compare_gains``, the base scenario (path and SHA-256), the
 operator traces' SHA-256 and the package's version. ``count``, ``name`` and
 ``description`` are not part of it: sample k is the same whatever the count.
 """
@@ -32,7 +32,7 @@ COMPARED = {
     "graph": "[graph]",
     "operator": "[operator]",
     "faults": "[faults]",
-    "per_agent": "per_agent",
+    "compare_gains": "compare_gains",
     "base": "base (path)",
     "base_sha256": "base scenario (SHA-256)",
     "traces_sha256": "operator traces (SHA-256)",
@@ -92,7 +92,8 @@ def study_identity(study: Study) -> dict[str, Any]:
         "graph": _graph(study),
         "operator": _plain(study.operator),
         "faults": _plain(study.faults),
-        **({"per_agent": True} if study.per_agent else {}),  # absent: the default engine
+        # recorded only when true, so the identity of every other study is unchanged
+        **({"compare_gains": True} if study.compare_gains else {}),
         "base": study.base,
         "base_sha256": _file_sha(study.base, MAX_SCENARIO_BYTES),
         "traces_sha256": [_file_sha(t, MAX_SCENARIO_BYTES << 6) for t in traces],

@@ -9,7 +9,8 @@ import numpy as np
 import pandas as pd
 
 from core.artifacts import atomic_write_text
-from sweep.coverage import coverage_lines
+from core.pyplot import pyplot
+from sweep.coverage import coverage_lines, gains_lines
 
 #: (column, label) of the medians in the summary table
 MEDIANS = [
@@ -78,15 +79,6 @@ def entry_times(table: pd.DataFrame) -> np.ndarray:
 
 #: colour of each fault type in the scatter plots
 TYPE_COLOURS = {"abrupt": "C0", "ramp": "C1", "intermittent": "C2", "bias": "C3"}
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _num(table: pd.DataFrame, col: str) -> np.ndarray:
@@ -168,7 +160,7 @@ def fault_figures(points: pd.DataFrame, figs: Path) -> list[Path]:
     """
     if not len(points):
         return []
-    plt = _pyplot()
+    plt = pyplot()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.4), sharey=True)
     _scatter(
         a1, points[points["type"] != "bias"], "severity", "fault severity (loss of effectiveness)"
@@ -198,7 +190,7 @@ def graph_figure(table: pd.DataFrame, figs: Path) -> Path | None:
     good = np.isfinite(N) & np.isfinite(err)
     if not good.any():
         return None
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(5, 3.4))
     lost = links_lost(ok)
     switched = tail_switched(ok)
@@ -243,13 +235,13 @@ def links_lost(table: pd.DataFrame) -> np.ndarray:
 def _save(fig, path: Path) -> Path:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    _pyplot().close(fig)
+    pyplot().close(fig)
     return path
 
 
 def _histogram(values: np.ndarray, xlabel: str, path: Path) -> Path | None:
     """A histogram written to ``path`` (None when there is nothing finite to draw)."""
-    plt = _pyplot()
+    plt = pyplot()
     values = values[np.isfinite(values)]
     if not len(values):
         return None
@@ -287,7 +279,7 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
             lines.append(f"| largest {label} | {np.max(vals):.4g} |")
     lines += step_lines(ok)
     lines += link_lines(ok)
-    lines += per_agent_lines(table)
+    lines += kernel_lines(table)
     lines += tail_split_lines(ok)
     t2 = entry_times(table)
     lines.append(
@@ -331,11 +323,11 @@ def step_lines(ok: pd.DataFrame) -> list[str]:
     ]
 
 
-def per_agent_lines(table: pd.DataFrame) -> list[str]:
-    """A study on the per-agent engine (``per_agent = true``): the kernel libraries the
-    samples ran and which samples compiled them, the cyclic graphs, and Theorem 1 shown
-    with the paper's z on every topology (``[graph.losses] theorem1 = "measured"``); no
-    line for other studies.
+def kernel_lines(table: pd.DataFrame) -> list[str]:
+    """Samples run on the per-agent engine (method ``native``): the kernel libraries they
+    ran and which samples compiled them, the cyclic graphs, and Theorem 1 shown with the
+    paper's z on every topology (``[graph.losses] theorem1 = "measured"``); no line
+    without them.
 
     Parameters
     ----------
@@ -592,6 +584,8 @@ def write_report(results: Path, retried: int | None = None) -> Path:
         *fault_type_lines(points),
         "",
         *coverage_lines(table, points),
+        "",
+        *gains_lines(table),
         "",
         "## Figures",
         "",

@@ -158,11 +158,6 @@ def run_study(
     for flag, value in (("--batch", batch), ("--workers", workers), ("--chunk", chunk)):
         if value is not None and value < 1:
             raise UsageError(f"{flag}: {value}: give an integer >= 1")
-    if keep and study.per_agent:
-        raise UsageError(
-            f"--keep-runs: study {study.name} runs on the per-agent engine (per_agent = true), "
-            "whose samples stay in memory: run it without --keep-runs"
-        )
     scheduler = scheduler_address(scheduler)
     created = [d for d in (paths.folder, *paths.folder.parents) if not d.exists()]
     paths.folder.mkdir(parents=True, exist_ok=True)

@@ -14,7 +14,7 @@ import copy
 import hashlib
 import re
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -59,7 +59,7 @@ TOP_KEYS = {
     "graph",
     "operator",
     "faults",
-    "per_agent",
+    "compare_gains",
 }
 #: a ``--set`` key: dotted names, each with an optional 1-based [index]
 KEY_PATTERN = r"[A-Za-z_]\w*(\[\d+\])?(\.[A-Za-z_]\w*(\[\d+\])?)*"
@@ -95,8 +95,11 @@ class Study:
         The operator input family, or None to keep the base's u0.
     faults : FaultFamily or None
         Random faults added to the followers, or None.
-    per_agent : bool
-        Every sample on the per-agent engine, whatever its N (:mod:`sweep.per_agent`).
+    designed : dict
+        The keys of ``fixed`` that come from the base's design (its design.json, not
+        overridden by ``[set]``); empty without a ``[design]`` table.
+    compare_gains : bool
+        Each sample runs once more with the base's own gains (:meth:`given`).
     """
 
     name: str
@@ -111,7 +114,14 @@ class Study:
     operator: OperatorFamily | None
     fixed: dict[str, Any] = field(default_factory=dict)
     faults: FaultFamily | None = None
-    per_agent: bool = False
+    designed: dict[str, Any] = field(default_factory=dict)
+    compare_gains: bool = False
+
+    def given(self) -> Study:
+        """The same study with the base scenario's own gains: ``[set]`` without the
+        design's keys (the same draws, since the seeds and distributions are the same)."""
+        fixed = {k: v for k, v in self.fixed.items() if k not in self.designed}
+        return replace(self, fixed=fixed, designed={}, compare_gains=False)
 
 
 # --------------------------------------------------------------------------- reading
@@ -153,6 +163,8 @@ def study_from_data(path: str | Path, data: dict) -> Study:
     f = str(path)
     read_table(f, data, "", TOP_KEYS, {"base", "count", "seed"})
     base, base_data = _base(f, path, data["base"])
+    own = _fixed(f, data.get("set", {}))
+    designed = {k: v for k, v in _designed(f, base, base_data).items() if k not in own}
     study = Study(
         name=_name(f, data, path),
         path=f,
@@ -164,19 +176,13 @@ def study_from_data(path: str | Path, data: dict) -> Study:
         params=_params(f, data.get("params", {})),
         graph=graph_family(f, data["graph"]) if "graph" in data else None,
         operator=operator_family(f, path, data["operator"]) if "operator" in data else None,
-        fixed={**_designed(f, base, base_data), **_fixed(f, data.get("set", {}))},
+        fixed={**designed, **own},
         faults=fault_family(f, data["faults"]) if "faults" in data else None,
-        per_agent=_boolean(f, data.get("per_agent", False), "per_agent"),
+        designed=designed,
+        compare_gains=_compare_gains(f, data.get("compare_gains", False), base_data),
     )
     _check_keys_apply(study)
     return study
-
-
-def _boolean(f: str, v: Any, key: str) -> bool:
-    """A true/false key of the study file."""
-    if not isinstance(v, bool):
-        raise StudyError(f, key, f"{v!r} is not a boolean", "true/false")
-    return v
 
 
 def read_study_file(path: str | Path) -> dict:
@@ -282,6 +288,20 @@ def _designed(f: str, base: str, base_data: dict) -> dict[str, Any]:
             f"`make design SCENARIO={base}` first",
         )
     return ov
+
+
+def _compare_gains(f: str, v: Any, base_data: dict) -> bool:
+    """``compare_gains``: a boolean, true only on a base with a ``[design]`` table."""
+    if not isinstance(v, bool):
+        raise StudyError(f, "compare_gains", f"{v!r} is not a boolean", "true or false")
+    if v and "design" not in base_data:
+        raise StudyError(
+            f,
+            "compare_gains",
+            "needs a base with a [design] table (the designed gains to compare)",
+            "a base scenario with [design], or compare_gains = false",
+        )
+    return v
 
 
 def _params(f: str, raw: Any) -> dict[str, Distribution]:

@@ -15,9 +15,8 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-from core.errors import ScenarioError
 from core.memo import MEMO
-from sweep.coverage import coverage_columns
+from sweep.coverage import GIVEN, coverage_columns
 from sweep.measures import (
     library_key,
     link_recovery,
@@ -28,10 +27,10 @@ from sweep.measures import (
     theorem2_entry,
     topology_in_tail,
 )
-from sweep.per_agent import topology_columns
 from sweep.results import StudyPaths
 from sweep.sampler import Sample, make_sample, write_scenario
 from sweep.study import Study, load_study
+from sweep.switched_gains import topology_columns
 
 
 @MEMO.memoize("worker-studies", 4)
@@ -79,6 +78,8 @@ def run_sample(study_path: str, sample_id: int, folder: str, keep: bool = False)
             row["status"] = "ok"
         except Exception as exc:  # noqa: BLE001 - any failure of one sample is recorded
             row["status"] = f"failed: {one_line(exc)}"
+        if _study(study_path).compare_gains:
+            row.update(given_gains(_study(study_path), sample, paths))
     row["wall_s"] = time.perf_counter() - t0
     row["finished_utc"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
     return row
@@ -186,7 +187,7 @@ def engine(study: Study) -> dict[str, bool]:
     ----------
     study : Study
     """
-    return {"per_agent": study.per_agent, "measured": _measured(study)}
+    return {"measured": _measured(study)}
 
 
 def _measured(study: Study) -> bool:
@@ -201,9 +202,7 @@ def _baseline(study: Study) -> bool:
     return g is not None and g.losses is not None and g.losses.baseline
 
 
-def link_baseline(
-    sample: Sample, paths: StudyPaths, per_agent: bool = False, measured: bool = False
-) -> dict[str, Any]:
+def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> dict[str, Any]:
     """The sample once more with its graph switches made no-ops (each sets the base
     graph's weight): the same structure, so the same compiled library, and the run the
     losses are compared with (``peak_u_late_nolosses``; NaN without switches).
@@ -214,7 +213,7 @@ def link_baseline(
         The drawn sample.
     paths : StudyPaths
         The study's folders.
-    per_agent, measured : bool
+    measured : bool
         As for :func:`simulate_in_memory`.
     """
     import dataclasses
@@ -234,7 +233,7 @@ def link_baseline(
 
     graph = dataclasses.replace(sc.graph, switches=tuple(same(s) for s in sc.graph.switches))
     twin = dataclasses.replace(sample, scenario=dataclasses.replace(sc, graph=graph))
-    run = run_in_memory(twin, paths, per_agent=per_agent, measured=measured)
+    run = run_in_memory(twin, paths, measured=measured)
     # the same (switch time, follower) pairs without the losses: what the formation's own
     # error leaves of the promise "back within 0.05 within 2 s"
     back = switch_summary(switch_recoveries(sc, run.frame, gauge(sc, run.gains)))
@@ -242,6 +241,35 @@ def link_baseline(
         "peak_u_late_nolosses": peak_u_late(run.frame, sc.N, sc.n),
         **{f"{k}_nolosses": back[k] for k in ("switch_pairs_late", "switch_pairs_undefined")},
     }
+
+
+def given_gains(study: Study, sample: Sample, paths: StudyPaths) -> dict[str, Any]:
+    """The sample once more with the base scenario's own gains (:meth:`Study.given`: the
+    same draws without the design's keys), in memory; its columns prefixed ``given:``
+    (``given:status`` as ``status``; docs/studies.md, 'Designed gains beside the base's').
+
+    Parameters
+    ----------
+    study : Study
+        A study with ``compare_gains``.
+    sample : Sample
+        The drawn sample (with the designed gains).
+    paths : StudyPaths
+        The study's folders.
+    """
+    twin = make_sample(study.given(), sample.id)
+    out: dict[str, Any] = {}
+    if twin.params != sample.params:  # the draws must not depend on the gains
+        out["status"] = "failed: the draws differ without the design's keys"
+    elif twin.scenario is None:
+        out["status"] = f"refused: {twin.reason}"
+    else:
+        try:
+            out.update(_simulate_and_verify(twin, paths, keep=False))
+            out["status"] = "ok"
+        except Exception as exc:  # noqa: BLE001 - recorded like the sample's own run
+            out["status"] = f"failed: {one_line(exc)}"
+    return {f"{GIVEN}{k}": v for k, v in out.items()}
 
 
 def _run_written(sample: Sample, paths: StudyPaths) -> Any:
@@ -254,9 +282,7 @@ def _run_written(sample: Sample, paths: StudyPaths) -> Any:
     return P.Run(sample.scenario, res.frame, res.trajectory.x, res.meta, res.csv_path.parent)
 
 
-def run_in_memory(
-    sample: Sample, paths: StudyPaths, per_agent: bool = False, measured: bool = False
-) -> Any:
+def run_in_memory(sample: Sample, paths: StudyPaths, measured: bool = False) -> Any:
     """The same steps as :func:`generated.api.run` (gains, build, integrate, outputs)
     writing nothing; the run's folder is where ``--keep-runs`` would write it.
 
@@ -266,7 +292,7 @@ def run_in_memory(
         The drawn sample (its scenario).
     paths : StudyPaths
         The study's folders.
-    per_agent, measured : bool
+    measured : bool
         As for :func:`simulate_in_memory`.
 
     Raises
@@ -274,13 +300,13 @@ def run_in_memory(
     IntegrationError
         The run stopped early.
     """
-    run, traj = simulate_in_memory(sample, paths, per_agent=per_agent, measured=measured)
+    run, traj = simulate_in_memory(sample, paths, measured=measured)
     traj.raise_if_incomplete()
     return run
 
 
 def simulate_in_memory(
-    sample: Sample, paths: StudyPaths, per_agent: bool = False, measured: bool = False
+    sample: Sample, paths: StudyPaths, measured: bool = False
 ) -> tuple[Any, Any]:
     """:func:`run_in_memory` without raising for a run that stopped early.
 
@@ -290,11 +316,9 @@ def simulate_in_memory(
         The drawn sample (its scenario).
     paths : StudyPaths
         The study's folders.
-    per_agent : bool
-        Method ``native`` on the per-agent engine whatever N (:func:`sweep.per_agent.build`:
-        the kernels of the study's follower models, built once per process).
     measured : bool
-        Gains certified on the sample's base graph (:func:`sweep.per_agent.base_graph_gains`).
+        Gains certified on the sample's base graph
+        (:func:`sweep.switched_gains.base_graph_gains`).
 
     Returns
     -------
@@ -304,30 +328,20 @@ def simulate_in_memory(
     import pandas as pd
 
     from generated import api
-    from sweep import per_agent as PA
+    from sweep.switched_gains import base_graph_gains
     from verify import pipeline as P
 
     sc = sample.scenario
     where = f"gains of sample {sample.id}"
-    gains = PA.base_graph_gains(sc, where) if measured else api.scenario_gains(sc, where)
+    gains = base_graph_gains(sc, where) if measured else api.scenario_gains(sc, where)
     codegen = api.resolve_codegen(sc.N)
     method = sc.integration.method
-    if per_agent:
-        if method != "native":
-            raise ScenarioError(
-                str(sc.path),
-                "integration.method",
-                f"is {method!r}, but per_agent = true",
-                '"native" (the per-agent engine is method native)',
-            )
-        built = PA.build(sc, gains, codegen)
-    else:
-        built = api.build(sc, gains, method, codegen)
+    built = api.build(sc, gains, method, codegen)
     traj = api.simulate(built, sc, api.integrator_settings(sc, method, codegen))
     frame = api.trajectory_frame(built, sc, traj) if traj.complete else pd.DataFrame()
     libs = built.agents[0] if built.agents is not None else (built.library,)
     meta = {"steps": traj.stats.get("steps"), "library": {"key": ";".join(x.key for x in libs)}}
-    if per_agent:
+    if built.agents is not None:  # the per-agent engine: the graph's cycles, a new library
         meta.update(cyclic=not built.agents[1].acyclic, compiled=not built.library.cache_hit)
     folder = paths.runs / sc.name
     run = P.Run(sc, frame, traj.x, meta, folder, gains=gains, closed_loop=built.closed_loop)

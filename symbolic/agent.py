@@ -19,7 +19,7 @@ from symbolic.controller import controller_function, saturate
 from symbolic.derivatives import filter_function, flow_jets
 from symbolic.formation import formation_function
 from symbolic.layout import agent_offsets
-from symbolic.observer import ObserverGains, observer_function
+from symbolic.observer import ObserverGains, gain_values, observer_function
 from symbolic.parameters import (
     param_layout,
 )
@@ -72,8 +72,10 @@ class _AgentSymbols:
     P: dict[str, ca.SX]
 
     @classmethod
-    def make(cls, sc: Scenario) -> _AgentSymbols:
-        """Symbols sized for ``sc``'s leader, coordinates and derivative option."""
+    def make(cls, sc: Scenario, gains: int = 0) -> _AgentSymbols:
+        """Symbols sized for ``sc``'s leader, coordinates and derivative option; ``gains``
+        more numbers after the per-agent ones, the observer's (``P["obs"]`` then ends
+        with them: :func:`symbolic.observer.gain_values`)."""
         m, n = sc.m, sc.n
         off, na = agent_offsets(m, n, sc.options.derivatives == "filtered")
         poff, npar = param_layout(n, saturated(sc))
@@ -81,9 +83,11 @@ class _AgentSymbols:
         psi, dpsi, ddpsi = (ca.SX.sym(k, n) for k in ("psi", "dpsi", "ddpsi"))
         gf = ca.SX.sym("gf", 1 + n)
         a = ca.SX.sym("a", n)
-        prm = ca.SX.sym("prm", npar)
+        prm = ca.SX.sym("prm", npar + gains)
         inputs = dict(zip(AGENT_INPUTS, (s, psi, dpsi, ddpsi, gf, a, prm), strict=True))
         P = {k: prm[sl] for k, sl in poff.items()}
+        if gains:
+            P["obs"] = ca.vertcat(P["obs"], prm[npar:])
         S = {k: s[sl] for k, sl in off.items()}
         return cls(inputs, S, P)
 
@@ -105,7 +109,7 @@ def _reference_signals(sc: Scenario, og: ObserverGains, sym: _AgentSymbols) -> d
     m, n, opts = sc.m, sc.n, sc.options
     S, P, inp = sym.S, sym.P, sym.inputs
     psi = inp["psi"]
-    obs = observer_function(og)
+    obs = observer_function(og, parametric=P["obs"].numel() > 2)
     so = ca.vertcat(S["mu"], S["eta"], S["phi"])
     sodot, v, ehat = obs(so, psi, P["obs"])  # eqs. (7), (9)
     etadot = sodot[m : 2 * m]
@@ -190,12 +194,15 @@ def _dynamics(model: ELModel, sym: _AgentSymbols, r: dict[str, Any], c: dict) ->
     return dict(sdot=sdot, sdot_dae=sdot_dae, res=res, qdot=qdot, V2=V2)
 
 
-def agent_function(sc: Scenario, og: ObserverGains, model_index: int) -> ca.Function:
+def agent_function(
+    sc: Scenario, og: ObserverGains, model_index: int, parametric_gains: bool = False
+) -> ca.Function:
     """Everything local to one follower as one SX Function.
 
     Inputs ``s`` (agent block), ``psi``, ``dpsi``, ``ddpsi`` (ψ_i and, for the oracle,
     its first two time derivatives), ``gf`` = (g_i(t), f_i(t)), ``a`` (acceleration,
-    used only by the DAE residual) and ``prm`` (per-agent numbers).
+    used only by the DAE residual) and ``prm`` (per-agent numbers, followed with
+    ``parametric_gains`` by the observer's gains, :func:`symbolic.observer.gain_values`).
     Outputs ``sdot`` (ODE), ``sdot_dae`` (q̇ = a), ``res`` (DAE residual) and diagnostics
     (:data:`AGENT_OUTPUTS`).
 
@@ -208,10 +215,13 @@ def agent_function(sc: Scenario, og: ObserverGains, model_index: int) -> ca.Func
     model_index : int
         0-based follower whose model (and parameters) the Function uses; followers
         with the same model and parameters share it.
+    parametric_gains : bool
+        The observer's gains as inputs (the per-agent kernels) instead of constants.
     """
     fo = sc.followers[model_index]
     model = build_model(fo.model, fo.params)
-    sym = _AgentSymbols.make(sc)
+    ng = gain_values(og).size if parametric_gains else 0
+    sym = _AgentSymbols.make(sc, ng)
     r = _reference_signals(sc, og, sym)
     c = _control(sc, model, sym, r)
     d = _dynamics(model, sym, r, c)

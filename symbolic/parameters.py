@@ -36,6 +36,7 @@ from core.errors import ScenarioError
 from core.expressions import Expr
 from core.graph import pinned_laplacian
 from core.scenario import Scenario
+from symbolic.observer import ObserverGains, gain_pattern, gain_values
 from synthesis.gains import Gains
 
 #: observer settings that are runtime parameters (in ``agents``) or only initial values
@@ -338,3 +339,177 @@ def structure_key(sc: Scenario, gains: Gains) -> str:
     """
     text = json.dumps(structure(sc, gains), sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+# ----------------------------------------------------------------------------- per-agent rows
+@dataclass(frozen=True)
+class RowLayout:
+    """The columns of one follower's row of runtime numbers in the per-agent engine.
+
+    The per-agent kernels (:func:`symbolic.cascade.agent_block`) read every number a
+    scenario may vary without changing a model's equations from their agent's row: the
+    per-agent numbers of :func:`param_layout` (columns ``0..npar``), the observer's gains
+    (:func:`symbolic.observer.gain_values`) and the literals of the leader's u0
+    expressions (both the same in every row: each block evaluates them) and,
+    per fault component (g_i, then f_i1 … f_in), the index of the follower's template
+    among the scenario's distinct templates of that component and one literal slot per
+    template (only the chosen template's slot is filled). What the kernels compile in is
+    then only the templates (:meth:`key`), never their numbers.
+
+    Attributes
+    ----------
+    npar : int
+        Per-agent numbers (:func:`param_layout`) at the row's start.
+    gains : slice
+        The observer's gains (columns ``npar..``; empty without gains).
+    gain_pattern : tuple
+        Where the observer's gain matrices are nonzero (:func:`symbolic.observer.gain_pattern`).
+    u0 : tuple of slice
+        The literals of u0_k (``expr:leader.u0[k]``).
+    select : tuple of int
+        Per fault component, the column of the follower's template index.
+    slots : tuple of tuple of slice
+        Per fault component, per template, the columns of its literals.
+    templates : tuple of tuple of Expr
+        Per fault component, one expression of each distinct template (sorted by template).
+    size : int
+        Columns of a row.
+    """
+
+    npar: int
+    gains: slice
+    gain_pattern: tuple
+    u0: tuple[slice, ...]
+    select: tuple[int, ...]
+    slots: tuple[tuple[slice, ...], ...]
+    templates: tuple[tuple[Expr, ...], ...]
+    size: int
+
+    def key(self) -> dict[str, Any]:
+        """What the kernels compile in of this layout: sizes, patterns, templates, no number."""
+        return {
+            "npar": self.npar,
+            "gains": [self.gains.stop - self.gains.start, _plain(self.gain_pattern)],
+            "u0": [sl.stop - sl.start for sl in self.u0],
+            "faults": [[e.template() for e in tpl] for tpl in self.templates],
+        }
+
+
+def _components(sc: Scenario, i: int) -> list[Expr]:
+    """Follower i's fault components: g_i, then f_i1 … f_in."""
+    fo = sc.followers[i]
+    return [fo.g.expr, *fo.f]
+
+
+def row_layout(sc: Scenario, og: ObserverGains | None = None) -> RowLayout:
+    """The per-agent row layout of ``sc`` (:class:`RowLayout`).
+
+    Parameters
+    ----------
+    sc : Scenario
+    og : ObserverGains, optional
+        The observer's gains (their count and patterns; default: no gain columns).
+    """
+    _, npar = param_layout(sc.n, sc.controller.u_max is not None)
+    ng = 0 if og is None else gain_values(og).size
+    gains = slice(npar, npar + ng)
+    pattern = () if og is None else tuple(tuple(p) for p in gain_pattern(og))
+    k = npar + ng
+    u0 = []
+    for e in sc.leader.u0 or ():
+        u0.append(slice(k, k + len(e.literals())))
+        k += len(e.literals())
+    select, slots, templates = [], [], []
+    for c in range(1 + sc.n):
+        distinct: dict[str, Expr] = {}
+        for i in range(sc.N):
+            e = _components(sc, i)[c]
+            distinct.setdefault(e.template(), e)
+        tpl = tuple(distinct[name] for name in sorted(distinct))
+        select.append(k)
+        k += 1
+        sl = []
+        for e in tpl:
+            sl.append(slice(k, k + len(e.literals())))
+            k += len(e.literals())
+        slots.append(tuple(sl))
+        templates.append(tpl)
+    return RowLayout(
+        npar, gains, pattern, tuple(u0), tuple(select), tuple(slots), tuple(templates), k
+    )
+
+
+def row_slices(sc: Scenario, lay: RowLayout) -> dict[str, tuple[int | None, slice]]:
+    """Where each expression's literals are in the rows, by its name in p (:func:`expressions`).
+
+    Parameters
+    ----------
+    sc : Scenario
+    lay : RowLayout
+        :func:`row_layout` of ``sc``.
+
+    Returns
+    -------
+    dict
+        ``"expr:leader.u0[k]"`` -> (None, columns): every row holds them;
+        ``"expr:followers[i].g"``, ``"expr:followers[i].f[r]"`` -> (i, columns).
+    """
+    out: dict[str, tuple[int | None, slice]] = {
+        f"expr:leader.u0[{k}]": (None, sl) for k, sl in enumerate(lay.u0)
+    }
+    names = ["g", *(f"f[{r}]" for r in range(sc.n))]
+    for i in range(sc.N):
+        for c, e in enumerate(_components(sc, i)):
+            pick = [t.template() for t in lay.templates[c]].index(e.template())
+            out[f"expr:followers[{i}].{names[c]}"] = (i, lay.slots[c][pick])
+    return out
+
+
+def agent_rows(
+    sc: Scenario, og: ObserverGains | None = None, lay: RowLayout | None = None
+) -> np.ndarray:
+    """Every follower's row of runtime numbers (N × ``lay.size``, :class:`RowLayout`).
+
+    Parameters
+    ----------
+    sc : Scenario
+    og : ObserverGains, optional
+        The observer's gains (:func:`symbolic.observer.gain_values`).
+    lay : RowLayout, optional
+        Default :func:`row_layout` of ``sc`` and ``og``; another layout must hold
+        ``sc``'s templates and ``og``'s gain patterns.
+
+    Raises
+    ------
+    ScenarioError
+        If ``sc`` has a fault expression whose template ``lay`` lacks, or gains on other
+        patterns.
+    """
+    lay = lay or row_layout(sc, og)
+    R = np.zeros((sc.N, lay.size))
+    R[:, : lay.npar] = param_matrix(sc).T
+    if og is not None:
+        if tuple(tuple(p) for p in gain_pattern(og)) != lay.gain_pattern:
+            raise ScenarioError(
+                sc.path,
+                "gains",
+                "observer gains with other zeros than the compiled kernels'",
+                "kernels built for these gains",
+            )
+        R[:, lay.gains] = gain_values(og)
+    for sl, e in zip(lay.u0, sc.leader.u0 or (), strict=True):
+        R[:, sl] = e.literals()
+    for i in range(sc.N):
+        for c, e in enumerate(_components(sc, i)):
+            names = [t.template() for t in lay.templates[c]]
+            if e.template() not in names:
+                raise ScenarioError(
+                    sc.path,
+                    f"followers[{i + 1}]",
+                    f"fault expression {e.text!r} has a form the compiled kernels lack",
+                    "kernels built for this scenario",
+                )
+            pick = names.index(e.template())
+            R[i, lay.select[c]] = pick
+            R[i, lay.slots[c][pick]] = e.literals()
+    return R

@@ -95,3 +95,26 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 def paper_scenario() -> Scenario:
     """The shipped paper scenario (``scenarios/paper.toml``), loaded once; it is frozen."""
     return load_scenario(PAPER)
+
+
+@pytest.fixture
+def stored_designs(tmp_path_factory, monkeypatch):
+    """A design.json with no keys (the scenario's own gains) for every shipped scenario with
+    a ``[design]`` table, in a temporary output root that ``design.run`` reads: the shipped
+    studies on such a base load without running ``make design``."""
+    import json
+    import tomllib
+
+    import design.run as R
+    from core.overrides import load
+
+    root = tmp_path_factory.mktemp("designs")
+    for path in sorted(PAPER.parent.glob("*.toml")):
+        if "design" not in tomllib.loads(path.read_text(encoding="utf-8")):
+            continue
+        sc = load(path)
+        rec = {"format": R.FORMAT, "scenario_sha256": sc.sha256, "overrides": {}}
+        (root / f"{sc.name}-{R.VARIANT}").mkdir()
+        (root / f"{sc.name}-{R.VARIANT}" / "design.json").write_text(json.dumps(rec))
+    monkeypatch.setattr(R, "OUT_ROOT", root)
+    return root

@@ -28,13 +28,13 @@ from symbolic.closed_loop import build_closed_loop
 PAPER = "scenarios/paper.toml"
 
 
-def _with_graph(sc, A, pin, switches=()):
-    # the per-agent driver switches links raw (graph.link_fade = 0; generated/agents.py)
+def _with_graph(sc, A, pin, switches=(), fade=0.0):
+    # raw switching unless fade > 0 (graph.link_fade; both are runtime data of the driver)
     g = Graph(
         adjacency=np.asarray(A, float),
         pinning=np.asarray(pin, float),
         switches=switches,
-        link_fade=0.0,
+        link_fade=fade,
     )
     return dataclasses.replace(sc, graph=g)
 
@@ -204,7 +204,7 @@ def test_trajectory_converges_to_the_whole_loop_native_one(cases, build_root, na
     """
     sc, gains, cl, libs, prob = cases[name]
     cg = CodegenSettings(optimization="-O0", build_root=build_root)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl)
+    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
     H = 0.15 if name == "link-losses" else 0.25  # through the first loss: its kick is costly
     t_out = output_grid(H, 0.01)
     bps = [b for b in sc.breakpoints() if b < H]
@@ -259,7 +259,7 @@ def test_trajectory_equals_the_whole_loop_native_one_past_the_start_up(cases, bu
     """
     sc, gains, cl, libs, prob = cases[name]
     cg = CodegenSettings(optimization="-O0", build_root=build_root)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl)
+    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
     t0, width = SETTLED[name]
     s = IntegratorSettings(method="native", rtol=1e-12, atol=1e-14, max_steps=2_000_000)
     bps = sc.breakpoints()
@@ -291,10 +291,78 @@ def test_kernel_key_ignores_the_graph_and_n_but_not_what_is_compiled(cases):
     key = agents.kernel_key(sc, gains, 0)
     sc_c, gains_c = cases["cyclic"][:2]
     assert agents.kernel_key(sc_c, gains_c, 0) == key
-    other = dataclasses.replace(gains, lambda1=gains.lambda1 * 2)
-    assert agents.kernel_key(sc, other, 0) != key
+    other = dataclasses.replace(gains, lambda1=gains.lambda1 * 2)  # a runtime number
+    assert agents.kernel_key(sc, other, 0) == key
+    obs = dataclasses.replace(sc.observer, lambda1=3.0, delta2=0.9)  # only through the gains
+    assert agents.kernel_key(dataclasses.replace(sc, observer=obs), other, 0) == key
+    zero = np.zeros_like(np.atleast_2d(gains.Q))  # other zeros: other code
+    assert agents.kernel_key(sc, dataclasses.replace(gains, Q=zero), 0) != key
     mixed, gm = cases["cyclic-mixed"][:2]
     assert agents.kernel_key(mixed, gm, 1) != key  # the point mass
+
+
+def _paper_variant(folder: Path, name: str, edit) -> Path:
+    """The paper's scenario cut to 0.2 s, edited by ``edit(dict)``, written to ``folder``."""
+    import tomllib
+
+    from sweep.sampler import scenario_toml
+
+    d = tomllib.loads(Path(PAPER).read_text(encoding="utf-8"))
+    d["name"] = name
+    d["integration"]["horizon"] = 0.2
+    edit(d)
+    path = folder / f"{name}.toml"
+    path.write_text(scenario_toml(d), encoding="utf-8")
+    return path
+
+
+def _other_numbers(d: dict) -> None:
+    """Other u0 numbers, fault parameters, gains, graph, N and initial states."""
+    import copy
+
+    d["leader"]["u0"] = ["1.5*cos(t)"]
+    d["leader"]["eta0"] = [0.3, -0.2]
+    fol = d["followers"]
+    fol[0]["f"] = ["3*sin(3*t) + 0.5", "2*sin(1*t) + 2"]
+    fol[0]["g"] = 0.8
+    fol[2]["f"] = ["4*cos(t)", "1*sin(t)"]  # follower 4's template, follower 3's
+    fol.append(copy.deepcopy(fol[4]))  # N = 6
+    fol[5]["p0"] = [2.0, -1.0]
+    N = len(fol)
+    A = np.zeros((N, N))
+    for i in range(1, N):
+        A[i, i - 1] = 1.0
+    A[0, N - 1] = 1.0  # a ring: cyclic
+    d["graph"] = {"adjacency": A.tolist(), "pinning": [1.0] + [0.0] * (N - 1)}
+    d["initial"]["eta"] = [0.1, -0.1]
+    d["controller"]["k2"] = 2.0
+    d["observer"]["lambda1"] = 2.5  # gains: λ1, and Θ (so the UIO's F, K) synthesised anew
+    d["observer"]["delta2"] = 0.9
+
+
+def test_a_scenario_differing_in_numbers_compiles_nothing(tmp_path, monkeypatch):
+    """``generated sim`` (api.run, the shared build cache as ``make sim`` uses it) on the
+    per-agent engine: after the paper's scenario (compiled once per cache), one with other
+    u0 numbers, fault parameters, controller numbers, observer gains (λ1, Θ), graph (a
+    cycle), N and initial states reuses its kernel library: its C is the same (the in-process memo is cleared,
+    so the code is generated again and hashed), nothing is compiled (meta.json: cache
+    hit, compile 0 s), and the run completes."""
+    from generated import agent_kernels, native
+
+    monkeypatch.setattr(native, "MAX_AGENTS", 0)  # `native` on the per-agent engine at any N
+    first = _paper_variant(tmp_path, "first", lambda d: None)
+    other = _paper_variant(tmp_path, "other", _other_numbers)
+    metas = []
+    for path in (first, other):
+        agent_kernels._BUILT.clear()
+        r = api.run(path, out_root=tmp_path / "out", progress=False)
+        metas.append(json.loads(r.meta_path.read_text()))
+        assert r.trajectory.complete
+    assert metas[1]["library"]["cache_hit"] is True
+    assert metas[1]["wall_seconds"]["compile"] == 0.0
+    assert metas[0]["library"]["path"] == metas[1]["library"]["path"]
+    g0, g1 = (json.loads(Path(m["gains_path"]).read_text()) for m in metas)
+    assert g0["lambda1"] != g1["lambda1"] and not np.allclose(g0["Theta"], g1["Theta"])
 
 
 def test_threads_give_the_serial_results(cases, build_root):
@@ -414,7 +482,7 @@ def test_an_operator_press_and_release_on_the_per_agent_driver(build_root):
     gains = api.scenario_gains(sc, "press")
     cg = CodegenSettings(optimization="-O0", build_root=build_root)
     cl = build_closed_loop(sc, gains)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl)
+    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
     libs, model = agents.build_models(sc, gains, cg)
     prob = agents.problem(sc, gains, model)
     t_out = output_grid(1.5, 0.01)
@@ -608,8 +676,8 @@ def test_faults_and_two_pinned_followers_against_the_whole_loop(tmp_path):
     cg = CodegenSettings(optimization="-O0", kernel_optimization="-O0")
     libs, model = agents.build_models(sc, gains, cg)
     prob = agents.problem(sc, gains, model)
-    built = api.build(sc, gains, "native", cg, closed_loop=cl)
-    assert built.agents is None  # N = 2: the whole loop
+    built = api.build(sc, gains, "native", cg, closed_loop=cl, runtime_parameters=True)
+    assert built.agents is None  # runtime p: the whole loop (driver.c)
     t_out = output_grid(0.5, 0.01)
     diffs = []
     for rtol in (1e-8, 1e-11):
@@ -622,14 +690,16 @@ def test_faults_and_two_pinned_followers_against_the_whole_loop(tmp_path):
     assert diffs[1] < 1e-6 and diffs[1] < diffs[0] / 10, diffs
 
 
-def test_native_above_20_through_a_link_lost_and_restored():
-    """N = 24 with cycles, a back edge lost at 0.05 s and restored at 0.1 s, through
-    method ``native`` (the per-agent engine: the switching times are data) against
-    CasADi's CVODES on the whole loop: both restart at the switches and converge to the
-    same trajectory as the tolerance shrinks."""
+@pytest.mark.parametrize("fade", [0.0, 0.04])
+def test_native_above_20_through_a_link_lost_and_restored(fade):
+    """N = 24 with cycles, a back edge lost at 0.05 s and restored at 0.1 s, switched raw
+    or fading over 0.04 s, through method ``native`` (the per-agent engine: the switching
+    times and the fade are data) against CasADi's CVODES on the whole loop (one library
+    for both: the fade is in its p): both restart at the switches (and the fades' ends)
+    and converge to the same trajectory as the tolerance shrinks."""
     sc = _random_cyclic(24, 0.15)
     sw = (Switch(0.05, 0, 23, 0.0), Switch(0.1, 0, 23, 1.0))
-    sc = _with_graph(sc, sc.graph.adjacency, sc.graph.pinning, sw)
+    sc = _with_graph(sc, sc.graph.adjacency, sc.graph.pinning, sw, fade=fade)
     sc = dataclasses.replace(sc, observer=dataclasses.replace(sc.observer, lambda1=6.0))
     gains = bench_gains(sc)[0]
     cg = CodegenSettings(jacobian="auto")  # the shared build cache
@@ -644,6 +714,117 @@ def test_native_above_20_through_a_link_lost_and_restored():
             s = dataclasses.replace(s, rtol=rtol, atol=rtol * 1e-2, max_steps=10**6)
             runs.append(api.simulate(b, sc, s))
         assert all(r.complete for r in runs)
-        assert runs[0].stats["restarts"] == 2
+        assert runs[0].stats["restarts"] == (2 if fade == 0 else 4)
         diffs.append(_rel(runs[0].x, runs[1].x))
     assert diffs[1] < 1e-5 and diffs[1] < diffs[0] / 10, diffs
+
+
+# ------------------------------------------------------- links that fade (graph.link_fade)
+def _fading():
+    """The benchmark's acyclic graph (N = 6) with links fading over 0.12 s: a link lost at
+    0.1 s and restored at 0.2 s (the fades overlap: three topologies active on
+    [0.2, 0.22)), and a link reversed and back (two acyclic topologies whose union,
+    active while they fade into each other, has a cycle)."""
+    base = _bench(6)
+    A, pin = base.graph.adjacency, base.graph.pinning
+    loss = (Switch(0.1, 3, 1, 0.0), Switch(0.2, 3, 1, 1.0))
+    rev = (Switch(0.1, 2, 1, 0.0), Switch(0.1, 1, 2, 1.0))
+    rev += (Switch(0.2, 2, 1, 1.0), Switch(0.2, 1, 2, 0.0))
+    return {
+        "fade-loss": _with_graph(base, A, pin, loss, fade=0.12),
+        "fade-reversal": _with_graph(base, A, pin, rev, fade=0.12),
+    }
+
+
+@pytest.mark.parametrize("name", list(_fading()))
+def test_rhs_and_newton_solves_while_links_fade(cases, name):
+    """While links fade, the passes are cl.ode (whose eq. (6) derivatives take Ẇ and Ẅ)
+    and every solver solves (I − γJ) exactly, on the union of the active topologies
+    (a cycle for the reversal: ``auto`` takes GMRES there); the library is the one of the
+    raw-switching cases (a cache hit: the fade time and the graph are data)."""
+    sc = _fading()[name]
+    gains = bench_gains(sc)[0]
+    libs, model = agents.build_models(sc, gains, _settings_of(cases))
+    assert libs[0].key == cases["acyclic"][3][0].key and libs[0].cache_hit
+    prob = agents.problem(sc, gains, model)
+    segs = [(s.t_start, len(s.active), s.graph.acyclic) for s in prob.segments]
+    union_acyclic = name == "fade-loss"
+    assert segs == [
+        (0.0, 1, True),
+        (0.1, 2, union_acyclic),
+        (0.2, 3, union_acyclic),
+        (0.22, 2, union_acyclic),
+        (pytest.approx(0.32), 1, True),
+    ]
+    cl = build_closed_loop(sc, gains)
+    paths = [lib.path for lib in libs]
+    rng = np.random.default_rng(7)
+    x = cl.x0 + rng.normal(scale=0.2, size=prob.nx)
+    b = rng.normal(size=prob.nx)
+    solvers = ["auto", "dense", "gmres"] + (["forward"] if prob.acyclic else [])
+    for t in (0.15, 0.21, 0.25, 0.4):
+        ref = np.array(cl.ode(t, x)).ravel()
+        for gamma in (1e-2, 0.3):
+            M, expected = _newton_reference(cl, t, x, gamma, b)
+            for s in solvers:
+                ls = agents.LinearSettings(solver=s)
+                xdot, sol = agents.probe(paths, prob, t, x, gamma, b, ls)
+                np.testing.assert_allclose(xdot, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+                resid = np.abs(M @ sol - b).max() / (np.abs(M).max() * np.abs(sol).max())
+                assert resid < 1e-12, (name, t, s, gamma, resid)
+    # raw switching of the same graph differs inside the fade: the fade is not ignored
+    raw_sc = dataclasses.replace(sc, graph=dataclasses.replace(sc.graph, link_fade=0.0))
+    raw = agents.problem(raw_sc, gains, model)
+    assert len(raw.segments) == 3 and raw.fade == 0.0
+    xr, _ = agents.probe(paths, raw, 0.15, x, 1e-2, b)
+    assert np.abs(xr - np.array(cl.ode(0.15, x)).ravel()).max() > 1e-6 * np.abs(xr).max()
+
+
+def test_paper_with_a_link_lost_and_restored_fading_equals_cvodes():
+    """The paper scenario, a_42 lost at 0.3 s and restored at 0.6 s with the default fade
+    (1 s: the fades overlap), through the per-agent engine against CasADi's CVODES on the
+    whole loop, both at rtol 1e-10: equal to a relative 1e-6 (measured 6.3e-7, the start-up's as without switches)."""
+    sc = load_scenario(PAPER)
+    sw = (Switch(0.3, 3, 1, 0.0), Switch(0.6, 3, 1, 1.0))
+    sc = dataclasses.replace(
+        sc,
+        graph=dataclasses.replace(sc.graph, switches=sw),
+        integration=dataclasses.replace(sc.integration, horizon=1.0),
+    )
+    assert sc.graph.link_fade == 1.0
+    gains = bench_gains(sc)[0]
+    cg = CodegenSettings(jacobian="auto")  # the shared build cache
+    ref_built = api.build(sc, gains, "cvodes", cg)
+    s = dataclasses.replace(
+        api.integrator_settings(sc, "cvodes"), rtol=1e-10, atol=1e-12, max_steps=10**6
+    )
+    ref = api.simulate(ref_built, sc, s)
+    libs, model = agents.build_models(sc, gains, cg)
+    prob = agents.problem(sc, gains, model)
+    assert [len(g.active) for g in prob.segments] == [1, 2, 3, 2, 1]  # past 1 s: unused
+    tr = agents.run(
+        [lib.path for lib in libs],
+        prob,
+        ref_built.closed_loop.x0,
+        ref.t,
+        dataclasses.replace(s, method="native"),
+        breakpoints=api.breakpoints(ref_built, sc),
+    )
+    assert tr.complete and ref.complete
+    assert _rel(tr.x, ref.x) < 1e-6
+    # another fade time and the raw switching: the same library (data, nothing compiled);
+    # switching raw moves the run far from the fading reference
+    for T in (0.5, 0.0):
+        other = dataclasses.replace(sc, graph=dataclasses.replace(sc.graph, link_fade=T))
+        libs_T, model_T = agents.build_models(other, gains, cg)
+        assert [lib.key for lib in libs_T] == [lib.key for lib in libs] and libs_T[0].cache_hit
+        assert libs_T[0].compile_seconds == 0.0
+    raw = agents.run(
+        [lib.path for lib in libs_T],
+        agents.problem(other, gains, model_T),
+        ref_built.closed_loop.x0,
+        ref.t,
+        dataclasses.replace(s, method="native"),
+        breakpoints=api.breakpoints(ref_built, other),
+    )
+    assert raw.complete and _rel(raw.x, ref.x) > 1e-3

@@ -508,3 +508,94 @@ def test_scripted_sessions_with_link_cuts_and_faults(three) -> None:
     text = report(results, "python -m console.sessions --network", "three", "prov", 2.0)
     assert f"cuts refused as breaking Assumption 1: {sum(r.refused for r in results)}" in text
     con.loop.close()
+
+
+def test_the_page_reads_the_links_as_they_fade(recorded) -> None:
+    """What the page draws (``outputs_at``: the symbolic whole loop with the console's link
+    slots) equals the replay's own outputs (the record's ``[[graph.switches]]``, faded by
+    the scenario's ``graph.link_fade``) at the replay's states while the restored link
+    still fades in; the torque |u_i| at those states, compared (reading the new weights at
+    once, as a page without the slots would, fails this)."""
+    from generated import api
+
+    con, saved, _, _ = recorded
+    loop = con.loop
+    rec = load_scenario(saved["scenario"])
+    restore = max(c.t for c in loop.changes if c.kind == "link")
+    assert loop.t - restore < rec.graph.link_fade  # the fade still runs at the session's end
+    gains, _ = api.ensure_gains(rec, Path(saved["folder"]).parent / "gains")
+    built = api.build(rec, gains, "native")
+    traj = api.simulate(built, rec, api.integrator_settings(rec, "native"))
+    sel = np.flatnonzero(traj.t > restore)
+    assert sel.size > 10
+    for j in sel:
+        want = np.asarray(built.outputs.call({"t": traj.t[j], "x": traj.x[j]})["u"], float)
+        got = np.asarray(loop.outputs_at(float(traj.t[j]), traj.x[j])["u"], float)
+        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
+
+
+def test_a_link_change_beyond_the_slots_is_refused_until_a_fade_ends(three) -> None:
+    """Eight link changes fading at once fill the page's slots: a ninth, in its own call,
+    is refused with the reason and changes nothing; once the oldest fade has ended, a
+    change is taken again."""
+    from console.protocol import MessageError
+    from console.scenario import LINK_SLOTS
+
+    con = open_console(three[0], out_root=three[1])
+    loop = con.loop
+    for k in range(LINK_SLOTS):
+        loop.set_link(2, 1, k % 2 == 0)  # 3 <- 2 cut, restored, ... (3 still hears 1)
+        loop.advance(1)
+    assert len(loop.link_history()) == 1 + LINK_SLOTS
+    before = dict(loop.target.weights)
+    with pytest.raises(MessageError, match="still fading"):
+        loop.set_link(2, 1, LINK_SLOTS % 2 == 0)
+    assert loop.target.weights == before
+    fade_end = loop.link_history()[1][0] + loop.sc.graph.link_fade
+    while loop.t <= fade_end:
+        loop.advance(5)
+    loop.set_link(2, 1, LINK_SLOTS % 2 == 0)  # the oldest fade has ended: taken
+    assert loop.target.weights != before
+    loop.close()
+
+
+def test_a_call_carries_the_link_changes_a_fade_still_runs(three, monkeypatch) -> None:
+    """The per-agent problem of a call holds the graphs the replay's ``[[graph.switches]]``
+    give over it: switching raw (``link_fade = 0``), the links in
+    force and the change pending at the call's end; with a fade of T s, also every
+    change of the last T s, from the last one whose fade had ended (a fade spanning
+    several calls then runs in each as in the replay). Weights read back from the CSR
+    arrays: follower 3 hears follower 2 with weight 0 while the link is cut."""
+    import dataclasses
+
+    con = open_console(three[0], out_root=three[1])
+    loop = con.loop
+    q = loop.quantum
+
+    def heard(top, i: int, j: int) -> float:
+        row = slice(top.ptr[i], top.ptr[i + 1])
+        return float(sum(w for k, w in zip(top.idx[row], top.w[row], strict=True) if k == j))
+
+    loop.advance(5)
+    loop.set_link(2, 1, True)  # 3 <- 2 cut at the end of the next call (3 still hears 1)
+    loop.advance(5)
+    loop.set_link(2, 1, False)  # restored at the end of the next call
+    loop.advance(5)
+    loop.advance(5)
+    assert loop.t == pytest.approx(20 * q)
+    assert loop.sc.graph.link_fade > 20 * q  # the console keeps the file's fade (default)
+    raw = dataclasses.replace(loop.sc.graph, link_fade=0.0)
+    monkeypatch.setattr(loop, "sc", dataclasses.replace(loop.sc, graph=raw))
+    tops = loop.topologies()
+    assert [t.t_start for t in tops] == [pytest.approx(15 * q)]
+    assert heard(tops[0], 2, 1) != 0.0
+    fade = dataclasses.replace(loop.sc.graph, link_fade=8 * q)  # the cut's fade has ended
+    monkeypatch.setattr(loop, "sc", dataclasses.replace(loop.sc, graph=fade))
+    tops = loop.topologies()
+    assert [t.t_start for t in tops] == [pytest.approx(10 * q), pytest.approx(15 * q)]
+    assert heard(tops[0], 2, 1) == 0.0 and heard(tops[1], 2, 1) != 0.0
+    loop.set_link(2, 1, True)  # pending: the next call ends with it
+    loop.switch_at = 25 * q
+    assert [t.t_start for t in loop.topologies()][-1] == pytest.approx(25 * q)
+    loop.switch_at = None
+    loop.close()

@@ -330,3 +330,158 @@ def test_a_study_on_a_design_base_runs_its_designed_gains(monkeypatch, tmp_path)
     s = make_sample(load_study(study), 0).scenario
     assert np.all(s.controller.k1 == 40.0)
     assert np.all(s.controller.Lambda == 30.0)  # the study's own [set] wins
+
+
+def _design_record(tmp_path, monkeypatch, overrides: dict) -> None:
+    """A design.json of paper-design.toml with ``overrides``, where design.run reads it."""
+    import json
+
+    import design.run as R
+
+    sc = load(PAPER_DESIGN)
+    folder = tmp_path / f"{sc.name}-{R.VARIANT}"
+    folder.mkdir(exist_ok=True)
+    rec = {"format": R.FORMAT, "scenario_sha256": sc.sha256, "overrides": overrides}
+    (folder / "design.json").write_text(json.dumps(rec))
+    monkeypatch.setattr(R, "OUT_ROOT", tmp_path)
+
+
+def test_compare_gains_runs_the_same_draws_with_the_base_gains(monkeypatch, tmp_path):
+    from sweep.sampler import make_sample
+    from sweep.study import load_study
+
+    _design_record(tmp_path, monkeypatch, {"controller.k1": [40.0] * 5, "controller.k2": 7.0})
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'name = "s"\nbase = "{PAPER_DESIGN}"\ncount = 3\nseed = 1\ncompare_gains = true\n'
+        '[set]\n"controller.k2" = 6.0\n'
+        '[params]\n"followers[1].p0" = { uniform = [10.0, 30.0], size = 2 }\n'
+    )
+    s = load_study(study)
+    assert s.compare_gains and s.designed == {"controller.k1": [40.0] * 5}
+    given = s.given()
+    assert given.fixed == {"controller.k2": 6.0} and not given.compare_gains
+    paper = load(PAPER_DESIGN).controller
+    for k in range(3):
+        a, b = make_sample(s, k), make_sample(given, k)
+        assert a.params == b.params  # the same draws
+        assert np.all(a.scenario.controller.k1 == 40.0)
+        assert np.array_equal(b.scenario.controller.k1, paper.k1)  # the base's own
+        assert np.all(a.scenario.controller.k2 == 6.0) and np.all(b.scenario.controller.k2 == 6.0)
+
+
+@pytest.mark.parametrize(
+    ("body", "says"),
+    [
+        ("compare_gains = 1\n", "is not a boolean"),
+        ('compare_gains = "yes"\n', "is not a boolean"),
+    ],
+)
+def test_bad_compare_gains_is_one_line(monkeypatch, tmp_path, body, says):
+    from sweep.study import StudyError, load_study
+
+    _design_record(tmp_path, monkeypatch, {})
+    study = tmp_path / "s.toml"
+    study.write_text(f'name = "s"\nbase = "{PAPER_DESIGN}"\ncount = 1\nseed = 1\n{body}')
+    with pytest.raises(StudyError) as exc:
+        load_study(study)
+    assert (
+        "\n" not in str(exc.value) and "compare_gains" in str(exc.value) and says in str(exc.value)
+    )
+    plain = tmp_path / "p.toml"
+    plain.write_text(
+        f'name = "p"\nbase = "{ROOT / "scenarios" / "paper.toml"}"\ncount = 1\nseed = 1\n'
+        "compare_gains = true\n"
+    )
+    with pytest.raises(StudyError, match=r"compare_gains: needs a base with a \[design\] table"):
+        load_study(plain)
+
+
+@pytest.mark.parametrize("name", ["faults", "steps"])
+def test_the_design_studies_draw_the_samples_of_the_paper_studies(stored_designs, name):
+    """studies/<name>-design.toml: the samples of studies/<name>.toml on paper-design.toml
+    (the same draws; the scenario tables equal but for the name, description and [design])."""
+    from sweep.sampler import make_sample
+    from sweep.study import load_study
+
+    design = load_study(ROOT / "studies" / f"{name}-design.toml")
+    paper = load_study(ROOT / "studies" / f"{name}.toml")
+    assert design.compare_gains and design.count == paper.count and design.seed == paper.seed
+    skip = {"name", "description", "design"}
+    for k in (0, 1, paper.count - 1):
+        a, b = make_sample(design, k), make_sample(paper, k)
+        assert a.params == b.params
+        assert {x: v for x, v in a.scenario_data.items() if x not in skip} == {
+            x: v for x, v in b.scenario_data.items() if x not in skip
+        }
+
+
+def test_gains_summary_counts_each_gain_set():
+    """Hand-made results: two ok samples of two followers and a failed one, with the given
+    gains' columns beside."""
+    import pandas as pd
+
+    from sweep.coverage import GIVEN, gains_lines, gains_summary
+
+    nan = math.nan
+    table = pd.DataFrame(
+        {
+            "id": [0, 1, 2],
+            "status": ["ok", "ok", "failed: x"],
+            "guaranteed_held": [True, False, nan],
+            "coverage": [0.9, 0.8, nan],
+            "ultimate_from:1": [2.0, 3.0, nan],
+            "ultimate_from:2": [2.5, nan, nan],
+            f"{GIVEN}status": ["ok", "ok", "ok"],
+            f"{GIVEN}guaranteed_held": [True, True, True],
+            f"{GIVEN}coverage": [0.4, 0.3, 0.35],
+            f"{GIVEN}ultimate_from:1": [nan, 12.0, 13.0],
+            f"{GIVEN}ultimate_from:2": [nan, nan, 14.0],
+        }
+    )
+    d = gains_summary(table)
+    assert (d["samples"], d["ok"], d["held"]) == (3, 2, 1)
+    assert d["coverage_mean"] == pytest.approx(0.85) and d["coverage_min"] == 0.8
+    assert (d["follower_samples"], d["ultimate"], d["all_ultimate"]) == (4, 3, 1)
+    g = gains_summary(table, GIVEN)
+    assert (g["ok"], g["held"], g["ultimate"], g["all_ultimate"]) == (3, 3, 3, 1)
+    assert g["coverage_min"] == 0.3
+    assert (d["from_median"], d["from_max"]) == (2.5, 3.0)
+    assert (g["from_median"], g["from_max"]) == (13.0, 14.0)
+    lines = gains_lines(table)
+    assert lines[-2].startswith("| designed") and "| 3 of 4 (75.0%) | 1 of 2 |" in lines[-2]
+    assert lines[-1].startswith("| given") and "| 30.0% |" in lines[-1]
+
+
+def test_health_bound_is_the_worst_end_and_its_ghat_term_falls_like_one_over_gamma():
+    """χ̄ over [g_min, 1]: the larger of the constant-health χ̄ at g_min and at 1 (the ĝ term
+    is convex in g), and χ̄² is affine in 1/γ (only the ĝ term of χv holds γ)."""
+    from design.controller import health_bound
+    from verify.bounds import VerifyConfig, theorem2_constants
+
+    inv, sq = [], []
+    for gamma in (0.01, 0.1, 1.0):
+        sc = load(PAPER_DESIGN, {"controller.gamma": gamma})
+        ends = [theorem2_constants(sc, 2, VerifyConfig(), health=(g, g, 0.0)) for g in (0.5, 1.0)]
+        assert health_bound(sc, 2) == pytest.approx(max(c.chi_bar_var for c in ends), rel=1e-12)
+        inv.append(1.0 / gamma)
+        sq.append(health_bound(sc, 2) ** 2)
+    slope = (sq[1] - sq[0]) / (inv[1] - inv[0])
+    assert slope > 0 and sq[2] == pytest.approx(sq[0] + slope * (inv[2] - inv[0]), rel=1e-9)
+
+
+def test_the_gamma_choice_refuses_runs_that_stop_rows_that_fail_and_the_budget():
+    from dataclasses import replace
+
+    from design.controller import GammaPoint, choose_gamma
+
+    base = _point([100, 100], [2, 2], [1.0, 1.0])
+    own = GammaPoint([0.01, 0.01], base, [6.0, 6.0])
+    mid = GammaPoint([0.1, 0.1], replace(base, peak=[100, 250]), [4.0, 4.0])  # 2 over budget
+    best = GammaPoint([0.3, 0.3], replace(base, complete=False), [3.0, 3.0])  # its run stops
+    bad = GammaPoint([1.0, 1.0], replace(base, holds=False), [2.0, 2.0])  # a failing row
+    got = choose_gamma([own, mid, best, bad], np.array([200.0, 200.0]))
+    assert got[0] is mid and got[1] is own
+    same = GammaPoint([0.03, 0.03], base, [6.0, 6.0])  # a tie goes to the smaller gamma
+    assert choose_gamma([same, own], np.array([200.0, 200.0])) == [own, own]
+    assert choose_gamma([own], np.array([50.0, 200.0]))[0] is None

@@ -139,10 +139,12 @@ def test_switching_weights_follow_the_topology(tmp_path):
 
 
 def test_a_second_scenario_reuses_the_compiled_library(pair, tmp_path):
+    """The whole loop's library takes p (``runtime_parameters``: the console's build; the
+    per-agent engine compiles the gains and u0's numbers into its kernels)."""
     a, ga, b, gb, _ = pair
     cg = CodegenSettings(optimization="-O0", build_root=str(tmp_path / "build"))
-    first = api.build(a, ga, "native", cg)
-    second = api.build(b, gb, "native", cg)
+    first = api.build(a, ga, "native", cg, runtime_parameters=True)
+    second = api.build(b, gb, "native", cg, runtime_parameters=True)
     assert second.library.path == first.library.path
     assert second.timings["codegen"] == second.timings["compile"] == 0.0
     ref = Reference(b, gb)

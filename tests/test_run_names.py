@@ -7,7 +7,7 @@ import re
 from hypothesis import given
 from hypothesis import strategies as st
 
-from core.overrides import MAX_VARIANT_CHARS, _variant_label
+from core.overrides import MAX_VARIANT_CHARS, variant_label
 
 KEYS = st.sampled_from(
     ["options.ablation", "integration.horizon", "integration.method", "observer.margin"]
@@ -31,19 +31,19 @@ def _plain(name: str) -> bool:
 
 def test_indices_are_kept() -> None:
     fault = [{"type": "bias", "onset": 1.0}]
-    a = _variant_label({"followers[2].faults": fault})
-    b = _variant_label({"followers[3].faults": fault})
+    a = variant_label({"followers[2].faults": fault})
+    b = variant_label({"followers[3].faults": fault})
     assert a != b and "followers2" in a and "followers3" in b
 
 
 def test_readable_names_stay() -> None:
-    assert _variant_label({"options.ablation": True}) == "ablation"
-    assert _variant_label({"integration.horizon": 0.2}) == "horizon-0.2"
+    assert variant_label({"options.ablation": True}) == "ablation"
+    assert variant_label({"integration.horizon": 0.2}) == "horizon-0.2"
 
 
 @given(OVERRIDES, OVERRIDES)
 def test_distinct_overrides_distinct_names(a: dict, b: dict) -> None:
-    na, nb = _variant_label(a), _variant_label(b)
+    na, nb = variant_label(a), variant_label(b)
     assert _plain(na) and len(na) <= MAX_VARIANT_CHARS
     if a != b:
         assert na != nb

@@ -218,9 +218,9 @@ def test_agent_blocks_apply_the_same_limit():
     every block its exact input on any graph.
     """
     from symbolic.cascade import agent_block
-    from symbolic.closed_loop import fault_function, make_layout, observer_gains
+    from symbolic.closed_loop import make_layout, observer_gains
     from symbolic.network import graph_matrices
-    from symbolic.parameters import param_matrix
+    from symbolic.parameters import agent_rows
 
     sc = load_scenario(PAPER)
     g = hand_gains(sc)
@@ -231,15 +231,12 @@ def test_agent_blocks_apply_the_same_limit():
     block = agent_block(sat, observer_gains(sat, g), lay, 0)
     gm = graph_matrices(sat.graph, g)
     off = gm.L_B - np.diag(np.diag(gm.L_B))
-    cpl = np.column_stack([np.diag(gm.L_B), gm.a0h])
-    prm = param_matrix(sat)
-    faults, fidx = fault_function(sat)
-    fidx = np.asarray(fidx).reshape(N, 1 + n)
+    cpl = np.column_stack([np.diag(gm.L_B), gm.a0h, np.zeros((N, 4))])  # no fade: no rates
+    prm = agent_rows(sat, observer_gains(sat, g)).T  # the blocks evaluate g_i, f_i from them
     x = np.asarray(cl.x0).ravel()
     t = 0.0
     xd, u = _signals(cl, t, x)
     assert np.isclose(np.abs(u), 50.0, rtol=1e-12).any()  # the limit is active here
-    fv = np.array(faults(t)).ravel()
     jets = np.zeros((N, 3 * n))
     for _ in range(3):  # pass l fixes the level-l jets
         nb = off @ jets
@@ -250,7 +247,7 @@ def test_agent_blocks_apply_the_same_limit():
                 nb[i],
                 cpl[i],
                 prm[:, i],
-                fv[fidx[i]],
+                np.full(1 + n, np.nan),  # not read
             )
             for i in range(N)
         ]

@@ -55,7 +55,7 @@ def test_shipped_scenario_reaches_a_short_horizon(path, roots):
 
 
 @pytest.mark.parametrize("path", STUDIES, ids=lambda p: f"{p.parent.name}/{p.name}")
-def test_shipped_study_first_sample_reaches_a_short_horizon(path, roots, tmp_path):
+def test_shipped_study_first_sample_reaches_a_short_horizon(path, roots, tmp_path, stored_designs):
     """A study is not a scenario: it loads, and its first sample (written as a scenario
     file, the way ``python -m sweep samples --write-scenarios`` does) runs, to its own
     horizon: a drawn fault onset or link loss may lie past a short one."""

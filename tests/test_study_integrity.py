@@ -4,8 +4,8 @@ Two runs of one study into one folder: the folder's lock lets one of them in, th
 refused in one line, and no row is lost. The folder records the study's identity; a
 changed study under the same name is refused. A results file that is not a results table
 is refused and kept. Written sample scenarios are plain TOML. A study file every sample
-of which would be refused fails at load; a bad flag of ``python -m sweep`` or a bad key of a
-per-agent study is one line, exit 2, before any file.
+of which would be refused fails at load; a bad flag of ``python -m sweep`` is one line,
+exit 2, before any file.
 """
 
 from __future__ import annotations
@@ -309,7 +309,7 @@ def test_results_path_that_is_a_fifo_is_refused_unread(tmp_path, capsys):
 STUDIES = sorted(p for p in (ROOT / "studies").glob("*.toml") if "search" not in read_study_file(p))
 
 
-def test_written_scenarios_of_every_shipped_study_are_plain_toml(tmp_path):
+def test_written_scenarios_of_every_shipped_study_are_plain_toml(tmp_path, stored_designs):
     switches = 0
     for path in STUDIES:
         study = load_study(path)
@@ -393,36 +393,27 @@ def test_bad_flags_of_sweep_are_one_line_before_any_file(tmp_path, capsys, monke
     assert sorted(p.name for p in tmp_path.iterdir()) == [study.name]
 
 
-#: a per-agent study's own keys, misspelt, and a flag it cannot take
-PER_AGENT_BAD = [
-    ("per_agent = true", 'per_agent = "yes"', []),
-    ('theorem1 = "measured"', 'theorem1 = "maybe"', []),
-    ("per_agent = true", "per_agent = true", ["--keep-runs"]),
-]
-
-
-@pytest.mark.parametrize("old,new,flags", PER_AGENT_BAD, ids=["per_agent", "theorem1", "keep"])
-def test_bad_input_of_a_per_agent_study_is_one_line(tmp_path, capsys, monkeypatch, old, new, flags):
+def test_a_bad_theorem1_of_graph_losses_is_one_line(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     text = (ROOT / "studies" / "topologies.toml").read_text()
-    base = 'base = "../scenarios/paper.toml"'
+    base, old = 'base = "../scenarios/paper.toml"', 'theorem1 = "measured"'
     assert text.count(old) == 1 and text.count(base) == 1
-    text = text.replace(base, f'base = "{PAPER.as_posix()}"').replace(old, new)
+    text = text.replace(base, f'base = "{PAPER.as_posix()}"').replace(old, 'theorem1 = "maybe"')
     study = tmp_path / "t.toml"
     study.write_text(text)
-    err = _one_line(capsys, run_cli(main, ["run", str(study), "--out", "o", *flags]))
-    assert new.split(" =")[0] in err or "--keep-runs" in err
+    err = _one_line(capsys, run_cli(main, ["run", str(study), "--out", "o"]))
+    assert "graph.losses.theorem1" in err and "required or measured" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.toml"]
 
 
-def test_identity_names_the_engine_and_a_measured_theorem1_only_when_set():
+def test_identity_names_a_measured_theorem1_only_when_set():
     """A study without the new keys keeps the identity it had before them."""
     from sweep.identity import study_identity
 
     links = study_identity(load_study(ROOT / "studies" / "links.toml"))
-    assert "per_agent" not in links and "theorem1" not in links["graph"]["losses"]
+    assert "theorem1" not in links["graph"]["losses"]
     topo = study_identity(load_study(ROOT / "studies" / "topologies.toml"))
-    assert topo["per_agent"] is True and topo["graph"]["losses"]["theorem1"] == "measured"
+    assert topo["graph"]["losses"]["theorem1"] == "measured"
 
 
 def test_scheduler_that_does_not_answer_leaves_no_folder(tmp_path, capsys, monkeypatch):

@@ -362,3 +362,38 @@ def test_the_headline_never_says_a_bare_pass_without_tracking_rows(paper_scenari
     k = bad.index[bad["kind"] == "guaranteed"][0]
     bad.loc[k, "holds"] = False
     assert verdict(bad, coverage(bad, (0.0, 20.0))).startswith("FAIL: 1 check(s) failed")
+
+
+# ------------------------------------------------------------------------- last interval
+def test_covered_at_the_ultimate_level_on_the_last_interval(step_run):
+    """verify.headline.ultimate_from: the followers not restarted are covered from their own
+    comparison-lemma time on; follower 1, restarted by the step at 14 s with t_c beyond the
+    horizon, is not, although its first interval's rows all hold."""
+    from verify.headline import ultimate_from
+
+    sc, gains, res, v = step_run
+    tb, t1 = v.table, float(res.frame["t"].iloc[-1])
+    assert math.isnan(ultimate_from(tb, 1, t1))
+    for a in range(2, 6):
+        chi = tb[(tb["agent"] == str(a)) & (tb["claim_id"] == CL.T2_CHI.id)]
+        assert len(chi) == 1 and bool(chi["holds"].iloc[0])
+        assert ultimate_from(tb, a, t1) == pytest.approx(float(chi["t_start"].iloc[0]))
+        assert ultimate_from(tb, a, t1) < t1
+
+
+def test_the_last_interval_is_not_covered_on_a_wrong_trajectory_or_a_short_horizon(step_run):
+    from verify.headline import ultimate_from
+
+    sc, gains, res, _ = step_run
+    dep = np.array([True, False, False, False, False])
+    t1 = float(res.frame["t"].iloc[-1])
+    # follower 3 logged 10 m off its slot on the last 2 s: its derived Definition 1 row
+    # fails, so its last interval is not covered (the others still are)
+    df = res.frame.copy()
+    df.loc[df["t"] >= t1 - 2.0, ["p3_1", "p3_2"]] += 10.0
+    tb = bounds_table(sc, df, gains=gains, u0_dep=dep)
+    assert math.isnan(ultimate_from(tb, 3, t1)) and math.isfinite(ultimate_from(tb, 2, t1))
+    # a horizon of 8 s ends before every comparison-lemma time of the paper's gains
+    short = res.frame[res.frame["t"] <= 8.0].reset_index(drop=True)
+    tb = bounds_table(sc, short, gains=gains, u0_dep=dep)
+    assert all(math.isnan(ultimate_from(tb, a, 8.0)) for a in range(1, 6))

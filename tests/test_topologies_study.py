@@ -1,6 +1,6 @@
 """The topology study (``studies/topologies.toml``) through ``python -m sweep run``.
 
-A few samples run on the per-agent engine (``per_agent = true``): one kernel library for
+A few samples run on method ``native`` (the per-agent engine): one kernel library for
 graphs of different sizes, verdicts and coverage per sample, resumable; the paper's λ1
 kept, Theorem 1 per topology a column (``theorem1 = "measured"``). An integration that
 stops early is a ``failed`` row with where CVODE stood, named in the report.
@@ -22,11 +22,11 @@ from generated import agents, api
 from generated.schedule import output_grid
 from generated.values import CodegenSettings
 from sweep import worker
-from sweep.per_agent import base_graph_gains
 from sweep.report import stop_text
 from sweep.run import run_study
 from sweep.sampler import make_sample
 from sweep.study import load_study
+from sweep.switched_gains import base_graph_gains
 
 STUDY = "studies/topologies.toml"
 #: sample 0: acyclic, N = 7, no losses; 1: refused (a loss cuts a follower off); 3: cyclic,

@@ -13,15 +13,14 @@ import importlib.util
 import io
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")  # files only, never a window
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
+from core.artifacts import atomic_write_bytes
+from core.pyplot import pyplot
+from verify import signals as S
 
-from core.artifacts import atomic_write_bytes  # noqa: E402
-from verify import signals as S  # noqa: E402
+plt = pyplot()  # files only, never a window
 
 SNAPSHOTS = (0.0, 1.0, 3.0, 5.0, 10.0, 13.0, 17.0, 20.0)  # Figs. 3–10
 # the followers are the paper's two-link arms: p_i are joint angles

@@ -163,6 +163,44 @@ def coverage(table: pd.DataFrame, horizon: tuple[float, float]) -> list[Follower
     return out
 
 
+#: the ultimate-level rows a follower's last interval must have (both: its tracking error
+#: through ‖χ_i‖ and its formation deviation)
+ULTIMATE_NEEDED = (CL.T2_CHI.id, CL.DEF1_DERIVED.id)
+
+
+def ultimate_from(table: pd.DataFrame, agent: int, t1: float) -> float:
+    """The time from which follower ``agent`` is covered at the ultimate level on its last
+    interval, up to the horizon ``t1``; NaN when it is not (docs/verification.md,
+    'Coverage').
+
+    The last interval's rows are those whose window ends at ``t1`` (every earlier
+    interval's window ends before the next restart). It is covered when its guaranteed
+    ultimate-level tracking rows (:data:`verify.claims.TRACKING`) include Theorem 2's
+    provable ‖χ_i‖ ≤ χ̄_i and Definition 1's derived bound, and every one of them was
+    evaluated and holds; the time is the latest start of their windows (the first output
+    time after the comparison-lemma time t_c).
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+    agent : int
+        1-based follower.
+    t1 : float
+        The last output time.
+    """
+    rows = table[table["agent"].astype(str) == str(agent)]
+    tol = 1e-9 * max(1.0, abs(t1))
+    last = rows[
+        (rows["kind"] == CL.Kind.GUARANTEED.value)
+        & rows["claim_id"].isin(CL.TRACKING)
+        & (np.abs(rows["t_end"].astype(float) - t1) <= tol)
+    ]
+    if not set(ULTIMATE_NEEDED) <= set(last["claim_id"]) or not held_mask(last).all():
+        return math.nan
+    return float(last["t_start"].astype(float).max())
+
+
 @dataclass(frozen=True)
 class Worst:
     """A largest value with where and when it occurs."""

@@ -15,7 +15,21 @@
  *   ag_nsol (P, x0, s, b) -> (x, dj)     x = D^{-1} (b - c (A_s0 x0 + B_s s)),
  *                                         dj = C_0 x0 + C_s x + E s
  *   ag_gmat (P) -> (G, H)                G = E - c C_s D^{-1} B_s, H = -c D^{-1} B_s
- * with xb = (eta0, s_i), nb = sum_j (L+B)_ij jets_j (3n) and cpl = (l_ii, a_i0 h_i).
+ * with xb = (eta0, s_i), nb = sum_j (L+B)_ij jets_j (3n) and its two time derivatives,
+ * and cpl = (l_ii, a_i0 h_i) with their first two time derivatives (6).
+ *
+ * Links that fade (graph.link_fade = T > 0; eq. (6) with W(t) = W_0 + sum_k sigma_k
+ * (W_k - W_{k-1}), sigma_k = sigma((t - s_k)/T) the quintic C^2 fade): time is cut into
+ * segments at every s_k and s_k + T; on each, W(t) = sum_k c_k(t) W_k over the active
+ * topologies k (c_k = sigma_k - sigma_{k+1}, topology k active on [s_k, s_{k+1} + T)),
+ * and the segment's pattern is their union (two acyclic topologies fading into each
+ * other may form a cycle: its order, waves and acyclic flag are the union's, so the
+ * solver choice sees it). Level l of a neighbour sum is the l-th time derivative of
+ * sum_j w_ij C0 eta_j: nb_1 = sum w J_1 + w' J_0, nb_2 = sum w J_2 + 2 w' J_1 + w'' J_0
+ * (product rule; hitl_ag_gather), still from the levels <= l of the neighbours' jets,
+ * and the kernels add the own and leader terms with cpl's rates. The weights are
+ * runtime data (T, the s_k and each topology's weights): no recompile for another T or
+ * graph. With T = 0 every segment is one topology and nothing fades.
  * The driver never calls these by name: it receives one table of function pointers per
  * follower model (hitl_agent_kernels), so followers of different models, each from its
  * own library, run in one CVODE run.
@@ -46,6 +60,11 @@
  *                    the level-l rows from the complete levels < l, and level l along the
  *                    waves, back edges dropped),
  * then x_i = D_i^{-1} (b_i - c A_s0 x_0) - c D_i^{-1} B_s dnb_i.
+ * While links fade dnb_i = sum_j Wb_ij dj_j with the level-triangular blocks
+ * Wb = [[w, 0, 0], [w', w, 0], [w'', 2w', w]] (x I_n), the exact linearisation of the
+ * faded sums at the Jacobian's time (its weights kept apart from the right-hand side's,
+ * hitl_ag_wts wl): every solver solves it exactly, as without a fade (the
+ * level-by-level preconditioner adds a delayed level's sum with its rates too).
  * HITL_AG_AUTO takes FORWARD on an acyclic topology and GMRES otherwise.
  *
  * Threads (OpenMP, when compiled with -fopenmp; a serial build has no OpenMP region at
@@ -83,14 +102,14 @@ typedef struct {
   int nfaults;
   const int *fidx;      /* N x (1 + n) indices into the fault values */
   const double *prm;    /* N x npar, agent-major */
-  int ntop;             /* topologies */
-  const double *t_switch; /* ntop - 1 start times of topologies 1.. */
-  const int *ptr;       /* ntop x (N + 1): CSR row pointers into idx/w (absolute) */
-  const int *idx;       /* followers each one hears */
-  const double *w;      /* weights (L + B)_ij */
-  const double *cpl;    /* ntop x N x 2: (l_ii, a_i0 h_i) */
+  int ntop;             /* segments (one topology each when links switch raw) */
+  const double *t_switch; /* ntop - 1 start times of segments 1.. */
+  const int *ptr;       /* ntop x (N + 1): CSR row pointers into idx (absolute) */
+  const int *idx;       /* followers each one hears (a segment's: its topologies' union) */
+  const double *w;      /* per active topology: (L + B)_ij on its segment's pattern */
+  const double *cpl;    /* per active topology: N x 2 (l_ii, a_i0 h_i) */
   const int *order;     /* ntop x N: topological order (cycles broken), grouped by depth */
-  const int *acyclic;   /* ntop flags */
+  const int *acyclic;   /* ntop flags (of the union pattern) */
   const int *nwaves;    /* ntop: depth levels (on a cycle, of the edges the GMRES
                            preconditioner keeps: all of an acyclic topology's) */
   const int *wave_ptr;  /* ntop x (N + 1): wave w is order[wave_ptr[w] .. wave_ptr[w+1]) */
@@ -104,6 +123,12 @@ typedef struct {
   const int *lead_nz;   /* m x m (column-major): the leader block's nonzero in agent 0's
                            K, or -1 where it is structurally zero */
   const int *depth;     /* ntop x N: each follower's wave */
+  const int *act_ptr;   /* ntop + 1: segment s's active topologies act_ptr[s] .. [s+1] */
+  const int *act_top;   /* per active: its topology k of the graph (0 .. ngraph - 1) */
+  const int *w_off;     /* per active: its weight of edge q at w[w_off[a] + q - ptr_s[0]] */
+  int ngraph;           /* the graph's topologies */
+  const double *t_graph; /* ngraph: their start times s_k (s_0 = 0) */
+  double fade;          /* T (graph.link_fade): the links' fade time, 0 = raw */
 } hitl_agents_problem;
 
 /* The sizes of one follower, known when the driver is compiled with its model
@@ -132,6 +157,16 @@ typedef struct {
   double *xb, *xbdot, *gf, *jscr, *col;
 } hitl_agwork;
 
+/* The graph's weights at one time on one segment's pattern: W(t) = sum_k c_k(t) W_k and
+   its first two time derivatives (eq. (6)'s L + B and a0 h, faded) */
+typedef struct {
+  int seg, fade; /* segment (-1: none yet); fade: more than one topology active */
+  double t;      /* the time they hold at */
+  double *w[3];  /* w, w', w'' of edge q at [q - base] */
+  int base;      /* the segment's ptr[0] */
+  double *cpl;   /* N x 6: (l_ii, a_i0 h_i) and their first and second derivatives */
+} hitl_ag_wts;
+
 typedef struct {
   hitl_ctx base; /* first member: CVODE's messages and counters */
   const hitl_agents_problem *p;
@@ -154,6 +189,10 @@ typedef struct {
   double *V, *H, *cs, *sn, *g, *z; /* GMRES */
   long *done, epoch; /* hitl_ag_sweep's flags: the last level each agent finished */
   long n_krylov;
+  hitl_ag_wts wr, wl; /* the weights of the right-hand side (at t) and of the Newton
+                         systems (at the Jacobian's time t_jac) */
+  const hitl_ag_wts *W; /* the ones in use: wr in a pass, wl in the linear solver */
+  double t_jac;
 } hitl_ag;
 
 static int hitl_ag_threads(const hitl_ag *d) { return d->nthreads; }
@@ -189,18 +228,84 @@ static int hitl_ag_topology(const hitl_agents_problem *p, double t) {
   return top;
 }
 
-/* nb_i (levels lo..hi-1, n each) from the agents' jets J (N x n3) on topology top */
+/* sigma_k of the graph's topology k at t and its two derivatives (the quintic C^2 fade
+   of core/graph.py fade_jets; sigma_0 = 1, sigma_K = 0) */
+static void hitl_ag_sigma(const hitl_agents_problem *p, int k, double t, double s[3]) {
+  s[0] = k == 0 ? 1.0 : 0.0, s[1] = s[2] = 0.0;
+  if (k <= 0 || k >= p->ngraph) return;
+  double T = p->fade, x = (t - p->t_graph[k]) / T;
+  x = x < 0.0 ? 0.0 : x > 1.0 ? 1.0 : x;
+  s[0] = x * x * x * (10.0 - 15.0 * x + 6.0 * x * x);
+  s[1] = 30.0 * x * x * (1.0 - x) * (1.0 - x) / T;
+  s[2] = 60.0 * x * (1.0 - x) * (1.0 - 2.0 * x) / (T * T);
+}
+
+/* W = the weights on segment seg at t: W(t) = W_0 + sum_k sigma_k (W_k - W_{k-1}) =
+   sum_k c_k W_k with c_k = sigma_k - sigma_{k+1}, over the segment's active topologies,
+   and the rates W', W'' that eq. (6)'s oracle derivatives take (product rule) */
+static void hitl_ag_weights(hitl_ag *d, hitl_ag_wts *W, int seg, double t) {
+  const hitl_agents_problem *p = d->p;
+  int N = d->N, a0 = p->act_ptr[seg], na = p->act_ptr[seg + 1] - a0;
+  if (W->seg == seg && (na == 1 || W->t == t)) return; /* one topology: constant */
+  const int *ptr = p->ptr + (size_t)seg * (N + 1);
+  int base = ptr[0], nnz = ptr[N] - base;
+  W->seg = seg, W->t = t, W->fade = na > 1, W->base = base;
+  for (int l = 0; l < 3; ++l) memset(W->w[l], 0, sizeof(double) * (size_t)nnz);
+  memset(W->cpl, 0, sizeof(double) * (size_t)N * 6);
+  for (int a = a0; a < a0 + na; ++a) {
+    double c[3] = {1.0, 0.0, 0.0};
+    if (na > 1) {
+      double s0[3], s1[3];
+      hitl_ag_sigma(p, p->act_top[a], t, s0);
+      hitl_ag_sigma(p, p->act_top[a] + 1, t, s1);
+      for (int l = 0; l < 3; ++l) c[l] = s0[l] - s1[l];
+    }
+    const double *wa = p->w + p->w_off[a], *ca = p->cpl + (size_t)a * N * 2;
+    for (int l = 0; l < 3; ++l) {
+      if (c[l] == 0.0) continue;
+      for (int q = 0; q < nnz; ++q) W->w[l][q] += c[l] * wa[q];
+      for (int i = 0; i < N; ++i) {
+        W->cpl[(size_t)6 * i + 2 * l] += c[l] * ca[2 * i];
+        W->cpl[(size_t)6 * i + 2 * l + 1] += c[l] * ca[2 * i + 1];
+      }
+    }
+  }
+}
+
+/* nb_i (levels lo..hi-1, n each) from the agents' jets J (N x n3) on segment top, with
+   the weights in use (d->W): level l is the l-th derivative of sum_j w_ij C0 eta_j, so
+   during a fade it takes the lower levels with the weights' rates (eq. (6), product
+   rule): nb_1 = sum w J_1 + w' J_0, nb_2 = sum w J_2 + 2 w' J_1 + w'' J_0 */
 static void hitl_ag_gather(const hitl_ag *d, int top, int i, const double *J, double *nb,
                            int lo, int hi) {
   const hitl_agents_problem *p = d->p;
+  const hitl_ag_wts *W = d->W;
   const int *ptr = p->ptr + (size_t)top * (d->N + 1);
   int n = AG_N(d);
   for (int r = lo * n; r < hi * n; ++r) nb[r] = 0.0;
   for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
     const double *jj = J + (size_t)p->idx[q] * AG_N3(d);
-    double w = p->w[q];
+    double w = W->w[0][q - W->base];
     for (int r = lo * n; r < hi * n; ++r) nb[r] += w * jj[r];
+    if (!W->fade) continue;
+    double w1 = W->w[1][q - W->base], w2 = W->w[2][q - W->base];
+    for (int l = lo > 1 ? lo : 1; l < hi; ++l)
+      for (int r = 0; r < n; ++r)
+        nb[l * n + r] += (l == 1 ? w1 * jj[r] : 2.0 * w1 * jj[n + r] + w2 * jj[r]);
   }
+}
+
+/* the level-l neighbour sum of edge q's jets zj added to s (levels <= l of zj; the
+   level-by-level preconditioner) */
+static void hitl_ag_edge_level(const hitl_ag *d, int q, int l, const double *zj, double *s) {
+  const hitl_ag_wts *W = d->W;
+  int n = AG_N(d);
+  double w = W->w[0][q - W->base];
+  for (int r = l * n; r < (l + 1) * n; ++r) s[r] += w * zj[r];
+  if (!W->fade || l == 0) return;
+  double w1 = W->w[1][q - W->base], w2 = W->w[2][q - W->base];
+  for (int r = 0; r < n; ++r)
+    s[l * n + r] += (l == 1 ? w1 * zj[r] : 2.0 * w1 * zj[n + r] + w2 * zj[r]);
 }
 
 /* agent i's kernel inputs in work wk: xb = (eta0, s_i), gf from the fault values */
@@ -215,7 +320,8 @@ static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int top, int i, const do
   wk->arg[0] = tt;
   wk->arg[1] = wk->xb;
   wk->arg[2] = d->nb + (size_t)AG_N3(d) * i;
-  wk->arg[3] = p->cpl + ((size_t)top * d->N + i) * 2;
+  wk->arg[3] = d->W->cpl + (size_t)6 * i; /* the weights of segment top, at the pass's t */
+  (void)top;
   wk->arg[4] = p->prm + (size_t)d->npar * i;
   wk->arg[5] = wk->gf;
 }
@@ -346,6 +452,8 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
   int N = d->N, n3 = AG_N3(d), fail = 0;
   int top = hitl_ag_topology(p, t);
   if (top_out) *top_out = top;
+  hitl_ag_weights(d, &d->wr, top, t);
+  d->W = &d->wr;
   c->arg[0] = &tt;
   c->res[0] = d->fvals;
   if (p->faults(c->arg, c->res, c->iw, c->w, 0)) return -1;
@@ -416,6 +524,7 @@ static int hitl_ag_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, void
   d->base.n_jac++;
   M->c = 1.0;
   M->shifted = 0;
+  d->t_jac = t; /* the Newton systems couple the agents with the weights at t */
   return hitl_ag_pass(d, t, N_VGetArrayPointer(y), NULL, M->K, &M->top) ? -1 : 0;
 }
 
@@ -534,11 +643,10 @@ static int hitl_ag_levels_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int 
   for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
     int j = p->idx[q];
     const double *zj = a->z + (size_t)n3 * j;
-    double wq = p->w[q];
     if (dep[j] < dep[i])
-      for (int r = lo; r < hi; ++r) s[r] += wq * zj[r];
+      hitl_ag_edge_level(d, q, l, zj, s);
     else if (l > 0)
-      for (int r = lo - n; r < lo; ++r) s[r] += wq * zj[r];
+      hitl_ag_edge_level(d, q, l - 1, zj, s);
   }
   for (int r = lo; r < hi; ++r) {
     double acc = a->u[(size_t)n3 * i + r];
@@ -677,6 +785,8 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
   double c = M->c;
   if (!M->shifted) return -1; /* CVODE always hands over I - gamma J */
   d->base.n_fac++;
+  hitl_ag_weights(d, &d->wl, M->top, d->t_jac);
+  d->W = &d->wl;
   d->ls_top = M->top;
   d->ls_mode = hitl_ag_mode(d, M->top);
   { /* the leader: rows and columns 0..m-1 of agent 0's block */
@@ -725,14 +835,24 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
     const int *ptr = d->p->ptr + (size_t)M->top * (N + 1);
     memset(d->S, 0, sizeof(double) * (size_t)nj * nj);
     for (long e = 0; e < nj; ++e) d->S[(size_t)e * nj + e] = 1.0;
+    const hitl_ag_wts *W = d->W;
+    int n = AG_N(d);
     for (int i = 0; i < N; ++i) {
       const double *G = d->G + (size_t)n3 * n3 * i;
       for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
         int j = d->p->idx[q];
-        double wq = d->p->w[q];
-        for (int col = 0; col < n3; ++col)
-          for (int row = 0; row < n3; ++row)
-            d->S[(size_t)(n3 * j + col) * nj + n3 * i + row] -= wq * G[(size_t)col * n3 + row];
+        double wq[3] = {W->w[0][q - W->base], 0.0, 0.0};
+        if (W->fade) wq[1] = W->w[1][q - W->base], wq[2] = W->w[2][q - W->base];
+        /* dnb_i's level a takes dj_j's level b <= a with binom(a, b) w^(a-b) */
+        for (int b = 0; b < 3; ++b)
+          for (int lv = b; lv < 3; ++lv) {
+            double f = (lv - b == 1 && lv == 2 ? 2.0 : 1.0) * wq[lv - b];
+            if (f == 0.0) continue;
+            for (int r = 0; r < n; ++r)
+              for (int row = 0; row < n3; ++row)
+                d->S[(size_t)(n3 * j + b * n + r) * nj + n3 * i + row] -=
+                    f * G[(size_t)(lv * n + r) * n3 + row];
+          }
       }
     }
     if (hitl_lu(d->S, (int)nj, d->Spiv)) {
@@ -751,6 +871,7 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
   double *x = N_VGetArrayPointer(xv);
   const double *b = N_VGetArrayPointer(bv);
   (void)A, (void)tol; /* the factorisations of the set-up are all a solve reads */
+  d->W = &d->wl;
   if (x != b) memcpy(x, b, sizeof(double) * (size_t)d->base.nx);
   hitl_lu_solve(d->lul, m, d->piv, x); /* leader */
   if (d->ls_mode == HITL_AG_FORWARD) return hitl_ag_forward_x(d, x);
@@ -867,6 +988,24 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
   d->rj = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->z = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->done = (long *)calloc((size_t)N + 1, sizeof(long));
+  {
+    int maxnnz = 0;
+    for (int sg = 0; sg < p->ntop; ++sg) {
+      int nz = p->ptr[(size_t)sg * (N + 1) + N] - p->ptr[(size_t)sg * (N + 1)];
+      if (nz > maxnnz) maxnnz = nz;
+    }
+    hitl_ag_wts *ws[2] = {&d->wr, &d->wl};
+    for (int q = 0; q < 2; ++q) {
+      ws[q]->seg = -1;
+      for (int l = 0; l < 3; ++l) ws[q]->w[l] = (double *)calloc((size_t)maxnnz + 1, sizeof(double));
+      ws[q]->cpl = (double *)calloc((size_t)N * 6 + 1, sizeof(double));
+      if (!ws[q]->w[0] || !ws[q]->w[1] || !ws[q]->w[2] || !ws[q]->cpl) {
+        hitl_msg(c, "out of memory");
+        return -1;
+      }
+    }
+    d->W = &d->wr;
+  }
   if (p->solver == HITL_AG_DENSE) {
     d->S = (double *)calloc((size_t)nj * nj + 1, sizeof(double));
     d->Spiv = (int *)calloc((size_t)nj + 1, sizeof(int));
@@ -906,6 +1045,8 @@ static void hitl_ag_free(hitl_ag *d, hitl_cvode *s) {
   free(d->fvals), free(d->jets), free(d->nb), free(d->lu), free(d->lul), free(d->piv), free(d->zero);
   free(d->G), free(d->Hm), free(d->ps), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S), free(d->done);
   free(d->Spiv), free(d->V), free(d->H), free(d->cs), free(d->sn), free(d->g);
+  for (int l = 0; l < 3; ++l) free(d->wr.w[l]), free(d->wl.w[l]);
+  free(d->wr.cpl), free(d->wl.cpl);
   hitl_cvode_free(&d->base, s);
 }
 

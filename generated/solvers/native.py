@@ -1,14 +1,18 @@
 """Method ``native``: SUNDIALS CVODE (BDF) driven from C, one call from Python per run.
 
-Two engines behind one method. Up to :data:`generated.native.MAX_AGENTS` followers the
-whole closed loop is flat generated code with its sparse LU (:mod:`generated.native`,
-``driver.c``); above, the per-agent engine (:mod:`generated.agents`, ``agents.c``) runs
-one kernel library per follower model with the graph, N and the per-follower numbers as
-runtime data, so any graph (cyclic, signed, switching) and mixed models are carried and
-a new graph compiles nothing. Both integrate the same ODE with the same CVODE settings
-(tests/test_agents.py); the size decides the engine, as the large-N plan decides the
-CasADi methods' linear algebra. The closed loop's outputs of a per-agent run are
-evaluated from the symbolic closed loop by CasADi's virtual machine (nothing compiled).
+The engine is the per-agent one (:mod:`generated.agents`, ``agents.c``) for every N: one
+kernel library per follower model with the graph, N, the switching times, the links'
+fade and the per-follower numbers as runtime data, so any graph (cyclic, signed,
+switching, fading) and mixed models are carried and a new graph compiles nothing. The
+closed loop's outputs of a run are evaluated from the symbolic closed loop by CasADi's
+virtual machine (nothing compiled).
+
+One exception, named: a caller that needs a library taking the runtime parameters p
+(``generated.api.build(..., runtime_parameters=True)``: the console's ``LiveLoop``, which
+changes u0, faults and weights between attempts) gets the whole closed loop as flat
+generated code with its sparse LU (:mod:`generated.native`, ``driver.c``), up to
+:data:`generated.native.MAX_AGENTS` followers. Both integrate the same ODE with the same
+CVODE settings (tests/test_agents.py).
 """
 
 from __future__ import annotations
@@ -43,18 +47,21 @@ class PerAgent:
     gains: Gains
 
 
-def per_agent(sc: Scenario) -> bool:
-    """Whether method ``native`` runs ``sc`` on the per-agent engine (above the flat build's size).
+def per_agent(sc: Scenario, runtime_parameters: bool = False) -> bool:
+    """Whether method ``native`` runs ``sc`` on the per-agent engine: always, unless the
+    caller needs a library taking the runtime parameters p (the whole loop, ``driver.c``).
 
     Parameters
     ----------
     sc : Scenario
+    runtime_parameters : bool
+        ``generated.api.build``'s switch of the same name (the console).
     """
-    return sc.N > native.MAX_AGENTS
+    return not runtime_parameters
 
 
 class Native(Solver):
-    """CVODE from C: the whole loop (N <= 20) or the per-agent engine (above)."""
+    """CVODE from C: the per-agent engine (the whole loop where runtime p is required)."""
 
     name = "native"
     form = "ode"
@@ -62,7 +69,7 @@ class Native(Solver):
     summary = "BDF (SUNDIALS CVODE) driven from generated C"
 
     def prepare(self, sc: Scenario, gains: Gains) -> Any:
-        """Above :data:`generated.native.MAX_AGENTS`: what the per-agent kernels need.
+        """What the per-agent kernels need.
 
         Parameters
         ----------
@@ -71,15 +78,17 @@ class Native(Solver):
 
         Returns
         -------
-        PerAgent or None
-            None for the whole-loop build.
+        PerAgent
+            (``generated.api.build(..., runtime_parameters=True)`` does not call this:
+            the whole-loop build.)
         """
-        return PerAgent(sc, gains) if per_agent(sc) else None
+        return PerAgent(sc, gains)
 
     def build(
         self, dyn: ca.Function, cl: ClosedLoop, settings: CodegenSettings, prepared: Any = None
     ) -> BuildPlan:
-        """The driver's functions and SUNDIALS (whole loop), or the kernel libraries (above).
+        """The kernel libraries (per-agent), or the driver's functions and SUNDIALS (whole
+        loop: nothing ``prepared``, a caller that needs runtime p).
 
         CVODES' ``jac_`` is not generated: the drivers bring their own Jacobians.
 
@@ -88,14 +97,15 @@ class Native(Solver):
         dyn, cl, settings, prepared
             As :meth:`generated.solvers.Solver.build`.
         """
-        if cl.layout.N <= native.MAX_AGENTS:  # whole loop, flat SX
-            functions = native.native_functions(dyn, cse=settings.cse)[0]
-            return BuildPlan(tuple(functions), derivatives=False, toolchain=native.toolchain())
         if not isinstance(prepared, PerAgent):
-            raise IntegrationError(
-                f"integration.method 'native' above N = {native.MAX_AGENTS} runs the per-agent "
-                "engine: call build(sc, gains, method='native')"
-            )
+            if cl.layout.N > native.MAX_AGENTS:
+                raise IntegrationError(
+                    f"integration.method 'native' with runtime parameters p (the whole loop) "
+                    f"is for N <= {native.MAX_AGENTS}; above, the per-agent engine: call "
+                    "build(sc, gains, method='native')"
+                )
+            functions = native.native_functions(dyn, cse=settings.cse)[0]  # whole loop, flat SX
+            return BuildPlan(tuple(functions), derivatives=False, toolchain=native.toolchain())
         sc, gains = prepared.scenario, prepared.gains
         libs, model = agents.build_models(sc, gains, settings)
         prob = agents.problem(sc, gains, model)
@@ -122,8 +132,6 @@ class Native(Solver):
         N : int
         plan : Plan
         """
-        if N <= native.MAX_AGENTS:
-            return "native CVODE: generated J (reused by CVODE) and sparse LU without pivoting"
         return (
             "native CVODE, per-agent engine: jets system by forward substitution "
             "(acyclic topology) or GMRES (cyclic)"
