@@ -287,8 +287,8 @@ def stop_columns(sc: Any, traj: Any, layout: Any) -> dict[str, Any]:
     traj : Trajectory
         The run (:class:`generated.values.Trajectory`); the native engines give where
         CVODE stood when it returned (``t_stop``, ``x_stop``).
-    layout : StateLayout
-        Names the states (the trajectory.csv columns).
+    layout : StateLayout or None
+        Names the states (the trajectory.csv columns); not read for a complete run.
 
     Returns
     -------

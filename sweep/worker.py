@@ -152,7 +152,8 @@ def _simulate_and_verify(
     t0 = time.perf_counter()
     extra: dict[str, Any] = {}
     if keep:
-        run = _run_written(sample, paths)
+        run, traj = _run_written(sample, paths)
+        row.update(stop_columns(sample.scenario, traj, None))  # complete: no layout read
         t1 = time.perf_counter()
         v = P.verify_run(run, out_root=paths.runs)
     else:
@@ -272,14 +273,16 @@ def given_gains(study: Study, sample: Sample, paths: StudyPaths) -> dict[str, An
     return {f"{GIVEN}{k}": v for k, v in out.items()}
 
 
-def _run_written(sample: Sample, paths: StudyPaths) -> Any:
-    """``make sim`` of the written scenario file: samples/<name>.toml, runs/<name>/."""
+def _run_written(sample: Sample, paths: StudyPaths) -> tuple[Any, Any]:
+    """``make sim`` of the written scenario file: samples/<name>.toml, runs/<name>/; the
+    run and its (complete: ``api.run`` raises otherwise) trajectory."""
     from generated import api
     from verify import pipeline as P
 
     scenario_file = write_scenario(sample, paths.samples)
     res = api.run(scenario_file, out_root=paths.runs, progress=False)
-    return P.Run(sample.scenario, res.frame, res.trajectory.x, res.meta, res.csv_path.parent)
+    run = P.Run(sample.scenario, res.frame, res.trajectory.x, res.meta, res.csv_path.parent)
+    return run, res.trajectory
 
 
 def run_in_memory(sample: Sample, paths: StudyPaths, measured: bool = False) -> Any:

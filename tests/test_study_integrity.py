@@ -404,6 +404,10 @@ def test_a_bad_theorem1_of_graph_losses_is_one_line(tmp_path, capsys, monkeypatc
     err = _one_line(capsys, run_cli(main, ["run", str(study), "--out", "o"]))
     assert "graph.losses.theorem1" in err and "required or measured" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.toml"]
+    study.write_text(text.replace('theorem1 = "maybe"', 'theorem1 = "measured"'))
+    err = _one_line(capsys, run_cli(main, ["run", str(study), "--out", "o", "--keep-runs"]))
+    assert "--keep-runs" in err and 'theorem1 = "measured"' in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.toml"]
 
 
 def test_identity_names_a_measured_theorem1_only_when_set():
