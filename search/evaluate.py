@@ -213,6 +213,7 @@ def evaluate(search: SearchFile, point: dict[str, Any], folder: str) -> dict[str
         One flat row: arm, eval, ``u:<k>``, ``param:<key>``, status, robustness columns.
     """
     from sweep.run import StudyPaths, one_line, param_columns, run_in_memory
+    from sweep.worker import engine
 
     t0 = time.perf_counter()
     name = f"{search.name}-{point['arm']}-{point['eval']:04d}"
@@ -233,7 +234,7 @@ def evaluate(search: SearchFile, point: dict[str, Any], folder: str) -> dict[str
         row["status"] = f"refused: {sample.reason}"
     else:
         try:
-            run = run_in_memory(sample, StudyPaths(Path(folder)))
+            run = run_in_memory(sample, StudyPaths(Path(folder)), **engine(search.study))
             row.update(robustness(search.requirements, sample, run, verify_table(run)))
             row["library"] = run.meta.get("library", {}).get("key", "")
             row["status"] = unscored(search.requirements, row) or "ok"

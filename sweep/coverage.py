@@ -32,14 +32,14 @@ import pandas as pd
 PREFIXES = ("t2_rows:", "covered:", "covered_env:", "last_covered:", "ultimate_from:")
 
 
-def _last_covered(table: pd.DataFrame, agent: int, t1: float) -> bool:
-    """A guaranteed Theorem 2 row and a guaranteed Definition 1 row of ``agent`` reach ``t1``."""
+def _last_covered(rows: pd.DataFrame, t1: float) -> bool:
+    """A guaranteed Theorem 2 row and a guaranteed Definition 1 row among one follower's
+    ``rows`` reach ``t1``."""
     from verify import claims as CL
 
-    rows = table[
-        (table["agent"].astype(str) == str(agent))
-        & (table["kind"] == CL.Kind.GUARANTEED.value)
-        & (np.abs(table["t_end"].astype(float) - t1) <= 1e-9 * max(1.0, abs(t1)))
+    rows = rows[
+        (rows["kind"] == CL.Kind.GUARANTEED.value)
+        & (np.abs(rows["t_end"].astype(float) - t1) <= 1e-9 * max(1.0, abs(t1)))
     ]
     ids = set(rows["claim_id"])
     t2 = bool(ids & {CL.T2_CHI.id, CL.T2_CHI_ENV.id})
@@ -54,7 +54,7 @@ def coverage_columns(table: pd.DataFrame) -> dict[str, Any]:
     table : DataFrame
         The bound-vs-actual table (:func:`verify.table.bounds_table`).
     """
-    from verify.headline import coverage, ultimate_from
+    from verify.headline import by_agent, coverage, ultimate_from
 
     if not len(table) or "t_start" not in table:
         return {"coverage": math.nan, "followers_covered": 0, "followers_ultimate": 0}
@@ -62,9 +62,10 @@ def coverage_columns(table: pd.DataFrame) -> dict[str, Any]:
     t1 = float(np.nanmax(table["t_end"].astype(float)))
     out: dict[str, Any] = {}
     covered, last, ultimate = [], 0, 0
+    groups = by_agent(table)
     for c in coverage(table, (t0, t1)):
-        ok = _last_covered(table, c.agent, t1)
-        since = ultimate_from(table, c.agent, t1)
+        ok = _last_covered(groups[str(c.agent)], t1)
+        since = ultimate_from(groups[str(c.agent)], c.agent, t1)
         out[f"t2_rows:{c.agent}"] = c.tracking
         out[f"covered:{c.agent}"] = c.covered
         out[f"covered_env:{c.agent}"] = c.covered_any

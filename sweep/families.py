@@ -21,7 +21,9 @@ from sweep.study_fields import StudyError, join_key, read_integer, read_number, 
 #: largest random graph (the adjacency is written densely into each sample's file)
 MAX_GRAPH_N = 500
 GRAPH_KEYS = {"N", "edge_probability", "weight", "losses"}
-LOSS_KEYS = {"count", "time", "recovery", "pinning", "baseline", "reachable"}
+LOSS_KEYS = {"count", "time", "recovery", "pinning", "baseline", "reachable", "theorem1"}
+#: what a sample's given gains owe its switched topologies (``[graph.losses] theorem1``)
+THEOREM1_CHOICES = ("required", "measured")
 #: the keys of [faults]: which, how many, and a distribution per fault key
 FAULT_KEYS = {"count", "followers", "types", "onset", "severity", "duration", "period", "duty"}
 FAULT_KEYS |= {"amplitude"}
@@ -52,6 +54,11 @@ class LinkLosses:
     reachable : bool
         Whether only losses that keep every follower reachable from the leader in every
         topology (Assumption 1) are drawn; otherwise such a sample is refused by the loader.
+    theorem1 : str
+        ``"required"``: a switched topology on which the sample's given λ1 fails Theorem 1
+        refuses its gains (the sample fails), as for ``make sim``; ``"measured"``: the
+        gains are certified on the base graph and the condition on every topology is a
+        column of the row (:func:`sweep.switched_gains.topology_columns`).
     """
 
     count: tuple[int, int]
@@ -60,6 +67,7 @@ class LinkLosses:
     pinning: bool = True
     baseline: bool = False
     reachable: bool = False
+    theorem1: str = "required"
 
 
 @dataclass(frozen=True)
@@ -179,6 +187,14 @@ def _losses(f: str, raw: Any) -> LinkLosses:
     for key, v in (("pinning", pinning), ("baseline", baseline), ("reachable", reachable)):
         if not isinstance(v, bool):
             raise StudyError(f, f"graph.losses.{key}", f"{v!r} is not a boolean", "true/false")
+    theorem1 = t.get("theorem1", "required")
+    if theorem1 not in THEOREM1_CHOICES:
+        raise StudyError(
+            f,
+            "graph.losses.theorem1",
+            f"{theorem1!r} is not a choice",
+            " or ".join(THEOREM1_CHOICES),
+        )
     rec = t.get("recovery")
     return LinkLosses(
         count=_count_range(f, t.get("count", 1), "graph.losses.count"),
@@ -187,6 +203,7 @@ def _losses(f: str, raw: Any) -> LinkLosses:
         pinning=pinning,
         baseline=baseline,
         reachable=reachable,
+        theorem1=theorem1,
     )
 
 

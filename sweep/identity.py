@@ -66,6 +66,16 @@ def _plain(value: Any) -> Any:
     return json.loads(json.dumps(value, default=str))
 
 
+def _graph(study: Study) -> Any:
+    """The ``[graph]`` family's JSON form; ``losses.theorem1`` only when not the default
+    (the identities recorded before the key existed stay this study's)."""
+    g = _plain(study.graph)
+    losses = g.get("losses") if isinstance(g, dict) else None
+    if isinstance(losses, dict) and losses.get("theorem1") == "required":
+        del losses["theorem1"]
+    return g
+
+
 def study_identity(study: Study) -> dict[str, Any]:
     """The identity of ``study`` (the compared entries :data:`COMPARED`, and ``commit``).
 
@@ -79,7 +89,7 @@ def study_identity(study: Study) -> dict[str, Any]:
         "seed": study.seed,
         "set": _plain(study.fixed),
         "params": _plain(study.params),
-        "graph": _plain(study.graph),
+        "graph": _graph(study),
         "operator": _plain(study.operator),
         "faults": _plain(study.faults),
         # recorded only when true, so the identity of every other study is unchanged

@@ -270,3 +270,50 @@ def link_recovery(sc: Any, run: Any) -> dict[str, Any]:
     from verify.table import gauge
 
     return switch_summary(switch_recoveries(sc, run.frame, gauge(sc, run.gains)))
+
+
+#: the columns of :func:`stop_columns`, NaN (``stop_state`` empty) for a complete run
+STOP_COLUMNS = ("t_reached", "t_stop", "stop_state", "stop_abs", "rows_abs", "switch_before_stop")
+
+
+def stop_columns(sc: Any, traj: Any, layout: Any) -> dict[str, Any]:
+    """Where an integration that stopped early stood: a state that ran away, or an
+    integrator stalled on a tame one.
+
+    Parameters
+    ----------
+    sc : Scenario
+        Its graph's switching times.
+    traj : Trajectory
+        The run (:class:`generated.values.Trajectory`); the native engines give where
+        CVODE stood when it returned (``t_stop``, ``x_stop``).
+    layout : StateLayout or None
+        Names the states (the trajectory.csv columns); not read for a complete run.
+
+    Returns
+    -------
+    dict
+        ``t_reached`` (the last output time), ``t_stop`` (CVODE's last internal step),
+        ``stop_state`` and ``stop_abs`` (the largest ``|x|`` there), ``rows_abs`` (the
+        largest ``|x|`` of the output rows before), ``switch_before_stop`` (the last
+        topology switch at or before ``t_stop``); NaN where the run is complete or the
+        method does not say.
+    """
+    from core.graph import switch_times
+
+    out: dict[str, Any] = dict.fromkeys(STOP_COLUMNS, math.nan)
+    out["stop_state"] = ""
+    out["t_reached"] = float(traj.t_reached)
+    k = traj.largest_at_stop()
+    if traj.complete or k is None:
+        return out
+    before = [t for t in switch_times(sc.graph.switches) if t <= traj.t_stop]
+    x = np.asarray(traj.x, dtype=float)
+    out.update(
+        t_stop=float(traj.t_stop),
+        stop_state=layout.name_of(k),
+        stop_abs=float(abs(traj.x_stop[k])),
+        rows_abs=float(np.nanmax(np.abs(x))) if x.size else math.nan,
+        switch_before_stop=float(before[-1]) if before else math.nan,
+    )
+    return out

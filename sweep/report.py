@@ -279,6 +279,7 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
             lines.append(f"| largest {label} | {np.max(vals):.4g} |")
     lines += step_lines(ok)
     lines += link_lines(ok)
+    lines += kernel_lines(table)
     lines += tail_split_lines(ok)
     t2 = entry_times(table)
     lines.append(
@@ -320,6 +321,37 @@ def step_lines(ok: pd.DataFrame) -> list[str]:
         f"within {within} | {back} of {int(pairs)} ({late} late; {undefined} undefined: still "
         f"out when the next step or the horizon came within {within}) |"
     ]
+
+
+def kernel_lines(table: pd.DataFrame) -> list[str]:
+    """Samples run on the per-agent engine (method ``native``): the kernel libraries they
+    ran and which samples compiled them, the cyclic graphs, and Theorem 1 shown with the
+    paper's z on every topology (``[graph.losses] theorem1 = "measured"``); no line
+    without them.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The results.
+    """
+    if "compiled" not in table.columns:
+        return []
+    ran = table[table["compiled"].notna()]
+    libs = sorted({str(k)[:12] for k in ran["library"].dropna()})
+    compiled = [int(i) for i in ran["id"][ran["compiled"].astype(bool)]]
+    cyclic = int(ran["cyclic"].astype(bool).sum())
+    lines = [
+        f"| kernel libraries (per-agent engine) | {len(libs)} ({', '.join(libs)}); compiled "
+        f"for sample(s) {', '.join(map(str, compiled)) or 'none (all from the cache)'} |",
+        f"| cyclic graphs among the ok samples | {cyclic} of {len(ran)} |",
+    ]
+    if "theorem1" in table.columns:
+        shown = ran["theorem1"].dropna()
+        lines.append(
+            f"| Theorem 1 shown on every topology with the paper's z | "
+            f"{int(shown.astype(bool).sum())} of {len(shown)} |"
+        )
+    return lines
 
 
 def link_lines(ok: pd.DataFrame) -> list[str]:
@@ -478,8 +510,36 @@ def failing_lines(table: pd.DataFrame, study: str, folder: Path) -> list[str]:
     if not len(other):
         lines.append("None.")
     for r in other.itertuples(index=False):
-        lines.append(f"- id {r.id}: {r.status}")
+        lines.append(f"- id {r.id}: {r.status}" + stop_text(r._asdict()))
     return lines
+
+
+def stop_text(r: dict) -> str:
+    """Where CVODE stood when a sample's run stopped early, against the largest state of
+    the output rows before and the last topology switch (:func:`sweep.measures.stop_columns`);
+    empty for a row without them.
+
+    Parameters
+    ----------
+    r : dict
+        A results row.
+    """
+    t_stop = pd.to_numeric(r.get("t_stop"), errors="coerce")
+    if t_stop is None or not np.isfinite(t_stop):
+        return ""
+    switch = pd.to_numeric(r.get("switch_before_stop"), errors="coerce")
+    last = (
+        "no topology switch before"
+        if switch is None or not np.isfinite(switch)
+        else f"{(t_stop - switch) * 1e3:.3g} ms after the last topology switch"
+    )
+    before = f"at most {float(r.get('rows_abs')):.3g} in the output rows before; {last})"
+    if f"the largest state is {r.get('stop_state')} = " in str(r.get("status", "")):
+        return f" ({before}"  # the error's message named CVODE's last state already
+    return (
+        f" (stopped at t = {t_stop:.7g} s, the largest state there {r.get('stop_state')} = "
+        f"{float(r.get('stop_abs')):.3g} in magnitude, {before}"
+    )
 
 
 def write_report(results: Path, retried: int | None = None) -> Path:

@@ -158,6 +158,13 @@ def run_study(
     for flag, value in (("--batch", batch), ("--workers", workers), ("--chunk", chunk)):
         if value is not None and value < 1:
             raise UsageError(f"{flag}: {value}: give an integer >= 1")
+    if keep and study.graph is not None and study.graph.losses is not None:
+        if study.graph.losses.theorem1 == "measured":
+            raise UsageError(
+                f"--keep-runs: study {study.name} certifies its samples' gains on their base "
+                'graphs ([graph.losses] theorem1 = "measured"), which make sim does not: run '
+                "it without --keep-runs"
+            )
     scheduler = scheduler_address(scheduler)
     created = [d for d in (paths.folder, *paths.folder.parents) if not d.exists()]
     paths.folder.mkdir(parents=True, exist_ok=True)

@@ -21,6 +21,7 @@ from sweep.measures import (
     library_key,
     link_recovery,
     step_recovery,
+    stop_columns,
     summarize_table,
     tail_max_et,
     theorem2_entry,
@@ -29,6 +30,7 @@ from sweep.measures import (
 from sweep.results import StudyPaths
 from sweep.sampler import Sample, make_sample, write_scenario
 from sweep.study import Study, load_study
+from sweep.switched_gains import topology_columns
 
 
 @MEMO.memoize("worker-studies", 4)
@@ -57,7 +59,8 @@ def run_sample(study_path: str, sample_id: int, folder: str, keep: bool = False)
     dict
         One flat row (:data:`sweep.results.BASE_COLUMNS`, ``param:<key>``,
         ``t2_entry:<i>``); ``status`` is ``ok``, ``refused: <loader's reason>`` or
-        ``failed: <one-line error>``.
+        ``failed: <one-line error>``. A run that stopped early (``failed:
+        IntegrationError: ...``) has where it stopped (:func:`sweep.measures.stop_columns`).
     """
     t0 = time.perf_counter()
     paths = StudyPaths(Path(folder))
@@ -67,10 +70,11 @@ def run_sample(study_path: str, sample_id: int, folder: str, keep: bool = False)
     if sample.scenario is None:
         row["status"] = f"refused: {sample.reason}"
     else:
+        study = _study(study_path)
         try:
-            row.update(_simulate_and_verify(sample, paths, keep))
-            if _baseline(_study(study_path)):
-                row.update(link_baseline(sample, paths))
+            row.update(_simulate_and_verify(sample, paths, keep, study, row))
+            if _baseline(study):
+                row.update(link_baseline(sample, paths, **engine(study)))
             row["status"] = "ok"
         except Exception as exc:  # noqa: BLE001 - any failure of one sample is recorded
             row["status"] = f"failed: {one_line(exc)}"
@@ -138,24 +142,35 @@ def _scalar(v: Any) -> Any:
     return json.dumps(v)
 
 
-def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[str, Any]:
-    """Run the sample (written to disk or in memory) and summarize its bounds table."""
+def _simulate_and_verify(
+    sample: Sample, paths: StudyPaths, keep: bool, study: Study, row: dict[str, Any]
+) -> dict[str, Any]:
+    """Run the sample (written to disk or in memory) and summarize its bounds table; the
+    columns of a run that stopped early go into ``row`` before its error is raised."""
     from verify import pipeline as P
 
     t0 = time.perf_counter()
+    extra: dict[str, Any] = {}
     if keep:
-        run = _run_written(sample, paths)
+        run, traj = _run_written(sample, paths)
+        row.update(stop_columns(sample.scenario, traj, None))  # complete: no layout read
         t1 = time.perf_counter()
         v = P.verify_run(run, out_root=paths.runs)
     else:
-        run = run_in_memory(sample, paths)
+        run, traj = simulate_in_memory(sample, paths, **engine(study))
+        row.update(stop_columns(sample.scenario, traj, run.closed_loop.layout))
+        traj.raise_if_incomplete()
         t1 = time.perf_counter()
         v = P.verify_run(run)  # with the gains the run used (Run.gains): no file is read
+        if _measured(study):
+            extra = topology_columns(sample.scenario, run.gains)
     return {
         "simulate_s": t1 - t0,
         "checks_s": time.perf_counter() - t1,
         "steps": run.meta.get("steps"),
         "library": library_key(run.meta),
+        **{k: run.meta[k] for k in ("cyclic", "compiled") if k in run.meta},
+        **extra,
         **summarize_table(v.table),
         **coverage_columns(v.table),
         **theorem2_entry(v.table, sample.scenario, run.frame, v.config),
@@ -166,13 +181,29 @@ def _simulate_and_verify(sample: Sample, paths: StudyPaths, keep: bool) -> dict[
     }
 
 
+def engine(study: Study) -> dict[str, bool]:
+    """How the study's samples run: the keywords of :func:`simulate_in_memory`.
+
+    Parameters
+    ----------
+    study : Study
+    """
+    return {"measured": _measured(study)}
+
+
+def _measured(study: Study) -> bool:
+    """Whether the study measures Theorem 1 on its samples' switched topologies."""
+    g = study.graph
+    return g is not None and g.losses is not None and g.losses.theorem1 == "measured"
+
+
 def _baseline(study: Study) -> bool:
     """Whether the study asks for each sample's run without its losses."""
     g = study.graph
     return g is not None and g.losses is not None and g.losses.baseline
 
 
-def link_baseline(sample: Sample, paths: StudyPaths) -> dict[str, Any]:
+def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> dict[str, Any]:
     """The sample once more with its graph switches made no-ops (each sets the base
     graph's weight): the same structure, so the same compiled library, and the run the
     losses are compared with (``peak_u_late_nolosses``; NaN without switches).
@@ -183,6 +214,8 @@ def link_baseline(sample: Sample, paths: StudyPaths) -> dict[str, Any]:
         The drawn sample.
     paths : StudyPaths
         The study's folders.
+    measured : bool
+        As for :func:`simulate_in_memory`.
     """
     import dataclasses
 
@@ -201,7 +234,7 @@ def link_baseline(sample: Sample, paths: StudyPaths) -> dict[str, Any]:
 
     graph = dataclasses.replace(sc.graph, switches=tuple(same(s) for s in sc.graph.switches))
     twin = dataclasses.replace(sample, scenario=dataclasses.replace(sc, graph=graph))
-    run = run_in_memory(twin, paths)
+    run = run_in_memory(twin, paths, measured=measured)
     # the same (switch time, follower) pairs without the losses: what the formation's own
     # error leaves of the promise "back within 0.05 within 2 s"
     back = switch_summary(switch_recoveries(sc, run.frame, gauge(sc, run.gains)))
@@ -240,17 +273,19 @@ def given_gains(study: Study, sample: Sample, paths: StudyPaths) -> dict[str, An
     return {f"{GIVEN}{k}": v for k, v in out.items()}
 
 
-def _run_written(sample: Sample, paths: StudyPaths) -> Any:
-    """``make sim`` of the written scenario file: samples/<name>.toml, runs/<name>/."""
+def _run_written(sample: Sample, paths: StudyPaths) -> tuple[Any, Any]:
+    """``make sim`` of the written scenario file: samples/<name>.toml, runs/<name>/; the
+    run and its (complete: ``api.run`` raises otherwise) trajectory."""
     from generated import api
     from verify import pipeline as P
 
     scenario_file = write_scenario(sample, paths.samples)
     res = api.run(scenario_file, out_root=paths.runs, progress=False)
-    return P.Run(sample.scenario, res.frame, res.trajectory.x, res.meta, res.csv_path.parent)
+    run = P.Run(sample.scenario, res.frame, res.trajectory.x, res.meta, res.csv_path.parent)
+    return run, res.trajectory
 
 
-def run_in_memory(sample: Sample, paths: StudyPaths) -> Any:
+def run_in_memory(sample: Sample, paths: StudyPaths, measured: bool = False) -> Any:
     """The same steps as :func:`generated.api.run` (gains, build, integrate, outputs)
     writing nothing; the run's folder is where ``--keep-runs`` would write it.
 
@@ -260,17 +295,57 @@ def run_in_memory(sample: Sample, paths: StudyPaths) -> Any:
         The drawn sample (its scenario).
     paths : StudyPaths
         The study's folders.
+    measured : bool
+        As for :func:`simulate_in_memory`.
+
+    Raises
+    ------
+    IntegrationError
+        The run stopped early.
     """
+    run, traj = simulate_in_memory(sample, paths, measured=measured)
+    traj.raise_if_incomplete()
+    return run
+
+
+def simulate_in_memory(
+    sample: Sample, paths: StudyPaths, measured: bool = False
+) -> tuple[Any, Any]:
+    """:func:`run_in_memory` without raising for a run that stopped early.
+
+    Parameters
+    ----------
+    sample : Sample
+        The drawn sample (its scenario).
+    paths : StudyPaths
+        The study's folders.
+    measured : bool
+        Gains certified on the sample's base graph
+        (:func:`sweep.switched_gains.base_graph_gains`).
+
+    Returns
+    -------
+    (Run, Trajectory)
+        The run (its frame empty when the trajectory is incomplete) and the trajectory.
+    """
+    import pandas as pd
+
     from generated import api
+    from sweep.switched_gains import base_graph_gains
     from verify import pipeline as P
 
     sc = sample.scenario
-    gains = api.scenario_gains(sc, f"gains of sample {sample.id}")
+    where = f"gains of sample {sample.id}"
+    gains = base_graph_gains(sc, where) if measured else api.scenario_gains(sc, where)
     codegen = api.resolve_codegen(sc.N)
-    built = api.build(sc, gains, sc.integration.method, codegen)
-    traj = api.simulate(built, sc, api.integrator_settings(sc, sc.integration.method, codegen))
-    traj.raise_if_incomplete()
-    frame = api.trajectory_frame(built, sc, traj)
-    meta = {"steps": traj.stats.get("steps"), "library": {"key": built.library.key}}
+    method = sc.integration.method
+    built = api.build(sc, gains, method, codegen)
+    traj = api.simulate(built, sc, api.integrator_settings(sc, method, codegen))
+    frame = api.trajectory_frame(built, sc, traj) if traj.complete else pd.DataFrame()
+    libs = built.agents[0] if built.agents is not None else (built.library,)
+    meta = {"steps": traj.stats.get("steps"), "library": {"key": ";".join(x.key for x in libs)}}
+    if built.agents is not None:  # the per-agent engine: the graph's cycles, a new library
+        meta.update(cyclic=not built.agents[1].acyclic, compiled=not built.library.cache_hit)
     folder = paths.runs / sc.name
-    return P.Run(sc, frame, traj.x, meta, folder, gains=gains, closed_loop=built.closed_loop)
+    run = P.Run(sc, frame, traj.x, meta, folder, gains=gains, closed_loop=built.closed_loop)
+    return run, traj

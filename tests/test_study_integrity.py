@@ -4,8 +4,8 @@ Two runs of one study into one folder: the folder's lock lets one of them in, th
 refused in one line, and no row is lost. The folder records the study's identity; a
 changed study under the same name is refused. A results file that is not a results table
 is refused and kept. Written sample scenarios are plain TOML. A study file every sample
-of which would be refused fails at load; a bad flag of ``python -m sweep`` or ``python -m
-sweep.topologies`` is one line, exit 2, before any file.
+of which would be refused fails at load; a bad flag of ``python -m sweep`` is one line,
+exit 2, before any file.
 """
 
 from __future__ import annotations
@@ -25,7 +25,6 @@ from helpers import PAPER, ROOT
 import sweep.run
 from core.errors import run_cli
 from core.scenario import load_scenario
-from sweep import topologies
 from sweep.__main__ import main
 from sweep.identity import check_identity
 from sweep.lock import LOCK, StudyLocked, study_lock
@@ -394,23 +393,31 @@ def test_bad_flags_of_sweep_are_one_line_before_any_file(tmp_path, capsys, monke
     assert sorted(p.name for p in tmp_path.iterdir()) == [study.name]
 
 
-TOPOLOGY_FLAGS = [
-    ["{study}", "--count", "0"],
-    ["{study}", "--count", "-3"],
-    ["{study}", "--workers", "0", "--count", "1"],
-    ["{study}", "--count", "x"],
-    ["{study}", "--bogus"],
-    ["{study}", "--out", "", "--count", "1"],
-    ["missing.toml"],
-]
-
-
-@pytest.mark.parametrize("argv", TOPOLOGY_FLAGS, ids=[" ".join(a) for a in TOPOLOGY_FLAGS])
-def test_bad_flags_of_topologies_are_one_line(tmp_path, capsys, monkeypatch, argv):
+def test_a_bad_theorem1_of_graph_losses_is_one_line(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    study = ROOT / "studies" / "topologies.toml"
-    _one_line(capsys, run_cli(topologies.main, [a.format(study=study) for a in argv]))
-    assert list(tmp_path.iterdir()) == []
+    text = (ROOT / "studies" / "topologies.toml").read_text()
+    base, old = 'base = "../scenarios/paper.toml"', 'theorem1 = "measured"'
+    assert text.count(old) == 1 and text.count(base) == 1
+    text = text.replace(base, f'base = "{PAPER.as_posix()}"').replace(old, 'theorem1 = "maybe"')
+    study = tmp_path / "t.toml"
+    study.write_text(text)
+    err = _one_line(capsys, run_cli(main, ["run", str(study), "--out", "o"]))
+    assert "graph.losses.theorem1" in err and "required or measured" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.toml"]
+    study.write_text(text.replace('theorem1 = "maybe"', 'theorem1 = "measured"'))
+    err = _one_line(capsys, run_cli(main, ["run", str(study), "--out", "o", "--keep-runs"]))
+    assert "--keep-runs" in err and 'theorem1 = "measured"' in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.toml"]
+
+
+def test_identity_names_a_measured_theorem1_only_when_set():
+    """A study without the new keys keeps the identity it had before them."""
+    from sweep.identity import study_identity
+
+    links = study_identity(load_study(ROOT / "studies" / "links.toml"))
+    assert "theorem1" not in links["graph"]["losses"]
+    topo = study_identity(load_study(ROOT / "studies" / "topologies.toml"))
+    assert topo["graph"]["losses"]["theorem1"] == "measured"
 
 
 def test_scheduler_that_does_not_answer_leaves_no_folder(tmp_path, capsys, monkeypatch):

@@ -1,8 +1,9 @@
-"""The topology study on the per-agent driver (``python -m sweep.topologies``).
+"""The topology study (``studies/topologies.toml``) through ``python -m sweep run``.
 
-A few samples of ``studies/topologies.toml`` run on one kernel library compiled for the
-first; an integration that stops early is a row ``incomplete`` with where it stopped and
-why (named in the report), never a crash of the study.
+A few samples run on method ``native`` (the per-agent engine): one kernel library for
+graphs of different sizes, verdicts and coverage per sample, resumable; the paper's λ1
+kept, Theorem 1 per topology a column (``theorem1 = "measured"``). An integration that
+stops early is a ``failed`` row with where CVODE stood, named in the report.
 """
 
 from __future__ import annotations
@@ -11,29 +12,113 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
+from helpers import PAPER
 
+from core.graph import pinned_laplacian
+from core.scenario import load_scenario
 from generated import agents, api
-from generated.values import CodegenSettings, Status
-from sweep import topologies
+from generated.schedule import output_grid
+from generated.values import CodegenSettings
+from sweep import worker
+from sweep.report import stop_text
+from sweep.run import run_study
 from sweep.sampler import make_sample
 from sweep.study import load_study
+from sweep.switched_gains import base_graph_gains
 
 STUDY = "studies/topologies.toml"
+#: sample 0: acyclic, N = 7, no losses; 1: refused (a loss cuts a follower off); 3: cyclic,
+#: N = 8, two links lost and restored; 11: cyclic, N = 8, no losses
+IDS = [0, 1, 3]
 
 
 @pytest.fixture(scope="module")
-def rows(tmp_path_factory):
-    root = str(tmp_path_factory.mktemp("topologies"))
-    return topologies.run_study(STUDY, 4, 1, root)
+def out(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("topologies")
+    run_study(STUDY, out_root=root, ids=IDS, workers=1)
+    return root / "topologies"
 
 
-def test_one_library_for_every_graph(rows):
-    ran = [r for r in rows if r["status"] != "refused"]
-    assert len(ran) >= 2 and len({r["N"] for r in ran}) >= 2  # graphs of different sizes
-    assert len({r["library"] for r in ran}) == 1
-    assert [r["compiled"] for r in ran] == [True] + [False] * (len(ran) - 1)
-    assert all(r["status"] == "complete" and r["t_reached"] == 20.0 for r in ran)
+def _table(out: Path) -> pd.DataFrame:
+    return pd.read_parquet(out / "results.parquet").set_index("id")
+
+
+def _w_dense(A: np.ndarray, b: np.ndarray) -> float:
+    """Lemma 3's w with the paper's z, dense: λ_min(Z^-1/2 (L̄ᵀZ + ZL̄) Z^-1/2)."""
+    L = pinned_laplacian(A, b).toarray()
+    z = np.linalg.solve(L.T, np.ones(len(L)))
+    S = L.T * z + (L.T * z).T  # L̄ᵀZ + ZL̄
+    d = 1 / np.sqrt(z)
+    return float(np.linalg.eigvalsh(d[:, None] * S * d[None, :]).min())
+
+
+def test_one_library_verdicts_and_coverage_per_sample(out):
+    t = _table(out)
+    assert list(t.index) == IDS
+    assert t.loc[1, "status"].startswith("refused: ") and "Assumption 1" in t.loc[1, "status"]
+    ok = t[t["status"] == "ok"]
+    assert len(ok) == 2 and ok["param:graph.N"].nunique() == 2  # graphs of different sizes
+    assert ok["library"].nunique() == 1  # one kernel library for both graphs
+    assert list(ok["cyclic"]) == [False, True]
+    assert (ok["n_guaranteed"] > 0).all() and ok["guaranteed_held"].notna().all()
+    for k in ok.index:  # a coverage column per follower of the sample, and no other
+        N = int(ok.loc[k, "param:graph.N"])
+        cov = [c for c in ok.columns if c.startswith("covered:") and pd.notna(ok.loc[k, c])]
+        assert sorted(cov) == sorted(f"covered:{i}" for i in range(1, N + 1))
+    assert (ok["t_reached"] == 20.0).all() and ok["stop_state"].eq("").all()
+    assert ok["t_stop"].isna().all()
+    report = (out / "report.md").read_text()
+    assert "| kernel libraries (per-agent engine) | 1 (" in report
+    assert "| Theorem 1 shown on every topology with the paper's z |" in report
+
+
+def test_theorem1_per_topology_against_a_dense_lemma3(out):
+    """Truth: Lemma 3's w of every topology by a dense eigenvalue computation."""
+    t = _table(out)
+    study = load_study(STUDY)
+    for k in (0, 3):
+        sc = make_sample(study, k).scenario
+        tops = sc.graph.topologies()
+        w = min(_w_dense(top.adjacency, top.pinning) for top in tops)
+        assert t.loc[k, "topologies"] == len(tops) == (1 if k == 0 else 5)
+        assert t.loc[k, "w_min"] == pytest.approx(w, rel=1e-9)
+        o = sc.observer
+        assert t.loc[k, "theorem1"] == bool(o.lambda1 * w > o.lambda_bar1)
+
+
+def test_steps_equal_the_engine_called_directly(out):
+    """The row's integrator steps are those of ``agents.run`` on the sample with the
+    paper's gains: the study keeps them (no per-sample synthesis of λ1)."""
+    sample = make_sample(load_study(STUDY), 3)
+    sc = sample.scenario
+    gains = base_graph_gains(sc, "gains")
+    assert gains.lambda1 == load_scenario(PAPER).observer.lambda1  # the paper's, not synthesized
+    settings = api.integrator_settings(sc, "native", api.resolve_codegen(sc.N))
+    libs, model = agents.build_models(sc, gains, api.resolve_codegen(sc.N))
+    tr = agents.run(
+        [lib.path for lib in libs],
+        agents.problem(sc, gains, model),
+        agents.initial_state(sc),
+        output_grid(sc.integration.horizon, sc.integration.output_step),
+        settings,
+        breakpoints=sc.breakpoints(),
+    )
+    assert tr.complete
+    assert _table(out).loc[3, "steps"] == tr.stats["steps"]
+
+
+def test_a_rerun_runs_only_the_missing_samples(out):
+    before = _table(out)
+    run_study(STUDY, out_root=out.parent, ids=[*IDS, 11], workers=1)
+    after = _table(out)
+    assert list(after.index) == [*IDS, 11] and after.loc[11, "status"] == "ok"
+    for k in IDS:  # the recorded rows are kept as they were
+        assert after.loc[k, "finished_utc"] == before.loc[k, "finished_utc"]
+        assert after.loc[k, "wall_s"] == before.loc[k, "wall_s"] or np.isnan(
+            before.loc[k, "wall_s"]
+        )
 
 
 def test_a_run_that_gives_up_reports_where_cvode_stood(tmp_path):
@@ -41,20 +126,19 @@ def test_a_run_that_gives_up_reports_where_cvode_stood(tmp_path):
 
     Truth: a second run of the same sample, to t_stop, with the steps it needs.
     """
-    study = Path(STUDY).read_text().replace("count = 1000", "count = 1")
-    base = Path("scenarios/paper.toml").resolve().as_posix()
-    study = study.replace('base = "../scenarios/paper.toml"', f'base = "{base}"')
+    text = Path(STUDY).read_text()
+    fade = '"graph.link_fade" = 0.0\n'  # the study's [set] (the per-agent engine switches raw)
+    base = 'base = "../scenarios/paper.toml"'
+    assert text.count(fade) == 1 and text.count(base) == 1
+    text = text.replace(base, f'base = "{PAPER.as_posix()}"')
     path = tmp_path / "few-steps.toml"
-    fade = '"graph.link_fade" = 0.0\n'  # the study's [set] (the per-agent driver switches raw)
-    assert study.count(fade) == 1
-    path.write_text(study.replace(fade, fade + '"integration.max_steps" = 1000\n'))
-    (row,) = topologies.run_study(str(path), 1, 1, None)
-    assert row["status"] == "incomplete"
+    path.write_text(text.replace(fade, fade + '"integration.max_steps" = 1000\n'))
+    row = worker.run_sample(str(path), 0, str(tmp_path / "out"))
+    assert row["status"].startswith("failed: IntegrationError: ")
     assert row["t_reached"] < row["t_stop"] < row["t_reached"] + 0.01  # the output step
-    sample = make_sample(load_study(str(path)), 0)
-    sc = sample.scenario
-    gains, _, _ = topologies.sample_gains(api.scenario_gains(sc, "gains"), sc)
-    libs, model = agents.build_models(sc, gains, CodegenSettings())
+    sc = make_sample(load_study(str(path)), 0).scenario
+    gains = base_graph_gains(sc, "gains")
+    libs, model = agents.build_models(sc, gains, api.resolve_codegen(sc.N))
     settings = api.integrator_settings(sc, "native", CodegenSettings())
     tr = agents.run(
         [lib.path for lib in libs],
@@ -69,41 +153,20 @@ def test_a_run_that_gives_up_reports_where_cvode_stood(tmp_path):
     assert row["stop_abs"] == pytest.approx(abs(tr.x[-1, k]), rel=1e-3)
     assert row["rows_abs"] == np.abs(agents.initial_state(sc)).max()  # the only row: x(0)
     assert row["stop_abs"] > 2 * row["rows_abs"]  # so x(0) in its place would fail above
-    text = topologies.report([row], 1.0, str(path))
-    assert f"the largest state is {row['stop_state']} = " in text
-    assert "(complete runs): no complete run" in text
-    if sc.graph.switches:  # sample 0 has none: the report says so
-        assert row["switch_before_stop"] <= row["t_stop"]
-    else:
-        assert np.isnan(row["switch_before_stop"]) and "no topology switch before" in text
-
-
-def test_an_integration_that_stops_early_is_an_incomplete_row(rows, monkeypatch, tmp_path):
-    real = agents.run
-
-    def stops_at_5s(*args, **kwargs):
-        tr = real(*args, **kwargs)
-        k = int((tr.t <= 5.0).sum())
-        return dataclasses.replace(
-            tr, t=tr.t[:k], x=tr.x[:k], status=Status.STEP_LIMIT, t_reached=5.0, message="x"
-        )
-
-    monkeypatch.setattr(agents, "run", stops_at_5s)
-    again = topologies.run_study(STUDY, 2, 1, str(tmp_path))
-    bad = [r for r in again if r["status"] == "incomplete"]
-    assert bad and all(r["t_reached"] == 5.0 and r["message"] == "x" for r in bad)
-    text = topologies.report(again, 1.0, STUDY)
-    assert text.splitlines()[2].startswith("measured ")  # date, commit and machine
+    assert not sc.graph.switches and np.isnan(row["switch_before_stop"])  # sample 0: none
+    assert f"the largest state is {row['stop_state']} = " in row["status"]  # the error says it
+    note = stop_text(row)  # the report's line adds the rows before and the last switch
     assert (
-        f"incomplete: sample {bad[0]['sample']} (N = {bad[0]['N']}) stopped at t = 5 s: x" in text
+        note
+        == f" (at most {row['rows_abs']:.3g} in the output rows before; no topology switch before)"
     )
+    full = stop_text({**row, "status": "failed: cut"})
+    assert f"the largest state there {row['stop_state']} = " in full and full.endswith(note[2:])
 
 
 def test_the_report_times_a_stop_from_the_last_switch():
-    row = dict(sample=15, N=18, cyclic=True, losses=2, theorem1=False, status="incomplete")
-    row.update(t_reached=6.37, message="TOO_MUCH_WORK", t_stop=6.3737, stop_state="q10_1")
-    row.update(stop_abs=6.88e4, rows_abs=870.0, switch_before_stop=6.3729, simulate_s=1.0)
-    row.update(library="k", compiled=False)
-    text = topologies.report([row], 1.0, STUDY)
-    assert "the largest state is q10_1 = 6.88e+04 in magnitude (at most 870 in the output" in text
+    row = dict(t_stop=6.3737, stop_state="q10_1", stop_abs=6.88e4, rows_abs=870.0)
+    text = stop_text({**row, "switch_before_stop": 6.3729})
+    assert "the largest state there q10_1 = 6.88e+04 in magnitude, at most 870 in the" in text
     assert "; 0.8 ms after the last topology switch)" in text
+    assert stop_text({"t_stop": np.nan}) == "" == stop_text({})

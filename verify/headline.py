@@ -59,8 +59,16 @@ class FollowerCoverage:
     gaps: tuple[str, ...] = field(default_factory=tuple)
 
 
-def _per_agent(table: pd.DataFrame, agent: int) -> pd.DataFrame:
-    return table[table["agent"].astype(str) == str(agent)]
+def by_agent(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """The table's rows per follower (``agent`` as text: ``"1"``, ...), split once.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The bound-vs-actual table.
+    """
+    key = table["agent"].astype(str)
+    return {str(a): rows for a, rows in table.groupby(key, sort=False)}
 
 
 def _windows(rows: pd.DataFrame) -> list[tuple[float, float]]:
@@ -92,20 +100,23 @@ def _gaps(
     step between two windows is the grid at a restart, not a gap)."""
     out, at = [], t0
     pieces = sorted(covered)
+    chi: list | None = None  # the Theorem 2 rows, read once when a gap needs them
     for a, b in [*pieces, (t1, t1)]:
         if a > at + 1.5 * step + 1e-9 or (at == t0 and a > at + 1e-9):
-            out.append(f"[{at:.4g}, {a:.4g}] s: {_why(rows, at, a)}")
+            if chi is None:
+                chi = list(rows[rows["claim_id"] == CL.T2_CHI.id].itertuples(index=False))
+            out.append(f"[{at:.4g}, {a:.4g}] s: {_why(chi, at, a)}")
         at = max(at, b)
     return out
 
 
-def _why(rows: pd.DataFrame, a: float, b: float) -> str:
-    """Why no guaranteed tracking row covers [a, b]: the note of a Theorem 2 row stated there
-    that is not guaranteed, else the transient before the comparison-lemma time."""
-    chi = rows[rows["claim_id"] == CL.T2_CHI.id]
-    if chi.empty:
+def _why(chi: list, a: float, b: float) -> str:
+    """Why no guaranteed tracking row covers [a, b]: the note of a Theorem 2 row (of the
+    follower's ``chi`` rows) stated there that is not guaranteed, else the transient before
+    the comparison-lemma time."""
+    if not chi:
         return "no provable variant for this ghat law (options.ghat_law)"
-    for r in chi.itertuples(index=False):
+    for r in chi:
         if r.kind == CL.Kind.GUARANTEED.value or not (r.t_start <= b and r.t_end >= a):
             continue
         note = str(r.note)
@@ -128,10 +139,11 @@ def coverage(table: pd.DataFrame, horizon: tuple[float, float]) -> list[Follower
     """
     t0, t1 = horizon
     step = _step(table)
-    agents = sorted({int(a) for a in table["agent"].astype(str) if a.isdigit()})
+    groups = by_agent(table)
+    agents = sorted(int(a) for a in groups if a.isdigit())
     out = []
     for a in agents:
-        rows = _per_agent(table, a)
+        rows = groups[str(a)]
         g = rows[rows["kind"] == CL.Kind.GUARANTEED.value]
         track = g[g["claim_id"].isin(CL.TRACKING)]
         env = g[g["claim_id"].isin(CL.ENVELOPE)]
@@ -177,7 +189,7 @@ def ultimate_from(table: pd.DataFrame, agent: int, t1: float) -> float:
     t1 : float
         The last output time.
     """
-    rows = _per_agent(table, agent)
+    rows = table[table["agent"].astype(str) == str(agent)]
     tol = 1e-9 * max(1.0, abs(t1))
     last = rows[
         (rows["kind"] == CL.Kind.GUARANTEED.value)
