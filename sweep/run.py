@@ -37,7 +37,7 @@ from sweep.lock import LOCK, study_lock
 from sweep.measures import summarize_table, tail_max_et, theorem2_entry  # noqa: F401
 from sweep.results import RESULTS, StudyPaths, commit_rows, read_results
 from sweep.resume import pending_ids
-from sweep.study import load_study
+from sweep.study import Study, load_study
 from sweep.worker import one_line, param_columns, run_in_memory, run_samples  # noqa: F401
 
 # The names above marked F401 are re-exported: search/ and docs/studies.md,
@@ -150,21 +150,7 @@ def run_study(
     study = load_study(study_path)
     paths = StudyPaths(Path(out_root) / study.name)
     wanted = list(range(study.count)) if ids is None else sorted(set(ids))
-    for k in wanted:
-        if not 0 <= k < study.count:
-            raise UsageError(
-                f"--ids: sample id {k} outside 0..{study.count - 1}: give ids of the study"
-            )
-    for flag, value in (("--batch", batch), ("--workers", workers), ("--chunk", chunk)):
-        if value is not None and value < 1:
-            raise UsageError(f"{flag}: {value}: give an integer >= 1")
-    if keep and study.graph is not None and study.graph.losses is not None:
-        if study.graph.losses.theorem1 == "measured":
-            raise UsageError(
-                f"--keep-runs: study {study.name} certifies its samples' gains on their base "
-                'graphs ([graph.losses] theorem1 = "measured"), which make sim does not: run '
-                "it without --keep-runs"
-            )
+    _check_options(study, wanted, batch, workers, chunk, keep)
     scheduler = scheduler_address(scheduler)
     created = [d for d in (paths.folder, *paths.folder.parents) if not d.exists()]
     paths.folder.mkdir(parents=True, exist_ok=True)
@@ -183,6 +169,27 @@ def run_study(
             if created and not paths.results.exists():
                 _remove_new_folders(paths, created)
             raise
+
+
+def _check_options(
+    study: Study, wanted: list[int], batch: int, workers: int | None, chunk: int | None, keep: bool
+) -> None:
+    """Refuse, in one line before any folder, options :func:`run_study` cannot honour."""
+    for k in wanted:
+        if not 0 <= k < study.count:
+            raise UsageError(
+                f"--ids: sample id {k} outside 0..{study.count - 1}: give ids of the study"
+            )
+    for flag, value in (("--batch", batch), ("--workers", workers), ("--chunk", chunk)):
+        if value is not None and value < 1:
+            raise UsageError(f"{flag}: {value}: give an integer >= 1")
+    losses = study.graph.losses if study.graph is not None else None
+    if keep and losses is not None and losses.theorem1 == "measured":
+        raise UsageError(
+            f"--keep-runs: study {study.name} certifies its samples' gains on their base "
+            'graphs ([graph.losses] theorem1 = "measured"), which make sim does not: run '
+            "it without --keep-runs"
+        )
 
 
 def _remove_new_folders(paths: StudyPaths, created: list[Path]) -> None:
