@@ -17,6 +17,7 @@ import hashlib
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -126,31 +127,48 @@ def open_image(lib: Library, form: str) -> Image:
         ``"ode"`` or ``"dae"``: which right-hand side to load.
     """
     data, stamp = verified_bytes(lib)
-    root = lib.folder.parent
-    try:
-        tmp = Path(tempfile.mkdtemp(dir=root, prefix=f"{TMP_PREFIX}{lib.key[:12]}-{os.getpid()}-"))
-    except OSError:  # a read-only cache root
-        tmp = Path(tempfile.mkdtemp(prefix=f"hitl-{lib.key[:12]}-"))
-    try:
-        copy = tmp / lib.path.name
-        copy.write_bytes(data)
-        names = (DAE_NAME if form == "dae" else ODE_NAME, OUT_NAME)
-        for name in names:
-            if name not in lib.names:
-                raise BuildError(
-                    f"library {lib.path}: no function {name!r} (it has {', '.join(lib.names)})"
-                )
+    names = (DAE_NAME if form == "dae" else ODE_NAME, OUT_NAME)
+    for name in names:
+        if name not in lib.names:
+            raise BuildError(
+                f"library {lib.path}: no function {name!r} (it has {', '.join(lib.names)})"
+            )
+
+    def load(copy: Path) -> tuple[Any, Any]:
         try:
             preload(lib.preload)  # the libraries it names by soname (native: SUNDIALS)
-            dyn_p, outputs_p = (ca.external(name, str(copy)) for name in names)
+            return tuple(ca.external(name, str(copy)) for name in names)
         except (OSError, RuntimeError) as exc:
             first = str(exc).strip().splitlines()
             raise BuildError(
                 f"build cache {lib.folder}: cannot be loaded ({first[0] if first else exc})"
             ) from None
+
+    dyn_p, outputs_p = _from_private_copy(lib, data, load)
+    return Image(stamp, dyn_p, outputs_p)
+
+
+def _from_private_copy(lib: Library, data: bytes, load: Callable[[Path], Any]) -> Any:
+    """``load`` of a private copy of ``data`` (the entry's verified bytes), removed after.
+
+    The copy lives in a fresh folder of the cache root (a read-only root: of the system's
+    temporary folder), named with the process id so a crash leaves a folder a later build
+    can recognise and remove.
+    """
+    try:
+        tmp = Path(
+            tempfile.mkdtemp(
+                dir=lib.folder.parent, prefix=f"{TMP_PREFIX}{lib.key[:12]}-{os.getpid()}-"
+            )
+        )
+    except OSError:  # a read-only cache root
+        tmp = Path(tempfile.mkdtemp(prefix=f"hitl-{lib.key[:12]}-"))
+    try:
+        copy = tmp / lib.path.name
+        copy.write_bytes(data)
+        return load(copy)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return Image(stamp, dyn_p, outputs_p)
 
 
 #: per-agent kernel libraries loaded in this process, by (path, stamp) (core/memo.py)
@@ -181,17 +199,7 @@ def open_kernels(path: Path) -> ctypes.CDLL:
     if hit is not None:
         return hit
     data, stamp = verified_bytes(lib)
-    root = folder.parent
-    try:
-        tmp = Path(tempfile.mkdtemp(dir=root, prefix=f"{TMP_PREFIX}{lib.key[:12]}-{os.getpid()}-"))
-    except OSError:  # a read-only cache root
-        tmp = Path(tempfile.mkdtemp(prefix=f"hitl-{lib.key[:12]}-"))
-    try:
-        copy = tmp / lib.path.name
-        copy.write_bytes(data)
-        cdll = native.open_library(copy)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    cdll = _from_private_copy(lib, data, native.open_library)
     _KERNELS[(str(path), stamp)] = cdll
     return cdll
 
