@@ -4,7 +4,8 @@
   ``out/<name>-designed/``, gains.json (with its certificate), design.json and design.md
   with the fronts (docs/synthesis.md, 'Design').
 - ``demo``: ``python -m verify demo`` on the scenario; with a ``[design]`` table, on its
-  designed gains (designed first unless a design.json written for this scenario exists).
+  designed gains (designed first unless a design.json written for this scenario by this
+  version of the design procedure exists).
 """
 
 from __future__ import annotations
@@ -71,7 +72,9 @@ def demo(argv: list[str]) -> int:
         write_design(d, user or {}, user_variant, root)
         ov = d.overrides
     else:
-        print(f"[design] reusing the design of {base.name} (design.json matches the scenario)")
+        print(
+            f"[design] reusing the design of {base.name} (design.json: this scenario, this procedure)"
+        )
     rest, skip = [], False
     for a in argv:  # the designed run's variant replaces the user's
         if skip:

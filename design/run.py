@@ -41,6 +41,9 @@ VARIANT = "designed"
 FORMAT = 1
 #: largest design.json read back
 MAX_DESIGN_BYTES = 16 * 2**20
+#: the sources of the design procedure: a design.json written by another version of them
+#: is designed again, not reused (:func:`procedure_sha256`)
+PROCEDURE = ("design", "synthesis/design.py")
 
 
 class DesignError(ToolkitError):
@@ -310,6 +313,7 @@ def write_design(
         "format": FORMAT,
         "scenario_sha256": d.base.sha256,
         "scenario_path": d.base.path,
+        "procedure_sha256": procedure_sha256(),
         "user_overrides": user,
         "overrides": d.overrides,
         "designed_scenario": sc.name,
@@ -325,10 +329,33 @@ def write_design(
     return folder
 
 
+def procedure_sha256() -> str:
+    """SHA-256 of the design procedure's sources (:data:`PROCEDURE`), by content only.
+
+    Returns
+    -------
+    str
+        Hex digest over the sources' relative names and bytes (the same in every checkout
+        of the same code).
+    """
+    import hashlib
+
+    top = Path(__file__).resolve().parent.parent
+    files = []
+    for name in PROCEDURE:
+        p = top / name
+        files += sorted(p.glob("*.py")) if p.is_dir() else [p]
+    h = hashlib.sha256()
+    for p in files:
+        h.update(p.relative_to(top).as_posix().encode() + b"\0" + p.read_bytes())
+    return h.hexdigest()
+
+
 def stored_overrides(
     path: str | Path, user: dict[str, Any], user_variant: str | None, out_root: Path | None
 ) -> dict[str, Any] | None:
-    """The design's keys from a design.json written for this very scenario, else None.
+    """The design's keys from a design.json written for this very scenario by this very
+    design procedure (:func:`procedure_sha256`), else None.
 
     Parameters
     ----------
@@ -350,5 +377,7 @@ def stored_overrides(
     if not isinstance(rec, dict) or rec.get("format") != FORMAT:
         return None
     if rec.get("scenario_sha256") != base.sha256 or not isinstance(rec.get("overrides"), dict):
+        return None
+    if rec.get("procedure_sha256") != procedure_sha256():
         return None
     return rec["overrides"]

@@ -113,7 +113,12 @@ def stored_designs(tmp_path_factory, monkeypatch):
         if "design" not in tomllib.loads(path.read_text(encoding="utf-8")):
             continue
         sc = load(path)
-        rec = {"format": R.FORMAT, "scenario_sha256": sc.sha256, "overrides": {}}
+        rec = {
+            "format": R.FORMAT,
+            "scenario_sha256": sc.sha256,
+            "procedure_sha256": R.procedure_sha256(),
+            "overrides": {},
+        }
         (root / f"{sc.name}-{R.VARIANT}").mkdir()
         (root / f"{sc.name}-{R.VARIANT}" / "design.json").write_text(json.dumps(rec))
     monkeypatch.setattr(R, "OUT_ROOT", root)

@@ -204,18 +204,26 @@ def test_designed_observer_gains_certify(monkeypatch):
     assert g.delta1 == pytest.approx(od.delta1) and g.delta2 == pytest.approx(od.delta2)
 
 
-def test_a_stored_design_is_reused_only_for_its_own_scenario(tmp_path):
+def test_a_stored_design_is_reused_only_for_its_own_scenario_and_procedure(tmp_path):
     import json
 
-    from design.run import FORMAT, VARIANT, stored_overrides
+    from design.run import FORMAT, VARIANT, procedure_sha256, stored_overrides
 
     sc = load(PAPER_DESIGN)
     folder = tmp_path / f"{sc.name}-{VARIANT}"
     folder.mkdir()
     ov = {"observer.delta1": 1.5, "controller.k1": [40.0] * 5}
-    rec = {"format": FORMAT, "scenario_sha256": sc.sha256, "overrides": ov}
+    rec = {
+        "format": FORMAT,
+        "scenario_sha256": sc.sha256,
+        "procedure_sha256": procedure_sha256(),
+        "overrides": ov,
+    }
     (folder / "design.json").write_text(json.dumps(rec))
     assert stored_overrides(PAPER_DESIGN, {}, None, tmp_path) == ov
+    # designed by another version of the procedure (e.g. before it chose γ): designed again
+    (folder / "design.json").write_text(json.dumps({**rec, "procedure_sha256": "0" * 64}))
+    assert stored_overrides(PAPER_DESIGN, {}, None, tmp_path) is None
     rec["scenario_sha256"] = "0" * 64  # written for another scenario (or an edited file)
     (folder / "design.json").write_text(json.dumps(rec))
     assert stored_overrides(PAPER_DESIGN, {}, None, tmp_path) is None
@@ -289,13 +297,18 @@ def test_demo_runs_the_stored_design_of_a_design_scenario(monkeypatch, tmp_path)
 
     import verify.__main__ as V
     from design.cli import demo
-    from design.run import FORMAT, VARIANT
+    from design.run import FORMAT, VARIANT, procedure_sha256
 
     sc = load(PAPER_DESIGN)
     folder = tmp_path / f"{sc.name}-{VARIANT}"
     folder.mkdir()
     ov = {"observer.delta1": 1.5, "controller.k1": [40.0] * 5}
-    rec = {"format": FORMAT, "scenario_sha256": sc.sha256, "overrides": ov}
+    rec = {
+        "format": FORMAT,
+        "scenario_sha256": sc.sha256,
+        "procedure_sha256": procedure_sha256(),
+        "overrides": ov,
+    }
     (folder / "design.json").write_text(json.dumps(rec))
     seen = []
     monkeypatch.setattr(V, "main", lambda argv: seen.append(argv) or 0)
@@ -325,7 +338,12 @@ def test_a_study_on_a_design_base_runs_its_designed_gains(monkeypatch, tmp_path)
     folder = tmp_path / f"{sc.name}-{R.VARIANT}"
     folder.mkdir()
     ov = {"controller.k1": [40.0] * 5, "controller.Lambda": 80.0}
-    rec = {"format": R.FORMAT, "scenario_sha256": sc.sha256, "overrides": ov}
+    rec = {
+        "format": R.FORMAT,
+        "scenario_sha256": sc.sha256,
+        "procedure_sha256": R.procedure_sha256(),
+        "overrides": ov,
+    }
     (folder / "design.json").write_text(json.dumps(rec))
     s = make_sample(load_study(study), 0).scenario
     assert np.all(s.controller.k1 == 40.0)
@@ -341,7 +359,12 @@ def _design_record(tmp_path, monkeypatch, overrides: dict) -> None:
     sc = load(PAPER_DESIGN)
     folder = tmp_path / f"{sc.name}-{R.VARIANT}"
     folder.mkdir(exist_ok=True)
-    rec = {"format": R.FORMAT, "scenario_sha256": sc.sha256, "overrides": overrides}
+    rec = {
+        "format": R.FORMAT,
+        "scenario_sha256": sc.sha256,
+        "procedure_sha256": R.procedure_sha256(),
+        "overrides": overrides,
+    }
     (folder / "design.json").write_text(json.dumps(rec))
     monkeypatch.setattr(R, "OUT_ROOT", tmp_path)
 
