@@ -553,6 +553,28 @@ def _rel(a: np.ndarray, b: np.ndarray) -> float:
     return float((np.abs(a - b) / np.maximum(1.0, np.abs(b))).max())
 
 
+def _tight_cvodes(sc, gains, cg):  # noqa: ANN001, ANN202
+    """CasADi's CVODES on ``sc`` at rtol 1e-10, atol 1e-12: its build, settings and run."""
+    built = api.build(sc, gains, "cvodes", cg)
+    s = dataclasses.replace(
+        api.integrator_settings(sc, "cvodes"), rtol=1e-10, atol=1e-12, max_steps=10**6
+    )
+    return built, s, api.simulate(built, sc, s)
+
+
+def _per_agent_like(libs, prob, ref_built, ref, s, sc):  # noqa: ANN001, ANN202
+    """The per-agent engine from the reference's x(0), at its output times, tolerances and
+    breakpoints."""
+    return agents.run(
+        [lib.path for lib in libs],
+        prob,
+        ref_built.closed_loop.x0,
+        ref.t,
+        dataclasses.replace(s, method="native"),
+        breakpoints=api.breakpoints(ref_built, sc),
+    )
+
+
 def test_paper_on_the_per_agent_engine_equals_cvodes():
     """The paper scenario through the per-agent engine against CasADi's CVODES (the whole
     closed loop's generated C), both at rtol 1e-10: equal to a relative 1e-6 over the
@@ -561,20 +583,9 @@ def test_paper_on_the_per_agent_engine_equals_cvodes():
     sc = dataclasses.replace(sc, integration=dataclasses.replace(sc.integration, horizon=1.0))
     gains = bench_gains(sc)[0]
     cg = CodegenSettings(jacobian="auto")  # the shared build cache
-    ref_built = api.build(sc, gains, "cvodes", cg)
-    s = dataclasses.replace(
-        api.integrator_settings(sc, "cvodes"), rtol=1e-10, atol=1e-12, max_steps=10**6
-    )
-    ref = api.simulate(ref_built, sc, s)
+    ref_built, s, ref = _tight_cvodes(sc, gains, cg)
     libs, model = agents.build_models(sc, gains, cg)
-    tr = agents.run(
-        [lib.path for lib in libs],
-        agents.problem(sc, gains, model),
-        ref_built.closed_loop.x0,
-        ref.t,
-        dataclasses.replace(s, method="native"),
-        breakpoints=api.breakpoints(ref_built, sc),
-    )
+    tr = _per_agent_like(libs, agents.problem(sc, gains, model), ref_built, ref, s, sc)
     assert tr.complete and ref.complete
     assert _rel(tr.x, ref.x) < 1e-6
 
@@ -802,22 +813,11 @@ def test_paper_with_a_link_lost_and_restored_fading_equals_cvodes():
     assert sc.graph.link_fade == 1.0
     gains = bench_gains(sc)[0]
     cg = CodegenSettings(jacobian="auto")  # the shared build cache
-    ref_built = api.build(sc, gains, "cvodes", cg)
-    s = dataclasses.replace(
-        api.integrator_settings(sc, "cvodes"), rtol=1e-10, atol=1e-12, max_steps=10**6
-    )
-    ref = api.simulate(ref_built, sc, s)
+    ref_built, s, ref = _tight_cvodes(sc, gains, cg)
     libs, model = agents.build_models(sc, gains, cg)
     prob = agents.problem(sc, gains, model)
     assert [len(g.active) for g in prob.segments] == [1, 2, 3, 2, 1]  # past 1 s: unused
-    tr = agents.run(
-        [lib.path for lib in libs],
-        prob,
-        ref_built.closed_loop.x0,
-        ref.t,
-        dataclasses.replace(s, method="native"),
-        breakpoints=api.breakpoints(ref_built, sc),
-    )
+    tr = _per_agent_like(libs, prob, ref_built, ref, s, sc)
     assert tr.complete and ref.complete
     assert _rel(tr.x, ref.x) < 1e-6
     # another fade time and the raw switching: the same library (data, nothing compiled);
@@ -827,12 +827,5 @@ def test_paper_with_a_link_lost_and_restored_fading_equals_cvodes():
         libs_T, model_T = agents.build_models(other, gains, cg)
         assert [lib.key for lib in libs_T] == [lib.key for lib in libs] and libs_T[0].cache_hit
         assert libs_T[0].compile_seconds == 0.0
-    raw = agents.run(
-        [lib.path for lib in libs_T],
-        agents.problem(other, gains, model_T),
-        ref_built.closed_loop.x0,
-        ref.t,
-        dataclasses.replace(s, method="native"),
-        breakpoints=api.breakpoints(ref_built, other),
-    )
+    raw = _per_agent_like(libs_T, agents.problem(other, gains, model_T), ref_built, ref, s, other)
     assert raw.complete and _rel(raw.x, ref.x) > 1e-3
