@@ -37,11 +37,12 @@ import pandas as pd
 from core.artifacts import OUT_ROOT, atomic_write_text
 from core.errors import ScenarioError
 from core.memo import MEMO
+from core.overrides import load, parse_override
 from core.scenario import Scenario
 from generated import solvers
 from generated.built import Built
 from generated.codegen import Library, build_library, cache_root, check_dyn_signature, renamed
-from generated.gains_cache import GainsInfo, ensure_gains, scenario_gains
+from generated.gains_cache import ensure_gains, scenario_gains
 from generated.largescale import choose_plan
 from generated.loaded import (
     BUILDS,
@@ -54,20 +55,12 @@ from generated.loaded import (
     open_image,
 )
 from generated.meta import LibraryRecord, RunMeta, WallSeconds
-from generated.overrides import (
-    MAX_SET_DEPTH,
-    MAX_SET_INT,
-    MAX_VARIANT_CHARS,
-    load,
-    parse_override,
-)
 from generated.progress import progress_bar
-from generated.reuse import CODE_PACKAGES, code_sha256, library_hashes, reuse_problem, run_inputs
+from generated.reuse import library_hashes, reuse_problem, run_inputs
 from generated.schedule import output_grid
 from generated.solvers.base import BuildPlan
 from generated.sundials_log import sundials_summary
 from generated.trajectory_file import (
-    INCOMPLETE_MARK,
     column_names,
     csv_text,
     evaluate_outputs,
@@ -82,19 +75,10 @@ from synthesis.gains import Gains
 
 #: the names other packages use, from this module or re-exported from the modules above
 __all__ = [
-    "CODE_PACKAGES",
-    "INCOMPLETE_MARK",
-    "MAX_SET_DEPTH",
-    "MAX_SET_INT",
-    "MAX_VARIANT_CHARS",
-    "GainsInfo",
-    "RunMeta",
     "RunResult",
     "breakpoints",
     "build",
     "build_from_closed_loop",
-    "fix_parameters",
-    "code_sha256",
     "column_names",
     "csv_text",
     "ensure_gains",
@@ -102,17 +86,14 @@ __all__ = [
     "evaluate_outputs",
     "integrate_built",
     "integrator_settings",
-    "library_hashes",
     "load",
     "parse_override",
     "read_trajectory",
     "resolve_codegen",
     "reuse_problem",
     "run",
-    "run_inputs",
     "simulate",
     "trajectory_frame",
-    "trajectory_text",
     "with_method",
 ]
 

@@ -23,8 +23,8 @@ import numpy as np
 
 from core.errors import ExpressionError, ScenarioError
 from core.faults import FAULT_TYPES
+from core.overrides import set_path
 from core.scenario import scenario_from_dict
-from generated.overrides import set_path
 from sweep.sampler import Sample, scenario_toml
 from sweep.study import Distribution, Study, substitute
 

@@ -23,8 +23,8 @@ from core.artifacts import atomic_write_text
 from core.errors import ExpressionError, ScenarioError
 from core.faults import FAULT_TYPES
 from core.graph import unreachable_followers
+from core.overrides import set_path
 from core.scenario import Scenario, scenario_from_dict
-from generated.overrides import set_path
 from sweep.distributions import Distribution
 from sweep.families import FaultFamily, LinkLosses, substitute
 from sweep.graphs import random_graph, resize_followers

@@ -23,9 +23,9 @@ import numpy as np
 from core.errors import ExpressionError, ScenarioError
 from core.faults import FAULT_TYPES
 from core.files import FileRefused, read_regular_file
+from core.overrides import set_path
 from core.reading import ReadingContext
 from core.scenario import MAX_SCENARIO_BYTES, load_scenario, scenario_from_dict, scenario_name
-from generated.overrides import set_path
 from sweep.distributions import Distribution, distribution, representative
 from sweep.families import (
     FAULT_KEYS,
