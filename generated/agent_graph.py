@@ -191,11 +191,6 @@ class Segment:
     w: np.ndarray
     cpl: np.ndarray
 
-    @property
-    def fading(self) -> bool:
-        """Whether more than one topology is active (the weights move)."""
-        return len(self.active) > 1
-
 
 def _union(t_start: float, tops: list[Topology], active: list[int]) -> Segment:
     """The segment of ``active`` topologies: union pattern, each one's weights on it."""

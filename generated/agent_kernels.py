@@ -8,8 +8,6 @@ option set, the kernels of ONE agent (:func:`symbolic.cascade.agent_block`, as C
 * ``ag_rhs``: the agent's rates (and the leader's, eq. (3));
 * ``ag_jac``: their Jacobian block K = ∂(ẋ_b, jets)/∂(x_b, nb), its structural
   nonzeros only (column-compressed, ``ag_jac_sparsity_out(1)``);
-* ``ag_faults``: one 0 (the kernels evaluate g_i(t), f_i(t) from their agent's row of
-  runtime numbers, :func:`symbolic.parameters.agent_rows`; the driver still calls it);
 * ``ag_nfac``, ``ag_nsol``, ``ag_gmat``: the agent's part of CVODE's Newton systems on
   the structural pattern of K (:func:`newton_functions`): the LU of D = I + c A_ss without
   pivoting, unrolled (:mod:`generated.sparse_lu`) and packed with the blocks a solve
@@ -47,9 +45,8 @@ from symbolic.closed_loop import make_layout, model_groups, observer_gains
 from symbolic.parameters import row_layout, structure
 from synthesis.gains import Gains
 
-DRIVER = native.NATIVE_DIR / "agents.c"
 JET_NAMES = ("ag_jet0", "ag_jet1", "ag_jet2")
-RHS_NAME, JAC_NAME, FAULTS_NAME = "ag_rhs", "ag_jac", "ag_faults"
+RHS_NAME, JAC_NAME = "ag_rhs", "ag_jac"
 NFAC_NAME, NSOL_NAME, GMAT_NAME = "ag_nfac", "ag_nsol", "ag_gmat"
 #: compile flags of the kernel libraries: OpenMP threads over the agents of a pass
 OPENMP_FLAGS = ("-fopenmp",)
@@ -73,8 +70,8 @@ def kernel_functions(
     Returns
     -------
     list of casadi.Function
-        ``ag_jet0..2``, ``ag_rhs``, ``ag_jac`` with inputs ``(t, xb, nb, cpl, prm, gf)``
-        and ``ag_faults(t)``.
+        ``ag_jet0..2``, ``ag_rhs``, ``ag_jac`` with inputs ``(t, xb, nb, cpl, prm)``
+        and the Newton kernels (:func:`newton_functions`).
     """
     lay = make_layout(sc.m, sc.n, 1, sc.options.derivatives == "filtered")
     block = agent_block(sc, observer_gains(sc, gains), lay, model_index)
@@ -92,8 +89,6 @@ def kernel_functions(
     ]
     fns.append(ca.Function(RHS_NAME, args, [xbdot, jets], names, ["xbdot", "jets"], opts))
     fns.append(ca.Function(JAC_NAME, args, [jets, K], names, ["jets", "K"], opts))
-    t = ca.SX.sym("t")  # the blocks evaluate their faults from their rows (agent_block)
-    fns.append(ca.Function(FAULTS_NAME, [t], [ca.SX.zeros(1)], ["t"], ["values"], opts))
     return fns + newton_functions(K.sparsity(), sc.m, 3 * n, opts)
 
 
@@ -229,7 +224,7 @@ def kernel_key(
         # the fault templates, the gains' patterns, the row's sizes
         "rows": row_layout(sc, observer_gains(sc, gains)).key(),
         "driver": hashlib.sha256(
-            (native.COMMON.read_text() + DRIVER.read_text()).encode()
+            (native.COMMON.read_text() + native.DRIVER.read_text()).encode()
         ).hexdigest(),
         "settings": repr(kernel_settings(settings, openmp)),
     }
@@ -247,7 +242,7 @@ def driver_toolchain(sc: Scenario) -> Toolchain:
     ----------
     sc : Scenario
     """
-    tc = native.toolchain(DRIVER)
+    tc = native.toolchain()
     na = make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered").agent_size
     sizes = (
         f"#define HITL_AG_N_LEADER {sc.m}\n#define HITL_AG_N_STATE {na}\n"

@@ -33,7 +33,6 @@ from core.scenario import Scenario
 from generated import native
 from generated.agent_graph import Segment, Topology, segments, topology
 from generated.agent_kernels import (
-    FAULTS_NAME,
     GMAT_NAME,
     JAC_NAME,
     JET_NAMES,
@@ -76,11 +75,6 @@ class AgentProblem:
         Followers, leader states, states per follower, output coordinates.
     model : ndarray
         N ints: each follower's kernel library.
-    fault_index : ndarray
-        N × (1+n) zeros: the driver's ``gf`` (``ag_faults``' values), which the kernels
-        do not read (they evaluate g_i, f_i from their rows).
-    nfaults : int
-        Length of the fault kernel's output (1).
     params : ndarray
         N × npar, agent-major: each follower's row of runtime numbers
         (:func:`symbolic.parameters.agent_rows`: per-agent numbers, the observer's gains,
@@ -96,8 +90,6 @@ class AgentProblem:
     na: int
     n: int
     model: np.ndarray
-    fault_index: np.ndarray
-    nfaults: int
     params: np.ndarray
     topologies: tuple[Topology, ...]
     fade: float
@@ -121,7 +113,7 @@ class AgentProblem:
 
 
 def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
-    """The runtime data of ``sc`` (graph, per-agent numbers, fault indices).
+    """The runtime data of ``sc`` (graph, per-agent numbers).
 
     Parameters
     ----------
@@ -148,9 +140,6 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
         na=lay.agent_size,
         n=sc.n,
         model=np.asarray(model, np.int32),
-        # the kernels evaluate g_i, f_i from their rows: ag_faults' one 0 is not read
-        fault_index=np.zeros((sc.N, 1 + sc.n), np.int32),
-        nfaults=1,
         params=np.ascontiguousarray(agent_rows(sc, observer_gains(sc, gains)), dtype=float),
         topologies=tops,
         fade=fade,
@@ -196,10 +185,6 @@ class Problem(ctypes.Structure):
         ("nmodels", ctypes.c_int),
         ("kern", ctypes.POINTER(Kernels)),
         ("model", _IP),
-        ("faults", _FN),
-        ("faults_work", _FN),
-        ("nfaults", ctypes.c_int),
-        ("fidx", _IP),
         ("prm", _DP),
         ("ntop", ctypes.c_int),
         ("t_switch", _DP),
@@ -271,11 +256,10 @@ def _kernels(lib: ctypes.CDLL) -> Kernels:
     for lev, name in enumerate(JET_NAMES):
         k.jet[lev] = _fn(lib, name)
         k.jet_work[lev] = _fn(lib, name + "_work")
-    k.rhs, k.rhs_work = _fn(lib, RHS_NAME), _fn(lib, RHS_NAME + "_work")
-    k.jac, k.jac_work = _fn(lib, JAC_NAME), _fn(lib, JAC_NAME + "_work")
-    k.nfac, k.nfac_work = _fn(lib, NFAC_NAME), _fn(lib, NFAC_NAME + "_work")
-    k.nsol, k.nsol_work = _fn(lib, NSOL_NAME), _fn(lib, NSOL_NAME + "_work")
-    k.gmat, k.gmat_work = _fn(lib, GMAT_NAME), _fn(lib, GMAT_NAME + "_work")
+    for name in (RHS_NAME, JAC_NAME, NFAC_NAME, NSOL_NAME, GMAT_NAME):
+        field = name.removeprefix("ag_")
+        setattr(k, field, _fn(lib, name))
+        setattr(k, field + "_work", _fn(lib, name + "_work"))
     return k
 
 
@@ -292,10 +276,15 @@ def k_pattern(lib: ctypes.CDLL) -> tuple[int, np.ndarray, np.ndarray]:
     (int, ndarray, ndarray)
         k (K is k × k), the column pointers (k + 1) and the row of every nonzero.
     """
-    f = getattr(lib, JAC_NAME + "_sparsity_out")
+    return _sparsity_out(lib, JAC_NAME, 1)
+
+
+def _sparsity_out(lib: ctypes.CDLL, name: str, j: int) -> tuple[int, np.ndarray, np.ndarray]:
+    """:func:`parse_sparsity` of output ``j`` of the library's Function ``name``."""
+    f = getattr(lib, name + "_sparsity_out")
     f.restype = ctypes.POINTER(ctypes.c_longlong)
     f.argtypes = [ctypes.c_longlong]
-    return parse_sparsity(f(1))
+    return parse_sparsity(f(j))
 
 
 def parse_sparsity(sp: Sequence[int]) -> tuple[int, np.ndarray, np.ndarray]:
@@ -320,27 +309,13 @@ def parse_sparsity(sp: Sequence[int]) -> tuple[int, np.ndarray, np.ndarray]:
     return nrow, colind, rows
 
 
-def packed_size(lib: ctypes.CDLL) -> int:
-    """Doubles of one agent's packed factorisation P (``ag_nfac``'s first output).
-
-    Parameters
-    ----------
-    lib : ctypes.CDLL
-        A kernel library (:func:`load`).
-    """
-    f = getattr(lib, NFAC_NAME + "_sparsity_out")
-    f.restype = ctypes.POINTER(ctypes.c_longlong)
-    f.argtypes = [ctypes.c_longlong]
-    _, colind, _ = parse_sparsity(f(0))
-    return int(colind[-1])
-
-
 def _k_layout(libs: list[ctypes.CDLL], model: np.ndarray, m: int) -> dict[str, np.ndarray]:
     """Each agent's offsets into the stored K nonzeros and into the packed factorisations,
     and the leader block's nonzeros."""
     pats = [k_pattern(lib) for lib in libs]
     nnz = np.array([int(pats[j][1][-1]) for j in model])
-    npk = np.array([packed_size(libs[j]) for j in range(len(libs))])[model]
+    # doubles of each agent's packed factorisation P (ag_nfac's first output)
+    npk = np.array([_sparsity_out(lib, NFAC_NAME, 0)[1][-1] for lib in libs])[model]
     _, colind, rows = pats[model[0]]
     lead = -np.ones((m, m), np.int32)  # column-major, as the driver reads it
     for col in range(m):
@@ -400,7 +375,6 @@ def _c_problem(
     w_off = np.cumsum([0] + [len(t.idx) for s, t in zip(segs, tops, strict=True) for _ in s.active])
     arrays = {
         "model": np.ascontiguousarray(prob.model, np.int32),
-        "fidx": np.ascontiguousarray(prob.fault_index.ravel(), np.int32),
         "prm": np.ascontiguousarray(prob.params, float),
         "t_switch": np.ascontiguousarray([s.t_start for s in segs[1:]] + [0.0], float),
         "ptr": np.ascontiguousarray(ptr),
@@ -429,9 +403,6 @@ def _c_problem(
         npar=prob.params.shape[1],
         nmodels=len(libs),
         kern=kern,
-        faults=_fn(libs[0], FAULTS_NAME),
-        faults_work=_fn(libs[0], FAULTS_NAME + "_work"),
-        nfaults=prob.nfaults,
         ntop=len(segs),
         ngraph=len(prob.topologies),
         fade=float(prob.fade),

@@ -1,48 +1,32 @@
-"""The native CVODE driver's Python side: its toolchain, loading, and calling convention.
+"""The native CVODE driver's Python side: its toolchain, loading and calling convention.
 
-Method ``native`` is the per-agent engine (:mod:`generated.agents`): one library per
-follower model (:mod:`generated.agent_kernels`) with ``generated/native/common.c`` and
-``generated/native/agents.c`` appended, linked against SUNDIALS CVODE. This module holds
-what that driver needs around it:
-
-* :func:`toolchain`: the C sources, the vendored SUNDIALS headers and the SUNDIALS
-  shared libraries, hashed into the build cache's key;
-* :func:`load` / :func:`open_library`: a built library loaded and checked (SUNDIALS
-  version and index type, struct sizes);
-* :class:`Options`, :class:`Result`: the ctypes mirror of ``hitl_native.h``, and
-  :class:`DriverCall`, one run's options, result and buffers, turned into a
-  :class:`~generated.values.Trajectory` by :func:`driver_trajectory`.
-
-SUNDIALS comes from the ``scikit-sundae`` wheel (SUNDIALS 7.9 shared libraries, built
-with 32-bit indices). Its wheel has no headers, so the 31 headers the driver needs are
-vendored in ``generated/native/include`` (SUNDIALS 7.9.0, BSD-3-Clause, from the
-official ``sundials4py`` 7.9.0 wheel; only ``sundials_config.h``'s index type is changed
-to match scikit-sundae's build). When a library is loaded ``hitl_native_check`` compares
-the library's version with the headers' and reads back a matrix's dimensions, so a
-mismatched SUNDIALS fails with a clear error instead of corrupting memory.
-
-A run takes one options struct and fills one result struct, defined once in
-``generated/native/hitl_native.h`` and mirrored here; a library reports the sizes it was
-compiled with (``hitl_struct_size``) and :func:`open_library` refuses one that differs
-from the mirror.
+Method ``native`` is the per-agent engine (:mod:`generated.agents`): its libraries are one
+follower model's kernels with ``native/common.c`` and ``native/agents.c`` appended, linked
+against the SUNDIALS 7.9 of the ``scikit-sundae`` wheel, whose missing headers are
+vendored in ``native/include`` (``native/README.md``). :func:`toolchain` hashes everything
+a library is built from; :func:`open_library` refuses a library whose SUNDIALS (version,
+index type) differs from the headers or whose structs differ from the ctypes mirror
+(:class:`Options`, :class:`Result`) of ``hitl_native.h``, so a mismatch is a clear error,
+never corrupt memory; :class:`DriverCall` holds one run's options, result and buffers.
 """
 
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import importlib.util
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from core.artifacts import sha256_file
 from core.errors import BuildError, IntegrationError
 from core.memo import MEMO
-from generated.codegen import Toolchain, preload
+from generated.compiler import Toolchain
 from generated.schedule import Schedule, schedule
+from generated.shared_library import preload
 from generated.sundials_log import new_sundials_log, take_sundials_log
 from generated.values import (
     IntegratorSettings,
@@ -121,19 +105,9 @@ class Result(ctypes.Structure):
 STRUCTS = (Options, Result)
 
 
-def _sha256_file(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-@MEMO.memoize("native-toolchain", 2)
-def toolchain(driver: Path = DRIVER) -> Toolchain:
+@MEMO.memoize("native-toolchain", 1)
+def toolchain() -> Toolchain:
     """The driver source, the vendored headers and scikit-sundae's SUNDIALS libraries.
-
-    Parameters
-    ----------
-    driver : Path
-        The C appended after ``common.c``: ``agents.c``, the per-agent engine
-        (:mod:`generated.agent_kernels`).
 
     Returns
     -------
@@ -169,11 +143,11 @@ def toolchain(driver: Path = DRIVER) -> Toolchain:
         libs.append(found[0])
     headers = sorted(p for p in INCLUDE_DIR.rglob("*.h"))
     key = {
-        "headers": {str(p.relative_to(INCLUDE_DIR)): _sha256_file(p) for p in headers},
-        "libraries": {p.name: _sha256_file(p) for p in libs},
-        "interface": {HEADER.name: _sha256_file(HEADER)},
+        "headers": {str(p.relative_to(INCLUDE_DIR)): sha256_file(p) for p in headers},
+        "libraries": {p.name: sha256_file(p) for p in libs},
+        "interface": {HEADER.name: sha256_file(HEADER)},
     }
-    source = COMMON.read_text() + "\n" + Path(driver).read_text()
+    source = COMMON.read_text() + "\n" + DRIVER.read_text()
     return Toolchain(source, (NATIVE_DIR, INCLUDE_DIR), tuple(libs), key)
 
 
@@ -196,7 +170,10 @@ def open_library(path: Path) -> ctypes.CDLL:
         lib = ctypes.CDLL(str(path))
     except OSError as exc:
         raise BuildError(f"native integrator: {path.name} cannot be loaded ({exc})") from None
-    _declare(lib)
+    lib.hitl_native_check.restype = ctypes.c_int
+    lib.hitl_native_check.argtypes = [ctypes.c_char_p, ctypes.c_int]
+    lib.hitl_struct_size.restype = ctypes.c_long
+    lib.hitl_struct_size.argtypes = [ctypes.c_int]
     for which, struct in enumerate(STRUCTS):
         size = lib.hitl_struct_size(which)
         if size != ctypes.sizeof(struct):
@@ -212,15 +189,6 @@ def open_library(path: Path) -> ctypes.CDLL:
             "(install scikit-sundae==1.2.*, whose SUNDIALS 7.9 the vendored headers match)"
         )
     return lib
-
-
-def _declare(lib: ctypes.CDLL) -> None:
-    """The entry points' signatures (hitl_native.h's structs passed by pointer)."""
-    ci = ctypes.c_int
-    lib.hitl_native_check.restype = ci
-    lib.hitl_native_check.argtypes = [ctypes.c_char_p, ci]
-    lib.hitl_struct_size.restype = ctypes.c_long
-    lib.hitl_struct_size.argtypes = [ci]
 
 
 def dptr(a: np.ndarray) -> ctypes._Pointer:
@@ -259,7 +227,6 @@ class DriverCall:
     X: np.ndarray
     x_stop: np.ndarray
     _keep: tuple[np.ndarray, ...]
-    #: the temporary file the driver appends SUNDIALS' messages to (``options.log_path``)
     log: Path | None = None
 
     @classmethod
@@ -284,6 +251,7 @@ class DriverCall:
             Restart times, reconciled with ``t_out`` by :func:`~generated.schedule.schedule`.
         """
         sched = schedule(t_out, breakpoints)
+        log = new_sundials_log()
         tq = np.ascontiguousarray(sched.targets, dtype=float)
         bps = np.ascontiguousarray(sched.breaks, dtype=float)
         X = np.full((len(sched.t_out), nx), np.nan)
@@ -296,84 +264,64 @@ class DriverCall:
             t_out=dptr(tq),
             nb=len(bps),
             breaks=dptr(bps),
+            log_path=str(log).encode(),
         )
-        log = new_sundials_log()
-        options.log_path = str(log).encode()
         result = Result(x_out=dptr(X), x_stop=dptr(x_stop))
         return cls(sched, options, result, X, x_stop, (tq, bps), log)
 
     def trajectory(
         self, method: str, wall0: float, progress: Callable[[float], None] | None = None
     ) -> Trajectory:
-        """:func:`driver_trajectory` of the filled result.
+        """A :class:`Trajectory` from what the driver filled in.
 
         Parameters
         ----------
-        method, wall0, progress
-            As :func:`driver_trajectory`.
+        method : str
+            ``"native"``.
+        wall0 : float
+            ``time.perf_counter()`` when the run began.
+        progress : callable, optional
+            Called once with the time reached.
+
+        Raises
+        ------
+        IntegrationError
+            If the driver could not start (``result.filled`` < 1).
         """
         log = take_sundials_log(self.log)  # SUNDIALS' messages; the temporary file removed
-        tr = driver_trajectory(method, self.sched.t_out, self.X, self.result, wall0, progress)
-        t_stop = float(self.result.t_stop)
-        return replace(tr, sundials_log=log, t_stop=t_stop, x_stop=self.x_stop.copy())
-
-
-def driver_trajectory(
-    method: str,
-    t_out: np.ndarray,
-    X: np.ndarray,
-    result: Result,
-    wall0: float,
-    progress: Callable[[float], None] | None = None,
-) -> Trajectory:
-    """A :class:`Trajectory` from what the C driver returned.
-
-    Parameters
-    ----------
-    method : str
-        ``"native"``.
-    t_out, X : ndarray
-        Output times and the driver's output rows.
-    result : Result
-        The driver's counters, last flag and message (``"FLAG_NAME: SUNDIALS message"``
-        on a failure); ``filled`` < 1: it could not start.
-    wall0 : float
-        ``time.perf_counter()`` when the run began.
-    progress : callable, optional
-        Called once with the time reached.
-
-    Raises
-    ------
-    IntegrationError
-        If the driver could not start.
-    """
-    text = result.msg.decode(errors="replace").strip()
-    filled, nt = int(result.filled), len(t_out)
-    if filled < 1:
-        raise IntegrationError(f"{method} integrator could not start: {text or 'unknown error'}")
-    stats: dict[str, float | int] = {k: int(getattr(result, k)) for k in COUNTERS}
-    stats.update(last_step=float(result.last_step), integrator_calls=1, jtimes_evals=0)
-    stats["wall_seconds"] = time.perf_counter() - wall0
-    t_reached = float(t_out[filled - 1])
-    message, status = "", Status.OK
-    if filled < nt:
-        name, _, detail = text.partition(":")
-        flag = name.strip() or str(int(result.flag))
-        status = flag_status(flag)
-        message = (
-            f"{method} failed after t = {t_reached:.6g} s (working towards t = "
-            f"{float(t_out[filled]):.6g} s): {flag_reason(flag)}"
-            + (f" ({detail.strip()})" if detail.strip() else "")
+        result, t_out = self.result, self.sched.t_out
+        text = result.msg.decode(errors="replace").strip()
+        filled = int(result.filled)
+        if filled < 1:
+            raise IntegrationError(
+                f"{method} integrator could not start: {text or 'unknown error'}"
+            )
+        stats: dict[str, float | int] = {k: int(getattr(result, k)) for k in COUNTERS}
+        stats.update(last_step=float(result.last_step), integrator_calls=1, jtimes_evals=0)
+        stats["wall_seconds"] = time.perf_counter() - wall0
+        t_reached = float(t_out[filled - 1])
+        message, status = "", Status.OK
+        if filled < len(t_out):  # "FLAG_NAME: SUNDIALS message"
+            name, _, detail = text.partition(":")
+            flag = name.strip() or str(int(result.flag))
+            status = flag_status(flag)
+            message = (
+                f"{method} failed after t = {t_reached:.6g} s (working towards t = "
+                f"{float(t_out[filled]):.6g} s): {flag_reason(flag)}"
+                + (f" ({detail.strip()})" if detail.strip() else "")
+            )
+        if progress is not None:
+            progress(t_reached)
+        return Trajectory(
+            t=t_out[:filled].copy(),
+            x=self.X[:filled],
+            z=None,
+            method=method,
+            status=status,
+            t_reached=t_reached,
+            message=message,
+            stats=stats,
+            sundials_log=log,
+            t_stop=float(result.t_stop),
+            x_stop=self.x_stop.copy(),
         )
-    if progress is not None:
-        progress(t_reached)
-    return Trajectory(
-        t=t_out[:filled].copy(),
-        x=X[:filled],
-        z=None,
-        method=method,
-        status=status,
-        t_reached=t_reached,
-        message=message,
-        stats=stats,
-    )

@@ -85,7 +85,7 @@ def library_hashes(built: Built) -> dict[str, str]:
     Parameters
     ----------
     built : Built
-        The build (its library, or the per-agent kernel libraries above N = 20).
+        The build (its library, or the per-agent kernel libraries of method ``native``).
     """
     libs = [built.library] if built.agents is None else list(built.agents[0])
     return {str(lib.path): sha256_file(lib.path) for lib in libs}

@@ -2,7 +2,7 @@
 
 :func:`schedule` is the one place that reconciles output times with breakpoints (fault
 onsets, steps in inputs): the CasADi methods' chunk loop (:mod:`generated.solvers.engine`)
-and the native drivers (:mod:`generated.native`) both integrate to its targets.
+and the native driver (:mod:`generated.native`) both integrate to its targets.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
-"""SUNDIALS' messages of a run: the per-call log file the native drivers write, read back.
+"""SUNDIALS' messages of a run: the per-call log file the native driver writes, read back.
 
-The native drivers route SUNDIALS' logger into a per-call file (:func:`new_sundials_log`);
+The native driver routes SUNDIALS' logger into a per-call file (:func:`new_sundials_log`);
 :func:`take_sundials_log` reads and removes it, :func:`sundials_messages` counts its
 warnings and errors and :func:`sundials_summary` gives the one line the CLI prints.
 """
@@ -12,8 +12,6 @@ import re
 import tempfile
 from pathlib import Path
 from typing import Any
-
-#: SUNDIALS return flags -> readable reason
 
 #: one SUNDIALS message line: level, module, text, optional "(file:line)" at the end
 _SUNDIALS_LINE = re.compile(

@@ -25,8 +25,7 @@ Every number a scenario may vary without changing the model's equations is an in
 block's ``prm`` is its follower's row of :func:`symbolic.parameters.agent_rows` (the
 per-agent numbers, the observer's gains Q, λ1, λ2 and the UIO's matrices on their
 patterns, the leader's u0 literals, the follower's fault template and literals),
-from which it evaluates u0(t), g_i(t) and f_i(t) itself; its ``gf`` input is not read
-(kept so the driver's argument list stays the same).
+from which it evaluates u0(t), g_i(t) and f_i(t) itself.
 """
 
 from __future__ import annotations
@@ -43,10 +42,10 @@ from symbolic.parameters import RowLayout, param_layout, row_layout
 
 
 def agent_block(sc: Scenario, og: ObserverGains, lay: StateLayout, model_index: int) -> ca.Function:
-    """Follower i's block ``(t, xb, nb, cpl, prm, gf) -> (xbdot, jets)`` (module docstring).
+    """Follower i's block ``(t, xb, nb, cpl, prm) -> (xbdot, jets)`` (module docstring).
 
     ``prm`` is a row of :func:`symbolic.parameters.agent_rows` (layout
-    :func:`symbolic.parameters.row_layout` of ``sc`` and ``og``); ``gf`` is not read.
+    :func:`symbolic.parameters.row_layout` of ``sc`` and ``og``).
     Only the patterns of ``og``'s matrices are compiled in, never their values.
 
     Parameters
@@ -68,7 +67,6 @@ def agent_block(sc: Scenario, og: ObserverGains, lay: StateLayout, model_index: 
     nb = ca.SX.sym("nb", 3 * n)
     cpl = ca.SX.sym("cpl", 6)  # (l̄_ii, a_i0 h_i) and their first two time derivatives
     prm = ca.SX.sym("prm", rows.size)
-    gf = ca.SX.sym("gf", 1 + n)
     eta0, s = xb[:m], xb[m:]
     lii, a0h = cpl[0], cpl[1]
     dlii, da0h, ddlii, dda0h = cpl[2], cpl[3], cpl[4], cpl[5]
@@ -107,9 +105,9 @@ def agent_block(sc: Scenario, og: ObserverGains, lay: StateLayout, model_index: 
     jets = ca.vertcat(*(ca.mtimes(C0, v) for v in (eta, res["etadot"], etaddot)))
     return ca.Function(
         "cascade_block",
-        [t, xb, nb, cpl, prm, gf],
+        [t, xb, nb, cpl, prm],
         [xbdot, jets],
-        ["t", "xb", "nb", "cpl", "prm", "gf"],
+        ["t", "xb", "nb", "cpl", "prm"],
         ["xbdot", "jets"],
         {"cse": True},
     )

@@ -452,7 +452,7 @@ def test_newton_kernels_against_numpy(cases, gamma):
     k = jac.size1_out(1)
     na = k - m - n3
     rng = np.random.default_rng(11)
-    ins = [rng.normal(size=jac.size1_in(j)) for j in range(1, 6)]
+    ins = [rng.normal(size=jac.size1_in(j)) for j in range(1, jac.n_in())]
     K = np.array(jac(0.3, *ins)[1])
     A_s0, A_ss, B_s = K[m : m + na, :m], K[m : m + na, m : m + na], K[m : m + na, m + na :]
     C_0, C_s, E = K[m + na :, :m], K[m + na :, m : m + na], K[m + na :, m + na :]
@@ -527,7 +527,7 @@ def test_the_library_stores_k_on_the_pattern_casadi_derives(cases):
     np.testing.assert_array_equal(np.diff(lay["koff"]), nnz)
     jac = {f.name(): f for f in kernel_functions(sc, gains, 0)}["ag_jac"]
     rng = np.random.default_rng(5)
-    K = jac(0.3, *[rng.normal(size=jac.size1_in(j)) for j in range(1, 6)])[1]
+    K = jac(0.3, *[rng.normal(size=jac.size1_in(j)) for j in range(1, jac.n_in())])[1]
     vals = np.array(K.nonzeros())  # what ag_jac writes, in the library's order
     lead = np.zeros((sc.m, sc.m))
     for col in range(sc.m):

@@ -247,7 +247,6 @@ def test_agent_blocks_apply_the_same_limit():
                 nb[i],
                 cpl[i],
                 prm[:, i],
-                np.full(1 + n, np.nan),  # not read
             )
             for i in range(N)
         ]

@@ -4,11 +4,10 @@
  * N, the pinning, the gauge signs and every switching time as runtime data.
  *
  * Appended (after common.c) to the C that CasADi generates for ONE follower model:
- *   ag_jet0, ag_jet1, ag_jet2 (t, xb, nb, cpl, prm, gf) -> C0 eta_i, C0 eta_i', C0 eta_i''
- *   ag_rhs (t, xb, nb, cpl, prm, gf) -> (xbdot, jets)
- *   ag_jac (t, xb, nb, cpl, prm, gf) -> (jets, K),  K = d(xbdot, jets)/d(xb, nb): its
- *                                         structural nonzeros (column-compressed)
- *   ag_faults (t) -> values
+ *   ag_jet0, ag_jet1, ag_jet2 (t, xb, nb, cpl, prm) -> C0 eta_i, C0 eta_i', C0 eta_i''
+ *   ag_rhs (t, xb, nb, cpl, prm) -> (xbdot, jets)
+ *   ag_jac (t, xb, nb, cpl, prm) -> (jets, K),  K = d(xbdot, jets)/d(xb, nb): its
+ *                                     structural nonzeros (column-compressed)
  *   ag_nfac (c, K) -> (P, pivots)        D = I + c A_ss factorised without pivoting, packed
  *                                         with what a solve reads: P = (LU of D with U's
  *                                         diagonal inverted, c A_s0, c B_s, C_0, C_s, E)
@@ -97,10 +96,6 @@ typedef struct {
   int nmodels;
   const hitl_agent_kernels *kern; /* nmodels */
   const int *model;               /* N: kernel table of each follower */
-  hitl_fn faults;
-  hitl_work_fn faults_work;
-  int nfaults;
-  const int *fidx;      /* N x (1 + n) indices into the fault values */
   const double *prm;    /* N x npar, agent-major */
   int ntop;             /* segments (one topology each when links switch raw) */
   const double *t_switch; /* ntop - 1 start times of segments 1.. */
@@ -154,7 +149,7 @@ typedef struct {
   casadi_real **res;
   casadi_int *iw;
   casadi_real *w;
-  double *xb, *xbdot, *gf, *jscr, *col;
+  double *xb, *xbdot, *jscr, *col;
 } hitl_agwork;
 
 /* The graph's weights at one time on one segment's pattern: W(t) = sum_k c_k(t) W_k and
@@ -171,7 +166,7 @@ typedef struct {
   hitl_ctx base; /* first member: CVODE's messages and counters */
   const hitl_agents_problem *p;
   int N, m, na, n, n3, k, npar, nthreads;
-  double *fvals, *jets, *nb; /* jets, nb: N x n3 */
+  double *jets, *nb; /* N x n3 */
   hitl_agwork *wk;           /* nthreads */
   /* linear solver */
   double *lu;    /* p->poff[N]: each agent's P (ag_nfac) at p->poff[i] */
@@ -308,26 +303,19 @@ static void hitl_ag_edge_level(const hitl_ag *d, int q, int l, const double *zj,
     s[l * n + r] += (l == 1 ? w1 * zj[r] : 2.0 * w1 * zj[n + r] + w2 * zj[r]);
 }
 
-/* agent i's kernel inputs in work wk: xb = (eta0, s_i), gf from the fault values */
-static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int top, int i, const double *y,
-                           double *tt) {
+/* agent i's kernel inputs in work wk: xb = (eta0, s_i) */
+static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int i, const double *y, double *tt) {
   const hitl_agents_problem *p = d->p;
-  const int *fi = p->fidx + (size_t)(1 + AG_N(d)) * i;
   memcpy(wk->xb, y, sizeof(double) * (size_t)AG_M(d));
   memcpy(wk->xb + AG_M(d), y + AG_M(d) + (size_t)AG_NA(d) * i,
          sizeof(double) * (size_t)AG_NA(d));
-  for (int r = 0; r <= AG_N(d); ++r) wk->gf[r] = d->fvals[fi[r]];
   wk->arg[0] = tt;
   wk->arg[1] = wk->xb;
   wk->arg[2] = d->nb + (size_t)AG_N3(d) * i;
-  wk->arg[3] = d->W->cpl + (size_t)6 * i; /* the weights of segment top, at the pass's t */
-  (void)top;
+  wk->arg[3] = d->W->cpl + (size_t)6 * i; /* the weights in use, at the pass's t */
   wk->arg[4] = p->prm + (size_t)d->npar * i;
-  wk->arg[5] = wk->gf;
 }
 
-/* The passes at (t, y): jets and neighbour sums of every level, then ydot (if not NULL)
-   and/or the Jacobian blocks K (if not NULL, at p->koff). Returns 0 or -1. */
 /* What one agent computes at one level of a sweep (hitl_ag_sweep): 0, or non-zero */
 typedef int (*hitl_ag_step_fn)(hitl_ag *d, hitl_agwork *wk, int top, int i, int lev,
                                void *ctx);
@@ -422,7 +410,7 @@ static int hitl_ag_wave_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int le
   casadi_real ti = a->t;
   (void)lev;
   hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)n3 * i, 0, 3);
-  hitl_ag_inputs(d, wk, top, i, a->y, &ti);
+  hitl_ag_inputs(d, wk, i, a->y, &ti);
   if (a->ydot) {
     wk->res[0] = wk->xbdot;
     wk->res[1] = d->jets + (size_t)n3 * i;
@@ -444,33 +432,26 @@ static int hitl_ag_wave_pass(hitl_ag *d, int top, double t, const double *y, dou
   return hitl_ag_sweep(d, top, 1, hitl_ag_wave_step, &a, d->jets);
 }
 
+/* The passes at (t, y): jets and neighbour sums of every level, then ydot (if not NULL)
+   and/or the Jacobian blocks K (if not NULL, at p->koff). Returns 0 or -1. */
 static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, double *K,
                         int *top_out) {
   const hitl_agents_problem *p = d->p;
-  hitl_ctx *c = &d->base;
-  casadi_real tt = t;
   int N = d->N, n3 = AG_N3(d), fail = 0;
   int top = hitl_ag_topology(p, t);
   if (top_out) *top_out = top;
   hitl_ag_weights(d, &d->wr, top, t);
   d->W = &d->wr;
-  c->arg[0] = &tt;
-  c->res[0] = d->fvals;
-  if (p->faults(c->arg, c->res, c->iw, c->w, 0)) return -1;
   if (p->acyclic[top] && (ydot == NULL || K == NULL))
     return hitl_ag_wave_pass(d, top, t, y, ydot, K);
   memset(d->nb, 0, sizeof(double) * (size_t)N * n3);
   for (int lev = 0; lev < 3; ++lev) {
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
     for (int i = 0; i < N; ++i) {
-#ifdef _OPENMP
-      hitl_agwork *wk = d->wk + omp_get_thread_num();
-#else
-      hitl_agwork *wk = d->wk;
-#endif
+      hitl_agwork *wk = hitl_ag_wk(d);
       casadi_real ti = t;
       const hitl_agent_kernels *kn = p->kern + p->model[i];
-      hitl_ag_inputs(d, wk, top, i, y, &ti);
+      hitl_ag_inputs(d, wk, i, y, &ti);
       wk->res[0] = d->jets + (size_t)n3 * i + (size_t)lev * AG_N(d);
       if (kn->jet[lev](wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
     }
@@ -481,14 +462,10 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
   }
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
   for (int i = 0; i < N; ++i) {
-#ifdef _OPENMP
-    hitl_agwork *wk = d->wk + omp_get_thread_num();
-#else
-    hitl_agwork *wk = d->wk;
-#endif
+    hitl_agwork *wk = hitl_ag_wk(d);
     casadi_real ti = t;
     const hitl_agent_kernels *kn = p->kern + p->model[i];
-    hitl_ag_inputs(d, wk, top, i, y, &ti);
+    hitl_ag_inputs(d, wk, i, y, &ti);
     if (ydot) {
       wk->res[0] = wk->xbdot;
       wk->res[1] = wk->jscr;
@@ -509,7 +486,6 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
 static int hitl_ag_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data) {
   hitl_ag *d = (hitl_ag *)data;
   casadi_real *out = N_VGetArrayPointer(ydot);
-  d->base.n_rhs++;
   if (hitl_ag_pass(d, t, N_VGetArrayPointer(y), out, NULL, NULL)) return -1;
   for (int i = 0; i < d->base.nx; ++i)
     if (!isfinite(out[i])) return 1; /* recoverable: CVODE retries with a smaller step */
@@ -521,7 +497,6 @@ static int hitl_ag_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, void
   hitl_ag *d = (hitl_ag *)data;
   hitl_kmat *M = HITL_KMAT(J);
   (void)fy; (void)t1; (void)t2; (void)t3;
-  d->base.n_jac++;
   M->c = 1.0;
   M->shifted = 0;
   d->t_jac = t; /* the Newton systems couple the agents with the weights at t */
@@ -918,10 +893,9 @@ static int hitl_ag_work_alloc(hitl_ag *d, const casadi_int *sz) {
     wk->w = (casadi_real *)calloc((size_t)sz[3] + 1, sizeof(casadi_real));
     wk->xb = (double *)calloc((size_t)(m + na), sizeof(double));
     wk->xbdot = (double *)calloc((size_t)(m + na), sizeof(double));
-    wk->gf = (double *)calloc((size_t)d->n + 1, sizeof(double));
     wk->jscr = (double *)calloc((size_t)n3 + 1, sizeof(double));
     wk->col = (double *)calloc((size_t)k + 1, sizeof(double));
-    if (!wk->arg || !wk->res || !wk->iw || !wk->w || !wk->xb || !wk->xbdot || !wk->gf ||
+    if (!wk->arg || !wk->res || !wk->iw || !wk->w || !wk->xb || !wk->xbdot ||
         !wk->jscr || !wk->col)
       return -1;
   }
@@ -970,9 +944,7 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
     hitl_work_size(kn->nsol_work, sz);
     hitl_work_size(kn->gmat_work, sz);
   }
-  hitl_work_size(p->faults_work, sz);
-  if (hitl_ctx_alloc(c, nx, sz)) return -1;
-  d->fvals = (double *)calloc((size_t)p->nfaults + 1, sizeof(double));
+  c->nx = nx;
   d->jets = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->nb = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->lu = (double *)calloc((size_t)p->poff[N] + 1, sizeof(double));
@@ -1018,7 +990,7 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
     d->sn = (double *)calloc((size_t)kr + 1, sizeof(double));
     d->g = (double *)calloc((size_t)kr + 2, sizeof(double));
   }
-  if (!d->fvals || !d->jets || !d->nb || !d->lu || !d->lul || !d->piv || !d->zero || !d->G || !d->Hm || !d->ps || !d->y ||
+  if (!d->jets || !d->nb || !d->lu || !d->lul || !d->piv || !d->zero || !d->G || !d->Hm || !d->ps || !d->y ||
       !d->dj || !d->dnb || !d->rj || !d->z || !d->done || !d->V || !d->H || !d->cs || !d->sn || !d->g ||
       (p->solver == HITL_AG_DENSE && (!d->S || !d->Spiv)) || hitl_ag_work_alloc(d, sz)) {
     hitl_msg(c, "out of memory");
@@ -1039,15 +1011,15 @@ static void hitl_ag_free(hitl_ag *d, hitl_cvode *s) {
     for (int q = 0; q < d->nthreads; ++q) {
       hitl_agwork *wk = d->wk + q;
       free(wk->arg), free(wk->res), free(wk->iw), free(wk->w), free(wk->xb);
-      free(wk->xbdot), free(wk->gf), free(wk->jscr), free(wk->col);
+      free(wk->xbdot), free(wk->jscr), free(wk->col);
     }
   free(d->wk);
-  free(d->fvals), free(d->jets), free(d->nb), free(d->lu), free(d->lul), free(d->piv), free(d->zero);
+  free(d->jets), free(d->nb), free(d->lu), free(d->lul), free(d->piv), free(d->zero);
   free(d->G), free(d->Hm), free(d->ps), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S), free(d->done);
   free(d->Spiv), free(d->V), free(d->H), free(d->cs), free(d->sn), free(d->g);
   for (int l = 0; l < 3; ++l) free(d->wr.w[l]), free(d->wl.w[l]);
   free(d->wr.cpl), free(d->wl.cpl);
-  hitl_cvode_free(&d->base, s);
+  hitl_cvode_free(s);
 }
 
 /* 1 if compiled with OpenMP (threads over the agents), else 0 */

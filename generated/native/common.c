@@ -23,13 +23,8 @@
 #define HITL_PIVOT_MIN 1e-13
 
 typedef struct {
-  const casadi_real **arg;
-  casadi_real **res;
-  casadi_int *iw;
-  casadi_real *w;
-  casadi_real *lu, *piv;
   int nx;
-  long n_rhs, n_jac, n_fac, n_piv_fail;
+  long n_fac, n_piv_fail;
   char *msg;
   int msglen;
 } hitl_ctx;
@@ -72,8 +67,7 @@ static void hitl_add_counters(void *mem, long *acc) {
   CVodeGetNumNonlinSolvConvFails(mem, &v), acc[6] += v;
 }
 
-/* CVODE with everything it needs: one per run, re-initialised at breakpoints (and, in
-   the cascade, for every follower) */
+/* CVODE with everything it needs: one per run, re-initialised at breakpoints */
 typedef struct {
   SUNContext ctx;
   N_Vector y;
@@ -105,21 +99,6 @@ static SUNErrCode hitl_log_flush(SUNLogger logger, SUNLogLevel lvl, void *conten
   (void)logger; (void)lvl;
   if (content) fflush((FILE *)content);
   return SUN_SUCCESS;
-}
-
-/* Allocate the context's work arrays for the generated functions (sz: the largest of
-   their work sizes). Returns 0, or -1 with c->msg set. */
-static int hitl_ctx_alloc(hitl_ctx *c, int nx, const casadi_int *sz) {
-  c->nx = nx;
-  c->arg = (const casadi_real **)calloc((size_t)sz[0] + 1, sizeof(casadi_real *));
-  c->res = (casadi_real **)calloc((size_t)sz[1] + 1, sizeof(casadi_real *));
-  c->iw = (casadi_int *)calloc((size_t)sz[2] + 1, sizeof(casadi_int));
-  c->w = (casadi_real *)calloc((size_t)sz[3] + 1, sizeof(casadi_real));
-  if (!c->arg || !c->res || !c->iw || !c->w) {
-    hitl_msg(c, "out of memory");
-    return -1;
-  }
-  return 0;
 }
 
 /* The SUNDIALS context, the state vector, an empty linear solver (the driver sets its
@@ -291,14 +270,13 @@ static int hitl_cvode_run(hitl_ctx *c, hitl_cvode *s, int ok, void *data, CVRhsF
   return filled;
 }
 
-static void hitl_cvode_free(hitl_ctx *c, hitl_cvode *s) {
+static void hitl_cvode_free(hitl_cvode *s) {
   if (s->mem) CVodeFree(&s->mem);
   if (s->LS) SUNLinSolFree(s->LS);
   if (s->A) SUNMatDestroy(s->A);
   if (s->y) N_VDestroy(s->y);
   if (s->ctx) SUNContext_Free(&s->ctx);
   if (s->log) fclose(s->log), s->log = NULL;
-  free(c->arg), free(c->res), free(c->iw), free(c->w), free(c->lu), free(c->piv);
 }
 
 /* ------------------------------------------------- the per-follower block matrix */
