@@ -41,7 +41,8 @@ from core.overrides import load, parse_override
 from core.scenario import Scenario
 from generated import solvers
 from generated.built import Built
-from generated.codegen import Library, build_library, cache_root, check_dyn_signature, renamed
+from generated.codegen import Library, build_library, cache_root
+from generated.csource import check_dyn_signature, renamed
 from generated.gains_cache import ensure_gains, scenario_gains
 from generated.largescale import choose_plan
 from generated.loaded import (
@@ -149,7 +150,7 @@ def _reuse(c: Compiled, sc: Scenario, gains: Gains, key: str) -> Built:
     cl = bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks, key=key)
     lib = dataclasses.replace(c.library, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0)
     timings = {"symbolic_build": 0.0, "codegen": 0.0, "compile": 0.0}
-    return _bound(cl, lib, c.image, c.form, timings)
+    return _bound(cl, lib, (c.image.dyn_p, c.image.outputs_p), c.form, timings)
 
 
 def build(
@@ -269,25 +270,21 @@ def _compile(
     dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
     outs = renamed(src_fns.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
     plan = solver.build(dyn, cl, settings, prepared)
-    if not plan.whole_loop:
+    if plan.libraries:
         return _own_libraries(cl, plan, form, time.perf_counter() - t0), None
     t_sym = time.perf_counter() - t0
-    lib = build_library(
-        [dyn, outs, *plan.functions],
-        settings,
-        with_derivatives=[name] if plan.derivatives else [],
-    )
+    lib = build_library([dyn, outs], settings, with_derivatives=[name])
     timings = {
         "symbolic_build": t_sym,
         "codegen": lib.codegen_seconds,
         "compile": lib.compile_seconds,
     }
     image = open_image(lib, form)
-    return _bound(cl, lib, image, form, timings), image
+    return _bound(cl, lib, (image.dyn_p, image.outputs_p), form, timings), image
 
 
 def _own_libraries(cl: Any, plan: BuildPlan, form: str, t_build: float) -> Built:
-    """The Built of a method that runs its own libraries (``plan.whole_loop`` False).
+    """The Built of a method that runs its own libraries (``plan.libraries``).
 
     Nothing of the closed loop is compiled: its right-hand side and outputs are the
     symbolic Functions with p filled in (CasADi's virtual machine); :attr:`Built.library`
@@ -309,41 +306,25 @@ def _own_libraries(cl: Any, plan: BuildPlan, form: str, t_build: float) -> Built
     }
     src = cl if cl.parametric is None else cl.parametric
     dyn_p = src.dae_dyn if form == "dae" else src.ode_dyn
-    agents = (libs, plan.data)
-    if cl.parametric is None:
-        return Built(cl, lib, dyn_p, src.outputs, form, timings, agents=agents)
-    p = np.asarray(cl.p0, dtype=float)
-    return Built(
-        cl,
-        lib,
-        fix_parameters(dyn_p, p),
-        fix_parameters(src.outputs, p),
-        form,
-        timings,
-        agents=agents,
-        p=p,
-        dyn_p=dyn_p,
-        outputs_p=src.outputs,
-    )
+    return _bound(cl, lib, (dyn_p, src.outputs), form, timings, (libs, plan.data))
 
 
-def _bound(cl: Any, lib: Library, image: Image, form: str, timings: dict[str, float]) -> Built:
-    """The Built of ``cl`` on a loaded library: its Functions with ``cl``'s p filled in."""
-    dyn_p, outputs_p = image.dyn_p, image.outputs_p
+def _bound(
+    cl: Any,
+    lib: Library,
+    functions: tuple[Any, Any],
+    form: str,
+    timings: dict[str, float],
+    agents: Any = None,
+) -> Built:
+    """The Built of ``cl`` on ``functions`` (right-hand side, outputs; p an input when
+    ``cl`` is parametric), with ``cl``'s p filled in."""
+    dyn_p, outputs_p = functions
     if cl.parametric is None:
-        return Built(cl, lib, dyn_p, outputs_p, form, timings)
+        return Built(cl, lib, dyn_p, outputs_p, form, timings, agents=agents)
     p = np.asarray(cl.p0, dtype=float)
-    return Built(
-        cl,
-        lib,
-        fix_parameters(dyn_p, p),
-        fix_parameters(outputs_p, p),
-        form,
-        timings,
-        p=p,
-        dyn_p=dyn_p,
-        outputs_p=outputs_p,
-    )
+    fixed = (fix_parameters(dyn_p, p), fix_parameters(outputs_p, p))
+    return Built(cl, lib, *fixed, form, timings, agents, p, dyn_p, outputs_p)
 
 
 # --------------------------------------------------------------------------- simulate

@@ -89,6 +89,19 @@ def clear_cache(root: Path | None = None) -> list[Path]:
 def entry_problem(folder: Path, key: str) -> str | None:
     """Why the cache entry ``folder`` cannot be loaded for ``key`` (None: it can).
 
+    Parameters
+    ----------
+    folder : Path
+        ``<root>/<key>/``.
+    key : str
+        The key this build needs.
+    """
+    return entry_bytes(folder, key)[1]
+
+
+def entry_bytes(folder: Path, key: str) -> tuple[bytes, str | None]:
+    """The bytes of the entry's library and None, or ``b""`` and why they cannot be trusted.
+
     The manifest must name ``key`` and record the SHA-256 of ``model.so``, and the
     library's bytes must have that hash: a truncated or corrupt file, or a library
     copied in from another build, is caught before it is ever loaded.
@@ -102,18 +115,21 @@ def entry_problem(folder: Path, key: str) -> str | None:
     """
     info, why = read_manifest(folder)
     if why is not None:
-        return why
+        return b"", why
     if not isinstance(info, dict) or not isinstance(info.get("library_sha256"), str):
-        return "manifest records no library SHA-256"
+        return b"", "manifest records no library SHA-256"
     if info.get("key") != key:
-        return f"manifest is for key {str(info.get('key'))[:12]}…, not this build"
+        return b"", f"manifest is for key {str(info.get('key'))[:12]}…, not this build"
     try:
-        digest = sha256_bytes(read_library(folder))
+        data = read_library(folder)
     except (OSError, FileRefused):
-        return f"{LIBRARY_NAME} missing, unreadable or not a regular file"
-    if digest != info["library_sha256"]:
-        return f"{LIBRARY_NAME} does not have the SHA-256 its manifest records (truncated, corrupt or replaced)"
-    return None
+        return b"", f"{LIBRARY_NAME} missing, unreadable or not a regular file"
+    if sha256_bytes(data) != info["library_sha256"]:
+        return b"", (
+            f"{LIBRARY_NAME} does not have the SHA-256 its manifest records "
+            "(truncated, corrupt or replaced)"
+        )
+    return data, None
 
 
 def read_manifest(folder: Path) -> tuple[object, str | None]:

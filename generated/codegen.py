@@ -10,8 +10,7 @@ model is never rebuilt; a changed one gets a new key, so it is never served stal
 The steps live in their own modules: the C text (:mod:`generated.csource`), the
 compiler (:mod:`generated.compiler`), the cache's folders and entries
 (:mod:`generated.build_cache`) and loading a library with its dependencies
-(:mod:`generated.shared_library`). Their public names are re-exported here, the one
-import path of the build.
+(:mod:`generated.shared_library`).
 """
 
 from __future__ import annotations
@@ -35,15 +34,12 @@ from core.artifacts import sha256_file
 from core.errors import BuildError
 from core.private_files import make_private_dir, seal
 from generated.build_cache import (
-    DEFAULT_BUILD_ROOT,
-    ENTRY_PATTERN,
     LIBRARY_NAME,
     MANIFEST_NAME,
     SOURCE_NAME,
     TMP_PREFIX,
     cache_write_error,
     check_entry,
-    clear_cache,
     default_build_root,
     discard_entry,
     entry_problem,
@@ -52,34 +48,9 @@ from generated.build_cache import (
     remove_stale_builds,
 )
 from generated.compiler import Toolchain, compile_source, compiler_identity
-from generated.csource import check_dyn_signature, generate_source, renamed
+from generated.csource import generate_source
 from generated.shared_library import load_problem, preload
 from generated.values import CodegenSettings
-
-__all__ = [
-    "DEFAULT_BUILD_ROOT",
-    "ENTRY_PATTERN",
-    "LIBRARY_NAME",
-    "MANIFEST_NAME",
-    "SOURCE_NAME",
-    "TMP_PREFIX",
-    "Library",
-    "Toolchain",
-    "build_library",
-    "cache_key",
-    "cache_root",
-    "check_dyn_signature",
-    "clear_cache",
-    "compile_source",
-    "compiler_identity",
-    "default_build_root",
-    "entry_problem",
-    "generate_source",
-    "load_problem",
-    "preload",
-    "remove_stale_builds",
-    "renamed",
-]
 
 
 @dataclass(frozen=True)

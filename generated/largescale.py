@@ -1,34 +1,22 @@
 """Large-N plan: which derivatives to generate and how CVODES/IDAS solve their Newton systems.
 
-Why this module exists (measured, see ``docs/performance.md``): CasADi's Jacobian of
-the mapped closed loop is generated *unrolled* per agent — the C file grows linearly
-in N (13.8 MB flat / 5.6 MB mapped at N = 50, 48 MB at N = 500, gcc did not finish),
-and so does the Jacobian built by CasADi's AD from a mapped MX Function. The
-right-hand side alone, kept as an MX ``map`` (no SX expansion), stays small and its
-forward derivative (one direction, ``fwd1_<name>``) is mapped too.
-
-This module only *chooses*; building is :func:`generated.codegen.build_library` and
-integrating is :func:`generated.solvers.engine.integrate`, the same functions ``make sim``
-(:mod:`generated.api`) uses. A :class:`JacobianPlan` turns into the settings of those
-two: :meth:`JacobianPlan.codegen_settings` and :meth:`JacobianPlan.integrator_settings`.
-
-Plans, named by ``CodegenSettings.jacobian``:
+CasADi's Jacobian of the mapped closed loop is generated unrolled per agent, so its C
+grows with N until gcc no longer finishes (docs/performance.md); the right-hand side kept
+as an MX ``map`` and its forward derivative ``fwd1_<name>`` stay small. This module only
+chooses (:func:`choose_plan`, from N with ``auto``); a :class:`JacobianPlan` becomes the
+settings of the build and of the integrators (:meth:`JacobianPlan.codegen_settings`,
+:meth:`JacobianPlan.integrator_settings`). Plans, by ``CodegenSettings.jacobian``:
 
 ``sparse`` (Newton scheme ``direct``)
-    SX-expanded right-hand side plus its sparse Jacobian ``jac_<name>``, factorised
-    by a direct sparse solver (``csparse``). Best for small N (tiny Jacobian, fewest
-    steps). The simulation stage's default.
-``jvp`` (Newton scheme ``gmres``) — the large-N plan
-    Matrix-free Newton–Krylov: the MX-mapped right-hand side, carrying its Jacobian's
-    sparsity pattern, and its Jacobian-vector product ``fwd1_<name>`` only (no
-    Jacobian is ever formed, generated or factorised), solved by CVODES/IDAS's GMRES
-    without a preconditioner, ``max_krylov`` 20. Code size and compile time stay
-    flat in N; the cost per step is linear in N·(degree).
+    SX-expanded right-hand side and its sparse Jacobian ``jac_<name>``, factorised by a
+    direct sparse solver (``csparse``): for small N, and the default.
+``jvp`` (Newton scheme ``gmres``), the large-N plan
+    Matrix-free Newton–Krylov: the MX-mapped right-hand side and its Jacobian-vector
+    product ``fwd1_<name>`` only (no Jacobian formed), GMRES without a preconditioner:
+    code size and compile time flat in N, cost per step linear in N·(degree).
 ``gmres`` (Newton scheme ``gmres``)
-    ``jac_<name>`` and ``fwd1_<name>``: GMRES preconditioned with the generated
-    Jacobian (CasADi's default). Not chosen by ``auto``.
-
-:func:`choose_plan` picks one from N (``auto``: ``sparse`` for N ≤ 20, ``jvp`` above).
+    ``jac_<name>`` and ``fwd1_<name>``: GMRES preconditioned with the generated Jacobian
+    (CasADi's default). Never chosen by ``auto``.
 """
 
 from __future__ import annotations
@@ -42,10 +30,9 @@ import casadi as ca
 from core.errors import BuildError
 from generated.values import JACOBIAN_CHOICES, CodegenSettings, IntegratorSettings
 
-#: above this many agents ``auto`` switches to the matrix-free plan. Measured
-#: (docs/performance.md): N = 5 direct 0.67 s vs gmres 1.16 s; N = 50 direct does not
-#: even compile in 60 s (≈ 0.13 MB of expanded C per agent). 20 is a judgement call
-#: between the two; the crossover itself was not measured.
+#: above this many agents ``auto`` switches to the matrix-free plan: a judgement call
+#: between N = 5, where the direct plan is faster, and N = 50, where it does not compile
+#: in reasonable time (docs/performance.md)
 DIRECT_MAX_AGENTS = 20
 #: Krylov subspace size: the closed loop's stiff modes (φ floor, tanh layer, gains
 #: λ_ir k1_ir) need more than CVODES's default of 5

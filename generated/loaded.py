@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
-import hashlib
 import os
 import shutil
 import tempfile
@@ -25,17 +24,16 @@ from typing import Any
 import casadi as ca
 
 from core.errors import BuildError
-from core.files import FileRefused
 from core.memo import MEMO
 from generated import native
-from generated.build_cache import check_entry, read_library, read_manifest
-from generated.codegen import (
+from generated.build_cache import (
     MANIFEST_NAME,
     TMP_PREFIX,
-    Library,
-    entry_problem,
-    preload,
+    check_entry,
+    entry_bytes,
 )
+from generated.codegen import Library
+from generated.shared_library import preload
 
 #: the names of the closed loop's Functions in every library (ODE or DAE form, outputs)
 ODE_NAME, DAE_NAME, OUT_NAME = "cl_ode", "cl_dae", "cl_out"
@@ -78,7 +76,7 @@ def library_stamp(lib: Library) -> tuple[int, ...] | None:
 
 
 def verified_bytes(lib: Library) -> tuple[bytes, tuple[int, ...]]:
-    """The library's bytes, checked against its manifest (``entry_problem`` on these bytes).
+    """The library's bytes, checked against its manifest (:func:`entry_bytes`).
 
     Parameters
     ----------
@@ -93,20 +91,12 @@ def verified_bytes(lib: Library) -> tuple[bytes, tuple[int, ...]]:
     try:
         check_entry(lib.folder, lib.folder.parent)
     except OSError:
-        pass  # a missing file: entry_problem below names it
+        pass  # a missing file: entry_bytes below names it
     stamp = library_stamp(lib)
-    try:
-        data = read_library(lib.folder)
-    except (OSError, FileRefused):
-        data = b""
-    info, _ = read_manifest(lib.folder)
-    ok = (
-        isinstance(info, dict)
-        and info.get("key") == lib.key
-        and info.get("library_sha256") == hashlib.sha256(data).hexdigest()
-    )
-    if not ok or stamp is None or library_stamp(lib) != stamp:
-        why = entry_problem(lib.folder, lib.key) or "changed while it was loaded"
+    data, why = entry_bytes(lib.folder, lib.key)
+    if why is None and (stamp is None or library_stamp(lib) != stamp):
+        why = "changed while it was loaded"
+    if why is not None:
         raise BuildError(f"build cache {lib.folder}: {why}; build again to rebuild it")
     return data, stamp
 

@@ -149,8 +149,8 @@ class CodegenSettings:
         large files but the right-hand side then runs slower.
     kernel_optimization : str
         Optimisation flag of the per-agent kernel libraries (``generated/agent_kernels.py``),
-        which replaces ``optimization`` there. ``-O3``: those sources are small (about
-        2 s of gcc per follower model) and their driver's loops are hot.
+        which replaces ``optimization`` there. ``-O3``: those sources are small and their
+        driver's loops are hot.
     extra_cflags : tuple of str
         Appended after the fixed flags ``-shared -fPIC``.
     jacobian : str
@@ -168,9 +168,8 @@ class CodegenSettings:
         Expand MX Functions to SX before generating code (flat, faster C).
     cse : bool
         Common-subexpression elimination (CasADi's ``cse`` option) on SX functions and
-        their generated Jacobians before code is written. Same operations on the same
-        operands, so the same results; measured on the paper scenario (N = 5): the
-        right-hand side 2,723 → 1,721 instructions, its Jacobian 27,298 → 17,557.
+        their generated Jacobians before code is written: the same operations on the same
+        operands, so the same results, in less code.
     build_root : str or None
         Cache root; ``None`` = ``$HITL_BUILD_DIR`` or the user cache folder
         (:func:`generated.codegen.cache_root`).
@@ -253,10 +252,7 @@ class IntegratorSettings:
         with weights 1/(rtol|z| + algebraic_atol). The default 1e30 leaves z out of
         that test: in the semi-explicit form z enters ẋ, so a Newton error in z shows
         up in the x-corrections (times h/α), as in the ODE form, while testing z itself
-        asked for more digits than z(x) has on the paper scenario (a 1-ulp change of x
-        moves the accelerations by up to 1.6e-3 = 5 000 rtol|z|: 757 244 steps and
-        3.4e5 Newton failures instead of 78 082 and 1 061; docs/simulation.md).
-        ``algebraic_atol = atol`` restores the former behaviour.
+        asks for more digits than z(x) has (docs/simulation.md).
     extra_options : tuple of (str, value) pairs
         Merged last into the CVODES/IDAS options (e.g. ``("use_preconditioner", False)``,
         ``("max_krylov", 50)`` for GMRES at large N).

@@ -13,7 +13,7 @@ import pytest
 from platformdirs import user_cache_dir
 
 from core.errors import BuildError
-from generated import codegen
+from generated import build_cache, codegen
 from generated.__main__ import main as gen_main
 from generated.codegen import build_library
 from generated.compiler import compile_source
@@ -300,7 +300,7 @@ def test_clear_cache_removes_only_what_the_cache_made(settings, tmp_path, capsys
         (root / kind / f"{'1' * 64}.json").write_text("{}")
     (root / "notes").mkdir()  # not the cache's: kept
     (root / "notes" / "keep.txt").write_text("mine")
-    removed = codegen.clear_cache(root)
+    removed = build_cache.clear_cache(root)
     made = [".tmp-abc-1-x", "failed", "gains", "models", lib.key]
     assert sorted(p.name for p in removed) == sorted(made)
     assert [p.name for p in root.iterdir()] == ["notes"]

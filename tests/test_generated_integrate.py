@@ -9,8 +9,8 @@ from scipy.linalg import expm
 
 from core.errors import IntegrationError
 from generated.codegen import build_library
-from generated.schedule import output_grid
-from generated.solvers.engine import _plan, integrate
+from generated.schedule import output_grid, schedule
+from generated.solvers.engine import _chunks, integrate
 from generated.values import CodegenSettings, IntegratorSettings
 
 E = ca.SX(0, 1)
@@ -199,7 +199,7 @@ def test_run_restarts_at_breakpoints(cg):
 
 def test_plan_splits_at_breakpoints_and_chunks():
     tg = output_grid(3.0, 0.25)
-    chunks = _plan(tg, [0.6, 2.0, 5.0], chunk=1.0)
+    chunks = _chunks(schedule(tg, [0.6, 2.0, 5.0]), chunk=1.0)
     targets = [c for ch in chunks for c in ch]
     # every output time once, in order, plus the breakpoint 0.6 as a non-output target
     assert [c[1] for c in targets if c[1] >= 0] == list(range(1, len(tg)))

@@ -33,7 +33,7 @@ from generated import solvers
 #: where method names may be compared: the registry and the methods' implementations
 REGISTRY = ("core/methods.py", "generated/solvers/")
 #: modules whose comparisons are still to be replaced by a registry attribute (such as
-#: ``Solver.integrates_dyn``): none now. An entry must be a scanned module that still
+#: ``Solver.fixed_step``): none now. An entry must be a scanned module that still
 #: holds a comparison (the test says so), so the list cannot outlive its reason
 PENDING: frozenset[str] = frozenset()
 

@@ -320,7 +320,8 @@ def fast_functions(cl: Any, run: str = "") -> FastFunctions:
 
 def _compile(entry: FastFunctions) -> None:
     """Replace ``entry``'s SX Functions by their compiled C (kept SX if gcc fails)."""
-    from generated.codegen import build_library, renamed
+    from generated.codegen import build_library
+    from generated.csource import renamed
 
     entry.compiled = True  # tried once per structure and process, whatever the outcome
     if not all(f.is_a("SXFunction") for f in entry.functions.values()):

@@ -31,27 +31,18 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class BuildPlan:
-    """What a method adds to the closed loop's compiled library.
+    """The libraries a method runs instead of the closed loop's compiled one.
 
     Attributes
     ----------
-    functions : tuple of casadi.Function
-        Compiled next to the right-hand side and the outputs.
-    derivatives : bool
-        Generate ``jac_<dyn>`` (the CasADi integrators' Jacobian).
-    whole_loop : bool
-        Compile the closed loop's right-hand side and outputs. False for a method that
-        runs its own :attr:`libraries` (the per-agent engine): the closed loop's outputs
-        are then evaluated by CasADi's virtual machine, nothing of the loop is compiled.
     libraries : tuple of Library
-        The libraries the method runs instead of the closed loop's (``whole_loop`` False).
+        Empty: the closed loop's right-hand side (with its Jacobian) and outputs are
+        compiled. Otherwise the method's own (the per-agent engine's kernels): nothing of
+        the loop is compiled and its outputs are evaluated by CasADi's virtual machine.
     data : object
         Whatever ``run`` needs besides the libraries (the per-agent engine's problem).
     """
 
-    functions: tuple[ca.Function, ...] = ()
-    derivatives: bool = True
-    whole_loop: bool = True
     libraries: tuple[Library, ...] = ()
     data: Any = None
 
@@ -71,17 +62,12 @@ class Solver(ABC):
     fixed_step : bool
         Whether it steps with a fixed step (only such a method may integrate the exact
         sign function, ``options.sign = "exact"``).
-    integrates_dyn : bool
-        Whether it integrates ``Built.dyn`` (the compiled right-hand side as a
-        ``casadi.Function``), so that a caller who binds new runtime parameters must bind
-        them into ``dyn`` too; the native drivers call their own C entry points instead.
     """
 
     name: ClassVar[str]
     form: ClassVar[str] = "ode"
     summary: ClassVar[str] = ""
     fixed_step: ClassVar[bool] = False
-    integrates_dyn: ClassVar[bool] = True
 
     def prepare(self, sc: Scenario, gains: Gains) -> Any:
         """Checks and data needed before the closed loop is built (default: none).
@@ -101,7 +87,7 @@ class Solver(ABC):
     def build(
         self, dyn: ca.Function, cl: ClosedLoop, settings: CodegenSettings, prepared: Any = None
     ) -> BuildPlan:
-        """What to compile for this method besides ``dyn`` and the outputs.
+        """The method's own libraries, if it runs those instead of the closed loop's.
 
         Parameters
         ----------

@@ -194,16 +194,9 @@ class SundialsStepper:
         return X, Z
 
 
-def _plan(t_out: np.ndarray, breakpoints: Sequence[float], chunk: float) -> list[list[tuple]]:
-    """Chunks of targets ``(time, output index or -1)``; a new chunk starts at every breakpoint.
-
-    Each chunk is one integrator call from the previous chunk's last target.
-    """
-    return _chunks(schedule(t_out, breakpoints), chunk)
-
-
 def _chunks(sched: Schedule, chunk: float) -> list[list[tuple]]:
-    """:func:`_plan` on a :class:`Schedule`: its segments cut into calls of <= ``chunk`` s."""
+    """Chunks of targets ``(time, output index or -1)``: the schedule's segments cut into
+    integrator calls of <= ``chunk`` s, each from the previous chunk's last target."""
     chunks: list[list[tuple]] = []
     for start, end, rows in sched.segments():
         if end <= start:  # a single output time: nothing to integrate

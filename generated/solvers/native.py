@@ -45,7 +45,6 @@ class Native(Solver):
 
     name = "native"
     form = "ode"
-    integrates_dyn = False  # the C drivers' own entry points, not Built.dyn
     summary = "BDF (SUNDIALS CVODE) driven from generated C"
 
     def prepare(self, sc: Scenario, gains: Gains) -> Any:
@@ -82,7 +81,7 @@ class Native(Solver):
         sc, gains = prepared.scenario, prepared.gains
         libs, model = agents.build_models(sc, gains, settings)
         prob = agents.problem(sc, gains, model)
-        return BuildPlan(derivatives=False, whole_loop=False, libraries=tuple(libs), data=prob)
+        return BuildPlan(libraries=tuple(libs), data=prob)
 
     def check_built(self, built: Built) -> None:
         """The build must hold the kernel libraries.
@@ -124,12 +123,8 @@ class Native(Solver):
         Parameters
         ----------
         built, x0, t_out, settings, breakpoints, progress
-            As :meth:`generated.solvers.Solver.run`.
+            As :meth:`generated.solvers.Solver.run` (:meth:`check_built` has passed).
         """
-        if built.agents is None:
-            raise IntegrationError(
-                "method 'native' needs the native build: call build(..., method='native')"
-            )
         libs, prob = built.agents
         paths = [lib.path for lib in libs]
         return agents.run(
