@@ -43,7 +43,6 @@ from generated import solvers
 from generated.built import Built
 from generated.codegen import Library, build_library, cache_root
 from generated.csource import check_dyn_signature, renamed
-from generated.gains_cache import ensure_gains, scenario_gains
 from generated.largescale import choose_plan
 from generated.loaded import (
     BUILDS,
@@ -73,6 +72,7 @@ from generated.values import CodegenSettings, IntegratorSettings, Trajectory, st
 from symbolic.closed_loop import bind, build_closed_loop, fix_parameters
 from symbolic.parameters import structure_key
 from synthesis.gains import Gains
+from synthesis.gains_cache import ensure_gains, scenario_gains
 
 #: the names other packages use, from this module or re-exported from the modules above
 __all__ = [

@@ -22,9 +22,9 @@ from core.errors import ToolkitError
 from core.scenario import Scenario
 from generated import solvers
 from generated.codegen import Library
-from generated.gains_cache import GainsInfo
 from generated.sundials_log import sundials_messages as count_sundials_messages
 from generated.values import CodegenSettings, IntegratorSettings, Trajectory
+from synthesis.gains_cache import GainsInfo
 
 
 class MetaFileError(ToolkitError):

@@ -87,11 +87,11 @@ def test_threads_never_see_more_than_the_capacity():
 
 def test_every_stage_cache_is_a_namespace_of_the_one_object():
     import generated.agent_kernels  # noqa: F401 - declare their namespaces
-    import generated.gains_cache  # noqa: F401
     import generated.loaded  # noqa: F401
     import generated.trajectory_file  # noqa: F401
     import symbolic.closed_loop  # noqa: F401
     import synthesis.certificate  # noqa: F401
+    import synthesis.gains_cache  # noqa: F401
     import verify.lyapunov  # noqa: F401
 
     names = set(MEMO.sizes())

@@ -160,8 +160,8 @@ def test_the_recheck_fails_on_a_spoilt_gain(planar, gains, spoil, claim):
 
 
 def test_gains_file_is_reused_only_after_recertification(planar, gains, tmp_path):
-    from generated.gains_cache import ensure_gains
     from synthesis.gains import load_gains, save_gains
+    from synthesis.gains_cache import ensure_gains
 
     path = tmp_path / planar.name / "gains.json"
     path.parent.mkdir()

@@ -22,7 +22,7 @@ from helpers import two_link_closed_form
 import synthesis.api
 from core.models import build_model, cache, derive
 from core.scenario import load_scenario
-from generated import gains_cache
+from synthesis import gains_cache
 from synthesis.gains import Gains, gains_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -172,7 +172,7 @@ def test_reusing_cached_gains_imports_no_solver_control_or_matplotlib(
     fresh_gains(synth_scenario, tmp_path / "out1")
     code = (
         "import sys; from pathlib import Path; from core.scenario import load_scenario\n"
-        "from generated import gains_cache as g\n"
+        "from synthesis import gains_cache as g\n"
         f"sc = load_scenario({str(SYNTH)!r})\n"
         "k = g.synthesis_inputs(sc); assert g.cached_gains(sc, k) is not None\n"
         "g.scenario_gains(sc)  # certified on reuse, or it raises\n"

@@ -9,7 +9,6 @@ import time
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,9 +17,7 @@ from core.errors import SynthesisError
 from core.memo import MEMO
 from core.models import cache
 from core.scenario import Scenario
-
-if TYPE_CHECKING:
-    from synthesis.gains import Gains
+from synthesis.gains import Gains, gains_from_dict, read_gains_file, recertified, save_gains
 
 
 @dataclass(frozen=True)
@@ -109,8 +106,6 @@ def cached_gains(sc: Scenario, key: str, root: Path | None = None) -> Gains | No
     root : Path, optional
         Build cache root; default ``$HITL_BUILD_DIR`` or the user cache folder.
     """
-    from synthesis.gains import gains_from_dict, recertified
-
     body = cache.read_entry(CACHE_KIND, key, root)
     if body is None or body.get("code") != synthesis_code():
         return None
@@ -161,8 +156,6 @@ def ensure_gains(sc: Scenario, out_root: str | Path | None = None) -> tuple[Gain
     -------
     (Gains, GainsInfo)
     """
-    from synthesis.gains import read_gains_file, recertified, save_gains
-
     path = Path(out_root or OUT_ROOT) / sc.name / "gains.json"
     t0 = time.perf_counter()
     if path.is_file():
@@ -202,8 +195,6 @@ def scenario_gains(sc: Scenario, where: str = "gains") -> Gains:
     where : str
         Names the gains in messages (the file they are for).
     """
-    from synthesis.gains import recertified
-
     key = synthesis_inputs(sc)
     if key in _SYNTHESIZED:  # same synthesis inputs: re-certified for this scenario
         gains = recertified(_SYNTHESIZED[key], f"{where} (synthesized in this process)", sc)
