@@ -363,9 +363,17 @@ def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
 
 
 def _c_problem(
-    libs: list[ctypes.CDLL], prob: AgentProblem, ls: LinearSettings
-) -> tuple[Problem, list]:
-    """The driver's problem struct and the arrays it points into (kept alive by the caller)."""
+    libraries: Sequence[Path], prob: AgentProblem, linear: LinearSettings | None
+) -> tuple[list[ctypes.CDLL], Problem, list]:
+    """The loaded libraries, the driver's problem struct and the arrays it points into
+    (kept alive by the caller)."""
+    libs = load(libraries)
+    ls = linear or LinearSettings()
+    if ls.threads != 1 and not libs[0].hitl_agents_openmp():
+        raise IntegrationError(
+            f"agents threads: {ls.threads} needs the threaded build "
+            "(build_models(..., openmp=True)); or threads = 1"
+        )
     segs = prob.segments
     tops = [s.graph for s in segs]  # each segment's pattern (the union while links fade)
     N = prob.N
@@ -415,15 +423,7 @@ def _c_problem(
     for name, a in arrays.items():
         ptype = _IP if a.dtype == np.int32 else _DP
         setattr(c, name, a.ctypes.data_as(ptype))
-    return c, [kern, *arrays.values()]
-
-
-def _check_threads(libs: list[ctypes.CDLL], linear: LinearSettings) -> None:
-    if linear.threads != 1 and not libs[0].hitl_agents_openmp():
-        raise IntegrationError(
-            f"agents threads: {linear.threads} needs the threaded build "
-            "(build_models(..., openmp=True)); or threads = 1"
-        )
+    return libs, c, [kern, *arrays.values()]
 
 
 def run(
@@ -461,12 +461,9 @@ def run(
         Method ``"native"``; ``stats["krylov_iters"]`` counts GMRES iterations.
     """
     wall0 = time.perf_counter()
-    libs = load(libraries)
+    libs, cp, _keep = _c_problem(libraries, prob, linear)
     x = _checked_state(x0, prob.nx)
-    linear = linear or LinearSettings()
-    _check_threads(libs, linear)
     call = native.DriverCall.of(x.size, t_out, settings, breakpoints)
-    cp, _keep = _c_problem(libs, prob, linear)
     kry = ctypes.c_long(0)
     libs[0].hitl_agents_run(
         ctypes.byref(cp),
@@ -509,11 +506,8 @@ def probe(
     IntegrationError
         Wrong sizes, or the driver failed (singular block, GMRES not converged).
     """
-    libs = load(libraries)
-    linear = linear or LinearSettings()
-    _check_threads(libs, linear)
+    libs, cp, _keep = _c_problem(libraries, prob, linear)
     x, b = _checked_state(x, prob.nx), _checked_state(b, prob.nx)
-    cp, _keep = _c_problem(libs, prob, linear)
     xdot, sol = np.zeros_like(x), np.zeros_like(x)
     msg = ctypes.create_string_buffer(native.MSG_LEN)
     dp = native.dptr

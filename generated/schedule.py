@@ -64,7 +64,7 @@ class Schedule:
     """Where every integrator of a run stops: restarts and the time integrated to per row.
 
     Made by :func:`schedule`, the one place that reconciles output times with breakpoints
-    (the CasADi methods here, and the native drivers, which receive ``targets`` and
+    (the CasADi methods here, and the native driver, which receive ``targets`` and
     ``breaks``). Every two distinct times among ``t0``, ``breaks`` and ``targets`` are
     more than ``tol`` apart, so no integrator is asked for a time within ``tol`` of the
     time it stands at.

@@ -57,16 +57,8 @@ def column_names(sc: Scenario) -> list[str]:
     return [*cols, "V1"]
 
 
-#: CSV prefix -> candidate names of the closed loop's outputs (first match wins)
-_OUTPUT_ALIASES = {
-    "u": ("u",),
-    "b": ("b",),
-    "et": ("e_t", "et"),
-    "eeta": ("ebar", "e_eta_bar", "eeta"),
-    "chi": ("chi",),
-    "V2": ("V2",),
-    "V1": ("V1",),
-}
+#: CSV prefix -> the closed loop's output it shows (:func:`symbolic.closed_loop.build_closed_loop`)
+_OUTPUTS = {"u": "u", "b": "b", "et": "et", "eeta": "ebar", "chi": "chi", "V2": "V2", "V1": "V1"}
 
 
 #: mapped outputs Functions by (id of the Function, K): the Function, its map and an
@@ -197,19 +189,13 @@ def _frame_outputs(shapes: dict[str, tuple[int, ...]], sc: Scenario) -> dict[str
     ``shapes``: output name -> (rows, cols) per time.
     """
 
-    def find(prefix: str) -> str:
-        for nm in _OUTPUT_ALIASES[prefix]:
-            if nm in shapes:
-                return nm
-        raise BuildError(
-            f"closed loop outputs lack {prefix!r} (looked for {', '.join(_OUTPUT_ALIASES[prefix])}; "
-            f"it has {', '.join(shapes)})"
-        )
-
+    missing = [nm for nm in _OUTPUTS.values() if nm not in shapes]
+    if missing:
+        raise BuildError(f"closed loop outputs lack {missing} (it has {', '.join(shapes)})")
     N, n, m = sc.N, sc.n, sc.m
     named = {}
     for key, width in (("u", n), ("b", n), ("et", n), ("eeta", m), ("chi", n), ("V2", 1)):
-        nm = find(key)
+        nm = _OUTPUTS[key]
         if tuple(shapes[nm]) != (N, width):
             r, c = shapes[nm]
             raise BuildError(
@@ -217,7 +203,7 @@ def _frame_outputs(shapes: dict[str, tuple[int, ...]], sc: Scenario) -> dict[str
                 f"expected {N}x{width} (one row per agent)"
             )
         named[key] = (nm, width)
-    nm = find("V1")
+    nm = _OUTPUTS["V1"]
     if tuple(shapes[nm]) != (1, 1):
         raise BuildError(f"closed loop output {nm!r} is not a scalar")
     named["V1"] = (nm, 1)

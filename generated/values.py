@@ -316,14 +316,14 @@ class Trajectory:
         ``wall_seconds`` and, for CVODES/IDAS, ``last_step`` (the last step size taken).
     sundials_log : str
         SUNDIALS' warnings and errors of the run, one line each (``[WARNING][CVode]
-        text (cvode.c:line)``; the native drivers), empty when there were none; counted
+        text (cvode.c:line)``; the native driver), empty when there were none; counted
         by :func:`generated.sundials_log.sundials_messages`.
     t_stop : float
-        Where the integrator stood when it returned (the native drivers; NaN for the
+        Where the integrator stood when it returned (the native driver; NaN for the
         others): on a failure CVODE's last internal step, between ``t_reached`` and the
         next output time; the horizon for a complete run.
     x_stop : ndarray or None, shape (nx,)
-        The state at ``t_stop`` (the native drivers; None for the others). On a failure
+        The state at ``t_stop`` (the native driver; None for the others). On a failure
         it tells a state that ran away from an integrator that stalled on a tame one,
         which the output rows, ending at ``t_reached``, cannot.
     """

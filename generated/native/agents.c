@@ -549,8 +549,7 @@ static void hitl_lu_solve(const double *a, int n, const int *piv, double *b) {
 }
 
 /* ---------------------------------------------------------------- linear solver */
-/* K_i's entry (row, col) */
-
+/* the solver of the jets system on topology top (HITL_AG_AUTO resolved) */
 static int hitl_ag_mode(const hitl_ag *d, int top) {
   int s = d->p->solver;
   if (s == HITL_AG_AUTO) return d->p->acyclic[top] ? HITL_AG_FORWARD : HITL_AG_GMRES;
@@ -750,7 +749,7 @@ static int hitl_ag_forward_x(hitl_ag *d, double *x) {
 }
 
 /* Set-up of M = I + c J: the leader's block factorised (dense, pivoting), every agent's
-   D_i by its model's ag_nfac (pivots checked as the whole-loop driver checks its own) and,
+   D_i by its model's ag_nfac (pivots below HITL_PIVOT_MIN fail the set-up) and,
    unless the solve substitutes through the states, G_i by ag_gmat; HITL_AG_DENSE also
    factorises the jets system. */
 static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
@@ -1036,8 +1035,8 @@ CASADI_SYMBOL_EXPORT long hitl_agents_problem_size(void) {
 }
 
 /*
- * Integrate the closed loop (nx = m + N*na) from x0 at o->t_out[0]; options and result
- * as the whole-loop driver's (hitl_native_run). krylov_iters: GMRES iterations (or NULL).
+ * Integrate the closed loop (nx = m + N*na) from x0 at o->t_out[0] (hitl_native.h's
+ * options and result). krylov_iters: GMRES iterations (or NULL).
  * Returns r->filled, or -1 if CVODE could not be set up.
  */
 CASADI_SYMBOL_EXPORT int hitl_agents_run(const hitl_agents_problem *p, const double *x0,

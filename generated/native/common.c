@@ -1,6 +1,6 @@
 /*
  * The SUNDIALS side of the hitl-formation CVODE driver (generated/native.py): SUNDIALS
- * includes, the driver's context, CVODE's set-up and its output loop with breakpoints,
+ * includes, the driver's context (message, counters), CVODE's set-up and its output loop with breakpoints,
  * a custom SUNLinearSolver shell, CVODE's counters, the SUNDIALS version/index check,
  * and the per-follower block matrix hitl_kmat. Prepended to agents.c (the per-agent
  * engine); the generated C of the follower kernels comes first. The entry points take
