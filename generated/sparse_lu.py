@@ -1,20 +1,15 @@
 """A sparse LU factorisation without pivoting, written out as straight-line generated code.
 
-The native integrator (:mod:`generated.native`) solves CVODE's Newton systems
-``M δ = r`` with ``M = I − γ J`` on the Jacobian's fixed sparsity pattern. CasADi's
-CVODES interface factorises M with ``csparse`` (symbolic analysis, pivoting and
-pointer chasing at every call) and SUNDIALS' dense LU touches all nx² entries; on
-the paper scenario both cost more than the right-hand side itself
-(docs/performance.md). Here the elimination is done once *symbolically* on the
-pattern, in the order of the states (agent-major), and the resulting expressions
-are generated as C: factorising is then ≈ 3,300 flops and a solve ≈ 2,100 for the
-paper's 62 states (against 62³/3 ≈ 80,000 for a dense LU).
+The per-agent kernels (:mod:`generated.agent_kernels`) factorise each follower's
+diagonal block D = I + c A_ss of CVODE's Newton matrix on its fixed sparsity pattern.
+The elimination is done once *symbolically* on the pattern, in the order of the
+states, and the resulting expressions are generated as C: no symbolic analysis, pivot
+search or pointer chasing at run time, and only the structural nonzeros are touched.
 
 No pivoting means the pivots are whatever elimination produces. They are returned,
 and the caller treats a pivot that is not finite or is tiny as a recoverable failure
 of the linear solver setup (CVODE then retries with a smaller step, where
-``M → I`` and the pivots tend to 1). For ``M = I − γJ`` with small γ this is the
-classical diagonally dominant case; the test suite checks the solve against numpy
+``M → I`` and the pivots tend to 1). The test suite checks the solve against numpy
 on random patterns and the native run against CVODES.
 """
 
