@@ -154,18 +154,9 @@ def _unpack(v: ca.SX, patterns: list[ca.Sparsity]) -> list[ca.SX]:
     return out
 
 
-def kernel_settings(
-    settings: CodegenSettings | None = None, openmp: bool = False
-) -> CodegenSettings:
-    """``settings`` for the kernels: at their optimisation, with OpenMP's flags if threaded.
-
-    Parameters
-    ----------
-    settings : CodegenSettings, optional
-    openmp : bool
-        Threads over the agents (``LinearSettings.threads`` > 1). A serial build has no
-        OpenMP region: at small N entering one costs more than the pass it runs.
-    """
+def _kernel_settings(settings: CodegenSettings | None, openmp: bool) -> CodegenSettings:
+    """``settings`` for the kernels: at their optimisation, with OpenMP's flags if threaded
+    (a serial build has no OpenMP region: at small N entering one costs more than a pass)."""
     s = settings or CodegenSettings()
     extra = tuple(s.extra_cflags)
     if openmp:
@@ -226,22 +217,15 @@ def kernel_key(
         "driver": hashlib.sha256(
             (native.COMMON.read_text() + native.DRIVER.read_text()).encode()
         ).hexdigest(),
-        "settings": repr(kernel_settings(settings, openmp)),
+        "settings": repr(_kernel_settings(settings, openmp)),
     }
     return hashlib.sha256(json.dumps(desc, sort_keys=True, default=str).encode()).hexdigest()
 
 
-def driver_toolchain(sc: Scenario) -> Toolchain:
-    """The driver, compiled for one follower's sizes (``HITL_AG_*`` in agents.c).
-
-    The leader's states m, a follower's states and its output coordinates n are the
-    same for every model of a scenario; as compile-time constants they let gcc unroll
-    the driver's per-agent loops. The driver refuses a problem of other sizes.
-
-    Parameters
-    ----------
-    sc : Scenario
-    """
+def _driver_toolchain(sc: Scenario) -> Toolchain:
+    """The driver compiled for one follower's sizes (``HITL_AG_*`` in agents.c): the same
+    for every model of a scenario, as constants they let gcc unroll the per-agent loops
+    (the driver refuses a problem of other sizes)."""
     tc = native.toolchain()
     na = make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered").agent_size
     sizes = (
@@ -266,7 +250,7 @@ def build_models(
     settings : CodegenSettings, optional
         Compiler, flags, cache root and ``cse``.
     openmp : bool
-        A threaded build (:func:`kernel_settings`), needed for ``LinearSettings.threads``
+        A threaded build, needed for ``LinearSettings.threads``
         above 1.
 
     Returns
@@ -276,7 +260,7 @@ def build_models(
     model : ndarray
         N ints: the library of each follower.
     """
-    s = kernel_settings(settings, openmp)
+    s = _kernel_settings(settings, openmp)
     groups = model_groups(sc)
     model = np.zeros(sc.N, dtype=np.int32)
     libs = []
@@ -286,7 +270,7 @@ def build_models(
         lib, stamp = _BUILT.get(key) or (None, None)
         if lib is None or library_stamp(lib) != stamp:  # its entry changed: check, rebuild
             fns = kernel_functions(sc, gains, members[0], cse=s.cse)
-            lib = build_library(fns, s, toolchain=driver_toolchain(sc))
+            lib = build_library(fns, s, toolchain=_driver_toolchain(sc))
             _BUILT[key] = (lib, library_stamp(lib))
         else:
             lib = dataclasses.replace(lib, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0)

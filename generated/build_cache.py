@@ -113,7 +113,7 @@ def entry_bytes(folder: Path, key: str) -> tuple[bytes, str | None]:
     key : str
         The key this build needs.
     """
-    info, why = read_manifest(folder)
+    info, why = _read_manifest(folder)
     if why is not None:
         return b"", why
     if not isinstance(info, dict) or not isinstance(info.get("library_sha256"), str):
@@ -121,7 +121,7 @@ def entry_bytes(folder: Path, key: str) -> tuple[bytes, str | None]:
     if info.get("key") != key:
         return b"", f"manifest is for key {str(info.get('key'))[:12]}…, not this build"
     try:
-        data = read_library(folder)
+        data = read_regular_file(folder / LIBRARY_NAME, MAX_LIBRARY_BYTES)
     except (OSError, FileRefused):
         return b"", f"{LIBRARY_NAME} missing, unreadable or not a regular file"
     if sha256_bytes(data) != info["library_sha256"]:
@@ -132,18 +132,9 @@ def entry_bytes(folder: Path, key: str) -> tuple[bytes, str | None]:
     return data, None
 
 
-def read_manifest(folder: Path) -> tuple[object, str | None]:
-    """The parsed manifest of ``folder`` and None, or None and why it cannot be read.
-
-    Read only as a regular file of at most :data:`MAX_MANIFEST_BYTES` nested at most
-    :data:`MAX_MANIFEST_DEPTH` deep: a huge or absurdly nested manifest is a corrupt
-    entry (rebuilt), never a ``RecursionError``.
-
-    Parameters
-    ----------
-    folder : Path
-        ``<root>/<key>/``.
-    """
+def _read_manifest(folder: Path) -> tuple[object, str | None]:
+    """The parsed manifest and None, or None and why it cannot be read (a huge or absurdly
+    nested one is a corrupt entry, rebuilt, never a ``RecursionError``)."""
     try:
         return read_json_file(folder / MANIFEST_NAME, MAX_MANIFEST_BYTES, MAX_MANIFEST_DEPTH), None
     except FileNotFoundError:
@@ -152,22 +143,6 @@ def read_manifest(folder: Path) -> tuple[object, str | None]:
         return None, f"manifest {exc} (corrupt)"
     except (OSError, ValueError):
         return None, "manifest unreadable"
-
-
-def read_library(folder: Path) -> bytes:
-    """The bytes of the entry's library (a regular file of at most :data:`MAX_LIBRARY_BYTES`).
-
-    Parameters
-    ----------
-    folder : Path
-        ``<root>/<key>/``.
-
-    Raises
-    ------
-    OSError, core.files.FileRefused
-        Missing, unreadable, not a regular file or too large.
-    """
-    return read_regular_file(folder / LIBRARY_NAME, MAX_LIBRARY_BYTES)
 
 
 def private_root(root: Path) -> Path:

@@ -153,7 +153,7 @@ class SundialsStepper:
             return integ(x0=x, z0=z)
         finally:
             try:
-                add_stats(acc, integ.stats())
+                _add_stats(acc, integ.stats())
             except RuntimeError:  # no stats when the call failed before the solver ran
                 pass
 
@@ -241,13 +241,8 @@ _STAT_KEYS = {
 }
 
 
-def add_stats(acc: dict[str, Any], st: dict[str, Any]) -> None:
-    """Add a SUNDIALS integrator's counters ``st`` to the run's statistics ``acc``.
-
-    Parameters
-    ----------
-    acc, st : dict
-    """
+def _add_stats(acc: dict[str, Any], st: dict[str, Any]) -> None:
+    """Add a SUNDIALS integrator's counters ``st`` to the run's statistics ``acc``."""
     h = st.get("hlast")
     if isinstance(h, float) and math.isfinite(h) and h > 0:
         acc["last_step"] = h
