@@ -24,7 +24,7 @@ from core.files import FileRefused, read_json_file
 from core.private_files import check_trusted, make_private_dir
 
 #: the build cache root unless ``HITL_BUILD_DIR`` is set (the rule of
-#: ``generated.codegen.default_build_root``, which core may not import)
+#: ``generated.build_cache.default_build_root``, which core may not import)
 APP_NAME = "hitl-formation"
 #: largest entry read (a model's derivation is some 100 kB) and its deepest nesting
 MAX_ENTRY_BYTES = 64 << 20
