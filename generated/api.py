@@ -263,15 +263,14 @@ def _compile(
     settings = resolve_codegen(cl.layout.N, settings)
     t0 = time.perf_counter() if t_symbolic_start is None else t_symbolic_start
     form = solver.form
-    par = cl.parametric
-    src_fns = cl if par is None else par
+    plan = solver.build(cl, settings, prepared)
+    if plan.libraries:  # nothing of the closed loop is compiled
+        return _own_libraries(cl, plan, form, time.perf_counter() - t0), None
+    src_fns = cl if cl.parametric is None else cl.parametric
     src, name = (src_fns.dae_dyn, DAE_NAME) if form == "dae" else (src_fns.ode_dyn, ODE_NAME)
     check_dyn_signature(src, f"closed loop {form}_dyn")
     dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
     outs = renamed(src_fns.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
-    plan = solver.build(dyn, cl, settings, prepared)
-    if plan.libraries:
-        return _own_libraries(cl, plan, form, time.perf_counter() - t0), None
     t_sym = time.perf_counter() - t0
     lib = build_library([dyn, outs], settings, with_derivatives=[name])
     timings = {

@@ -17,7 +17,6 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from core.errors import IntegrationError
 
 if TYPE_CHECKING:
-    import casadi as ca
     import numpy as np
 
     from core.scenario import Scenario
@@ -84,15 +83,11 @@ class Solver(ABC):
         """
         return None
 
-    def build(
-        self, dyn: ca.Function, cl: ClosedLoop, settings: CodegenSettings, prepared: Any = None
-    ) -> BuildPlan:
+    def build(self, cl: ClosedLoop, settings: CodegenSettings, prepared: Any = None) -> BuildPlan:
         """The method's own libraries, if it runs those instead of the closed loop's.
 
         Parameters
         ----------
-        dyn : casadi.Function
-            The closed loop's right-hand side in :attr:`form`, as it is compiled.
         cl : ClosedLoop
         settings : CodegenSettings
             Resolved for the closed loop's N.

@@ -22,8 +22,6 @@ from generated.solvers import register
 from generated.solvers.base import BuildPlan, Solver
 
 if TYPE_CHECKING:
-    import casadi as ca
-
     from core.scenario import Scenario
     from generated.built import Built
     from generated.largescale import JacobianPlan as Plan
@@ -61,9 +59,7 @@ class Native(Solver):
         """
         return PerAgent(sc, gains)
 
-    def build(
-        self, dyn: ca.Function, cl: ClosedLoop, settings: CodegenSettings, prepared: Any = None
-    ) -> BuildPlan:
+    def build(self, cl: ClosedLoop, settings: CodegenSettings, prepared: Any = None) -> BuildPlan:
         """The per-agent kernel libraries (:func:`generated.agents.build_models`).
 
         Nothing of the closed loop is compiled: the driver brings its own Jacobians.
