@@ -10,7 +10,7 @@ import pandas as pd
 
 from core.artifacts import atomic_write_text
 from core.pyplot import pyplot
-from sweep.coverage import coverage_lines, gains_lines
+from sweep.coverage import GIVEN, coverage_lines, gains_lines
 
 #: (column, label) of the medians in the summary table
 MEDIANS = [
@@ -279,6 +279,7 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
             lines.append(f"| largest {label} | {np.max(vals):.4g} |")
     lines += step_lines(ok)
     lines += link_lines(ok)
+    lines += given_link_lines(table)
     lines += kernel_lines(table)
     lines += tail_split_lines(ok)
     t2 = entry_times(table)
@@ -401,6 +402,25 @@ def link_lines(ok: pd.DataFrame) -> list[str]:
             f"{int((r <= 2.0).sum())} of {len(r)} within 2x |"
         )
     return lines
+
+
+def given_link_lines(table: pd.DataFrame) -> list[str]:
+    """:func:`link_lines` of the samples' runs with the base scenario's own gains
+    (``compare_gains``: the ``given:`` columns of the rows whose ``given:status`` is ok),
+    each quantity marked so; none without them.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The results.
+    """
+    if f"{GIVEN}status" not in table.columns:
+        return []
+    ran = table[table[f"{GIVEN}status"] == "ok"]
+    names = {c: c.removeprefix(GIVEN) for c in ran.columns if c.startswith(GIVEN)}
+    given = ran[["id", *names]].rename(columns=names)
+    mark = "| with the base scenario's own gains: "
+    return [mark + line.removeprefix("| ") for line in link_lines(given)]
 
 
 def _worst_id(ok: pd.DataFrame, mask: np.ndarray, ratio: np.ndarray) -> str:

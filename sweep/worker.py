@@ -266,7 +266,9 @@ def given_gains(study: Study, sample: Sample, paths: StudyPaths) -> dict[str, An
         out["status"] = f"refused: {twin.reason}"
     else:
         try:
-            out.update(_simulate_and_verify(twin, paths, keep=False))
+            out.update(_simulate_and_verify(twin, paths, False, study, out))
+            if _baseline(study):  # the given gains' own run without the losses
+                out.update(link_baseline(twin, paths, **engine(study)))
             out["status"] = "ok"
         except Exception as exc:  # noqa: BLE001 - recorded like the sample's own run
             out["status"] = f"failed: {one_line(exc)}"

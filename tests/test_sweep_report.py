@@ -141,3 +141,37 @@ def test_link_lines_count_pairs_and_the_ratio_to_the_no_loss_runs():
     assert "median 2, largest 3 (sample 3); 1 of 2 within 2x" in text
     assert "| inf |" in text  # a follower that never came back
     assert link_lines(ok.assign(switch_pairs=0)) == []
+
+
+def test_given_link_lines_are_the_link_lines_of_the_base_gains_runs():
+    """compare_gains: the given: columns of the rows whose given run is ok, marked so."""
+    from sweep.coverage import GIVEN
+    from sweep.report import given_link_lines, link_lines
+
+    cols = {
+        "switch_pairs": [10, 6, 4],
+        "switch_pairs_late": [1, 0, 4],
+        "switch_pairs_undefined": [2, 1, 0],
+        "switch_pairs_out_before": [0, 1, 0],
+        "switch_recovery_s": [1.5, 3.0, 9.0],
+        "switch_pairs_late_nolosses": [2, 0, 4],
+        "switch_pairs_undefined_nolosses": [2, 1, 0],
+        "peak_u_late": [300.0, 100.0, 900.0],
+        "peak_u_late_nolosses": [100.0, 100.0, 100.0],
+    }
+    table = pd.DataFrame(
+        {
+            "id": [3, 7, 8],
+            "status": ["ok"] * 3,
+            **{k: [0, 0, 0] for k in cols},
+            f"{GIVEN}status": ["ok", "ok", "failed: x"],  # the third is left out
+            **{f"{GIVEN}{k}": v for k, v in cols.items()},
+        }
+    )
+    lines = given_link_lines(table)
+    plain = link_lines(pd.DataFrame({"id": [3, 7], **{k: v[:2] for k, v in cols.items()}}))
+    assert len(lines) == len(plain) == 4
+    for a, b in zip(lines, plain, strict=True):
+        assert a == "| with the base scenario's own gains: " + b.removeprefix("| ")
+    assert "| 12 of 16 (1 late; 3 undefined" in lines[0]
+    assert given_link_lines(table.drop(columns=f"{GIVEN}status")) == []
