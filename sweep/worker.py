@@ -203,6 +203,15 @@ def _baseline(study: Study) -> bool:
     return g is not None and g.losses is not None and g.losses.baseline
 
 
+#: the no-loss twin's columns (``<column>_nolosses``): its pairs not back in time, and why
+NOLOSS_COLUMNS = (
+    "switch_pairs_late",
+    "switch_pairs_undefined",
+    "switch_out_within",
+    "switch_out_observer",
+)
+
+
 def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> dict[str, Any]:
     """The sample once more with its graph switches made no-ops (each sets the base
     graph's weight): the same structure, so the same compiled library, and the run the
@@ -240,7 +249,7 @@ def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
     back = switch_summary(switch_recoveries(sc, run.frame, gauge(sc, run.gains)))
     return {
         "peak_u_late_nolosses": peak_u_late(run.frame, sc.N, sc.n),
-        **{f"{k}_nolosses": back[k] for k in ("switch_pairs_late", "switch_pairs_undefined")},
+        **{f"{k}_nolosses": back[k] for k in NOLOSS_COLUMNS},
     }
 
 

@@ -175,3 +175,35 @@ def test_given_link_lines_are_the_link_lines_of_the_base_gains_runs():
         assert a == "| with the base scenario's own gains: " + b.removeprefix("| ")
     assert "| 12 of 16 (1 late; 3 undefined" in lines[0]
     assert given_link_lines(table.drop(columns=f"{GIVEN}status")) == []
+
+
+def test_out_lines_say_what_keeps_the_pairs_out():
+    """Two samples (N = 6 and 13): 3 + 1 pairs out, with and without the losses."""
+    from sweep.report import out_lines
+
+    ok = pd.DataFrame(
+        {
+            "param:graph.N": [6, 13],
+            "switch_pairs": [10, 20],
+            "switch_pairs_late": [2, 1],
+            "switch_pairs_undefined": [1, 0],
+            "switch_out_within": [2, 1],
+            "switch_out_own": [1, 0],
+            "switch_out_observer": [3, 0],
+            "switch_out_worst_max": [0.07, 0.2],
+            "switch_out_observer_max": [0.069, 0.01],
+            "switch_out_controller_max": [0.002, 0.19],
+            "switch_pairs_late_nolosses": [2, 0],
+            "switch_pairs_undefined_nolosses": [0, 0],
+            "switch_out_within_nolosses": [2, 0],
+            "switch_out_observer_nolosses": [2, 0],
+        }
+    )
+    mine, nolosses, by_n = out_lines(ok, 30)
+    assert "of the 4 pairs not back in time | 3 within the level for the whole 2 s" in mine
+    assert "1 whose follower's own links switched; 3 with the observer's part" in mine
+    assert "at most 0.2 (observer's part up to 0.069, controller's up to 0.19)" in mine
+    assert "of the 2 pairs not back without losses | 2 within the level" in nolosses
+    assert "2 with the observer's part above" in nolosses
+    assert by_n == "| pairs not back in time by N (of 30) | N = 6–10: 3 of 10; N = 11–13: 1 of 20 |"
+    assert out_lines(ok.drop(columns="switch_out_within"), 30) == []
