@@ -455,8 +455,9 @@ def out_lines(ok: pd.DataFrame, pairs: int) -> list[str]:
         cells = []
         for a in range(lo, int(np.nanmax(N)) + 1, 5):
             m = (N >= a) & (N < a + 5)
+            b = min(a + 4, int(np.nanmax(N)))
             cells.append(
-                f"N = {a}–{min(a + 4, int(np.nanmax(N)))}: "
+                f"N = {a}{f'–{b}' if b > a else ''}: "
                 f"{int(np.nansum(per[m]))} of {int(np.nansum(_num(ok, 'switch_pairs')[m]))}"
             )
         lines.append(f"| pairs not back in time by N (of {pairs}) | {'; '.join(cells)} |")

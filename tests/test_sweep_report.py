@@ -206,4 +206,6 @@ def test_out_lines_say_what_keeps_the_pairs_out():
     assert "of the 2 pairs not back without losses | 2 within the level" in nolosses
     assert "2 with the observer's part above" in nolosses
     assert by_n == "| pairs not back in time by N (of 30) | N = 6–10: 3 of 10; N = 11–13: 1 of 20 |"
+    *_, one = out_lines(ok.assign(**{"param:graph.N": [6, 11]}), 30)
+    assert one.endswith("| N = 6–10: 3 of 10; N = 11: 1 of 20 |")
     assert out_lines(ok.drop(columns="switch_out_within"), 30) == []
