@@ -33,6 +33,10 @@ from sweep.study import Study, load_study
 from sweep.switched_gains import topology_columns
 
 
+class TwinFailed(Exception):
+    """The no-loss twin of a sample whose own run completed failed (the row says so)."""
+
+
 @MEMO.memoize("worker-studies", 4)
 def _study(path: str) -> Study:
     """The study, loaded once per worker process."""
@@ -74,8 +78,13 @@ def run_sample(study_path: str, sample_id: int, folder: str, keep: bool = False)
         try:
             row.update(_simulate_and_verify(sample, paths, keep, study, row))
             if _baseline(study):
-                row.update(link_baseline(sample, paths, **engine(study)))
+                try:
+                    row.update(link_baseline(sample, paths, **engine(study)))
+                except Exception as exc:  # noqa: BLE001 - named: the sample's own run completed
+                    raise TwinFailed(f"no-loss twin: {one_line(exc)}") from exc
             row["status"] = "ok"
+        except TwinFailed as exc:
+            row["status"] = f"failed: {exc}"
         except Exception as exc:  # noqa: BLE001 - any failure of one sample is recorded
             row["status"] = f"failed: {one_line(exc)}"
         if _study(study_path).compare_gains:

@@ -596,3 +596,25 @@ def test_the_gamma_choice_refuses_runs_that_stop_rows_that_fail_and_the_budget()
     same = GammaPoint([0.03, 0.03], base, [6.0, 6.0])  # a tie goes to the smaller gamma
     assert choose_gamma([same, own], np.array([200.0, 200.0])) == [own, own]
     assert choose_gamma([own], np.array([50.0, 200.0]))[0] is None
+
+
+def test_a_failed_no_loss_twin_is_named_in_the_status(monkeypatch, tmp_path):
+    """The sample's own run completes, its no-loss twin stops: the row says which failed."""
+    from core.errors import IntegrationError
+    from sweep import worker as W
+
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'name = "s"\nbase = "{ROOT / "scenarios" / "paper.toml"}"\ncount = 1\nseed = 3\n'
+        "[graph]\nN = [5, 6]\nedge_probability = 0.2\n"
+        "[graph.losses]\ncount = [1, 1]\ntime = { uniform = [3.0, 5.0] }\nbaseline = true\n"
+    )
+
+    def twin(sample, paths, measured=False):
+        raise IntegrationError("native failed after t = 0 s")
+
+    monkeypatch.setattr(W, "_simulate_and_verify", lambda *a: {"steps": 1})
+    monkeypatch.setattr(W, "link_baseline", twin)
+    row = W.run_sample(str(study), 0, str(tmp_path / "out"))
+    assert row["status"].startswith("failed: no-loss twin: IntegrationError: native failed")
+    assert row["steps"] == 1  # the sample's own columns stay
