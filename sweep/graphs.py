@@ -3,10 +3,18 @@
 from __future__ import annotations
 
 import copy
+import re
+from typing import Any
 
 import numpy as np
 
 from core.graph import check_network
+from core.model import OPTIONAL_SECTIONS, SECTIONS
+from core.settings import settings_of
+
+#: the shapes of a section's settings that hold one entry per follower (core.settings)
+PER_FOLLOWER_SHAPES = ("per_follower", "per_coordinate")
+_FOLLOWER_KEY = re.compile(r"followers\[(\d+)\]\.(.+)")
 
 
 def random_graph(
@@ -63,3 +71,43 @@ def resize_followers(data: dict, N: int) -> None:
     """
     base = data["followers"]
     data["followers"] = [copy.deepcopy(base[i % len(base)]) for i in range(N)]
+
+
+def cyclic_keys(keys: dict[str, Any], base_n: int, N: int) -> dict[str, Any]:
+    """``--set`` keys written for the base's ``base_n`` followers, made for N followers
+    repeated cyclically as :func:`resize_followers` repeats them: follower i takes what
+    follower ``i % base_n`` of the base was given.
+
+    A per-follower setting (``controller.Lambda = [l1, ..., l_base_n]``) is repeated or cut
+    to N entries; ``followers[k].x`` is given to every follower i with ``i % base_n = k - 1``
+    (1-based k, dropped when no such follower exists); every other key is kept as it is.
+
+    Parameters
+    ----------
+    keys : dict
+        ``--set`` key -> value, for the base's followers.
+    base_n : int
+        The base scenario's number of followers.
+    N : int
+        Number of followers of the sample.
+    """
+    out: dict[str, Any] = {}
+    for key, v in keys.items():
+        m = _FOLLOWER_KEY.fullmatch(key)
+        if m:
+            k = int(m.group(1)) - 1
+            for i in range(k, N, base_n):
+                out[f"followers[{i + 1}].{m.group(2)}"] = copy.deepcopy(v)
+            continue
+        out[key] = copy.deepcopy(v)
+        if _per_follower(key) and isinstance(v, list) and len(v) == base_n:
+            out[key] = [copy.deepcopy(v[i % base_n]) for i in range(N)]
+    return out
+
+
+def _per_follower(key: str) -> bool:
+    """``section.field`` names a setting with one entry per follower."""
+    section, _, name = key.partition(".")
+    cls = {**SECTIONS, **OPTIONAL_SECTIONS}.get(section)
+    s = settings_of(cls).get(name) if cls is not None else None
+    return s is not None and s.shape in PER_FOLLOWER_SHAPES

@@ -10,7 +10,7 @@ import pandas as pd
 
 from core.artifacts import atomic_write_text
 from core.pyplot import pyplot
-from sweep.coverage import coverage_lines, gains_lines
+from sweep.coverage import GIVEN, coverage_lines, gains_lines
 
 #: (column, label) of the medians in the summary table
 MEDIANS = [
@@ -279,6 +279,7 @@ def summary_lines(table: pd.DataFrame) -> list[str]:
             lines.append(f"| largest {label} | {np.max(vals):.4g} |")
     lines += step_lines(ok)
     lines += link_lines(ok)
+    lines += given_link_lines(table)
     lines += kernel_lines(table)
     lines += tail_split_lines(ok)
     t2 = entry_times(table)
@@ -391,6 +392,7 @@ def link_lines(ok: pd.DataFrame) -> list[str]:
             f"{int(pairs) - late0 - undef0} of {int(pairs)} back ({late0} late; {undef0} "
             "undefined) |"
         )
+    lines += out_lines(ok, int(pairs))
     late_u, base_u = _num(ok, "peak_u_late"), _num(ok, "peak_u_late_nolosses")
     both = np.isfinite(late_u) & np.isfinite(base_u) & (base_u > 0)
     if both.any():
@@ -401,6 +403,85 @@ def link_lines(ok: pd.DataFrame) -> list[str]:
             f"{int((r <= 2.0).sum())} of {len(r)} within 2x |"
         )
     return lines
+
+
+def out_lines(ok: pd.DataFrame, pairs: int) -> list[str]:
+    """What keeps the (switch, follower) pairs out that are not back in time
+    (:func:`verify.link_recovery.switch_summary`), with and without the losses, and how many
+    are out by the sample's N; none for results without the columns.
+
+    Parameters
+    ----------
+    ok : DataFrame
+        The ``ok`` rows.
+    pairs : int
+        The pairs in all.
+    """
+    from verify.operator_steps import RECOVERY_LIMIT
+
+    if "switch_out_within" not in ok.columns:
+        return []
+    out = int(np.nansum(_num(ok, "switch_pairs_late") + _num(ok, "switch_pairs_undefined")))
+    n = {k: int(np.nansum(_num(ok, f"switch_out_{k}"))) for k in ("within", "own", "observer")}
+    big = {
+        k: np.nanmax(_num(ok, f"switch_out_{k}_max"), initial=-np.inf)
+        for k in ("worst", "observer", "controller")
+    }
+    lim = f"{RECOVERY_LIMIT:g} s"
+    lines = [
+        f"| of the {out} pairs not back in time | {n['within']} within the level for the whole "
+        f"{lim} after the switch (above it only later); {n['own']} whose follower's own links "
+        f"switched; {n['observer']} with the observer's part ‖C0η_i + b_i − s_i‖ above the "
+        f"controller's ‖e_ti‖ at their largest deviation after {lim}: at most "
+        f"{big['worst']:.4g} (observer's part up to {big['observer']:.4g}, controller's up "
+        f"to {big['controller']:.4g}) |"
+    ]
+    if "switch_out_within_nolosses" in ok.columns:
+        out0 = int(
+            np.nansum(
+                _num(ok, "switch_pairs_late_nolosses") + _num(ok, "switch_pairs_undefined_nolosses")
+            )
+        )
+        w0 = int(np.nansum(_num(ok, "switch_out_within_nolosses")))
+        o0 = int(np.nansum(_num(ok, "switch_out_observer_nolosses")))
+        lines.append(
+            f"| of the {out0} pairs not back without losses | {w0} within the level for the "
+            f"whole {lim}; {o0} with the observer's part above the controller's |"
+        )
+    if "param:graph.N" in ok.columns:
+        N = _num(ok, "param:graph.N")
+        per = _num(ok, "switch_pairs_late") + _num(ok, "switch_pairs_undefined")
+        lo = int(np.nanmin(N))
+        cells = []
+        for a in range(lo, int(np.nanmax(N)) + 1, 5):
+            m = (N >= a) & (N < a + 5)
+            b = min(a + 4, int(np.nanmax(N)))
+            cells.append(
+                f"N = {a}{f'–{b}' if b > a else ''}: "
+                f"{int(np.nansum(per[m]))} of {int(np.nansum(_num(ok, 'switch_pairs')[m]))}"
+            )
+        lines.append(f"| pairs not back in time by N (of {pairs}) | {'; '.join(cells)} |")
+    return lines
+
+
+def given_link_lines(table: pd.DataFrame) -> list[str]:
+    """:func:`link_lines` of the samples' runs with the base scenario's own gains
+    (``compare_gains``: the ``given:`` columns of the rows whose ``given:status`` is ok),
+    each quantity marked so; none without them.
+
+    Parameters
+    ----------
+    table : DataFrame
+        The results.
+    """
+    if f"{GIVEN}status" not in table.columns:
+        return []
+    ran = table[table[f"{GIVEN}status"] == "ok"]
+    names = {c: c.removeprefix(GIVEN) for c in ran.columns if c.startswith(GIVEN)}
+    params = [c for c in ran.columns if c.startswith("param:")]
+    given = ran[["id", *params, *names]].rename(columns=names)
+    mark = "| with the base scenario's own gains: "
+    return [mark + line.removeprefix("| ") for line in link_lines(given)]
 
 
 def _worst_id(ok: pd.DataFrame, mask: np.ndarray, ratio: np.ndarray) -> str:

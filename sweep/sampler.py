@@ -141,7 +141,7 @@ def make_sample(study: Study, sample_id: int) -> Sample:
     params: dict[str, Any] = {}
     try:
         _draw_graph(study, data, params, rng)
-        for key, v in study.fixed.items():
+        for key, v in study.fixed_for(len(data["followers"])).items():
             set_path(data, f"{study.path}#{sample_id}", key, copy.deepcopy(v))
         _draw_operator(study, data, params, rng)
         _draw_faults(study.faults, data, params, rng)

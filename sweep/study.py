@@ -37,7 +37,7 @@ from sweep.families import (
     operator_family,
     substitute,  # noqa: F401 - re-exported: search/space.py imports it from here
 )
-from sweep.graphs import random_graph, resize_followers
+from sweep.graphs import cyclic_keys, random_graph, resize_followers
 from sweep.study_fields import StudyError, join_key, read_integer, read_string, read_table
 
 #: largest study file read (bytes)
@@ -122,6 +122,22 @@ class Study:
         design's keys (the same draws, since the seeds and distributions are the same)."""
         fixed = {k: v for k, v in self.fixed.items() if k not in self.designed}
         return replace(self, fixed=fixed, designed={}, compare_gains=False)
+
+    def fixed_for(self, N: int) -> dict[str, Any]:
+        """``fixed`` for a sample of N followers: the design's per-follower keys, written
+        for the base's followers, follow them as :func:`sweep.graphs.resize_followers`
+        repeats them (:func:`sweep.graphs.cyclic_keys`); ``[set]``'s own keys as given.
+
+        Parameters
+        ----------
+        N : int
+            The sample's number of followers.
+        """
+        base_n = len(self.base_data["followers"])
+        if not self.designed or N == base_n:
+            return self.fixed
+        own = {k: v for k, v in self.fixed.items() if k not in self.designed}
+        return {**cyclic_keys(self.designed, base_n, N), **own}
 
 
 # --------------------------------------------------------------------------- reading
@@ -341,7 +357,7 @@ def _check_keys_apply(study: Study) -> None:
         )
         data["graph"] = {"adjacency": A.tolist(), "pinning": b.tolist()}
         resize_followers(data, study.graph.n_range[0])
-    _apply(study, data, "set", study.fixed)
+    _apply(study, data, "set", study.fixed_for(len(data["followers"])))
     fixed = copy.deepcopy(data)
     _apply(
         study,

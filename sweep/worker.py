@@ -33,6 +33,10 @@ from sweep.study import Study, load_study
 from sweep.switched_gains import topology_columns
 
 
+class TwinFailed(Exception):
+    """The no-loss twin of a sample whose own run completed failed (the row says so)."""
+
+
 @MEMO.memoize("worker-studies", 4)
 def _study(path: str) -> Study:
     """The study, loaded once per worker process."""
@@ -74,8 +78,13 @@ def run_sample(study_path: str, sample_id: int, folder: str, keep: bool = False)
         try:
             row.update(_simulate_and_verify(sample, paths, keep, study, row))
             if _baseline(study):
-                row.update(link_baseline(sample, paths, **engine(study)))
+                try:
+                    row.update(link_baseline(sample, paths, **engine(study)))
+                except Exception as exc:  # noqa: BLE001 - named: the sample's own run completed
+                    raise TwinFailed(f"no-loss twin: {one_line(exc)}") from exc
             row["status"] = "ok"
+        except TwinFailed as exc:
+            row["status"] = f"failed: {exc}"
         except Exception as exc:  # noqa: BLE001 - any failure of one sample is recorded
             row["status"] = f"failed: {one_line(exc)}"
         if _study(study_path).compare_gains:
@@ -203,6 +212,15 @@ def _baseline(study: Study) -> bool:
     return g is not None and g.losses is not None and g.losses.baseline
 
 
+#: the no-loss twin's columns (``<column>_nolosses``): its pairs not back in time, and why
+NOLOSS_COLUMNS = (
+    "switch_pairs_late",
+    "switch_pairs_undefined",
+    "switch_out_within",
+    "switch_out_observer",
+)
+
+
 def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> dict[str, Any]:
     """The sample once more with its graph switches made no-ops (each sets the base
     graph's weight): the same structure, so the same compiled library, and the run the
@@ -240,7 +258,7 @@ def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
     back = switch_summary(switch_recoveries(sc, run.frame, gauge(sc, run.gains)))
     return {
         "peak_u_late_nolosses": peak_u_late(run.frame, sc.N, sc.n),
-        **{f"{k}_nolosses": back[k] for k in ("switch_pairs_late", "switch_pairs_undefined")},
+        **{f"{k}_nolosses": back[k] for k in NOLOSS_COLUMNS},
     }
 
 
@@ -266,7 +284,9 @@ def given_gains(study: Study, sample: Sample, paths: StudyPaths) -> dict[str, An
         out["status"] = f"refused: {twin.reason}"
     else:
         try:
-            out.update(_simulate_and_verify(twin, paths, keep=False))
+            out.update(_simulate_and_verify(twin, paths, False, study, out))
+            if _baseline(study):  # the given gains' own run without the losses
+                out.update(link_baseline(twin, paths, **engine(study)))
             out["status"] = "ok"
         except Exception as exc:  # noqa: BLE001 - recorded like the sample's own run
             out["status"] = f"failed: {one_line(exc)}"

@@ -420,7 +420,7 @@ def test_bad_compare_gains_is_one_line(monkeypatch, tmp_path, body, says):
         load_study(plain)
 
 
-@pytest.mark.parametrize("name", ["faults", "steps"])
+@pytest.mark.parametrize("name", ["faults", "steps", "links"])
 def test_the_design_studies_draw_the_samples_of_the_paper_studies(stored_designs, name):
     """studies/<name>-design.toml: the samples of studies/<name>.toml on paper-design.toml
     (the same draws; the scenario tables equal but for the name, description and [design])."""
@@ -437,6 +437,94 @@ def test_the_design_studies_draw_the_samples_of_the_paper_studies(stored_designs
         assert {x: v for x, v in a.scenario_data.items() if x not in skip} == {
             x: v for x, v in b.scenario_data.items() if x not in skip
         }
+
+
+def test_designed_per_follower_gains_follow_their_followers_on_random_graphs(monkeypatch, tmp_path):
+    """A [graph] study on a design base: follower i of a drawn graph is a copy of the base's
+    follower i mod 5 and takes its designed gains; the base's own gains beside it."""
+    from sweep.sampler import make_sample
+    from sweep.study import load_study
+
+    lam, k2 = [80.0, 80.0, 40.0, 40.0, 40.0], [1.0, 2.0, 3.0, 4.0, 5.0]
+    ov = {"controller.Lambda": lam, "controller.k2": k2, "followers[2].d": [5.0, 6.0]}
+    _design_record(tmp_path, monkeypatch, ov)
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'name = "s"\nbase = "{PAPER_DESIGN}"\ncount = 4\nseed = 1\ncompare_gains = true\n'
+        "[graph]\nN = [2, 12]\nedge_probability = 0.2\n"
+    )
+    s = load_study(study)
+    paper = load(PAPER_DESIGN).controller
+    sizes = set()
+    for k in range(4):
+        a, b = make_sample(s, k).scenario, make_sample(s.given(), k).scenario
+        sizes.add(a.N)
+        for i in range(a.N):
+            assert np.all(a.controller.Lambda[i] == lam[i % 5]) and a.controller.k2[i] == k2[i % 5]
+            assert np.all(a.followers[i].d == [5.0, 6.0]) == (i % 5 == 1)
+            assert np.all(b.controller.Lambda[i] == paper.Lambda[0])
+            assert a.followers[i].b0.tolist() == b.followers[i].b0.tolist()
+    assert min(sizes) < 5 < max(sizes)  # cut and repeated
+
+
+def test_cyclic_keys_map_per_follower_keys_only():
+    from sweep.graphs import cyclic_keys
+
+    keys = {
+        "controller.k1": [1.0, 2.0, 3.0],
+        "controller.Lambda": [[1.0, 1.5], [2.0, 2.5], [3.0, 3.5]],
+        "controller.g_min": 0.5,
+        "controller.k2": 7.0,
+        "observer.Theta": [[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]],
+        "followers[3].d": [0.1, 0.2],
+    }
+    seven = cyclic_keys(keys, 3, 7)
+    assert seven["controller.k1"] == [1.0, 2.0, 3.0, 1.0, 2.0, 3.0, 1.0]
+    assert seven["controller.Lambda"][4] == [2.0, 2.5] and len(seven["controller.Lambda"]) == 7
+    for same in ("controller.g_min", "controller.k2", "observer.Theta"):
+        assert seven[same] == keys[same]  # not one entry per follower
+    assert {k for k in seven if k.startswith("followers")} == {"followers[3].d", "followers[6].d"}
+    two = cyclic_keys(keys, 3, 2)
+    assert two["controller.k1"] == [1.0, 2.0] and not any(k.startswith("followers") for k in two)
+    assert cyclic_keys(keys, 3, 3) == keys
+
+
+def test_given_gains_runs_the_base_gains_with_and_without_the_losses(monkeypatch, tmp_path):
+    """compare_gains on a study with [graph.losses] baseline: the base's gains run the
+    sample and its no-loss twin; their columns come back prefixed given:."""
+    from sweep import worker as W
+    from sweep.results import StudyPaths
+    from sweep.sampler import make_sample
+    from sweep.study import load_study
+
+    _design_record(tmp_path, monkeypatch, {"controller.k1": [40.0] * 5})
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'name = "s"\nbase = "{PAPER_DESIGN}"\ncount = 2\nseed = 3\ncompare_gains = true\n'
+        "[graph]\nN = [5, 8]\nedge_probability = 0.2\n"
+        "[graph.losses]\ncount = [1, 1]\ntime = { uniform = [3.0, 5.0] }\nbaseline = true\n"
+    )
+    s = load_study(study)
+    seen = []
+
+    def simulate(sample, paths, keep, study, row):
+        seen.append(("run", float(sample.scenario.controller.k1[0, 0])))
+        return {"peak_u_late": 1.0}
+
+    def baseline(sample, paths, measured=False):
+        seen.append(("no losses", float(sample.scenario.controller.k1[0, 0])))
+        return {"peak_u_late_nolosses": 2.0}
+
+    monkeypatch.setattr(W, "_simulate_and_verify", simulate)
+    monkeypatch.setattr(W, "link_baseline", baseline)
+    out = W.given_gains(s, make_sample(s, 1), StudyPaths(tmp_path / "out"))
+    k1 = float(load(PAPER_DESIGN).controller.k1[0, 0])
+    assert seen == [("run", k1), ("no losses", k1)]
+    assert out == {
+        "given:peak_u_late": 1.0,
+        "given:peak_u_late_nolosses": 2.0,
+        "given:status": "ok",
+    }
 
 
 def test_gains_summary_counts_each_gain_set():
@@ -508,3 +596,25 @@ def test_the_gamma_choice_refuses_runs_that_stop_rows_that_fail_and_the_budget()
     same = GammaPoint([0.03, 0.03], base, [6.0, 6.0])  # a tie goes to the smaller gamma
     assert choose_gamma([same, own], np.array([200.0, 200.0])) == [own, own]
     assert choose_gamma([own], np.array([50.0, 200.0]))[0] is None
+
+
+def test_a_failed_no_loss_twin_is_named_in_the_status(monkeypatch, tmp_path):
+    """The sample's own run completes, its no-loss twin stops: the row says which failed."""
+    from core.errors import IntegrationError
+    from sweep import worker as W
+
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'name = "s"\nbase = "{ROOT / "scenarios" / "paper.toml"}"\ncount = 1\nseed = 3\n'
+        "[graph]\nN = [5, 6]\nedge_probability = 0.2\n"
+        "[graph.losses]\ncount = [1, 1]\ntime = { uniform = [3.0, 5.0] }\nbaseline = true\n"
+    )
+
+    def twin(sample, paths, measured=False):
+        raise IntegrationError("native failed after t = 0 s")
+
+    monkeypatch.setattr(W, "_simulate_and_verify", lambda *a: {"steps": 1})
+    monkeypatch.setattr(W, "link_baseline", twin)
+    row = W.run_sample(str(study), 0, str(tmp_path / "out"))
+    assert row["status"].startswith("failed: no-loss twin: IntegrationError: native failed")
+    assert row["steps"] == 1  # the sample's own columns stay

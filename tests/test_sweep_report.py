@@ -141,3 +141,71 @@ def test_link_lines_count_pairs_and_the_ratio_to_the_no_loss_runs():
     assert "median 2, largest 3 (sample 3); 1 of 2 within 2x" in text
     assert "| inf |" in text  # a follower that never came back
     assert link_lines(ok.assign(switch_pairs=0)) == []
+
+
+def test_given_link_lines_are_the_link_lines_of_the_base_gains_runs():
+    """compare_gains: the given: columns of the rows whose given run is ok, marked so."""
+    from sweep.coverage import GIVEN
+    from sweep.report import given_link_lines, link_lines
+
+    cols = {
+        "switch_pairs": [10, 6, 4],
+        "switch_pairs_late": [1, 0, 4],
+        "switch_pairs_undefined": [2, 1, 0],
+        "switch_pairs_out_before": [0, 1, 0],
+        "switch_recovery_s": [1.5, 3.0, 9.0],
+        "switch_pairs_late_nolosses": [2, 0, 4],
+        "switch_pairs_undefined_nolosses": [2, 1, 0],
+        "peak_u_late": [300.0, 100.0, 900.0],
+        "peak_u_late_nolosses": [100.0, 100.0, 100.0],
+    }
+    table = pd.DataFrame(
+        {
+            "id": [3, 7, 8],
+            "status": ["ok"] * 3,
+            **{k: [0, 0, 0] for k in cols},
+            f"{GIVEN}status": ["ok", "ok", "failed: x"],  # the third is left out
+            **{f"{GIVEN}{k}": v for k, v in cols.items()},
+        }
+    )
+    lines = given_link_lines(table)
+    plain = link_lines(pd.DataFrame({"id": [3, 7], **{k: v[:2] for k, v in cols.items()}}))
+    assert len(lines) == len(plain) == 4
+    for a, b in zip(lines, plain, strict=True):
+        assert a == "| with the base scenario's own gains: " + b.removeprefix("| ")
+    assert "| 12 of 16 (1 late; 3 undefined" in lines[0]
+    assert given_link_lines(table.drop(columns=f"{GIVEN}status")) == []
+
+
+def test_out_lines_say_what_keeps_the_pairs_out():
+    """Two samples (N = 6 and 13): 3 + 1 pairs out, with and without the losses."""
+    from sweep.report import out_lines
+
+    ok = pd.DataFrame(
+        {
+            "param:graph.N": [6, 13],
+            "switch_pairs": [10, 20],
+            "switch_pairs_late": [2, 1],
+            "switch_pairs_undefined": [1, 0],
+            "switch_out_within": [2, 1],
+            "switch_out_own": [1, 0],
+            "switch_out_observer": [3, 0],
+            "switch_out_worst_max": [0.07, 0.2],
+            "switch_out_observer_max": [0.069, 0.01],
+            "switch_out_controller_max": [0.002, 0.19],
+            "switch_pairs_late_nolosses": [2, 0],
+            "switch_pairs_undefined_nolosses": [0, 0],
+            "switch_out_within_nolosses": [2, 0],
+            "switch_out_observer_nolosses": [2, 0],
+        }
+    )
+    mine, nolosses, by_n = out_lines(ok, 30)
+    assert "of the 4 pairs not back in time | 3 within the level for the whole 2 s" in mine
+    assert "1 whose follower's own links switched; 3 with the observer's part" in mine
+    assert "at most 0.2 (observer's part up to 0.069, controller's up to 0.19)" in mine
+    assert "of the 2 pairs not back without losses | 2 within the level" in nolosses
+    assert "2 with the observer's part above" in nolosses
+    assert by_n == "| pairs not back in time by N (of 30) | N = 6–10: 3 of 10; N = 11–13: 1 of 20 |"
+    *_, one = out_lines(ok.assign(**{"param:graph.N": [6, 11]}), 30)
+    assert one.endswith("| N = 6–10: 3 of 10; N = 11: 1 of 20 |")
+    assert out_lines(ok.drop(columns="switch_out_within"), 30) == []

@@ -12,6 +12,13 @@ Every follower is measured, not only those downstream of the link: a switch must
 throw anyone off. ``out_before`` counts the pairs whose follower was already above the
 level at the last output time before the switch (its own transient, not the switch's).
 
+What keeps a pair out: the deviation splits as p_i − s_i = e_ti + (a_i − s_i), with
+e_ti = p_i − C0η_i − b_i the controller's tracking error (eq. (28)) and a_i = C0η_i + b_i
+the slot the follower aims at, built from its observer's estimate η_i (with b_i from its
+η̇_i, eq. (3)): a_i − s_i is the observer's part. Each pair records both parts at its
+largest deviation after the limit (in the whole window when it is shorter), the largest
+deviation within the limit, and whether the switch changed the follower's own links.
+
 An ``info`` measurement: the theory promises no time.
 """
 
@@ -31,6 +38,7 @@ from verify.operator_steps import (
     deviation,
     pair_recovery,
     pooled,
+    slots,
     windows,
 )
 
@@ -53,6 +61,14 @@ class SwitchRecovery:
         The largest deviation in the window.
     before : float
         The deviation at the last output time before the switch.
+    within : float
+        The largest deviation in the first ``limit`` seconds of the window.
+    worst : float
+        The largest deviation after the limit (in the whole window when it is shorter).
+    observer, controller : float
+        At that time: ‖a_i − s_i‖, the observer's part, and ‖e_ti‖, the controller's.
+    own : bool
+        The switch changed one of the follower's own links (weights it receives with).
     """
 
     start: float
@@ -62,6 +78,16 @@ class SwitchRecovery:
     outcome: str
     peak: float
     before: float
+    within: float = math.nan
+    worst: float = math.nan
+    observer: float = math.nan
+    controller: float = math.nan
+    own: bool = False
+
+    @property
+    def out(self) -> bool:
+        """Not back within the level in time (``late`` or ``undefined``)."""
+        return self.outcome in ("late", "undefined")
 
 
 def switch_recoveries(
@@ -90,14 +116,47 @@ def switch_recoveries(
     if not spans:
         return []
     dev = deviation(scenario, view, h)
+    target = slots(scenario, view, h)
     out = []
     for a, b in spans:
         k0 = int(np.searchsorted(t, a, side="left")) - 1
+        own = {s.follower for s in scenario.graph.switches if s.time == a}
         for i in range(scenario.N):
             measured = pair_recovery(t, dev[:, i], a, b, level, limit)
             before = float(dev[k0, i]) if k0 >= 0 else math.nan
-            out.append(SwitchRecovery(a, b, i, *measured, before))
+            parts = _parts(scenario, view, target, dev[:, i], i, (a, b), limit)
+            out.append(SwitchRecovery(a, b, i, *measured, before, *parts, own=i in own))
     return out
+
+
+def _parts(
+    scenario: Scenario,
+    view: S.TrajectoryView,
+    target: np.ndarray,
+    dev: np.ndarray,
+    i: int,
+    window: tuple[float, float],
+    limit: float,
+) -> tuple[float, float, float, float]:
+    """(within, worst, observer, controller) of follower ``i`` in ``window`` (NaN where
+    the window holds no output time or a deviation that is not finite)."""
+    t, (a, b) = view.t, window
+    w = (t >= a) & (t < b)
+    if not w.any() or not np.isfinite(dev[w]).all():
+        return (math.nan,) * 4
+    first = w & (t < a + limit)
+    late = w & (t >= a + limit) if (w & (t >= a + limit)).any() else w
+    k = int(np.flatnonzero(late)[np.argmax(dev[late])])
+    C0 = np.asarray(scenario.leader.C0, float)
+    eta = view.block(S.Signal.ETA, i + 1, scenario.leader.m)[k]
+    aim = C0 @ eta + view.block(S.Signal.B, i + 1, scenario.n)[k]
+    et = view.block(S.Signal.ET, i + 1, scenario.n)[k]
+    return (
+        float(dev[first].max()) if first.any() else math.nan,
+        float(dev[k]),
+        float(np.linalg.norm(aim - target[k, i])),
+        float(np.linalg.norm(et)),
+    )
 
 
 def switch_summary(items: list[SwitchRecovery], level: float = RECOVERY_LEVEL) -> dict:
@@ -114,11 +173,29 @@ def switch_summary(items: list[SwitchRecovery], level: float = RECOVERY_LEVEL) -
     dict
         ``switch_recovery_s`` (the slowest defined return; NaN: none), ``switch_pairs``,
         ``switch_pairs_late``, ``switch_pairs_undefined``, ``switch_pairs_out_before``
-        and ``switch_deviation_max``.
+        and ``switch_deviation_max``; of the pairs not back in time (``late`` or
+        ``undefined``): ``switch_out_within`` (within the level for the whole limit, above it
+        only later), ``switch_out_own`` (the switch changed the follower's own links),
+        ``switch_out_observer`` (the observer's part larger than the controller's at the
+        largest deviation after the limit), ``switch_out_worst_max``,
+        ``switch_out_observer_max`` and ``switch_out_controller_max`` (the largest of each
+        over those pairs; NaN: none).
     """
+    out = [r for r in items if r.out]
+
+    def largest(xs: list[float]) -> float:
+        xs = [x for x in xs if math.isfinite(x)]
+        return max(xs) if xs else math.nan
+
     return {
         **pooled(items, "switch"),
         "switch_pairs_out_before": sum(bool(r.before > level) for r in items),
+        "switch_out_within": sum(bool(r.within <= level) for r in out),
+        "switch_out_own": sum(r.own for r in out),
+        "switch_out_observer": sum(bool(r.observer > r.controller) for r in out),
+        "switch_out_worst_max": largest([r.worst for r in out]),
+        "switch_out_observer_max": largest([r.observer for r in out]),
+        "switch_out_controller_max": largest([r.controller for r in out]),
     }
 
 
