@@ -618,3 +618,23 @@ def test_a_failed_no_loss_twin_is_named_in_the_status(monkeypatch, tmp_path):
     row = W.run_sample(str(study), 0, str(tmp_path / "out"))
     assert row["status"].startswith("failed: no-loss twin: IntegrationError: native failed")
     assert row["steps"] == 1  # the sample's own columns stay
+
+
+@pytest.mark.slow
+def test_compare_gains_runs_the_base_gains_to_the_end(monkeypatch, tmp_path):
+    """The given: run is a run like the sample's own: it completes and is verified (a run
+    that raised was recorded as failed, and the report's given columns were left empty)."""
+    from sweep.coverage import GIVEN
+    from sweep.worker import run_sample
+
+    _design_record(tmp_path, monkeypatch, {"controller.k1": [40.0] * 5})
+    study = tmp_path / "s.toml"
+    study.write_text(
+        f'name = "s"\nbase = "{PAPER_DESIGN}"\ncount = 1\nseed = 1\ncompare_gains = true\n'
+        '[set]\n"integration.horizon" = 2.0\n'
+    )
+    row = run_sample(str(study), 0, str(tmp_path / "out"))
+    assert row["status"] == "ok" and row[f"{GIVEN}status"] == "ok"
+    # both runs verified: rows evaluated, and the two gain sets are different runs
+    assert row["guaranteed_held"] > 0 and row[f"{GIVEN}guaranteed_held"] > 0
+    assert row[f"{GIVEN}steps"] != row["steps"]
