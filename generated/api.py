@@ -285,11 +285,15 @@ def _compile(
     src_fns = cl if par is None else par
     src, name = (src_fns.dae_dyn, DAE_NAME) if form == "dae" else (src_fns.ode_dyn, ODE_NAME)
     check_dyn_signature(src, f"closed loop {form}_dyn")
-    dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
-    outs = renamed(src_fns.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
+    # a method that runs its own libraries compiles nothing of the loop: no SX copy of it
+    own = not solver.integrates_dyn
+    dyn = src if own else renamed(src, name, expand=settings.expand, cse=settings.cse)
     plan = solver.build(dyn, cl, settings, prepared)
     if not plan.whole_loop:
         return _own_libraries(cl, plan, form, time.perf_counter() - t0), None
+    if own:
+        dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
+    outs = renamed(src_fns.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
     t_sym = time.perf_counter() - t0
     lib = build_library(
         [dyn, outs, *plan.functions],
