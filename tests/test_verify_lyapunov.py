@@ -205,8 +205,8 @@ def test_fast_path_equals_mx_path_on_the_paper_scenario(loop, monkeypatch):
 
 
 def _separate_p(cl, name: str, extra: tuple[str, ...] = ()):
-    """``(t, x, p) -> (V, V̇, *extra)`` for one V, built plainly (its own Function, no common
-    subexpressions eliminated): the straightforward form of the fast path's one Function."""
+    """``(t, x, p) -> (V, V̇, *extra)`` for one V, its own Function: the straightforward form
+    of the fast path's one Function."""
     outs_f, ode_f = cl.parametric.outputs.expand(), cl.parametric.ode.expand()
     t = ca.SX.sym("t")
     x, p = ca.SX.sym("x", outs_f.size_in(1)), ca.SX.sym("p", outs_f.size_in(2))
@@ -217,9 +217,8 @@ def _separate_p(cl, name: str, extra: tuple[str, ...] = ()):
 
 
 def test_one_function_for_both_lyapunov_functions_gives_the_same_bits(loop, monkeypatch):
-    """The fast path evaluates V1, V̇1, V2, V̇2, χ as one Function with common subexpressions
-    eliminated (one right-hand side for both V̇): the very numbers of a separate plain
-    Function per V, bit for bit."""
+    """The fast path evaluates V1, V̇1, V2, V̇2, χ as one Function (one right-hand side for
+    both V̇): the very numbers of a separate Function per V, bit for bit."""
     monkeypatch.setattr(L, "COMPILE_FROM_USE", 10**9)  # SX virtual machine
     L.clear_cache()
     _, _, cl, grid, X = loop
