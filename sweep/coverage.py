@@ -32,16 +32,12 @@ import pandas as pd
 PREFIXES = ("t2_rows:", "covered:", "covered_env:", "last_covered:", "ultimate_from:")
 
 
-def _last_covered(rows: pd.DataFrame, t1: float) -> bool:
-    """A guaranteed Theorem 2 row and a guaranteed Definition 1 row among one follower's
-    ``rows`` reach ``t1``."""
+def _last_covered(cols: Any, agent: int, t1: float) -> bool:
+    """A guaranteed Theorem 2 row and a guaranteed Definition 1 row among follower
+    ``agent``'s rows (of :class:`verify.headline.TableColumns` ``cols``) reach ``t1``."""
     from verify import claims as CL
 
-    rows = rows[
-        (rows["kind"] == CL.Kind.GUARANTEED.value)
-        & (np.abs(rows["t_end"].astype(float) - t1) <= 1e-9 * max(1.0, abs(t1)))
-    ]
-    ids = set(rows["claim_id"])
+    ids = set(cols.claim_id[cols.rows(agent) & cols.guaranteed & cols.ending_at(t1)])
     t2 = bool(ids & {CL.T2_CHI.id, CL.T2_CHI_ENV.id})
     return t2 and bool(ids & {CL.DEF1_DERIVED.id, CL.DEF1_ENV.id})
 
@@ -54,7 +50,7 @@ def coverage_columns(table: pd.DataFrame) -> dict[str, Any]:
     table : DataFrame
         The bound-vs-actual table (:func:`verify.table.bounds_table`).
     """
-    from verify.headline import by_agent, coverage, ultimate_from
+    from verify.headline import TableColumns, coverage, ultimate_from
 
     if not len(table) or "t_start" not in table:
         return {"coverage": math.nan, "followers_covered": 0, "followers_ultimate": 0}
@@ -62,10 +58,10 @@ def coverage_columns(table: pd.DataFrame) -> dict[str, Any]:
     t1 = float(np.nanmax(table["t_end"].astype(float)))
     out: dict[str, Any] = {}
     covered, last, ultimate = [], 0, 0
-    groups = by_agent(table)
-    for c in coverage(table, (t0, t1)):
-        ok = _last_covered(groups[str(c.agent)], t1)
-        since = ultimate_from(groups[str(c.agent)], c.agent, t1)
+    cols = TableColumns.of(table)  # read once: every follower's rows are masks of it
+    for c in coverage(table, (t0, t1), gaps=False, columns=cols):
+        ok = _last_covered(cols, c.agent, t1)
+        since = ultimate_from(cols, c.agent, t1)
         out[f"t2_rows:{c.agent}"] = c.tracking
         out[f"covered:{c.agent}"] = c.covered
         out[f"covered_env:{c.agent}"] = c.covered_any

@@ -21,6 +21,8 @@ import numpy as np
 import pandas as pd
 import pytest
 import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from core.graph import pinned_laplacian
 from sweep.measures import summarize_table, tail_max_et
@@ -245,3 +247,144 @@ def test_theorem2_entry_of_unprovable_followers_is_lemma1_observed_time(monkeypa
     got = theorem2_entry(table, sc, None, types.SimpleNamespace(lemma1_delta=0.1))
     assert got["t2_entry:1"] == 0.4 and got["t2_entry:2"] == 2.5
     assert math.isnan(got["t2_entry:3"]) and got["t2_entry_source"] == "Lemma 1 observed"
+
+
+# ------------------------------------------ coverage on arrays against the pandas reading
+def _reference_coverage(table: pd.DataFrame, t0: float, t1: float) -> dict:
+    """The coverage columns read with pandas' own filters, a follower's rows a sub-frame:
+    the plain form of ``sweep.coverage.coverage_columns`` (and of the headline's coverage)."""
+    from verify import claims as CL
+    from verify.headline import _fraction, _gaps, _step, by_agent
+    from verify.rows import held_mask
+
+    groups, out = by_agent(table), {}
+    tol = 1e-9 * max(1.0, abs(t1))
+    for a in sorted(int(k) for k in groups if k.isdigit()):
+        rows = groups[str(a)]
+        g = rows[rows["kind"] == CL.Kind.GUARANTEED.value]
+        track, env = g[g["claim_id"].isin(CL.TRACKING)], g[g["claim_id"].isin(CL.ENVELOPE)]
+
+        def wins(r):
+            return [
+                (float(x), float(y))
+                for x, y in zip(r["t_start"], r["t_end"], strict=True)
+                if math.isfinite(x) and math.isfinite(y)
+            ]
+
+        w, we = wins(track), wins(env)
+        end = g[np.abs(g["t_end"].astype(float) - t1) <= tol]
+        ids = set(end["claim_id"])
+        last = end[end["claim_id"].isin(CL.TRACKING)]
+        ult = math.nan
+        if {CL.T2_CHI.id, CL.DEF1_DERIVED.id} <= set(last["claim_id"]) and held_mask(last).all():
+            ult = float(last["t_start"].astype(float).max())
+        out[a] = {
+            "held": int(held_mask(g).sum()),
+            "total": len(g),
+            "tracking": len(track),
+            "envelope": len(env),
+            "covered": _fraction(w, t0, t1),
+            "covered_any": _fraction(w + we, t0, t1),
+            "gaps": tuple(_gaps(rows, w, t0, t1, _step(table))),
+            "last_covered": bool(ids & {CL.T2_CHI.id, CL.T2_CHI_ENV.id})
+            and bool(ids & {CL.DEF1_DERIVED.id, CL.DEF1_ENV.id}),
+            "ultimate_from": ult,
+        }
+    return out
+
+
+_CLAIMS = ["t2.chi.provable", "def1.derived", "t2.e.provable", "t2.chi.envelope"]
+_CLAIMS += ["def1.envelope", "t1.tail"]
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from(["1", "2", "all"]),
+            st.sampled_from(["guaranteed", "guaranteed", "guaranteed", "paper", "info"]),
+            st.sampled_from(_CLAIMS),
+            st.sampled_from([0.0, 0.5, 2.5, 7.0, math.nan]),  # window starts
+            st.sampled_from([2.5, 2.51, 10.0, 10.0, 10.0, math.nan]),  # and ends
+            st.sampled_from([True, True, False, None]),
+        ),
+        min_size=1,
+        max_size=24,
+    )
+)
+def test_coverage_on_arrays_equals_the_pandas_reading(rows):
+    """``TableColumns`` masks give what pandas' filters of a follower's sub-frame give: every
+    count, share, gap and the study's coverage columns (NaN windows, missing verdicts)."""
+    from sweep.coverage import coverage_columns
+    from verify.headline import coverage, ultimate_from
+
+    table = pd.DataFrame(
+        {
+            "agent": [r[0] for r in rows],
+            "kind": [r[1] for r in rows],
+            "claim_id": [r[2] for r in rows],
+            "t_start": [r[3] for r in rows],
+            "t_end": [r[4] for r in rows],
+            "holds": pd.array([r[5] for r in rows], dtype="boolean"),
+            "note": ["not guaranteed: x" if r[5] is None else "" for r in rows],
+        }
+    )
+    t0 = float(np.nanmin(table["t_start"])) if table["t_start"].notna().any() else 0.0
+    t1 = float(np.nanmax(table["t_end"])) if table["t_end"].notna().any() else 10.0
+    want = _reference_coverage(table, t0, t1)
+    got = coverage(table, (t0, t1))
+    assert [c.agent for c in got] == sorted(want)
+    for c in got:
+        w = want[c.agent]
+        assert (c.held, c.total, c.tracking, c.envelope) == (
+            w["held"],
+            w["total"],
+            w["tracking"],
+            w["envelope"],
+        )
+        assert (c.covered, c.covered_any, c.gaps) == (w["covered"], w["covered_any"], w["gaps"])
+        assert _same(ultimate_from(table, c.agent, t1), w["ultimate_from"])
+    if not table["t_start"].notna().any() or not table["t_end"].notna().any():
+        return
+    cols = coverage_columns(table)
+    for a, w in want.items():
+        assert cols[f"covered:{a}"] == w["covered"]
+        assert cols[f"last_covered:{a}"] == w["last_covered"]
+        assert _same(cols[f"ultimate_from:{a}"], w["ultimate_from"])
+
+
+def _same(a: float, b: float) -> bool:
+    return (math.isnan(a) and math.isnan(b)) or a == b
+
+
+def test_mark_switching_notes_the_rows_a_switch_voids(frame, paper_scenario):
+    """The rows ``mark_switching`` turns to ``info`` and the notes it puts first, row by row
+    against the rule written out (claims on the base graph; paper rows whose window holds
+    a switch)."""
+    import dataclasses
+
+    from core.graph import Switch
+    from verify import claims as CL
+    from verify.table import SWITCHING_NOTE, mark_switching
+
+    table = bounds_table(paper_scenario, frame)
+    switches = (Switch(time=3.0, follower=1, neighbour=None, weight=0.0),)
+    graph = dataclasses.replace(paper_scenario.graph, switches=switches)
+    sc = dataclasses.replace(paper_scenario, graph=graph)
+    got = mark_switching(table, sc)
+    assert list(got.columns) == list(table.columns) and (got.dtypes == table.dtypes).all()
+    changed = 0
+    for k in range(len(table)):
+        before, after = table.iloc[k], got.iloc[k]
+        base = CL.depends(before["claim_id"], CL.Dep.BASE_GRAPH)
+        inside = before["kind"] == "paper" and before["t_start"] <= 3.0 <= before["t_end"]
+        if base or inside:
+            changed += 1
+            assert after["kind"] == "info"
+            assert after["note"].startswith(SWITCHING_NOTE)
+            tail = after["note"].split(")", 1)[1]
+            assert tail == (f"; {before['note']}" if before["note"] else "")
+        else:
+            assert after.equals(before)
+    assert changed > 0
+    pd.testing.assert_frame_equal(mark_switching(table, paper_scenario), table)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 import pytest
 from helpers import integrate, paper_loop, printed_law_ode, trajectory_frame
@@ -201,6 +202,40 @@ def test_fast_path_equals_mx_path_on_the_paper_scenario(loop, monkeypatch):
     sc, gains, cl, grid, X = loop
     _assert_checks_equal(sc, gains, cl, grid, X)
     assert not L.fast_functions(cl).compiled
+
+
+def _separate_p(cl, name: str, extra: tuple[str, ...] = ()):
+    """``(t, x, p) -> (V, V̇, *extra)`` for one V, its own Function: the straightforward form
+    of the fast path's one Function."""
+    outs_f, ode_f = cl.parametric.outputs.expand(), cl.parametric.ode.expand()
+    t = ca.SX.sym("t")
+    x, p = ca.SX.sym("x", outs_f.size_in(1)), ca.SX.sym("p", outs_f.size_in(2))
+    outs = dict(zip(outs_f.name_out(), outs_f.call([t, x, p]), strict=True))
+    V = ca.vec(outs[name])
+    Vd = ca.jtimes(V, x, ode_f.call([t, x, p])[0]) + ca.jacobian(V, t)
+    return ca.Function("plain", [t, x, p], [V, Vd, *(outs[e] for e in extra)])
+
+
+def test_one_function_for_both_lyapunov_functions_gives_the_same_bits(loop, monkeypatch):
+    """The fast path evaluates V1, V̇1, V2, V̇2, χ as one Function (one right-hand side for
+    both V̇): the very numbers of a separate Function per V, bit for bit."""
+    monkeypatch.setattr(L, "COMPILE_FROM_USE", 10**9)  # SX virtual machine
+    L.clear_cache()
+    _, _, cl, grid, X = loop
+    entry = L.fast_functions(cl)
+    fast = L.evaluate_p(entry, "V1", grid, X, cl.p0) + L.evaluate_p(entry, "V2", grid, X, cl.p0)
+    plain = []
+    for f in (_separate_p(cl, "V1"), _separate_p(cl, "V2", ("chi",))):
+        K = len(grid)
+        args = [ca.DM(grid.reshape(1, -1)), ca.DM(np.asarray(X).T), ca.DM(cl.p0)]
+        plain += L._blocks(f, f.map("m", "serial", K, [2], []).call(args), K)
+    assert len(fast) == len(plain) == 5
+    for got, want in zip(fast, plain, strict=True):
+        assert got.shape == want.shape
+        assert got.tobytes() == np.ascontiguousarray(want).tobytes()
+    assert entry.functions["V"].n_instructions() < sum(
+        _separate_p(cl, *a).n_instructions() for a in (("V1",), ("V2", ("chi",)))
+    )
 
 
 @pytest.fixture(scope="module")

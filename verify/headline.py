@@ -59,6 +59,91 @@ class FollowerCoverage:
     gaps: tuple[str, ...] = field(default_factory=tuple)
 
 
+@dataclass(frozen=True)
+class TableColumns:
+    """The bound-vs-actual table's columns the coverage reads, as numpy arrays read once
+    (a follower's rows are a boolean mask, not a filtered DataFrame: a study's sample
+    asks for every follower's rows several times).
+
+    Attributes
+    ----------
+    agent : ndarray of str
+        ``agent`` as text (``"1"``, ...), as :func:`by_agent` keys it.
+    guaranteed, tracking, envelope : ndarray of bool
+        The row is of kind ``guaranteed``; its claim is in :data:`verify.claims.TRACKING`;
+        in :data:`verify.claims.ENVELOPE`.
+    claim_id : ndarray of str
+    t_start, t_end : ndarray of float
+    held : ndarray of bool
+        :func:`verify.rows.held_mask`.
+    """
+
+    agent: np.ndarray
+    guaranteed: np.ndarray
+    tracking: np.ndarray
+    envelope: np.ndarray
+    claim_id: np.ndarray
+    t_start: np.ndarray
+    t_end: np.ndarray
+    held: np.ndarray
+
+    @classmethod
+    def of(cls, table: pd.DataFrame) -> TableColumns:
+        """The columns of ``table``.
+
+        Parameters
+        ----------
+        table : DataFrame
+            The bound-vs-actual table.
+        """
+        claim = table["claim_id"].to_numpy(dtype=object)
+        return cls(
+            agent=table["agent"].astype(str).to_numpy(dtype=object),
+            guaranteed=(table["kind"] == CL.Kind.GUARANTEED.value).to_numpy(dtype=bool),
+            tracking=np.array([c in CL.TRACKING for c in claim], dtype=bool),
+            envelope=np.array([c in CL.ENVELOPE for c in claim], dtype=bool),
+            claim_id=claim,
+            t_start=table["t_start"].astype(float).to_numpy(),
+            t_end=table["t_end"].astype(float).to_numpy(),
+            held=held_mask(table).to_numpy(dtype=bool),
+        )
+
+    def agents(self) -> list[int]:
+        """The followers with rows (1-based), in order."""
+        return sorted(int(a) for a in dict.fromkeys(self.agent) if a.isdigit())
+
+    def rows(self, agent: int) -> np.ndarray:
+        """Follower ``agent``'s rows (1-based), a boolean mask.
+
+        Parameters
+        ----------
+        agent : int
+        """
+        return self.agent == str(agent)
+
+    def windows(self, mask: np.ndarray) -> list[tuple[float, float]]:
+        """The finite windows of the rows of ``mask``, in the table's order.
+
+        Parameters
+        ----------
+        mask : ndarray of bool
+        """
+        return [
+            (float(x), float(y))
+            for x, y in zip(self.t_start[mask], self.t_end[mask], strict=True)
+            if math.isfinite(x) and math.isfinite(y)
+        ]
+
+    def ending_at(self, t1: float) -> np.ndarray:
+        """The rows whose window ends at ``t1`` (to 1e-9 of max(1, |t1|)).
+
+        Parameters
+        ----------
+        t1 : float
+        """
+        return np.abs(self.t_end - t1) <= 1e-9 * max(1.0, abs(t1))
+
+
 def by_agent(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
     """The table's rows per follower (``agent`` as text: ``"1"``, ...), split once.
 
@@ -69,14 +154,6 @@ def by_agent(table: pd.DataFrame) -> dict[str, pd.DataFrame]:
     """
     key = table["agent"].astype(str)
     return {str(a): rows for a, rows in table.groupby(key, sort=False)}
-
-
-def _windows(rows: pd.DataFrame) -> list[tuple[float, float]]:
-    return [
-        (float(x), float(y))
-        for x, y in zip(rows["t_start"], rows["t_end"], strict=True)
-        if math.isfinite(x) and math.isfinite(y)
-    ]
 
 
 def _fraction(wins: list[tuple[float, float]], t0: float, t1: float) -> float:
@@ -127,7 +204,12 @@ def _why(chi: list, a: float, b: float) -> str:
     return "transient: before the comparison-lemma time"
 
 
-def coverage(table: pd.DataFrame, horizon: tuple[float, float]) -> list[FollowerCoverage]:
+def coverage(
+    table: pd.DataFrame,
+    horizon: tuple[float, float],
+    gaps: bool = True,
+    columns: TableColumns | None = None,
+) -> list[FollowerCoverage]:
     """Per follower, what the guaranteed rows cover (module docstring).
 
     Parameters
@@ -136,28 +218,31 @@ def coverage(table: pd.DataFrame, horizon: tuple[float, float]) -> list[Follower
         The bound-vs-actual table.
     horizon : (float, float)
         First and last output time.
+    gaps : bool
+        Also say why each uncovered interval is (default); False leaves
+        :attr:`FollowerCoverage.gaps` empty.
+    columns : TableColumns, optional
+        ``TableColumns.of(table)``, when the caller has it.
     """
     t0, t1 = horizon
-    step = _step(table)
-    groups = by_agent(table)
-    agents = sorted(int(a) for a in groups if a.isdigit())
+    cols = TableColumns.of(table) if columns is None else columns
+    groups = by_agent(table) if gaps else {}
+    step = _step(table) if gaps else 0.0
     out = []
-    for a in agents:
-        rows = groups[str(a)]
-        g = rows[rows["kind"] == CL.Kind.GUARANTEED.value]
-        track = g[g["claim_id"].isin(CL.TRACKING)]
-        env = g[g["claim_id"].isin(CL.ENVELOPE)]
-        wins, wenv = _windows(track), _windows(env)
+    for a in cols.agents():
+        g = cols.rows(a) & cols.guaranteed
+        track, env = g & cols.tracking, g & cols.envelope
+        wins, wenv = cols.windows(track), cols.windows(env)
         out.append(
             FollowerCoverage(
                 agent=a,
-                held=int(held_mask(g).sum()),
-                total=len(g),
-                tracking=len(track),
+                held=int((cols.held & g).sum()),
+                total=int(g.sum()),
+                tracking=int(track.sum()),
                 covered=_fraction(wins, t0, t1),
-                envelope=len(env),
+                envelope=int(env.sum()),
                 covered_any=_fraction(wins + wenv, t0, t1),
-                gaps=tuple(_gaps(rows, wins, t0, t1, step)),
+                gaps=tuple(_gaps(groups[str(a)], wins, t0, t1, step)) if gaps else (),
             )
         )
     return out
@@ -168,7 +253,7 @@ def coverage(table: pd.DataFrame, horizon: tuple[float, float]) -> list[Follower
 ULTIMATE_NEEDED = (CL.T2_CHI.id, CL.DEF1_DERIVED.id)
 
 
-def ultimate_from(table: pd.DataFrame, agent: int, t1: float) -> float:
+def ultimate_from(table: pd.DataFrame | TableColumns, agent: int, t1: float) -> float:
     """The time from which follower ``agent`` is covered at the ultimate level on its last
     interval, up to the horizon ``t1``; NaN when it is not (docs/verification.md,
     'Coverage').
@@ -182,23 +267,20 @@ def ultimate_from(table: pd.DataFrame, agent: int, t1: float) -> float:
 
     Parameters
     ----------
-    table : DataFrame
-        The bound-vs-actual table.
+    table : DataFrame or TableColumns
+        The bound-vs-actual table (or its :class:`TableColumns`).
     agent : int
         1-based follower.
     t1 : float
         The last output time.
     """
-    rows = table[table["agent"].astype(str) == str(agent)]
-    tol = 1e-9 * max(1.0, abs(t1))
-    last = rows[
-        (rows["kind"] == CL.Kind.GUARANTEED.value)
-        & rows["claim_id"].isin(CL.TRACKING)
-        & (np.abs(rows["t_end"].astype(float) - t1) <= tol)
-    ]
-    if not set(ULTIMATE_NEEDED) <= set(last["claim_id"]) or not held_mask(last).all():
+    c = table if isinstance(table, TableColumns) else TableColumns.of(table)
+    last = c.rows(agent) & c.guaranteed & c.tracking & c.ending_at(t1)
+    if not set(ULTIMATE_NEEDED) <= set(c.claim_id[last]) or not c.held[last].all():
         return math.nan
-    return float(last["t_start"].astype(float).max())
+    start = c.t_start[last]
+    start = start[~np.isnan(start)]  # pandas' max skips NaN
+    return float(start.max()) if start.size else math.nan
 
 
 @dataclass(frozen=True)

@@ -11,10 +11,11 @@ V̇2i ≤ −χᵀKχ − ½k2‖θ̂ − d‖² + ½k2‖d‖² (+ Σ_r θ̂_r(
 layer; + the σ-modification's exact term −(gσ/γ)(ĝ − 1/g)(ĝ − ĝ0) when that law is on).
 
 Speed (docs/verification.md, 'Evaluation cost'): for a closed loop with runtime parameters
-(``cl.parametric``) the Functions evaluated along a trajectory, ``(t, x, p) -> (V1, V̇1)``,
-``(t, x, p) -> (V2, V̇2, χ)`` and the outputs, are built once per structure key from the
-parametric loop, expanded to SX, kept in this process (:func:`fast_functions`) and mapped
-over the output times with the run's own p as a non-mapped input; from the
+(``cl.parametric``) the Functions evaluated along a trajectory, ``(t, x, p) -> (V1, V̇1,
+V2, V̇2, χ)`` (one Function: one right-hand side for both V̇) and the outputs, are built
+once per structure key from the parametric loop, expanded to SX, kept in this process
+(:func:`fast_functions`) and mapped over the output times with the run's own p as a
+non-mapped input; from the
 :data:`COMPILE_FROM_USE`-th verification of one structure in a process (a study) they are
 compiled to C through the content-addressed build cache. A closed loop without
 ``parametric``, or a check with another vector field (``ode=``), takes the MX path
@@ -211,9 +212,9 @@ class FastFunctions:
     Attributes
     ----------
     functions : dict
-        ``"V1"``: ``(t, x, p) -> (V1, V1_dot)``; ``"V2"``: ``(t, x, p) -> (V2, V2_dot, chi)``;
-        ``"outputs"``: ``(t, x, p) -> outputs``. SX (or MX when the loop cannot be expanded)
-        until compiled, then the compiled library's Functions.
+        ``"V"``: ``(t, x, p) -> (V1, V1_dot, V2, V2_dot, chi)`` (read as ``"V1"`` and
+        ``"V2"``, :data:`VIEWS`); ``"outputs"``: ``(t, x, p) -> outputs``. SX (or MX when
+        the loop cannot be expanded) until compiled, then the compiled library's Functions.
     runs : set of str
         Digests of the distinct runs (p, x(0), output times) verified with these Functions
         in this process, counted until they are compiled.
@@ -258,28 +259,35 @@ def _expanded(f: ca.Function) -> ca.Function:
         return f
 
 
-def _derivative_p(
-    outs_f: ca.Function, ode_f: ca.Function, name: str, extra: tuple[str, ...] = ()
-) -> ca.Function:
-    """``(t, x, p) -> (V, V̇, *extra)`` from the (t, x, p) outputs and ode, SX when both are."""
+#: what each name of :func:`evaluate_p` reads of the one Function ``"V"``: its outputs
+#: (V1, V̇1, V2, V̇2, χ) in that order
+VIEWS = {"V1": ("V", slice(0, 2)), "V2": ("V", slice(2, 5))}
+
+
+def _derivative_p(outs_f: ca.Function, ode_f: ca.Function) -> ca.Function:
+    """``(t, x, p) -> (V1, V̇1, V2, V̇2, χ)`` from the (t, x, p) outputs and ode, SX when both
+    are: one Function, so that the right-hand side both derivatives need is evaluated once
+    and one map is built (the same numbers, bit for bit, as a Function per V:
+    ``tests/test_verify_lyapunov.py``). Its common subexpressions are not eliminated: that
+    costs more per structure (0.3 s at N = 15) than it saves on a run's evaluation (0.15 s)."""
     Sym = ca.SX if outs_f.is_a("SXFunction") and ode_f.is_a("SXFunction") else ca.MX
     t = Sym.sym("t")
     x, p = Sym.sym("x", outs_f.size_in(1)), Sym.sym("p", outs_f.size_in(2))
     outs = dict(zip(outs_f.name_out(), outs_f.call([t, x, p]), strict=True))
-    if name not in outs:
+    missing = [nm for nm in ("V1", "V2", "chi") if nm not in outs]
+    if missing:
         raise VerifyError(
-            f"closed loop has no output {name!r} (outputs: {', '.join(outs)}); update verify"
+            f"closed loop has no output {missing[0]!r} (outputs: {', '.join(outs)}); update verify"
         )
-    V = ca.vec(outs[name])
     xdot = ode_f.call([t, x, p])[0]
-    # the same exact derivative along the flow as lyapunov_derivative: ∂V/∂x · f + ∂V/∂t
-    Vdot = ca.jtimes(V, x, xdot) + ca.jacobian(V, t)
+    res, names = [], []
+    for name in ("V1", "V2"):
+        V = ca.vec(outs[name])
+        # the same exact derivative along the flow as lyapunov_derivative: ∂V/∂x · f + ∂V/∂t
+        res += [V, ca.jtimes(V, x, xdot) + ca.jacobian(V, t)]
+        names += [name, f"{name}_dot"]
     return ca.Function(
-        f"verify_{name}_dot",
-        [t, x, p],
-        [V, Vdot, *(outs[e] for e in extra)],
-        ["t", "x", "p"],
-        [name, f"{name}_dot", *extra],
+        "verify_V_dot", [t, x, p], [*res, outs["chi"]], ["t", "x", "p"], [*names, "chi"]
     )
 
 
@@ -304,11 +312,7 @@ def fast_functions(cl: Any, run: str = "") -> FastFunctions:
     entry = _FAST.get(par.structure_key)
     if entry is None:
         outs_f, ode_f = _expanded(par.outputs), _expanded(par.ode)
-        funs = {
-            "V1": _derivative_p(outs_f, ode_f, "V1"),
-            "V2": _derivative_p(outs_f, ode_f, "V2", ("chi",)),
-            "outputs": outs_f,
-        }
+        funs = {"V": _derivative_p(outs_f, ode_f), "outputs": outs_f}
         entry = FastFunctions(funs, key=par.structure_key)
     _remember(_FAST, par.structure_key, entry)
     if not entry.compiled:
@@ -346,7 +350,8 @@ def evaluate_p(
     entry : FastFunctions
         From :func:`fast_functions`.
     name : str
-        ``"V1"``, ``"V2"`` or ``"outputs"``.
+        ``"V1"`` (V1, V̇1), ``"V2"`` (V2, V̇2, χ), ``"outputs"``, or any other key of
+        ``entry.functions`` (all its outputs).
     t : ndarray
         K sample times.
     X : ndarray
@@ -359,20 +364,21 @@ def evaluate_p(
     list of ndarray
         One (K, rows, cols) array per output.
     """
-    fun = entry.functions[name]
+    fname, part = VIEWS.get(name, (name, slice(None)))
+    fun = entry.functions[fname]
     K = len(t)
-    fmap = entry.maps.get((name, K))
-    if fmap is None:  # p is not mapped: one copy serves the K samples
-        fmap = entry.maps[(name, K)] = fun.map(f"{fun.name()}_map", "serial", K, [2], [])
     t = np.ascontiguousarray(t, dtype=float)
     X = np.ascontiguousarray(X, dtype=float)
     p = np.ascontiguousarray(p, dtype=float).ravel()
-    head = (entry.key, entry.compiled, fun.class_name(), name)  # SX machine or compiled C
+    head = (entry.key, entry.compiled, fun.class_name(), fname)  # SX machine or compiled C
     last = _LAST_EVALUATION.get("last")
     if last is None or last[0] != head or not all(map(_same_bits, last[1], (t, X, p))):
+        fmap = entry.maps.get((fname, K))
+        if fmap is None:  # p is not mapped: one copy serves the K samples
+            fmap = entry.maps[(fname, K)] = fun.map(f"{fun.name()}_map", "serial", K, [2], [])
         vals = _blocks(fun, _call_buffers(fmap, t, X, p), K)
         last = _LAST_EVALUATION["last"] = (head, (t.copy(), X.copy(), p.copy()), vals)
-    return [a.copy(order="K") for a in last[2]]
+    return [a.copy(order="K") for a in last[2][part]]
 
 
 #: the last evaluation with its Functions and inputs: one run's three Theorem 1 checks

@@ -184,10 +184,14 @@ def mark_switching(table: pd.DataFrame, scenario: Scenario) -> pd.DataFrame:
             notes[k] = f"{SWITCHING_NOTE} (first switch at t = {times[0]:g} s)"
         elif kind == CL.Kind.PAPER.value and inside:
             notes[k] = f"{SWITCHING_NOTE} (a switch at t = {inside[0]:g} s lies in the window)"
-    for k, note in notes.items():
-        old = out.iloc[k, out.columns.get_loc("note")]
-        out.iloc[k, out.columns.get_loc("kind")] = CL.Kind.INFO.value
-        out.iloc[k, out.columns.get_loc("note")] = f"{note}; {old}" if old else note
+    if not notes:
+        return out
+    kinds, olds = out["kind"].tolist(), out["note"].tolist()
+    for k, note in notes.items():  # the two columns written whole: one assignment each
+        kinds[k] = CL.Kind.INFO.value
+        olds[k] = f"{note}; {olds[k]}" if olds[k] else note
+    out["kind"] = pd.Series(kinds, index=out.index, dtype=out["kind"].dtype)
+    out["note"] = pd.Series(olds, index=out.index, dtype=out["note"].dtype)
     return out
 
 
