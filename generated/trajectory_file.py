@@ -80,9 +80,22 @@ def _mapped(f: ca.Function, K: int) -> tuple[ca.Function, Any, Any]:
     entry = _MAPS.get(key)
     if entry is None:
         shared = [nm == "p" for nm in f.name_in()]
-        F = f.map(K, shared, [False] * f.n_out())
+        F = _expanded(f).map(K, shared, [False] * f.n_out())
         entry = _MAPS[key] = (f, F, *F.buffer())
     return entry[1:]
+
+
+def _expanded(f: ca.Function) -> ca.Function:
+    """An MX ``f`` (the symbolic closed loop's outputs) as SX: the same operations in the
+    same order, evaluated without the MX virtual machine's per-node overhead (the same
+    numbers, bit for bit: ``tests/test_trajectory_file.py``); ``f`` itself when it is not
+    MX or does not expand (a call into a compiled library)."""
+    if not f.is_a("MXFunction"):
+        return f
+    try:
+        return f.expand()
+    except RuntimeError:
+        return f
 
 
 def evaluate_outputs(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:

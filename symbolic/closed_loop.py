@@ -19,8 +19,9 @@ slices and back.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import casadi as ca
@@ -61,7 +62,8 @@ class ClosedLoop:
         ``ca.dyn_out()`` = (ode, alg, quad, zero); z, p, u empty.
     dae_dyn : casadi.Function
         Semi-explicit DAE for IDAS, same inputs/outputs, with z = accelerations of all
-        followers and alg = M(p)a + C(p,q)q + G(p) − g u − f.
+        followers and alg = M(p)a + C(p,q)q + G(p) − g u − f; built on first use (only
+        the DAE methods read it: :attr:`Parametric.dae_dyn`).
     outputs : casadi.Function
         ``(t, x) -> named outputs`` (e_t, chi, u, b, ehat, ebar, V1, V2, ...).
     x0 : ndarray
@@ -78,15 +80,19 @@ class ClosedLoop:
     layout: StateLayout
     ode: ca.Function
     ode_dyn: ca.Function
-    dae_dyn: ca.Function
     outputs: ca.Function
     x0: np.ndarray
     z0: np.ndarray
     breakpoints: tuple[float, ...]
+    parametric: Parametric = field(repr=False)
+    p0: np.ndarray
     assembly: str = "map"
     blocks: dict[str, ca.Function] = field(default_factory=dict, repr=False)
-    parametric: Parametric | None = field(default=None, repr=False)
-    p0: np.ndarray | None = None
+
+    @cached_property
+    def dae_dyn(self) -> ca.Function:
+        """The DAE in integrator form with this loop's p filled in (built on first use)."""
+        return fix_parameters(self.parametric.dae_dyn, self.p0)
 
 
 @dataclass(frozen=True)
@@ -101,20 +107,28 @@ class Parametric:
         Named slices of p (:mod:`symbolic.parameters`).
     ode : casadi.Function
         ``(t, x, p) -> xdot``.
-    ode_dyn, dae_dyn : casadi.Function
-        Integrator forms ``(t, x, z, p, u)`` (see :class:`ClosedLoop`), p not empty.
+    ode_dyn : casadi.Function
+        Integrator form ``(t, x, z, p, u)`` (see :class:`ClosedLoop`), p not empty.
     outputs : casadi.Function
         ``(t, x, p) -> named outputs``.
     structure_key : str
         :func:`symbolic.parameters.structure_key` of the scenario it was built from.
+    build_dae : callable
+        Builds :attr:`dae_dyn` (the same integrator form of the DAE) when first read: the
+        ODE methods never read it, and it costs as much to build as the ODE.
     """
 
     layout: ParamLayout
     ode: ca.Function
     ode_dyn: ca.Function
-    dae_dyn: ca.Function
     outputs: ca.Function
     structure_key: str
+    build_dae: Callable[[], ca.Function] = field(repr=False, compare=False)
+
+    @cached_property
+    def dae_dyn(self) -> ca.Function:
+        """``(t, x, z, p, u)``: the semi-explicit DAE (see :class:`ClosedLoop`)."""
+        return self.build_dae()
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -453,24 +467,28 @@ def build_closed_loop(scenario: Scenario, gains: Gains, *, assembly: str = "map"
     pv = Sym.sym("p", play.size)
     net = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N), pv, keep=("sdot",))
     xdot = ca.vertcat(net["eta0dot"], ca.vec(net["sdot"]))  # eq. (3) and every agent
-    net_dae = _network(sc, gains, assembly, t, x, a, pv, keep=("sdot_dae", "res"))
-    xdot_dae = ca.vertcat(net_dae["eta0dot"], ca.vec(net_dae["sdot_dae"]))
-    alg = ca.vec(net_dae["res"])
     e0 = Sym(0, 1)
     ode_p = ca.Function("ode", [t, x, pv], [xdot], ["t", "x", "p"], ["xdot"])
     ode_dyn_p = ca.Function(
         "ode_dyn", [t, x, e0, pv, e0], [xdot, e0, e0, e0], ca.dyn_in(), ca.dyn_out()
     )
-    dae_dyn_p = ca.Function(
-        "dae_dyn", [t, x, a, pv, e0], [xdot_dae, alg, e0, e0], ca.dyn_in(), ca.dyn_out()
-    )
+
+    def build_dae() -> ca.Function:
+        net_dae = _network(sc, gains, assembly, t, x, a, pv, keep=("sdot_dae", "res"))
+        xdot_dae = ca.vertcat(net_dae["eta0dot"], ca.vec(net_dae["sdot_dae"]))
+        alg = ca.vec(net_dae["res"])
+        return ca.Function(
+            "dae_dyn", [t, x, a, pv, e0], [xdot_dae, alg, e0, e0], ca.dyn_in(), ca.dyn_out()
+        )
+
     net_out = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N), pv)  # every signal
     outputs_p = _outputs_function(sc, gains, net_out, t, x, pv)
     blocks = dict(net["funs"])
     blocks["leader"] = net["lead"]
-    parametric = Parametric(play, ode_p, ode_dyn_p, dae_dyn_p, outputs_p, structure_key(sc, gains))
+    key = structure_key(sc, gains)
+    parametric = Parametric(play, ode_p, ode_dyn_p, outputs_p, key, build_dae)
     _remember_parametric((parametric.structure_key, assembly), parametric)
-    return bind(parametric, sc, gains, lay, assembly, blocks)
+    return bind(parametric, sc, gains, lay, assembly, blocks, key=key)
 
 
 #: how many structures' parametric loops a process keeps
@@ -582,15 +600,14 @@ def bind(
         layout=lay,
         ode=fix_parameters(par.ode, p0),
         ode_dyn=fix_parameters(par.ode_dyn, p0),
-        dae_dyn=fix_parameters(par.dae_dyn, p0),
         outputs=outputs,
         x0=x0,
         z0=qdd0,
         breakpoints=sc.breakpoints(),
-        assembly=assembly,
-        blocks=blocks or {},
         parametric=par,
         p0=p0,
+        assembly=assembly,
+        blocks=blocks or {},
     )
 
 

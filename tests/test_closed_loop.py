@@ -319,6 +319,7 @@ def test_ode_and_dae_give_same_accelerations(tmp_path):
     A, pin = random_graph(6, rng, signed=True)
     sc = write_scenario(tmp_path, A, pin)
     cl = build_closed_loop(sc, hand_gains(sc))
+    assert "dae_dyn" not in vars(cl.parametric)  # built on first use (the ODE methods never do)
     lay = cl.layout
     for _ in range(4):
         x, t = random_state(cl, rng), rng.uniform(0, 20)
