@@ -829,26 +829,3 @@ def test_paper_with_a_link_lost_and_restored_fading_equals_cvodes():
         assert libs_T[0].compile_seconds == 0.0
     raw = _per_agent_like(libs_T, agents.problem(other, gains, model_T), ref_built, ref, s, other)
     assert raw.complete and _rel(raw.x, ref.x) > 1e-3
-
-
-def test_start_up_through_the_ghat_projection_equals_cvodes():
-    """studies/links-design.toml's sample 32 with its link losses dropped (N = 15, a cycle:
-    GMRES): at its own tolerances the per-agent engine gets through the start-up, where one
-    ĝ_i crosses the projection's kink at a rate of 1e5 (it failed at t = 0.0049 s with the
-    Jacobian kept over steps: error-test failures down to h = 1e-10), and at rtol 1e-10 it
-    equals CasADi's CVODES to 2e-5 over the 0.01 s (measured 4.6e-6; 1.2e-4 at rtol 1e-8;
-    1.6e-4 at rtol 1e-10 with the Jacobian kept)."""
-    sc = load_scenario("tests/data/links-design-0032-no-losses.toml")
-    gains = api.scenario_gains(sc, "the test scenario")
-    assert not agents.problem(sc, gains, np.zeros(sc.N)).acyclic
-    cg = CodegenSettings(jacobian="auto")  # the shared build cache
-    built = api.build(sc, gains, "native", cg)
-    own = api.simulate(built, sc, api.integrator_settings(sc, "native"))
-    assert own.complete, own.message
-    ref_built = api.build(sc, gains, "cvodes", cg)
-    runs = []
-    for meth, b in (("native", built), ("cvodes", ref_built)):
-        s = api.integrator_settings(sc, meth)
-        runs.append(api.simulate(b, sc, dataclasses.replace(s, rtol=1e-10, atol=1e-12)))
-    assert all(r.complete for r in runs) and np.array_equal(runs[0].t, runs[1].t)
-    assert _rel(runs[0].x, runs[1].x) < 2e-5
