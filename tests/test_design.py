@@ -319,8 +319,6 @@ def test_demo_runs_the_stored_design_of_a_design_scenario(monkeypatch, tmp_path)
 
 
 def test_a_study_on_a_design_base_runs_its_designed_gains(monkeypatch, tmp_path):
-    import json
-
     import design.run as R
     from sweep.sampler import make_sample
     from sweep.study import StudyError, load_study
@@ -334,17 +332,7 @@ def test_a_study_on_a_design_base_runs_its_designed_gains(monkeypatch, tmp_path)
     with pytest.raises(StudyError) as exc:  # no design yet: refused in one line
         load_study(study)
     assert "\n" not in str(exc.value) and "make design" in str(exc.value)
-    sc = load(PAPER_DESIGN)
-    folder = tmp_path / f"{sc.name}-{R.VARIANT}"
-    folder.mkdir()
-    ov = {"controller.k1": [40.0] * 5, "controller.Lambda": 80.0}
-    rec = {
-        "format": R.FORMAT,
-        "scenario_sha256": sc.sha256,
-        "procedure_sha256": R.procedure_sha256(),
-        "overrides": ov,
-    }
-    (folder / "design.json").write_text(json.dumps(rec))
+    _design_record(tmp_path, monkeypatch, {"controller.k1": [40.0] * 5, "controller.Lambda": 80.0})
     s = make_sample(load_study(study), 0).scenario
     assert np.all(s.controller.k1 == 40.0)
     assert np.all(s.controller.Lambda == 30.0)  # the study's own [set] wins
