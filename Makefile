@@ -105,6 +105,7 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.precision
 	$(PY) -m benchmarks.study
 	$(PY) -m benchmarks.remedies
+	$(PY) -m design run scenarios/paper-design.toml  # studies/links.toml runs the designed gains
 	$(PY) -m benchmarks.links
 	$(PY) -m benchmarks.agents
 	$(PY) -m sweep run studies/topologies.toml || [ $$? -eq 1 ]  # 1: samples failed (in its report)

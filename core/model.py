@@ -57,6 +57,7 @@ MAX_HORIZON = 1e6  # s; far beyond any study here, and keeps time arithmetic fin
 # range checks beyond the sign, with the messages the loader has always given
 _G_MIN_RANGE = Check("≤ 1", lambda x: x <= 1.0, "{v} is outside (0, 1]", "0 < g_min <= 1")
 _AT_LEAST_ONE = Check("≥ 1", lambda x: x >= 1.0, "{v} is below 1", "a factor >= 1")
+_ABOVE_ONE = Check("> 1", lambda x: x > 1.0, "{v} is not above 1", "a factor > 1")
 _BELOW_ONE = Check("< 1", lambda x: x < 1.0, "{v} >= 1", "a relative tolerance < 1")
 _HORIZON_RANGE = Check(
     "≤ 1e6",
@@ -273,6 +274,8 @@ class Design:
     k1_max: float | None = setting(OFF, "number", POSITIVE, off=True)
     # the ultimate bound may be this factor above the best one within the budget (time for level)
     bound_slack: float = setting(1.5, "number", _AT_LEAST_ONE)
+    # the observer's robust gain lambda2 as a multiple of alpha (phi_min keeps lambda2/phi_min)
+    robust_gain: float = setting(2.0, "number", _ABOVE_ONE)
 
 
 #: the sections declared with :func:`core.settings.setting`, by their table name

@@ -17,9 +17,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from core.artifacts import atomic_write_text
+from synthesis.design import RobustTerm, layer_residual
 
 if TYPE_CHECKING:
     from core.provenance import Provenance
+    from core.scenario import Scenario
     from design.controller import Point
     from design.run import DesignResult
 
@@ -217,6 +219,20 @@ def _gamma_lines(d: DesignResult) -> list[str]:
     return out
 
 
+def _robust_lines(r: RobustTerm, sc: Scenario) -> list[str]:
+    """The robust term's design: λ2, φ_min, and the layer residual against the scenario's."""
+    alpha = sc.design.alpha if sc.design.alpha is not None else sc.leader.alpha
+    mine = layer_residual(0.0, r.lambda2, r.phi_min, alpha)
+    given = layer_residual(0.0, r.given_lambda2, r.given_phi_min, alpha)
+    return [
+        f"Robust term of eq. (9): λ2 = {r.lambda2:.4g}, φ_min = {r.phi_min:.4g} "
+        f"(the scenario's {r.given_lambda2:.4g}, {r.given_phi_min:.4g}; layer slope "
+        f"λ2/φ_min = {r.slope:.4g} kept). Residual ‖Qê‖ at which the term balances "
+        f"‖u0‖ = α = {alpha:g} without the linear term: {_fmt(mine)} "
+        f"(the scenario's: {_fmt(given)}; with λ2 = α only the linear term bounds it).",
+    ]
+
+
 def write_report(d: DesignResult, folder: Path, prov: Provenance) -> Path:
     """design.md and figures/design_observer.png, figures/design_controller.png.
 
@@ -249,6 +265,8 @@ def write_report(d: DesignResult, folder: Path, prov: Provenance) -> Path:
         f"‖Q‖ = {np.linalg.norm(od.Q, 2):.4g} ({'designed' if od.designed_Q else 'the scenario’s, kept'}), "
         f"‖Θ‖ = {np.linalg.norm(od.Theta, 2):.4g} ({'designed' if od.designed_Theta else 'the scenario’s, kept'}); "
         f"the scenario's δ1 = {sc.observer.delta1:g}, δ2 = {sc.observer.delta2:g}.",
+        "",
+        *_robust_lines(od.robust, sc),
         "",
         "| ‖Q‖ cap | largest δ1 | ‖Θ‖ cap | largest δ2 |",
         "|---|---|---|---|",

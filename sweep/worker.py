@@ -224,7 +224,9 @@ NOLOSS_COLUMNS = (
 def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> dict[str, Any]:
     """The sample once more with its graph switches made no-ops (each sets the base
     graph's weight): the same structure, so the same compiled library, and the run the
-    losses are compared with (``peak_u_late_nolosses``; NaN without switches).
+    losses are compared with (``peak_u_late_nolosses``; NaN without switches). It keeps
+    the sample's λ1 (synthesized over the topologies with the losses), so the two runs
+    differ in the switches only.
 
     Parameters
     ----------
@@ -251,7 +253,9 @@ def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
         return dataclasses.replace(s, weight=float(w))
 
     graph = dataclasses.replace(sc.graph, switches=tuple(same(s) for s in sc.graph.switches))
-    twin = dataclasses.replace(sample, scenario=dataclasses.replace(sc, graph=graph))
+    lambda1 = _gains(sc, f"gains of sample {sample.id}", measured).lambda1
+    obs = dataclasses.replace(sc.observer, lambda1=float(lambda1))
+    twin = dataclasses.replace(sample, scenario=dataclasses.replace(sc, graph=graph, observer=obs))
     run = run_in_memory(twin, paths, measured=measured)
     # the same (switch time, follower) pairs without the losses: what the formation's own
     # error leaves of the promise "back within 0.05 within 2 s"
@@ -328,6 +332,14 @@ def run_in_memory(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
     return run
 
 
+def _gains(sc: Any, where: str, measured: bool) -> Any:
+    """The run's gains: certified on the base graph (``measured``) or as ``make sim``'s."""
+    from generated import api
+    from sweep.switched_gains import base_graph_gains
+
+    return base_graph_gains(sc, where) if measured else api.scenario_gains(sc, where)
+
+
 def simulate_in_memory(
     sample: Sample, paths: StudyPaths, measured: bool = False
 ) -> tuple[Any, Any]:
@@ -351,12 +363,10 @@ def simulate_in_memory(
     import pandas as pd
 
     from generated import api
-    from sweep.switched_gains import base_graph_gains
     from verify import pipeline as P
 
     sc = sample.scenario
-    where = f"gains of sample {sample.id}"
-    gains = base_graph_gains(sc, where) if measured else api.scenario_gains(sc, where)
+    gains = _gains(sc, f"gains of sample {sample.id}", measured)
     codegen = api.resolve_codegen(sc.N)
     method = sc.integration.method
     built = api.build(sc, gains, method, codegen)

@@ -324,6 +324,81 @@ def design_lmi16(Phi: np.ndarray, A0: np.ndarray, C0: np.ndarray, theta_max: flo
     return Rate16(theta_max, dmax, delta, pt[0], pt[1], steps + 1)
 
 
+def layer_residual(lambda1: float, lambda2: float, phi: float, u: float) -> float:
+    """The ‖Qê‖ at which eq. (9)'s v balances an unknown input of size u in the layer.
+
+    The positive root s of λ1 s + λ2 s/(s + φ) = u: the observer's quasi-steady residual
+    for a follower that hears the leader while u0 moves slowly (docs/synthesis.md, 'The
+    robust term'). With λ2 > u it is below φu/(λ2 − u) for every λ1 ≥ 0; with λ2 = u it
+    is about sqrt(uφ/λ1).
+
+    Parameters
+    ----------
+    lambda1, lambda2 : float
+        The observer's linear and robust gains.
+    phi : float
+        φ_i (at the floor: φ_min).
+    u : float
+        ‖u0‖ (at most α).
+    """
+    if lambda1 == 0.0:
+        return phi * u / (lambda2 - u) if lambda2 > u else float("inf")
+    b = lambda1 * phi + lambda2 - u
+    return float(2.0 * u * phi / (b + np.sqrt(b * b + 4.0 * lambda1 * u * phi)))
+
+
+@dataclass(frozen=True)
+class RobustTerm:
+    """The robust term −λ2Qê/(‖Qê‖ + φ_i) of eq. (9), designed.
+
+    Attributes
+    ----------
+    lambda2, phi_min : float
+        The designed gain and floor.
+    slope : float
+        λ2/φ_min, the layer's slope at the floor (kept from the scenario; inf at φ_min = 0).
+    given_lambda2, given_phi_min : float
+        The scenario's own (λ2 left to synthesis: (1 + margin)α).
+    """
+
+    lambda2: float
+    phi_min: float
+    slope: float
+    given_lambda2: float
+    given_phi_min: float
+
+
+def design_robust_term(obs, alpha: float, factor: float) -> RobustTerm:  # noqa: ANN001
+    """λ2 = factor·α, φ_min scaled with it so that the layer's slope λ2/φ_min stays.
+
+    Inside the boundary layer the robust term is a gain λ2/φ_i: that slope is what makes
+    the loop stiff (the oracle's η⃛_i carries it), so it is kept at the scenario's. With
+    λ2 = α the term cancels ‖u0‖ = α only as ‖Qê‖/φ → ∞ and the residual is the linear
+    term's, sqrt(αφ_min/λ1); with λ2 > α it is below φ_min α/(λ2 − α) = α·factor/(slope
+    (factor − 1)) (:func:`layer_residual`), at factor 2 twice its infimum α/slope.
+    Theorem 1 needs λ2 ≥ α; its floor constant c_φ grows with λ2φ_min.
+
+    Parameters
+    ----------
+    obs : core.model.Observer
+        The scenario's observer (its λ2, φ_min, margin).
+    alpha : float
+        The design's bound on ‖u0‖.
+    factor : float
+        ``design.robust_gain`` (> 1).
+    """
+    given = (1.0 + max(obs.margin, 1e-3)) * alpha if obs.lambda2 is None else float(obs.lambda2)
+    lambda2 = factor * alpha
+    phi_min = float(obs.phi_min) * lambda2 / given
+    if np.any(np.asarray(obs.phi0, float) <= phi_min):
+        raise SynthesisError(
+            f"design.robust_gain = {factor:g}: phi_min = {phi_min:.4g} would reach phi0; "
+            "a smaller robust_gain or a larger observer.phi0"
+        )
+    slope = lambda2 / phi_min if phi_min > 0 else float("inf")
+    return RobustTerm(lambda2, phi_min, slope, given, float(obs.phi_min))
+
+
 #: points of each observer front (caps, geometric up to the cap)
 FRONT_POINTS = 7
 #: the front's smallest cap, as a fraction of the largest
@@ -350,8 +425,8 @@ class ObserverDesign:
         The designed rates (no more than Theorem 1's δ̃ can use: :func:`useful_rates`).
     T, Q, Omega, Theta : ndarray
         The gains at the designed rates.
-    lambda2 : float or None
-        (1 + margin) α of the design's operator bound when λ2 is left to synthesis.
+    robust : RobustTerm
+        The robust term's designed λ2 and φ_min (:func:`design_robust_term`).
     """
 
     front15: tuple[Rate15, ...]
@@ -364,7 +439,7 @@ class ObserverDesign:
     Q: np.ndarray
     Omega: np.ndarray
     Theta: np.ndarray
-    lambda2: float | None
+    robust: RobustTerm
     designed_Q: bool
     designed_Theta: bool
 
@@ -381,8 +456,8 @@ class ObserverDesign:
             out["observer.Q"] = np.round(self.Q, 12).tolist()
         if self.designed_Theta:
             out["observer.Theta"] = np.round(self.Theta, 12).tolist()
-        if self.lambda2 is not None:
-            out["observer.lambda2"] = float(self.lambda2)
+        out["observer.lambda2"] = self.robust.lambda2
+        out["observer.phi_min"] = self.robust.phi_min
         return out
 
 
@@ -492,7 +567,7 @@ def observer_design(scenario) -> ObserverDesign:  # noqa: ANN001
         Q=B0.T @ np.linalg.inv(T) if obs.Q is None else np.atleast_2d(np.asarray(obs.Q, float)),
         Omega=Omega,
         Theta=Theta,
-        lambda2=None if obs.lambda2 is not None else (1.0 + max(obs.margin, 1e-3)) * alpha,
+        robust=design_robust_term(obs, alpha, spec.robust_gain),
         designed_Q=obs.Q is None,
         designed_Theta=obs.Theta is None,
     )

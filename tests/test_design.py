@@ -408,7 +408,7 @@ def test_bad_compare_gains_is_one_line(monkeypatch, tmp_path, body, says):
         load_study(plain)
 
 
-@pytest.mark.parametrize("name", ["faults", "steps", "links"])
+@pytest.mark.parametrize("name", ["faults", "steps"])
 def test_the_design_studies_draw_the_samples_of_the_paper_studies(stored_designs, name):
     """studies/<name>-design.toml: the samples of studies/<name>.toml on paper-design.toml
     (the same draws; the scenario tables equal but for the name, description and [design])."""

@@ -410,7 +410,7 @@ def test_a_bad_theorem1_of_graph_losses_is_one_line(tmp_path, capsys, monkeypatc
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.toml"]
 
 
-def test_identity_names_a_measured_theorem1_only_when_set():
+def test_identity_names_a_measured_theorem1_only_when_set(stored_designs):
     """A study without the new keys keeps the identity it had before them."""
     from sweep.identity import study_identity
 
