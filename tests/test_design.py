@@ -104,6 +104,7 @@ def _design_text(extra: str) -> str:
         ("u_max = 200.0\ng_min = 0.99\n", "design.g_min", "g_min <= 0.95"),
         ("u_max = 0.0\n", "design.u_max", "a value > 0"),
         ("u_max = 200.0\nbound_slack = 0.5\n", "design.bound_slack", ">= 1"),
+        ("u_max = 200.0\nrobust_gain = 1.0\n", "design.robust_gain", "a factor > 1"),
         ("u_max = 200.0\nspeed = 1\n", "design", "speed"),
         # declared bounds must cover the scenario's own
         ("u_max = 226.0\nd = 1.0\n", "design.d", "d_ir >= each follower's d"),
@@ -191,6 +192,43 @@ def test_the_refusal_names_the_budget_and_what_would_work():
     assert "\n" not in msg and "design.u_max" in msg and "u_max >= 230" in msg, msg
 
 
+@pytest.mark.parametrize(
+    ("lambda1", "lambda2", "phi", "u"),
+    [(6.87, 2.0, 0.005, 2.0), (6.87, 4.0, 0.01, 2.0), (0.0, 4.0, 0.01, 2.0), (1.0, 3.0, 0.02, 1.2)],
+)
+def test_layer_residual_is_where_the_scalar_observer_error_settles(lambda1, lambda2, phi, u):
+    """ė = u − λ1e − λ2e/(|e| + φ) (eq. (9)'s v against a constant unknown input, Q = B0 = 1)
+    integrated to rest settles at layer_residual; with λ2 > u it is below φu/(λ2 − u)."""
+    from scipy.integrate import solve_ivp
+
+    def f(_t, e):  # noqa: ANN001, ANN202
+        return u - lambda1 * e - lambda2 * e / (np.abs(e) + phi)
+
+    sol = solve_ivp(f, (0.0, 50.0), [0.0], method="LSODA", rtol=1e-12, atol=1e-14)
+    e_end = float(sol.y[0, -1])
+    assert f(0.0, np.array([e_end]))[0] == pytest.approx(0.0, abs=1e-9)
+    assert SD.layer_residual(lambda1, lambda2, phi, u) == pytest.approx(e_end, rel=1e-8)
+    if lambda2 > u:
+        assert e_end <= phi * u / (lambda2 - u) * (1 + 1e-9)
+    else:  # λ2 = u: the linear term alone holds it, near sqrt(uφ/λ1)
+        assert e_end == pytest.approx(np.sqrt(u * phi / lambda1), rel=0.1)
+
+
+def test_the_robust_term_keeps_the_layer_slope_and_refuses_a_floor_at_phi0():
+    """λ2 = robust_gain·α and φ_min scaled with it (λ2/φ_min is the scenario's); a floor that
+    would reach φ_i(0) is refused in one line naming design.robust_gain."""
+    from core.errors import SynthesisError
+
+    sc = load(PAPER_DESIGN)
+    r = SD.design_robust_term(sc.observer, 2.0, 3.0)
+    assert r.lambda2 == pytest.approx(6.0)
+    assert r.lambda2 / r.phi_min == pytest.approx(sc.observer.lambda2 / sc.observer.phi_min)
+    assert (r.given_lambda2, r.given_phi_min) == (sc.observer.lambda2, sc.observer.phi_min)
+    with pytest.raises(SynthesisError) as exc:
+        SD.design_robust_term(sc.observer, 2.0, 500.0)  # φ_min = 2.5 > φ_i(0) = 1
+    assert "design.robust_gain" in str(exc.value) and "\n" not in str(exc.value)
+
+
 def test_designed_observer_gains_certify(monkeypatch):
     """The observer's designed keys go through synthesis and its whole certificate."""
     from synthesis.api import synthesize
@@ -202,6 +240,7 @@ def test_designed_observer_gains_certify(monkeypatch):
     g = synthesize(load(PAPER_DESIGN, od.overrides(), "designed"))
     assert g.certificate["passed"], g.certificate
     assert g.delta1 == pytest.approx(od.delta1) and g.delta2 == pytest.approx(od.delta2)
+    assert g.lambda2 == pytest.approx(2.0 * sc.leader.alpha)  # design.robust_gain = 2
 
 
 def test_a_stored_design_is_reused_only_for_its_own_scenario_and_procedure(tmp_path):
