@@ -132,7 +132,7 @@ def test_a_run_that_gives_up_reports_where_cvode_stood(tmp_path):
     assert text.count(fade) == 1 and text.count(base) == 1
     text = text.replace(base, f'base = "{PAPER.as_posix()}"')
     path = tmp_path / "few-steps.toml"
-    path.write_text(text.replace(fade, fade + '"integration.max_steps" = 1000\n'))
+    path.write_text(text.replace(fade, fade + '"integration.max_steps" = 300\n'))
     row = worker.run_sample(str(path), 0, str(tmp_path / "out"))
     assert row["status"].startswith("failed: IntegrationError: ")
     assert row["t_reached"] < row["t_stop"] < row["t_reached"] + 0.01  # the output step

@@ -197,12 +197,20 @@ static void hitl_ls_attach(hitl_cvode *s, void *content, int (*setup)(SUNLinearS
   s->LS->ops->free = hitl_ls_free;
 }
 
-/* CVODE's options after CVodeInit: user data, tolerances, linear solver, Jacobian */
+/* CVODE's options after CVodeInit: user data, tolerances, linear solver, Jacobian.
+   J is evaluated afresh at every set-up of the Newton matrix, as CasADi's cvodes does
+   (CVODE's default keeps one for up to 51 steps, error-test failures included): the
+   closed loop's right-hand side has kinks (the ghat projection, |chi|, the torque
+   limit) across which J changes by orders of magnitude, and Newton iterates from a J of
+   the far side pass the convergence test (it measures corrections, not residuals) with
+   the step's derivative history wrong. Measured on the start-up of
+   tests/data/links-design-0032-no-losses.toml: one ghat_i's history rate 2e5 where its
+   right-hand side was 0, error-test failures down to h = 1e-10, the run lost. */
 static int hitl_cvode_options(hitl_cvode *s, void *data, const hitl_options *o,
                               CVLsJacFn jac) {
   return CVodeSetUserData(s->mem, data) || CVodeSStolerances(s->mem, o->rtol, o->atol) ||
          CVodeSetLinearSolver(s->mem, s->LS, s->A) || CVodeSetJacFn(s->mem, jac) ||
-         CVodeSetMaxNumSteps(s->mem, o->max_steps);
+         CVodeSetJacEvalFrequency(s->mem, 1) || CVodeSetMaxNumSteps(s->mem, o->max_steps);
 }
 
 /* The counters (acc: hitl_add_counters' layout) and the last flag into the result */
