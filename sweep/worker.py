@@ -328,6 +328,23 @@ def run_in_memory(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
     return run
 
 
+def _frame(built: Any, sc: Any, traj: Any) -> Any:
+    """The run's trajectory frame; its outputs through the verification's compiled Functions
+    of the structure when there are (the same SX outputs as C: the same numbers,
+    ``tests/test_parameters.py``), else the closed loop's."""
+    import dataclasses
+
+    from generated import api
+    from verify.lyapunov import fast_functions, run_digest
+
+    cl = built.closed_loop
+    if cl.parametric is not None and cl.parametric.layout.dense:
+        fast = fast_functions(cl, run_digest(cl.p0, traj.t, traj.x))
+        if fast.compiled:
+            built = dataclasses.replace(built, outputs_p=fast.functions["outputs"])
+    return api.trajectory_frame(built, sc, traj)
+
+
 def simulate_in_memory(
     sample: Sample, paths: StudyPaths, measured: bool = False
 ) -> tuple[Any, Any]:
@@ -359,9 +376,9 @@ def simulate_in_memory(
     gains = base_graph_gains(sc, where) if measured else api.scenario_gains(sc, where)
     codegen = api.resolve_codegen(sc.N)
     method = sc.integration.method
-    built = api.build(sc, gains, method, codegen)
+    built = api.build(sc, gains, method, codegen, dense_graph=True)  # one loop per N
     traj = api.simulate(built, sc, api.integrator_settings(sc, method, codegen))
-    frame = api.trajectory_frame(built, sc, traj) if traj.complete else pd.DataFrame()
+    frame = _frame(built, sc, traj) if traj.complete else pd.DataFrame()
     libs = built.agents[0] if built.agents is not None else (built.library,)
     meta = {"steps": traj.stats.get("steps"), "library": {"key": ";".join(x.key for x in libs)}}
     if built.agents is not None:  # the per-agent engine: the graph's cycles, a new library

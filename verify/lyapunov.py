@@ -39,10 +39,12 @@ from verify.bounds import VerifyConfig, VerifyError
 
 #: a structure's verify Functions are compiled to C from its this-many-th verification in one
 #: process: a study's samples share one structure, a single run (one use) stays in CasADi's SX
-#: virtual machine (docs/verification.md, 'Evaluation cost')
+#: virtual machine (docs/verification.md, 'Evaluation cost'); a loop with the graph as data
+#: (a study's random graphs, one structure per N) is compiled from its first verification
 COMPILE_FROM_USE = 2
-#: structures whose Functions are kept per process (a random-graph study has one per sample)
-CACHE_SIZE = 8
+#: structures whose Functions are kept per process (a random-graph study with the graph as
+#: data has one per N)
+CACHE_SIZE = 24
 
 
 @dataclass(frozen=True)
@@ -305,8 +307,9 @@ def fast_functions(cl: Any, run: str = "") -> FastFunctions:
     Returns
     -------
     FastFunctions
-        From the :data:`COMPILE_FROM_USE`-th distinct run of the structure its Functions
-        are compiled to C (:func:`generated.codegen.build_library`, content-hash cache).
+        From the :data:`COMPILE_FROM_USE`-th distinct run of the structure (the first with
+        the graph as data) its Functions are compiled to C
+        (:func:`generated.codegen.build_library`, content-hash cache).
     """
     par = cl.parametric
     entry = _FAST.get(par.structure_key)
@@ -317,20 +320,22 @@ def fast_functions(cl: Any, run: str = "") -> FastFunctions:
     _remember(_FAST, par.structure_key, entry)
     if not entry.compiled:
         entry.runs.add(run)
-        if len(entry.runs) >= COMPILE_FROM_USE:
+        if len(entry.runs) >= (1 if par.layout.dense else COMPILE_FROM_USE):
             _compile(entry)
     return entry
 
 
 def _compile(entry: FastFunctions) -> None:
-    """Replace ``entry``'s SX Functions by their compiled C (kept SX if gcc fails)."""
+    """Replace ``entry``'s SX Functions by their compiled C (kept SX if gcc fails); their
+    common subexpressions eliminated first (the same operations on the same operands: the
+    same numbers in less code)."""
     from generated.codegen import build_library
     from generated.csource import renamed
 
     entry.compiled = True  # tried once per structure and process, whatever the outcome
     if not all(f.is_a("SXFunction") for f in entry.functions.values()):
         return  # MX that does not expand: C would not be faster than its virtual machine
-    named = {k: renamed(f, f"verify_{k}") for k, f in entry.functions.items()}
+    named = {k: renamed(f, f"verify_{k}", cse=True) for k, f in entry.functions.items()}
     try:
         lib = build_library(list(named.values()))
     except BuildError as exc:
