@@ -326,16 +326,14 @@ def fast_functions(cl: Any, run: str = "") -> FastFunctions:
 
 
 def _compile(entry: FastFunctions) -> None:
-    """Replace ``entry``'s SX Functions by their compiled C (kept SX if gcc fails); their
-    common subexpressions eliminated first (the same operations on the same operands: the
-    same numbers in less code)."""
+    """Replace ``entry``'s SX Functions by their compiled C (kept SX if gcc fails)."""
     from generated.codegen import build_library
     from generated.csource import renamed
 
     entry.compiled = True  # tried once per structure and process, whatever the outcome
     if not all(f.is_a("SXFunction") for f in entry.functions.values()):
         return  # MX that does not expand: C would not be faster than its virtual machine
-    named = {k: renamed(f, f"verify_{k}", cse=True) for k, f in entry.functions.items()}
+    named = {k: renamed(f, f"verify_{k}") for k, f in entry.functions.items()}
     try:
         lib = build_library(list(named.values()))
     except BuildError as exc:
@@ -380,7 +378,8 @@ def evaluate_p(
     if last is None or last[0] != head or not all(map(_same_bits, last[1], (t, X, p))):
         fmap = entry.maps.get((fname, K))
         if fmap is None:  # p is not mapped: one copy serves the K samples
-            fmap = entry.maps[(fname, K)] = fun.map(f"{fun.name()}_map", "serial", K, [2], [])
+            shared = [False, False, True]  # map(n, reduce_in, reduce_out): built in ms
+            fmap = entry.maps[(fname, K)] = fun.map(K, shared, [False] * fun.n_out())
         vals = _blocks(fun, _call_buffers(fmap, t, X, p), K)
         last = _LAST_EVALUATION["last"] = (head, (t.copy(), X.copy(), p.copy()), vals)
     return [a.copy(order="K") for a in last[2][part]]
