@@ -192,12 +192,11 @@ def build(
     # first: what the method needs of the scenario itself (the per-agent engine's kernels)
     prepared = solvers.get(method).prepare(sc, gains)
     # the cache folder is part of the key: a build of another cache (HITL_BUILD_DIR) is not reused
-    key = (structure_key(sc, gains), method, settings, cache_root(settings))
+    dense = dense_graph and prepared is not None
+    key = (structure_key(sc, gains, dense=dense), method, settings, cache_root(settings))
     if prepared is not None:  # the method's own libraries: only the closed loop is reused
         if closed_loop is None:
-            if dense_graph:
-                key = (structure_key(sc, gains, dense=True), *key[1:])
-            closed_loop = _loop_of(sc, gains, key, dense_graph)
+            closed_loop = _loop_of(sc, gains, key, dense)
         return _compile(closed_loop, method, settings, t0, prepared)[0]
     if closed_loop is None and key in BUILDS:
         c = current(BUILDS[key])
