@@ -197,7 +197,7 @@ def engine(study: Study) -> dict[str, bool]:
     ----------
     study : Study
     """
-    return {"measured": _measured(study)}
+    return {"measured": _measured(study), "dense": study.graph is not None}
 
 
 def _measured(study: Study) -> bool:
@@ -221,7 +221,9 @@ NOLOSS_COLUMNS = (
 )
 
 
-def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> dict[str, Any]:
+def link_baseline(
+    sample: Sample, paths: StudyPaths, measured: bool = False, dense: bool = False
+) -> dict[str, Any]:
     """The sample once more with its graph switches made no-ops (each sets the base
     graph's weight): the same structure, so the same compiled library, and the run the
     losses are compared with (``peak_u_late_nolosses``; NaN without switches).
@@ -232,7 +234,7 @@ def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
         The drawn sample.
     paths : StudyPaths
         The study's folders.
-    measured : bool
+    measured, dense : bool
         As for :func:`simulate_in_memory`.
     """
     import dataclasses
@@ -252,7 +254,7 @@ def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
 
     graph = dataclasses.replace(sc.graph, switches=tuple(same(s) for s in sc.graph.switches))
     twin = dataclasses.replace(sample, scenario=dataclasses.replace(sc, graph=graph))
-    run = run_in_memory(twin, paths, measured=measured)
+    run = run_in_memory(twin, paths, measured=measured, dense=dense)
     # the same (switch time, follower) pairs without the losses: what the formation's own
     # error leaves of the promise "back within 0.05 within 2 s"
     back = switch_summary(switch_recoveries(sc, run.frame, gauge(sc, run.gains)))
@@ -305,7 +307,9 @@ def _run_written(sample: Sample, paths: StudyPaths) -> tuple[Any, Any]:
     return run, res.trajectory
 
 
-def run_in_memory(sample: Sample, paths: StudyPaths, measured: bool = False) -> Any:
+def run_in_memory(
+    sample: Sample, paths: StudyPaths, measured: bool = False, dense: bool = False
+) -> Any:
     """The same steps as :func:`generated.api.run` (gains, build, integrate, outputs)
     writing nothing; the run's folder is where ``--keep-runs`` would write it.
 
@@ -315,7 +319,7 @@ def run_in_memory(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
         The drawn sample (its scenario).
     paths : StudyPaths
         The study's folders.
-    measured : bool
+    measured, dense : bool
         As for :func:`simulate_in_memory`.
 
     Raises
@@ -323,7 +327,7 @@ def run_in_memory(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
     IntegrationError
         The run stopped early.
     """
-    run, traj = simulate_in_memory(sample, paths, measured=measured)
+    run, traj = simulate_in_memory(sample, paths, measured=measured, dense=dense)
     traj.raise_if_incomplete()
     return run
 
@@ -346,7 +350,7 @@ def _frame(built: Any, sc: Any, traj: Any) -> Any:
 
 
 def simulate_in_memory(
-    sample: Sample, paths: StudyPaths, measured: bool = False
+    sample: Sample, paths: StudyPaths, measured: bool = False, dense: bool = False
 ) -> tuple[Any, Any]:
     """:func:`run_in_memory` without raising for a run that stopped early.
 
@@ -359,6 +363,9 @@ def simulate_in_memory(
     measured : bool
         Gains certified on the sample's base graph
         (:func:`sweep.switched_gains.base_graph_gains`).
+    dense : bool
+        The closed loop with the graph as data (``api.build``'s ``dense_graph``: one per
+        N for a study that draws its graphs; method ``native`` only).
 
     Returns
     -------
@@ -376,7 +383,7 @@ def simulate_in_memory(
     gains = base_graph_gains(sc, where) if measured else api.scenario_gains(sc, where)
     codegen = api.resolve_codegen(sc.N)
     method = sc.integration.method
-    built = api.build(sc, gains, method, codegen, dense_graph=True)  # one loop per N
+    built = api.build(sc, gains, method, codegen, dense_graph=dense)
     traj = api.simulate(built, sc, api.integrator_settings(sc, method, codegen))
     frame = _frame(built, sc, traj) if traj.complete else pd.DataFrame()
     libs = built.agents[0] if built.agents is not None else (built.library,)
