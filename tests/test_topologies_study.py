@@ -109,6 +109,20 @@ def test_steps_equal_the_engine_called_directly(out):
     assert _table(out).loc[3, "steps"] == tr.stats["steps"]
 
 
+def test_graphs_of_one_n_share_one_structure_with_the_graph_as_data():
+    """Samples 3 and 11 (N = 8, other links, two losses and none): one dense structure."""
+    from symbolic.parameters import structure_key
+
+    study = load_study(STUDY)
+    assert worker.engine(study)["dense"]
+    keys = []
+    for k in (3, 11):
+        sc = make_sample(study, k).scenario
+        gains = base_graph_gains(sc, "gains")
+        keys.append((structure_key(sc, gains), structure_key(sc, gains, dense=True)))
+    assert keys[0][0] != keys[1][0] and keys[0][1] == keys[1][1]
+
+
 def test_the_graph_as_data_gives_the_graphs_own_frame_and_checks():
     """Sample 3 (N = 8, two links lost and restored) on the study's loop with the graph as
     data, its frame from the compiled verification outputs, equals the sample's own loop's
