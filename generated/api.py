@@ -70,7 +70,7 @@ from generated.trajectory_file import (
 )
 from generated.values import CodegenSettings, IntegratorSettings, Trajectory, stop_note
 from symbolic.closed_loop import bind, build_closed_loop, fix_parameters
-from symbolic.parameters import structure_key
+from symbolic.parameters import DENSE_MAX_N, structure_key
 from synthesis.gains import Gains
 from synthesis.gains_cache import ensure_gains, scenario_gains
 
@@ -183,8 +183,9 @@ def build(
         For a method with its own libraries (``native``: the closed loop gives only the
         outputs, x(0) and the verification's Functions), the closed loop with the graph as
         data (:func:`symbolic.closed_loop.build_closed_loop`, ``dense``): one symbolic
-        build per N for a study's many graphs. The methods that compile the closed loop
-        keep the graph's own code.
+        build per N for a study's many graphs, up to
+        :data:`~symbolic.parameters.DENSE_MAX_N` followers. The methods that compile the
+        closed loop keep the graph's own code.
     """
     settings = resolve_codegen(sc.N, settings)
     method = method or sc.integration.method
@@ -192,7 +193,7 @@ def build(
     # first: what the method needs of the scenario itself (the per-agent engine's kernels)
     prepared = solvers.get(method).prepare(sc, gains)
     # the cache folder is part of the key: a build of another cache (HITL_BUILD_DIR) is not reused
-    dense = dense_graph and prepared is not None
+    dense = dense_graph and prepared is not None and sc.N <= DENSE_MAX_N
     key = (structure_key(sc, gains, dense=dense), method, settings, cache_root(settings))
     if prepared is not None:  # the method's own libraries: only the closed loop is reused
         if closed_loop is None:

@@ -52,6 +52,9 @@ _CONTROLLER_PARAMS = ("Lambda", "k1", "k2", "gamma", "sigma", "ghat_ref", "u_max
 #: topologies the code holds at least with the graph as data: up to two links lost and
 #: restored (a random-graph study's losses) need no other structure
 DENSE_TOPOLOGIES = 5
+#: the most followers the graph is data for: its code grows with N² (every entry of L + B),
+#: at N = 20 about 40 s of gcc once per N; a larger graph keeps its own sparse code
+DENSE_MAX_N = 24
 #: the gains' graph-dependent numbers: runtime data (``v1``) with the graph as data
 _GRAPH_GAINS = ("L_bar", "Z", "k1", "w")
 
