@@ -57,6 +57,7 @@ FUNCTIONS: dict[str, tuple[int, ...]] = {
 CONSTANTS = {"pi": math.pi}
 _BINOPS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
 MAX_LENGTH = 500
+_UNSET = object()  # no value kept yet (Expr._kept)
 MAX_DEPTH = 40
 
 
@@ -80,6 +81,15 @@ class Expr:
             h = hash((self.text, self.node))
             object.__setattr__(self, "_hash", h)
         return h
+
+    def _kept(self, name: str, compute: Callable[[Expr], Any]) -> Any:
+        """``compute(self)`` kept on this instance, like its hash: the process's memo (whose
+        key lookup compares whole trees) is asked once per instance, not at every call."""
+        value = self.__dict__.get(name, _UNSET)
+        if value is _UNSET:
+            value = compute(self)
+            object.__setattr__(self, name, value)
+        return value
 
     def __getstate__(self) -> dict[str, Any]:
         # the fields only: string hashes are salted per process, so a remembered hash
@@ -111,11 +121,11 @@ class Expr:
         These are the expression's runtime parameters; what remains (:meth:`template`)
         is its structure. Exponents stay structure so ``t**2`` keeps CasADi's integer power.
         """
-        return _literals_of(self)
+        return self._kept("_literals", _literals_of)
 
     def template(self) -> str:
         """The expression's structure: its tree with every literal written ``#``."""
-        return _template_of(self)
+        return self._kept("_template", _template_of)
 
     def numpy(self, t: Any) -> Any:
         """Evaluate with numpy on a float or array ``t`` (overflow gives inf/nan, no warning).
@@ -126,7 +136,7 @@ class Expr:
             Time(s).
         """
         with np.errstate(all="ignore"):
-            return _numpy_function(self)(np.asarray(t, dtype=float))
+            return self._kept("_numpy", _numpy_function)(np.asarray(t, dtype=float))
 
     def breakpoints(self) -> tuple[float, ...]:
         """Times t > 0 where the expression jumps or kinks, when the location is affine in t.
@@ -135,7 +145,7 @@ class Expr:
         where the arguments cross. Used to split an integration at known
         discontinuities; a non-affine argument contributes nothing.
         """
-        return _breakpoints_of(self)
+        return self._kept("_breakpoints", _breakpoints_of)
 
     def is_constant(self) -> bool:
         """True when the expression does not mention ``t``."""

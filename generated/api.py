@@ -70,7 +70,7 @@ from generated.trajectory_file import (
 )
 from generated.values import CodegenSettings, IntegratorSettings, Trajectory, stop_note
 from symbolic.closed_loop import bind, build_closed_loop, fix_parameters
-from symbolic.parameters import structure_key
+from symbolic.parameters import DENSE_MAX_N, structure_key
 from synthesis.gains import Gains
 from synthesis.gains_cache import ensure_gains, scenario_gains
 
@@ -159,6 +159,7 @@ def build(
     method: str | None = None,
     settings: CodegenSettings | None = None,
     closed_loop: Any = None,
+    dense_graph: bool = False,
 ) -> Built:
     """Symbolic closed loop -> C -> shared library (cached) -> loaded Functions.
 
@@ -178,6 +179,13 @@ def build(
         ``jacobian="auto"`` is resolved from ``sc.N`` (:func:`resolve_codegen`).
     closed_loop : ClosedLoop, optional
         A prebuilt closed loop (skips ``build_closed_loop``).
+    dense_graph : bool
+        For a method with its own libraries (``native``: the closed loop gives only the
+        outputs, x(0) and the verification's Functions), the closed loop with the graph as
+        data (:func:`symbolic.closed_loop.build_closed_loop`, ``dense``): one symbolic
+        build per N for a study's many graphs, up to
+        :data:`~symbolic.parameters.DENSE_MAX_N` followers. The methods that compile the
+        closed loop keep the graph's own code.
     """
     settings = resolve_codegen(sc.N, settings)
     method = method or sc.integration.method
@@ -185,10 +193,11 @@ def build(
     # first: what the method needs of the scenario itself (the per-agent engine's kernels)
     prepared = solvers.get(method).prepare(sc, gains)
     # the cache folder is part of the key: a build of another cache (HITL_BUILD_DIR) is not reused
-    key = (structure_key(sc, gains), method, settings, cache_root(settings))
+    dense = dense_graph and prepared is not None and sc.N <= DENSE_MAX_N
+    key = (structure_key(sc, gains, dense=dense), method, settings, cache_root(settings))
     if prepared is not None:  # the method's own libraries: only the closed loop is reused
         if closed_loop is None:
-            closed_loop = _loop_of(sc, gains, key)
+            closed_loop = _loop_of(sc, gains, key, dense)
         return _compile(closed_loop, method, settings, t0, prepared)[0]
     if closed_loop is None and key in BUILDS:
         c = current(BUILDS[key])
@@ -208,12 +217,13 @@ def build(
 _LOOPS = MEMO.namespace("per-agent-loops", 16)
 
 
-def _loop_of(sc: Scenario, gains: Gains, key: tuple) -> Any:
+def _loop_of(sc: Scenario, gains: Gains, key: tuple, dense: bool = False) -> Any:
     """``sc``'s closed loop: one built before for its structure bound to its numbers, or a
-    new symbolic build (kept for the next scenario of the structure)."""
+    new symbolic build (kept for the next scenario of the structure); ``dense``: the graph
+    as data (``key`` its structure key)."""
     cl = _LOOPS.get(key)
     if cl is None or cl.parametric is None:
-        cl = build_closed_loop(sc, gains)
+        cl = build_closed_loop(sc, gains, dense=dense)
     else:
         cl = bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks, key=key[0])
     _LOOPS[key] = cl

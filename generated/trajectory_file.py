@@ -64,7 +64,7 @@ _OUTPUTS = {"u": "u", "b": "b", "et": "et", "eeta": "ebar", "chi": "chi", "V2": 
 #: mapped outputs Functions by (id of the Function, K): the Function, its map and an
 #: evaluation buffer of the map
 #: how many mapped Functions are kept (one per structure and horizon in use)
-_MAPS_KEPT = 4
+_MAPS_KEPT = 24
 _MAPS = MEMO.namespace("mapped-outputs", _MAPS_KEPT)  # core/memo.py
 #: one evaluation at a time uses a kept buffer
 _MAPS_LOCK = threading.Lock()

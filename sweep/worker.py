@@ -197,7 +197,7 @@ def engine(study: Study) -> dict[str, bool]:
     ----------
     study : Study
     """
-    return {"measured": _measured(study)}
+    return {"measured": _measured(study), "dense": study.graph is not None}
 
 
 def _measured(study: Study) -> bool:
@@ -221,7 +221,9 @@ NOLOSS_COLUMNS = (
 )
 
 
-def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> dict[str, Any]:
+def link_baseline(
+    sample: Sample, paths: StudyPaths, measured: bool = False, dense: bool = False
+) -> dict[str, Any]:
     """The sample once more with its graph switches made no-ops (each sets the base
     graph's weight): the same structure, so the same compiled library, and the run the
     losses are compared with (``peak_u_late_nolosses``; NaN without switches). It keeps
@@ -234,7 +236,7 @@ def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
         The drawn sample.
     paths : StudyPaths
         The study's folders.
-    measured : bool
+    measured, dense : bool
         As for :func:`simulate_in_memory`.
     """
     import dataclasses
@@ -256,7 +258,7 @@ def link_baseline(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
     lambda1 = _gains(sc, f"gains of sample {sample.id}", measured).lambda1
     obs = dataclasses.replace(sc.observer, lambda1=float(lambda1))
     twin = dataclasses.replace(sample, scenario=dataclasses.replace(sc, graph=graph, observer=obs))
-    run = run_in_memory(twin, paths, measured=measured)
+    run = run_in_memory(twin, paths, measured=measured, dense=dense)
     # the same (switch time, follower) pairs without the losses: what the formation's own
     # error leaves of the promise "back within 0.05 within 2 s"
     back = switch_summary(switch_recoveries(sc, run.frame, gauge(sc, run.gains)))
@@ -309,7 +311,9 @@ def _run_written(sample: Sample, paths: StudyPaths) -> tuple[Any, Any]:
     return run, res.trajectory
 
 
-def run_in_memory(sample: Sample, paths: StudyPaths, measured: bool = False) -> Any:
+def run_in_memory(
+    sample: Sample, paths: StudyPaths, measured: bool = False, dense: bool = False
+) -> Any:
     """The same steps as :func:`generated.api.run` (gains, build, integrate, outputs)
     writing nothing; the run's folder is where ``--keep-runs`` would write it.
 
@@ -319,7 +323,7 @@ def run_in_memory(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
         The drawn sample (its scenario).
     paths : StudyPaths
         The study's folders.
-    measured : bool
+    measured, dense : bool
         As for :func:`simulate_in_memory`.
 
     Raises
@@ -327,7 +331,7 @@ def run_in_memory(sample: Sample, paths: StudyPaths, measured: bool = False) -> 
     IntegrationError
         The run stopped early.
     """
-    run, traj = simulate_in_memory(sample, paths, measured=measured)
+    run, traj = simulate_in_memory(sample, paths, measured=measured, dense=dense)
     traj.raise_if_incomplete()
     return run
 
@@ -340,8 +344,25 @@ def _gains(sc: Any, where: str, measured: bool) -> Any:
     return base_graph_gains(sc, where) if measured else api.scenario_gains(sc, where)
 
 
+def _frame(built: Any, sc: Any, traj: Any) -> Any:
+    """The run's trajectory frame; its outputs through the verification's compiled Functions
+    of the structure when there are (the same SX outputs as C: the same numbers,
+    ``tests/test_parameters.py``), else the closed loop's."""
+    import dataclasses
+
+    from generated import api
+    from verify.lyapunov import fast_functions, run_digest
+
+    cl = built.closed_loop
+    if cl.parametric is not None and cl.parametric.layout.dense:
+        fast = fast_functions(cl, run_digest(cl.p0, traj.t, traj.x))
+        if fast.compiled:
+            built = dataclasses.replace(built, outputs_p=fast.functions["outputs"])
+    return api.trajectory_frame(built, sc, traj)
+
+
 def simulate_in_memory(
-    sample: Sample, paths: StudyPaths, measured: bool = False
+    sample: Sample, paths: StudyPaths, measured: bool = False, dense: bool = False
 ) -> tuple[Any, Any]:
     """:func:`run_in_memory` without raising for a run that stopped early.
 
@@ -354,6 +375,9 @@ def simulate_in_memory(
     measured : bool
         Gains certified on the sample's base graph
         (:func:`sweep.switched_gains.base_graph_gains`).
+    dense : bool
+        The closed loop with the graph as data (``api.build``'s ``dense_graph``: one per
+        N for a study that draws its graphs; method ``native`` only).
 
     Returns
     -------
@@ -369,9 +393,9 @@ def simulate_in_memory(
     gains = _gains(sc, f"gains of sample {sample.id}", measured)
     codegen = api.resolve_codegen(sc.N)
     method = sc.integration.method
-    built = api.build(sc, gains, method, codegen)
+    built = api.build(sc, gains, method, codegen, dense_graph=dense)
     traj = api.simulate(built, sc, api.integrator_settings(sc, method, codegen))
-    frame = api.trajectory_frame(built, sc, traj) if traj.complete else pd.DataFrame()
+    frame = _frame(built, sc, traj) if traj.complete else pd.DataFrame()
     libs = built.agents[0] if built.agents is not None else (built.library,)
     meta = {"steps": traj.stats.get("steps"), "library": {"key": ";".join(x.key for x in libs)}}
     if built.agents is not None:  # the per-agent engine: the graph's cycles, a new library

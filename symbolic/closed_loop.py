@@ -204,7 +204,7 @@ def graph_coupling(
     W, dW, ddW : tuple of (L_Bᵀ, (a0 ∘ h)ᵀ)
         The weights and their first and second time derivatives (None without switches).
     """
-    L, a = graph_pattern(sc)
+    L, a = graph_pattern(sc, lay.dense)
     nw = int(L.sum() + a.sum())
     w = lay.get(p, "graph")
     times = lay.get(p, "graph_times")
@@ -304,9 +304,10 @@ def _slim(f: ca.Function, keep: Sequence[str] | None) -> ca.Function:
     )
 
 
-def _parameters_at(sc: Scenario, t: Any, pv: Any) -> tuple[Any, dict, Any, Any, ca.Function]:
+def _parameters_at(
+    sc: Scenario, play: ParamLayout, t: Any, pv: Any
+) -> tuple[Any, dict, Any, Any, ca.Function]:
     """Per-agent numbers (npar×N) and their offsets, g/f values, graph weights, the leader."""
-    play = layout_of(sc)
     poff, npar = param_layout(sc.n, saturated(sc))
     P = ca.reshape(play.get(pv, "agents"), npar, sc.N)
     GF = fault_values(sc, play)(t, pv)
@@ -314,9 +315,8 @@ def _parameters_at(sc: Scenario, t: Any, pv: Any) -> tuple[Any, dict, Any, Any, 
     return P, poff, GF, W, leader_function(sc.leader, parametric=True)
 
 
-def _u0_literals(sc: Scenario, pv: Any) -> Any:
+def _u0_literals(play: ParamLayout, pv: Any) -> Any:
     """The literals of the operator's u0 expressions, in input order."""
-    play = layout_of(sc)
     lits = [play.get(pv, k) for k in play.slices if k.startswith("expr:leader.u0")]
     return ca.vertcat(*lits) if lits else type(pv)(0, 1)
 
@@ -360,21 +360,22 @@ def _network(
     t: Any,
     x: Any,
     a: Any,
-    pv: Any,
+    pv: tuple[ParamLayout, Any],
     keep: Sequence[str] | None = None,
 ) -> dict[str, Any]:
     """Symbolic evaluation of the whole network at (t, x, p) (and accelerations a).
 
-    ``pv`` is the parameter vector (:mod:`symbolic.parameters`); ``keep`` names the
-    per-agent outputs needed (all when None, see :func:`_slim`).
+    ``pv`` is the parameter vector's layout and symbol (:mod:`symbolic.parameters`);
+    ``keep`` names the per-agent outputs needed (all when None, see :func:`_slim`).
     """
+    play, pv = pv
     m, n, N = sc.m, sc.n, sc.N
     filtered = sc.options.derivatives == "filtered"
     lay = make_layout(m, n, N, filtered)
     gm: GraphMatrices = graph_matrices(sc.graph, gains)
     og = observer_gains(sc, gains)
-    P, poff, GF, (W, dW, ddW), lead = _parameters_at(sc, t, pv)
-    eta0dot, eta0ddot, y0, y0dot, y0ddot, u0, u0dot = lead(t, x[:m], _u0_literals(sc, pv))
+    P, poff, GF, (W, dW, ddW), lead = _parameters_at(sc, play, t, pv)
+    eta0dot, eta0ddot, y0, y0dot, y0ddot, u0, u0dot = lead(t, x[:m], _u0_literals(play, pv))
     eta0 = x[:m]
     X = ca.reshape(x[m:], lay.agent_size, N)
     E = X[lay.agent_offsets["eta"], :]
@@ -422,6 +423,8 @@ def _network(
         W=W,
         P=P,
         poff=poff,
+        play=play,
+        pv=pv,
         lay=lay,
         funs=funs,
         lead=lead,
@@ -429,7 +432,9 @@ def _network(
     return named
 
 
-def build_closed_loop(scenario: Scenario, gains: Gains, *, assembly: str = "map") -> ClosedLoop:
+def build_closed_loop(
+    scenario: Scenario, gains: Gains, *, assembly: str = "map", dense: bool = False
+) -> ClosedLoop:
     """Build the closed loop of ``scenario`` with ``gains``.
 
     Parameters
@@ -441,6 +446,11 @@ def build_closed_loop(scenario: Scenario, gains: Gains, *, assembly: str = "map"
     assembly : {"map", "flat"}
         ``map`` (default): per-agent Functions applied with ``Function.map`` (MX graph,
         size independent of N); ``flat``: one SX expression with one copy per agent.
+    dense : bool
+        The graph as data (:mod:`symbolic.parameters`): one structure, the same
+        Functions, for every graph of N followers with up to
+        :data:`~symbolic.parameters.DENSE_TOPOLOGIES` topologies (a study's random
+        graphs); the same numbers as the graph's own loop (``tests/test_parameters.py``).
 
     Returns
     -------
@@ -462,10 +472,10 @@ def build_closed_loop(scenario: Scenario, gains: Gains, *, assembly: str = "map"
     filtered = sc.options.derivatives == "filtered"
     lay = make_layout(m, n, N, filtered)
     Sym = ca.MX if assembly == "map" else ca.SX
-    play = layout_of(sc)
+    play = layout_of(sc, dense)
     t, x, a = Sym.sym("t"), Sym.sym("x", lay.nx), Sym.sym("z", n * N)
     pv = Sym.sym("p", play.size)
-    net = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N), pv, keep=("sdot",))
+    net = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N), (play, pv), keep=("sdot",))
     xdot = ca.vertcat(net["eta0dot"], ca.vec(net["sdot"]))  # eq. (3) and every agent
     e0 = Sym(0, 1)
     ode_p = ca.Function("ode", [t, x, pv], [xdot], ["t", "x", "p"], ["xdot"])
@@ -474,18 +484,18 @@ def build_closed_loop(scenario: Scenario, gains: Gains, *, assembly: str = "map"
     )
 
     def build_dae() -> ca.Function:
-        net_dae = _network(sc, gains, assembly, t, x, a, pv, keep=("sdot_dae", "res"))
+        net_dae = _network(sc, gains, assembly, t, x, a, (play, pv), keep=("sdot_dae", "res"))
         xdot_dae = ca.vertcat(net_dae["eta0dot"], ca.vec(net_dae["sdot_dae"]))
         alg = ca.vec(net_dae["res"])
         return ca.Function(
             "dae_dyn", [t, x, a, pv, e0], [xdot_dae, alg, e0, e0], ca.dyn_in(), ca.dyn_out()
         )
 
-    net_out = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N), pv)  # every signal
+    net_out = _network(sc, gains, assembly, t, x, ca.DM.zeros(n * N), (play, pv))  # every signal
     outputs_p = _outputs_function(sc, gains, net_out, t, x, pv)
     blocks = dict(net["funs"])
     blocks["leader"] = net["lead"]
-    key = structure_key(sc, gains)
+    key = structure_key(sc, gains, dense)
     parametric = Parametric(play, ode_p, ode_dyn_p, outputs_p, key, build_dae)
     _remember_parametric((parametric.structure_key, assembly), parametric)
     return bind(parametric, sc, gains, lay, assembly, blocks, key=key)
@@ -506,7 +516,9 @@ def forget_parametric() -> None:
     _PARAMETRIC.clear()
 
 
-def closed_loop_for(sc: Scenario, gains: Gains, assembly: str = "map") -> ClosedLoop:
+def closed_loop_for(
+    sc: Scenario, gains: Gains, assembly: str = "map", dense: bool = False
+) -> ClosedLoop:
     """The closed loop of ``sc``: a parametric loop this process built for the same
     structure (:func:`build_closed_loop` keeps the newest few) bound to ``sc``'s numbers,
     else a new :func:`build_closed_loop`.
@@ -517,11 +529,13 @@ def closed_loop_for(sc: Scenario, gains: Gains, assembly: str = "map") -> Closed
     gains : Gains
     assembly : {"map", "flat"}
         As for :func:`build_closed_loop`.
+    dense : bool
+        The graph as data (as for :func:`build_closed_loop`).
     """
-    key = structure_key(sc, gains)
+    key = structure_key(sc, gains, dense)
     par = _PARAMETRIC.get((key, assembly))
     if par is None:
-        return build_closed_loop(sc, gains, assembly=assembly)
+        return build_closed_loop(sc, gains, assembly=assembly, dense=dense)
     return bind(par, sc, gains, assembly=assembly, key=key)
 
 
@@ -583,7 +597,8 @@ def bind(
     ScenarioError
         If ``sc`` has another structure.
     """
-    key = key or structure_key(sc, gains)
+    dense = par.layout.dense
+    key = key or structure_key(sc, gains, dense)
     if key != par.structure_key:
         raise ScenarioError(
             sc.path,
@@ -592,7 +607,7 @@ def bind(
             "build a closed loop for this scenario",
         )
     lay = lay or make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered")
-    p0 = param_values(sc, gains)
+    p0 = param_values(sc, gains, dense)
     outputs = fix_parameters(par.outputs, p0)
     x0 = initial_state(sc, lay, outputs)
     qdd0 = np.array(outputs(0.0, x0)[outputs.name_out().index("qdot")]).reshape(-1)  # agent-major
@@ -625,16 +640,15 @@ def _outputs_function(
     etilde = ehat - e_eta  # UIO error, eq. (8)
     Tinv = ca.DM(np.linalg.inv(np.atleast_2d(gains.T)))
     Om = ca.DM(np.atleast_2d(gains.Omega))
-    z = ca.DM(np.diag(np.atleast_2d(gains.Z)).reshape(-1, 1))
     phi = X[lay.agent_offsets["phi"], :]
     eps = ca.mtimes(ehat, ca.DM(ca.Sparsity.diag(gm.N), gm.h.tolist()))  # ε_η = (H ⊗ I) ê_η
     abar = net["P"][net["poff"]["abar"], :].T  # ᾱ1i, a runtime parameter
-    lbar = ca.DM(gm.l_bar.reshape(-1, 1))
+    z, lbar, k1 = _v1_coefficients(net["play"], net["pv"], gains, gm)
     lam2 = float(gains.lambda2)
     V1 = (
         ca.mtimes(ca.sum1(eps * ca.mtimes(Tinv, eps)), z)
         + 2 * lam2 * ca.sum1(lbar * z * phi.T / abar)
-        + float(gains.k1) * ca.sum2(ca.sum1(etilde * ca.mtimes(Om, etilde)))
+        + k1 * ca.sum2(ca.sum1(etilde * ca.mtimes(Om, etilde)))
     )  # eq. (17)
     GF = net["GF"]
     # per-agent network signals, transposed to N×k (row i = follower i)
@@ -658,6 +672,16 @@ def _outputs_function(
         "track": (X[lay.agent_offsets["p"], :] - ca.repmat(net["y0"], 1, sc.N) - net["b"]).T,
     }
     return ca.Function("outputs", [t, x, pv], list(items.values()), ["t", "x", "p"], list(items))
+
+
+def _v1_coefficients(play: ParamLayout, pv: Any, gains: Gains, gm: GraphMatrices) -> tuple:
+    """V1's z, l̄ (N×1) and k1 (eq. (17)): constants of the code, or read from p's ``v1``
+    block with the graph as data (the same operations on the same numbers)."""
+    if not play.dense:
+        z = ca.DM(np.diag(np.atleast_2d(gains.Z)).reshape(-1, 1))
+        return z, ca.DM(gm.l_bar.reshape(-1, 1)), float(gains.k1)
+    v1, N = play.get(pv, "v1"), gm.N
+    return v1[:N], v1[N : 2 * N], v1[2 * N]
 
 
 def initial_state(sc: Scenario, lay: StateLayout, outputs: ca.Function) -> np.ndarray:

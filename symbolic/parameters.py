@@ -12,10 +12,15 @@ through one flat vector ``p`` instead of being written into the generated C:
 * ``graph``, ``graph_times``, ``graph_fade``: the nonzero weights of ``L + B`` and
   ``a0 ∘ h`` (the coupling of eq. (6)) of every topology a switching graph reaches, the
   times it switches and the time a switch's weights fade over (``graph.link_fade``; only
-  with switches).
+  with switches);
+* with the graph as data (``dense=True``, a study's many graphs): ``graph`` holds every
+  entry of ``L + B`` and ``a0 ∘ h``, zeros included, for at least
+  :data:`DENSE_TOPOLOGIES` topologies (the last one repeated from t = ∞), and ``v1``
+  the graph's coefficients of V1 (eq. (17): Lemma 3's z, the diagonal l̄ of L̄ and k1), so
+  one structure serves every graph of N followers.
 
 What is left is the *structure*: the graph's pattern (the union over its topologies)
-and number of topologies, the follower models, the
+and number of topologies (with the graph as data: only N), the follower models, the
 options, the expressions' templates, the leader matrices and the certified gains.
 :func:`structure_key` hashes exactly that, so two scenarios with equal keys are the
 same code with different ``p`` (tests/test_parameters.py checks it against the
@@ -36,6 +41,7 @@ from core.errors import ScenarioError
 from core.expressions import Expr
 from core.graph import pinned_laplacian
 from core.scenario import Scenario
+from symbolic.network import graph_matrices
 from symbolic.observer import ObserverGains, gain_pattern, gain_values
 from synthesis.gains import Gains
 
@@ -43,6 +49,14 @@ from synthesis.gains import Gains
 _OBSERVER_PARAMS = ("alpha1", "alpha1_bar", "phi_min", "phi0")
 #: controller settings that are runtime parameters (``u_max``: only its presence is structure)
 _CONTROLLER_PARAMS = ("Lambda", "k1", "k2", "gamma", "sigma", "ghat_ref", "u_max")
+#: topologies the code holds at least with the graph as data: up to two links lost and
+#: restored (a random-graph study's losses) need no other structure
+DENSE_TOPOLOGIES = 5
+#: the most followers the graph is data for: its code grows with N² (every entry of L + B),
+#: at N = 20 about 40 s of gcc once per N; a larger graph keeps its own sparse code
+DENSE_MAX_N = 24
+#: the gains' graph-dependent numbers: runtime data (``v1``) with the graph as data
+_GRAPH_GAINS = ("L_bar", "Z", "k1", "w")
 
 
 @dataclass(frozen=True)
@@ -55,10 +69,13 @@ class ParamLayout:
         Name -> slice of p (``"agents"``, ``"graph"``, ``"expr:<where>"``).
     size : int
         Length of p.
+    dense : bool
+        The graph as data (:func:`layout_of`).
     """
 
     slices: dict[str, slice]
     size: int
+    dense: bool = False
 
     def get(self, p: Any, name: str) -> Any:
         """The part of ``p`` named ``name`` (numpy array or CasADi vector).
@@ -164,14 +181,18 @@ def graph_weights(adjacency: Any, pinning: Any, h: np.ndarray) -> tuple[np.ndarr
     return pinned_laplacian(A, a0).toarray().T, (a0 * h).reshape(1, -1)
 
 
-def graph_pattern(sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
+def graph_pattern(sc: Scenario, dense: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Where ``L_Bᵀ`` and ``(a0 ∘ h)ᵀ`` can be nonzero over every topology the run reaches.
 
     Parameters
     ----------
     sc : Scenario
+    dense : bool
+        The graph as data: every entry.
     """
     N = sc.N
+    if dense:
+        return np.ones((N, N), bool), np.ones((1, N), bool)
     L, a = np.zeros((N, N), bool), np.zeros((1, N), bool)
     for top in sc.graph.topologies():
         LBt, a0h = graph_weights(top.adjacency, top.pinning, np.ones(N))
@@ -180,7 +201,22 @@ def graph_pattern(sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
     return L, a
 
 
-def graph_values(sc: Scenario, h: np.ndarray, adjacency: Any, pinning: Any) -> np.ndarray:
+def topology_count(sc: Scenario, dense: bool = False) -> int:
+    """Topologies the code holds: the graph's, at least :data:`DENSE_TOPOLOGIES` when dense.
+
+    Parameters
+    ----------
+    sc : Scenario
+    dense : bool
+        The graph as data.
+    """
+    K = len(sc.graph.topologies())
+    return max(K, DENSE_TOPOLOGIES) if dense else K
+
+
+def graph_values(
+    sc: Scenario, h: np.ndarray, adjacency: Any, pinning: Any, dense: bool = False
+) -> np.ndarray:
     """The ``graph`` weights of one topology on ``sc``'s pattern (:func:`graph_pattern`).
 
     A link of the pattern that the topology lacks gets weight 0 (a cut link); a link
@@ -194,13 +230,15 @@ def graph_values(sc: Scenario, h: np.ndarray, adjacency: Any, pinning: Any) -> n
         Gauge signs.
     adjacency, pinning : ndarray
         The topology.
+    dense : bool
+        The graph as data (every entry).
 
     Raises
     ------
     ScenarioError
         If the topology has a link outside the pattern.
     """
-    L, a = graph_pattern(sc)
+    L, a = graph_pattern(sc, dense)
     LBt, a0h = graph_weights(adjacency, pinning, h)
     if np.any(LBt[~L] != 0) or np.any(a0h[~a] != 0):
         raise ScenarioError(
@@ -209,62 +247,87 @@ def graph_values(sc: Scenario, h: np.ndarray, adjacency: Any, pinning: Any) -> n
     return np.concatenate([LBt.T[L.T], a0h.T[a.T]])  # CasADi's column-major nonzeros
 
 
-def nonzeros_count(sc: Scenario) -> int:
+def nonzeros_count(sc: Scenario, dense: bool = False) -> int:
     """Weights per topology in the ``graph`` block.
 
     Parameters
     ----------
     sc : Scenario
+    dense : bool
+        The graph as data.
     """
-    L, a = graph_pattern(sc)
+    L, a = graph_pattern(sc, dense)
     return int(L.sum() + a.sum())
 
 
-def layout_of(sc: Scenario) -> ParamLayout:
+def layout_of(sc: Scenario, dense: bool = False) -> ParamLayout:
     """The parameter layout of ``sc`` (sizes only: equal for equal structures).
 
     ``graph`` holds the weights of every topology in turn, ``graph_times`` the
     switching times between them and ``graph_fade`` the fade's duration
-    (:func:`symbolic.closed_loop.graph_coupling`).
+    (:func:`symbolic.closed_loop.graph_coupling`); with the graph as data, ``v1`` V1's
+    coefficients of the graph (z, l̄, k1).
 
     Parameters
     ----------
     sc : Scenario
+    dense : bool
+        The graph as data (:mod:`symbolic.parameters`).
     """
     _, npar = param_layout(sc.n, sc.controller.u_max is not None)
-    K = len(sc.graph.topologies())
-    sizes = [("agents", npar * sc.N), ("graph", K * nonzeros_count(sc)), ("graph_times", K - 1)]
-    sizes.append(("graph_fade", 1 if K > 1 else 0))
+    K = topology_count(sc, dense)
+    sizes = [("agents", npar * sc.N), ("graph", K * nonzeros_count(sc, dense))]
+    sizes += [("graph_times", K - 1), ("graph_fade", 1 if K > 1 else 0)]
+    sizes += [("v1", 2 * sc.N + 1)] if dense else []
     sizes += [(k, len(e.literals())) for k, e in expressions(sc).items()]
     slices, k = {}, 0
     for name, size in sizes:
         slices[name] = slice(k, k + size)
         k += size
-    return ParamLayout(slices, k)
+    return ParamLayout(slices, k, dense)
 
 
-def param_values(sc: Scenario, gains: Gains) -> np.ndarray:
+def param_values(sc: Scenario, gains: Gains, dense: bool = False) -> np.ndarray:
     """The parameter vector p of ``sc`` (layout :func:`layout_of`).
 
     Parameters
     ----------
     sc : Scenario
     gains : Gains
-        Supplies the gauge h of signed graphs.
+        Supplies the gauge h of signed graphs (with the graph as data, also V1's z, l̄, k1).
+    dense : bool
+        The graph as data: every entry's weight, the last topology repeated from t = ∞ up to
+        :func:`topology_count` (its jump is 0: the same weights at every t).
     """
-    lay = layout_of(sc)
+    lay = layout_of(sc, dense)
     p = np.zeros(lay.size)
     p[lay.slices["agents"]] = param_matrix(sc).ravel(order="F")  # agent-major
     h = np.diag(np.atleast_2d(gains.H)).astype(float)
     tops = sc.graph.topologies()
-    p[lay.slices["graph"]] = np.concatenate(
-        [graph_values(sc, h, top.adjacency, top.pinning) for top in tops]
-    )
-    p[lay.slices["graph_times"]] = [top.t_start for top in tops[1:]]
-    p[lay.slices["graph_fade"]] = [sc.graph.link_fade] if len(tops) > 1 else []
+    vals = [graph_values(sc, h, top.adjacency, top.pinning, dense) for top in tops]
+    pad = topology_count(sc, dense) - len(tops)
+    p[lay.slices["graph"]] = np.concatenate(vals + vals[-1:] * pad)
+    p[lay.slices["graph_times"]] = [top.t_start for top in tops[1:]] + [np.inf] * pad
+    p[lay.slices["graph_fade"]] = [sc.graph.link_fade] if len(tops) + pad > 1 else []
+    if dense:
+        p[lay.slices["v1"]] = v1_coefficients(sc, gains)
     for name, e in expressions(sc).items():
         p[lay.slices[name]] = e.literals()
     return p
+
+
+def v1_coefficients(sc: Scenario, gains: Gains) -> np.ndarray:
+    """V1's numbers that depend on the graph (eq. (17)): Lemma 3's z, the diagonal l̄ of
+    L̄ = H(L + B)H and k1, as the ``v1`` block of p.
+
+    Parameters
+    ----------
+    sc : Scenario
+    gains : Gains
+    """
+    z = np.diag(np.atleast_2d(gains.Z))
+    lbar = graph_matrices(sc.graph, gains).l_bar  # checks L̄ against the graph
+    return np.concatenate([z, lbar, [float(gains.k1)]])
 
 
 # ----------------------------------------------------------------------------- structure
@@ -285,13 +348,16 @@ def _section(obj: Any, skip: tuple[str, ...]) -> dict[str, Any]:
     return {f.name: _plain(getattr(obj, f.name)) for f in fields(obj) if f.name not in skip}
 
 
-def structure(sc: Scenario, gains: Gains) -> dict[str, Any]:
+def structure(sc: Scenario, gains: Gains, dense: bool = False) -> dict[str, Any]:
     """Everything of ``sc`` and ``gains`` that is written into the generated code.
 
     Parameters
     ----------
     sc : Scenario
     gains : Gains
+    dense : bool
+        The graph as data: of the graph only N and the topologies held, of the gains
+        not those that depend on the graph (:data:`_GRAPH_GAINS`).
     """
     L = sc.leader
     trace = None if L.u0_trace is None else hashlib.sha256(L.u0_trace.tobytes()).hexdigest()
@@ -307,8 +373,8 @@ def structure(sc: Scenario, gains: Gains) -> dict[str, Any]:
             **({"u0_rise": L.u0_rise} if L.u0_hold and L.u0_rise > 0 else {}),
         },
         "graph": {
-            "pattern": [m.astype(int).tolist() for m in graph_pattern(sc)],
-            "topologies": len(sc.graph.topologies()),
+            "pattern": "dense" if dense else [m.astype(int).tolist() for m in graph_pattern(sc)],
+            "topologies": topology_count(sc, dense),
         },
         "followers": [
             {
@@ -325,19 +391,21 @@ def structure(sc: Scenario, gains: Gains) -> dict[str, Any]:
             "saturated": sc.controller.u_max is not None,
         },
         "options": _section(sc.options, ()),
-        "gains": _section(gains, ("certificate", "info")),
+        "gains": _section(gains, ("certificate", "info", *(_GRAPH_GAINS if dense else ()))),
     }
 
 
-def structure_key(sc: Scenario, gains: Gains) -> str:
+def structure_key(sc: Scenario, gains: Gains, dense: bool = False) -> str:
     """SHA-256 of :func:`structure`: equal keys, equal generated code.
 
     Parameters
     ----------
     sc : Scenario
     gains : Gains
+    dense : bool
+        The graph as data.
     """
-    text = json.dumps(structure(sc, gains), sort_keys=True, default=str)
+    text = json.dumps(structure(sc, gains, dense), sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
 
 

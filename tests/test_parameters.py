@@ -155,3 +155,61 @@ def test_a_second_scenario_reuses_the_compiled_library(pair, tmp_path):
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * np.max(np.abs(want)))
     tr = api.simulate(second, b, api.integrator_settings(b, "cvodes"))
     assert tr.complete
+
+
+#: other graphs of the paper's N: a link lost and restored (raw switching); another graph
+#: (a cycle 5 -> 1 and a second pinned follower) with the pinning of follower 2 lost and
+#: restored through the fade
+OTHER_GRAPHS = {
+    "lost-restored": {
+        "graph.switches": [
+            {"time": 0.3, "follower": 4, "neighbour": 2, "weight": 0.0},
+            {"time": 0.6, "follower": 4, "neighbour": 2, "weight": 1.0},
+        ],
+        "graph.link_fade": 0.0,
+    },
+    "cycle-faded": {
+        "graph.adjacency": [
+            [0.0, 0.0, 0.0, 0.0, 0.5],
+            [1.0, 0.0, 0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0, 0.0],
+        ],
+        "graph.pinning": [1.0, 2.0, 0.0, 0.0, 0.0],
+        "graph.switches": [
+            {"time": 0.3, "follower": 2, "neighbour": 0, "weight": 0.0},
+            {"time": 0.6, "follower": 2, "neighbour": 0, "weight": 2.0},
+        ],
+        "graph.link_fade": 0.2,
+    },
+}
+
+
+@pytest.mark.parametrize("name", sorted(OTHER_GRAPHS))
+def test_the_graph_as_data_is_the_graphs_own_loop(pair, name, tmp_path):
+    # one structure serves every graph of N followers: the dense loop built for the paper's
+    # graph, bound to another graph with switches, is that graph's own (sparse) loop, the
+    # same numbers at every time (before, at, inside and after the switches) and state
+    from verify.lyapunov import _derivative_p, _expanded
+
+    a, ga, *_ = pair
+    b = api.load(PAPER, overrides=OTHER_GRAPHS[name], variant=name)
+    gb, _ = api.ensure_gains(b, tmp_path)
+    assert structure_key(b, gb) != structure_key(a, ga)
+    assert structure_key(b, gb, dense=True) == structure_key(a, ga, dense=True)
+    dense = bind(build_closed_loop(a, ga, dense=True).parametric, b, gb)
+    own = build_closed_loop(b, gb)
+    np.testing.assert_array_equal(dense.x0, own.x0)
+    V = [
+        _derivative_p(_expanded(c.parametric.outputs), _expanded(c.parametric.ode))
+        for c in (dense, own)
+    ]
+    rng = np.random.default_rng(7)
+    for t in (0.0, 0.3 - 1e-9, 0.3, 0.41, 0.6, 0.75, 2.0):
+        for x in states(own, rng, k=2):
+            for f, g in ((dense.ode, own.ode), (dense.outputs, own.outputs)):
+                for u, v in zip(f.call([t, x]), g.call([t, x]), strict=True):
+                    np.testing.assert_array_equal(np.array(u), np.array(v))
+            for u, v in zip(V[0].call([t, x, dense.p0]), V[1].call([t, x, own.p0]), strict=True):
+                np.testing.assert_array_equal(np.array(u), np.array(v))

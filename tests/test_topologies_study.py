@@ -109,6 +109,48 @@ def test_steps_equal_the_engine_called_directly(out):
     assert _table(out).loc[3, "steps"] == tr.stats["steps"]
 
 
+def test_graphs_of_one_n_share_one_structure_with_the_graph_as_data():
+    """Samples 3 and 11 (N = 8, other links, two losses and none): one dense structure."""
+    from symbolic.parameters import structure_key
+
+    study = load_study(STUDY)
+    assert worker.engine(study)["dense"]
+    keys = []
+    for k in (3, 11):
+        sc = make_sample(study, k).scenario
+        gains = base_graph_gains(sc, "gains")
+        keys.append((structure_key(sc, gains), structure_key(sc, gains, dense=True)))
+    assert keys[0][0] != keys[1][0] and keys[0][1] == keys[1][1]
+
+
+def test_the_graph_as_data_gives_the_graphs_own_frame_and_checks():
+    """Sample 3 (N = 8, two links lost and restored) on the study's loop with the graph as
+    data, its frame from the compiled verification outputs, equals the sample's own loop's
+    frame (CasADi's virtual machine) and bounds table, bit for bit."""
+    from verify import lyapunov, pipeline
+
+    sc = make_sample(load_study(STUDY), 3).scenario
+    gains = base_graph_gains(sc, "gains")
+    codegen = api.resolve_codegen(sc.N)
+    own = api.build(sc, gains, "native", codegen)
+    dense = api.build(sc, gains, "native", codegen, dense_graph=True)
+    assert own.closed_loop.parametric.structure_key != dense.closed_loop.parametric.structure_key
+    traj = api.simulate(own, sc, api.integrator_settings(sc, "native", codegen))
+    frames = [worker._frame(dense, sc, traj), api.trajectory_frame(own, sc, traj)]
+    cl = dense.closed_loop
+    assert lyapunov.fast_functions(cl, lyapunov.run_digest(cl.p0, traj.t, traj.x)).compiled
+    pd.testing.assert_frame_equal(*frames, check_exact=True)
+    tables = [
+        pipeline.verify_run(
+            pipeline.Run(
+                sc, frames[0], traj.x, {}, Path("x"), gains=gains, closed_loop=b.closed_loop
+            )
+        ).table
+        for b in (dense, own)
+    ]
+    pd.testing.assert_frame_equal(*tables, check_exact=True)
+
+
 def test_a_rerun_runs_only_the_missing_samples(out):
     before = _table(out)
     run_study(STUDY, out_root=out.parent, ids=[*IDS, 11], workers=1)

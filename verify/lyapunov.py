@@ -39,10 +39,12 @@ from verify.bounds import VerifyConfig, VerifyError
 
 #: a structure's verify Functions are compiled to C from its this-many-th verification in one
 #: process: a study's samples share one structure, a single run (one use) stays in CasADi's SX
-#: virtual machine (docs/verification.md, 'Evaluation cost')
+#: virtual machine (docs/verification.md, 'Evaluation cost'); a loop with the graph as data
+#: (a study's random graphs, one structure per N) is compiled from its first verification
 COMPILE_FROM_USE = 2
-#: structures whose Functions are kept per process (a random-graph study has one per sample)
-CACHE_SIZE = 8
+#: structures whose Functions are kept per process (a random-graph study with the graph as
+#: data has one per N)
+CACHE_SIZE = 24
 
 
 @dataclass(frozen=True)
@@ -305,8 +307,9 @@ def fast_functions(cl: Any, run: str = "") -> FastFunctions:
     Returns
     -------
     FastFunctions
-        From the :data:`COMPILE_FROM_USE`-th distinct run of the structure its Functions
-        are compiled to C (:func:`generated.codegen.build_library`, content-hash cache).
+        From the :data:`COMPILE_FROM_USE`-th distinct run of the structure (the first with
+        the graph as data) its Functions are compiled to C
+        (:func:`generated.codegen.build_library`, content-hash cache).
     """
     par = cl.parametric
     entry = _FAST.get(par.structure_key)
@@ -317,7 +320,7 @@ def fast_functions(cl: Any, run: str = "") -> FastFunctions:
     _remember(_FAST, par.structure_key, entry)
     if not entry.compiled:
         entry.runs.add(run)
-        if len(entry.runs) >= COMPILE_FROM_USE:
+        if len(entry.runs) >= (1 if par.layout.dense else COMPILE_FROM_USE):
             _compile(entry)
     return entry
 
@@ -375,7 +378,8 @@ def evaluate_p(
     if last is None or last[0] != head or not all(map(_same_bits, last[1], (t, X, p))):
         fmap = entry.maps.get((fname, K))
         if fmap is None:  # p is not mapped: one copy serves the K samples
-            fmap = entry.maps[(fname, K)] = fun.map(f"{fun.name()}_map", "serial", K, [2], [])
+            shared = [False, False, True]  # map(n, reduce_in, reduce_out): built in ms
+            fmap = entry.maps[(fname, K)] = fun.map(K, shared, [False] * fun.n_out())
         vals = _blocks(fun, _call_buffers(fmap, t, X, p), K)
         last = _LAST_EVALUATION["last"] = (head, (t.copy(), X.copy(), p.copy()), vals)
     return [a.copy(order="K") for a in last[2][part]]
