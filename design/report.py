@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from core.artifacts import atomic_write_text
-from synthesis.design import RobustTerm, layer_residual
+from synthesis.design import ObserverDesign, RobustTerm, layer_residual
 
 if TYPE_CHECKING:
     from core.provenance import Provenance
@@ -219,6 +219,18 @@ def _gamma_lines(d: DesignResult) -> list[str]:
     return out
 
 
+def _observer_lines(od: ObserverDesign, sc: Scenario) -> list[str]:
+    """The observer's chosen rates and gains, and its robust term's design."""
+    return [
+        f"Chosen: δ1 = {od.delta1:.4g}, δ2 = {od.delta2:.4g} (δ̂ = δ/2), "
+        f"‖Q‖ = {np.linalg.norm(od.Q, 2):.4g} ({'designed' if od.designed_Q else 'the scenario’s, kept'}), "
+        f"‖Θ‖ = {np.linalg.norm(od.Theta, 2):.4g} ({'designed' if od.designed_Theta else 'the scenario’s, kept'}); "
+        f"the scenario's δ1 = {sc.observer.delta1:g}, δ2 = {sc.observer.delta2:g}.",
+        "",
+        *_robust_lines(od.robust, sc),
+    ]
+
+
 def _robust_lines(r: RobustTerm, sc: Scenario) -> list[str]:
     """The robust term's design: λ2, φ_min, and the layer residual against the scenario's."""
     alpha = sc.design.alpha if sc.design.alpha is not None else sc.leader.alpha
@@ -261,12 +273,7 @@ def write_report(d: DesignResult, folder: Path, prov: Provenance) -> Path:
         "",
         "## Observer (LMIs (15), (16))",
         "",
-        f"Chosen: δ1 = {od.delta1:.4g}, δ2 = {od.delta2:.4g} (δ̂ = δ/2), "
-        f"‖Q‖ = {np.linalg.norm(od.Q, 2):.4g} ({'designed' if od.designed_Q else 'the scenario’s, kept'}), "
-        f"‖Θ‖ = {np.linalg.norm(od.Theta, 2):.4g} ({'designed' if od.designed_Theta else 'the scenario’s, kept'}); "
-        f"the scenario's δ1 = {sc.observer.delta1:g}, δ2 = {sc.observer.delta2:g}.",
-        "",
-        *_robust_lines(od.robust, sc),
+        *_observer_lines(od, sc),
         "",
         "| ‖Q‖ cap | largest δ1 | ‖Θ‖ cap | largest δ2 |",
         "|---|---|---|---|",

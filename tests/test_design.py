@@ -538,7 +538,7 @@ def test_given_gains_runs_the_base_gains_with_and_without_the_losses(monkeypatch
         seen.append(("run", float(sample.scenario.controller.k1[0, 0])))
         return {"peak_u_late": 1.0}
 
-    def baseline(sample, paths, measured=False):
+    def baseline(sample, paths, **engine):
         seen.append(("no losses", float(sample.scenario.controller.k1[0, 0])))
         return {"peak_u_late_nolosses": 2.0}
 
@@ -637,7 +637,7 @@ def test_a_failed_no_loss_twin_is_named_in_the_status(monkeypatch, tmp_path):
         "[graph.losses]\ncount = [1, 1]\ntime = { uniform = [3.0, 5.0] }\nbaseline = true\n"
     )
 
-    def twin(sample, paths, measured=False):
+    def twin(sample, paths, **engine):
         raise IntegrationError("native failed after t = 0 s")
 
     monkeypatch.setattr(W, "_simulate_and_verify", lambda *a: {"steps": 1})
