@@ -204,7 +204,7 @@ static void hitl_ls_attach(hitl_cvode *s, void *content, int (*setup)(SUNLinearS
    limit) across which J changes by orders of magnitude, and Newton iterates from a J of
    the far side pass the convergence test (it measures corrections, not residuals) with
    the step's derivative history wrong. Measured on the start-up of
-   tests/data/links-design-0032-no-losses.toml: one ghat_i's history rate 2e5 where its
+   tests/data/startup-projection-kink.toml: one ghat_i's history rate 2e5 where its
    right-hand side was 0, error-test failures down to h = 1e-10, the run lost. */
 static int hitl_cvode_options(hitl_cvode *s, void *data, const hitl_options *o,
                               CVLsJacFn jac) {
