@@ -241,7 +241,8 @@ def _robust_lines(r: RobustTerm, sc: Scenario) -> list[str]:
         f"(the scenario's {r.given_lambda2:.4g}, {r.given_phi_min:.4g}; layer slope "
         f"λ2/φ_min = {r.slope:.4g} kept). Residual ‖Qê‖ at which the term balances "
         f"‖u0‖ = α = {alpha:g} without the linear term: {_fmt(mine)} "
-        f"(the scenario's: {_fmt(given)}; with λ2 = α only the linear term bounds it).",
+        f"(the scenario's: {_fmt(given)}"
+        + ("; with λ2 = α only the linear term bounds it)." if math.isinf(given) else ")."),
     ]
 
 

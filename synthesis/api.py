@@ -70,14 +70,39 @@ def _lmi16(
     return check_given_Theta(Phi, A0, C0, np.array(obs.Theta, dtype=float), obs.delta2)
 
 
+def relative_margin(obs: Observer) -> float:
+    """The relative margin every strict inequality keeps: the scenario's, at least
+    :data:`MIN_REL_MARGIN`.
+
+    Parameters
+    ----------
+    obs : Observer
+        The scenario's observer settings (its ``margin``).
+    """
+    return max(obs.margin, MIN_REL_MARGIN)
+
+
+def theorem1_lambda2(obs: Observer, alpha: float) -> float:
+    """λ2 ≥ α (Theorem 1): the scenario's, else (1 + margin)α.
+
+    Parameters
+    ----------
+    obs : Observer
+        The scenario's observer settings (its ``lambda2`` and ``margin``).
+    alpha : float
+        The bound on ‖u0‖.
+    """
+    return (1.0 + relative_margin(obs)) * alpha if obs.lambda2 is None else float(obs.lambda2)
+
+
 def _theorem1_gains(
     obs: Observer, alpha: float, w: float, margin: float
 ) -> tuple[float, float, list[str]]:
     """λ1 > λ̄1/w and λ2 ≥ α (Theorem 1), given ones kept; the notes they raise."""
     lambda1 = (1.0 + margin) * obs.lambda_bar1 / w if obs.lambda1 is None else float(obs.lambda1)
+    lambda2 = theorem1_lambda2(obs, alpha)
     if obs.lambda2 is None:
-        return lambda1, (1.0 + margin) * alpha, []
-    lambda2 = float(obs.lambda2)
+        return lambda1, lambda2, []
     notes = []
     if lambda2 == alpha:
         notes.append(
@@ -179,7 +204,7 @@ def synthesize(scenario: Scenario, *, strict: bool = False) -> Gains:
     """
     lead, obs = scenario.leader, scenario.observer
     A0, B0, C0 = (np.array(M, dtype=float) for M in (lead.A0, lead.B0, lead.C0))
-    margin = max(obs.margin, MIN_REL_MARGIN)
+    margin = relative_margin(obs)
     lc = check_leader(A0, B0, C0)  # Assumption 2
     net = check_network(scenario.graph.adjacency, scenario.graph.pinning)  # Assumption 1
     l3 = lemma3(net.L_bar)  # both variants; the larger w is used

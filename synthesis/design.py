@@ -28,6 +28,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from core.errors import SynthesisError
+from synthesis.api import theorem1_lambda2
 from synthesis.lmi_matrices import lmi15_matrix, lmi16_matrix
 
 #: relative width at which the bisection on δ stops
@@ -328,8 +329,8 @@ def layer_residual(lambda1: float, lambda2: float, phi: float, u: float) -> floa
     """The ‖Qê‖ at which eq. (9)'s v balances an unknown input of size u in the layer.
 
     The positive root s of λ1 s + λ2 s/(s + φ) = u: the observer's quasi-steady residual
-    for a follower that hears the leader while u0 moves slowly (docs/synthesis.md, 'The
-    robust term'). With λ2 > u it is below φu/(λ2 − u) for every λ1 ≥ 0; with λ2 = u it
+    for a follower that hears the leader while u0 moves slowly (docs/synthesis.md,
+    'Observer: the robust term'). With λ2 > u it is below φu/(λ2 − u) for every λ1 ≥ 0; with λ2 = u it
     is about sqrt(uφ/λ1).
 
     Parameters
@@ -343,6 +344,8 @@ def layer_residual(lambda1: float, lambda2: float, phi: float, u: float) -> floa
     """
     if lambda1 == 0.0:
         return phi * u / (lambda2 - u) if lambda2 > u else float("inf")
+    # eq. (9) at rest in the layer: λ1 s² + (λ1φ + λ2 − u)s − uφ = 0, its positive root
+    # in the form that does not cancel
     b = lambda1 * phi + lambda2 - u
     return float(2.0 * u * phi / (b + np.sqrt(b * b + 4.0 * lambda1 * u * phi)))
 
@@ -387,7 +390,7 @@ def design_robust_term(obs, alpha: float, factor: float) -> RobustTerm:  # noqa:
     factor : float
         ``design.robust_gain`` (> 1).
     """
-    given = (1.0 + max(obs.margin, 1e-3)) * alpha if obs.lambda2 is None else float(obs.lambda2)
+    given = theorem1_lambda2(obs, alpha)
     lambda2 = factor * alpha
     phi_min = float(obs.phi_min) * lambda2 / given
     if np.any(np.asarray(obs.phi0, float) <= phi_min):
