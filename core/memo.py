@@ -10,7 +10,7 @@ steps its loop in a thread of its own). ``MEMO.clear()`` empties all of them (te
 process that wants its memory back). A pure function is remembered with the decorator
 ``@MEMO.memoize("name", capacity)``: its namespace is keyed by the call's arguments.
 
-The on-disk build cache (compiled libraries, derivations; ``generated/build_cache.py``) is
+The on-disk build cache (compiled libraries, derivations; ``core/build_cache.py``) is
 a different thing: shared by processes and checkouts, keyed by content hashes.
 """
 

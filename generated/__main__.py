@@ -74,7 +74,7 @@ def main(argv: list[str]) -> int:
 
 def _cache(clear: bool) -> int:
     """Print the build cache root; with ``clear``, empty it first and say how many entries went."""
-    from generated.build_cache import clear_cache, default_build_root
+    from core.build_cache import clear_cache, default_build_root
 
     root = default_build_root()
     if clear:

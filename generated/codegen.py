@@ -9,7 +9,7 @@ model is never rebuilt; a changed one gets a new key, so it is never served stal
 
 The steps live in their own modules: the C text (:mod:`generated.csource`), the
 compiler (:mod:`generated.compiler`), the cache's folders and entries
-(:mod:`generated.build_cache`) and loading a library with its dependencies
+(:mod:`core.build_cache`) and loading a library with its dependencies
 (:mod:`generated.shared_library`).
 """
 
@@ -31,9 +31,7 @@ import casadi as ca
 
 from core import artifacts
 from core.artifacts import sha256_file
-from core.errors import BuildError
-from core.private_files import make_private_dir, seal
-from generated.build_cache import (
+from core.build_cache import (
     LIBRARY_NAME,
     MANIFEST_NAME,
     SOURCE_NAME,
@@ -47,6 +45,8 @@ from generated.build_cache import (
     private_root,
     remove_stale_builds,
 )
+from core.errors import BuildError
+from core.private_files import make_private_dir, seal
 from generated.compiler import Toolchain, compile_source, compiler_identity
 from generated.csource import generate_source
 from generated.shared_library import load_problem, preload
@@ -109,7 +109,7 @@ class Library:
 
 def cache_root(settings: CodegenSettings) -> Path:
     """The cache root folder of ``settings``: its ``build_root``, else ``$HITL_BUILD_DIR``
-    or the user cache folder (:func:`generated.build_cache.default_build_root`).
+    or the user cache folder (:func:`core.build_cache.default_build_root`).
 
     Parameters
     ----------

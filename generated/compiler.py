@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from core import artifacts
+from core.build_cache import LIBRARY_NAME, SOURCE_NAME
 from core.errors import BuildError
 from core.memo import MEMO
-from generated.build_cache import LIBRARY_NAME, SOURCE_NAME
 from generated.values import CodegenSettings
 
 

@@ -19,8 +19,8 @@ from collections.abc import Sequence
 
 import casadi as ca
 
+from core.build_cache import SOURCE_NAME
 from core.errors import BuildError
-from generated.build_cache import SOURCE_NAME
 from generated.values import JACOBIAN_STRATEGIES, CodegenSettings
 
 

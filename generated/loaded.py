@@ -23,15 +23,15 @@ from typing import Any
 
 import casadi as ca
 
-from core.errors import BuildError
-from core.memo import MEMO
-from generated import native
-from generated.build_cache import (
+from core.build_cache import (
     MANIFEST_NAME,
     TMP_PREFIX,
     check_entry,
     entry_bytes,
 )
+from core.errors import BuildError
+from core.memo import MEMO
+from generated import native
 from generated.codegen import Library
 from generated.shared_library import preload
 

@@ -31,8 +31,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from core.build_cache import LIBRARY_NAME, MANIFEST_NAME
 from generated import native
-from generated.build_cache import LIBRARY_NAME, MANIFEST_NAME
 from generated.codegen import Library, build_library
 from generated.compiler import Toolchain
 from generated.schedule import output_grid

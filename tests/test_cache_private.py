@@ -21,10 +21,10 @@ from pathlib import Path
 import casadi as ca
 import pytest
 
+from core.build_cache import LIBRARY_NAME, MANIFEST_NAME
 from core.errors import BuildError, run_cli
 from core.models import cache
 from generated import codegen
-from generated.build_cache import LIBRARY_NAME, MANIFEST_NAME
 from generated.codegen import CodegenSettings, build_library
 from generated.loaded import verified_bytes
 

@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 from platformdirs import user_cache_dir
 
+from core import build_cache
 from core.errors import BuildError
-from generated import build_cache, codegen
+from generated import codegen
 from generated.__main__ import main as gen_main
 from generated.codegen import build_library
 from generated.compiler import compile_source
@@ -277,7 +278,7 @@ def test_default_cache_is_outside_the_package_and_env_overrides_it(tmp_path, mon
         [
             sys.executable,
             "-c",
-            "from generated.build_cache import DEFAULT_BUILD_ROOT as r; print(r)",
+            "from core.build_cache import DEFAULT_BUILD_ROOT as r; print(r)",
         ],
         env={**os.environ, "XDG_CACHE_HOME": str(tmp_path / "xdg")},
         capture_output=True,

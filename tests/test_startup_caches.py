@@ -286,12 +286,12 @@ def test_model_key_changes_with_parameters_and_model():
 
 
 def test_the_cache_root_is_the_build_caches(monkeypatch, tmp_path):
-    from generated.build_cache import default_build_root
+    from core.build_cache import default_build_root
 
     monkeypatch.setenv("HITL_BUILD_DIR", str(tmp_path))
-    assert cache.cache_root() == default_build_root() == tmp_path
+    assert cache.entry_path("models", "k") == tmp_path / "models" / "k.json"
     monkeypatch.delenv("HITL_BUILD_DIR")
-    assert cache.cache_root() == default_build_root()
+    assert cache.entry_path("models", "k") == default_build_root() / "models" / "k.json"
 
 
 def test_an_unwritable_cache_still_gives_the_model(tmp_path, monkeypatch):

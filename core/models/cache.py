@@ -15,30 +15,17 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 from pathlib import Path
 from typing import Any
 
 from core.artifacts import atomic_write_text
+from core.build_cache import default_build_root
 from core.files import FileRefused, read_json_file
 from core.private_files import check_trusted, make_private_dir
 
-#: the build cache root unless ``HITL_BUILD_DIR`` is set (the rule of
-#: ``generated.build_cache.default_build_root``, which core may not import)
-APP_NAME = "hitl-formation"
 #: largest entry read (a model's derivation is some 100 kB) and its deepest nesting
 MAX_ENTRY_BYTES = 64 << 20
 MAX_ENTRY_DEPTH = 64
-
-
-def cache_root() -> Path:
-    """``$HITL_BUILD_DIR``, else the user cache folder's ``hitl-formation/build``."""
-    env = os.environ.get("HITL_BUILD_DIR")
-    if env:
-        return Path(env)
-    from platformdirs import user_cache_dir
-
-    return Path(user_cache_dir(APP_NAME)) / "build"
 
 
 def entry_path(kind: str, key: str, root: Path | None = None) -> Path:
@@ -51,9 +38,9 @@ def entry_path(kind: str, key: str, root: Path | None = None) -> Path:
     key : str
         Hex SHA-256 of the inputs.
     root : Path, optional
-        Default :func:`cache_root`.
+        Default :func:`core.build_cache.default_build_root`.
     """
-    return (root if root is not None else cache_root()) / kind / f"{key}.json"
+    return (root if root is not None else default_build_root()) / kind / f"{key}.json"
 
 
 def _digest(body: Any) -> str:
@@ -75,7 +62,7 @@ def read_entry(kind: str, key: str, root: Path | None = None) -> dict[str, Any] 
         The cache root, the kind's folder or the entry is another user's or writable by
         its group or others (:func:`core.private_files.check_trusted`).
     """
-    top = root if root is not None else cache_root()
+    top = root if root is not None else default_build_root()
     path = entry_path(kind, key, top)
     try:
         check_trusted(path, top)
