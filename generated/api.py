@@ -6,18 +6,14 @@
     sc = api.load("scenarios/paper.toml")                      # or overrides={...}
     gains, ginfo = api.ensure_gains(sc)                        # synthesis if needed
     built = api.build(sc, gains)                               # closed loop -> C -> .so
-    traj = api.simulate(built, sc)                             # CVODES / IDAS / fixed
+    traj = api.simulate(built, sc)                             # the scenario's method
     df = api.trajectory_frame(built, sc, traj)                 # pandas DataFrame
-
-or all at once, writing ``out/<name>/trajectory.csv`` and ``meta.json``::
-
-    result = api.run("scenarios/paper.toml")
     result = api.run("scenarios/paper.toml", overrides={"options.ablation": True})
-    # -> out/paper-ablation/ (eq. (42): u_i = Ψ_i, no ĝ_i)
+    # all at once -> out/paper-ablation/trajectory.csv, meta.json (eq. (42): u_i = Ψ_i, no ĝ_i)
 
-A scenario with overrides is a distinct scenario: its name gets a suffix
-(``paper-ablation``; ``variant=`` chooses it) and its SHA-256 is that of the file
-plus the overrides, so its gains, library and outputs never mix with the base run.
+A scenario with overrides is a distinct scenario: its name gets a suffix (``variant=``
+chooses it) and its SHA-256 covers the overrides, so its gains, library and outputs
+never mix with the base run's.
 """
 
 from __future__ import annotations
@@ -44,21 +40,11 @@ from generated.built import Built
 from generated.codegen import Library, build_library, cache_root
 from generated.csource import check_dyn_signature, renamed
 from generated.largescale import choose_plan
-from generated.loaded import (
-    BUILDS,
-    DAE_NAME,
-    ODE_NAME,
-    OUT_NAME,
-    Compiled,
-    Image,
-    current,
-    open_image,
-)
+from generated.loaded import BUILDS, DAE_NAME, ODE_NAME, OUT_NAME, Compiled, current, open_image
 from generated.meta import LibraryRecord, RunMeta, WallSeconds
 from generated.progress import progress_bar
 from generated.reuse import library_hashes, reuse_problem, run_inputs
 from generated.schedule import output_grid
-from generated.solvers.base import BuildPlan
 from generated.sundials_log import sundials_summary
 from generated.trajectory_file import (
     column_names,
@@ -112,9 +98,9 @@ def with_method(sc: Scenario, method: str | None) -> Scenario:
     Raises
     ------
     ScenarioError
-        For an unknown method, or one the scenario does not allow: the replaced
-        scenario is validated (:meth:`core.scenario.Scenario.validate`), so e.g.
-        ``options.sign = "exact"`` with a variable-step method is refused.
+        For an unknown method, or one the scenario's rules refuse
+        (:meth:`core.scenario.Scenario.validate`, e.g. ``options.sign = "exact"`` with a
+        variable-step method).
     """
     if method is None:
         return sc
@@ -127,30 +113,17 @@ def with_method(sc: Scenario, method: str | None) -> Scenario:
 
 # --------------------------------------------------------------------------- build
 def resolve_codegen(N: int, settings: CodegenSettings | None = None) -> CodegenSettings:
-    """``settings`` with its Jacobian strategy resolved for N agents (the large-N plan).
-
-    ``jacobian="auto"`` becomes ``sparse`` (direct Newton) for N <= 20 and ``jvp``
-    (matrix-free GMRES, mapped MX) above: :func:`generated.largescale.choose_plan`.
+    """``settings`` with ``jacobian="auto"`` resolved for N followers (the large-N plan).
 
     Parameters
     ----------
     N : int
-        Number of followers.
     settings : CodegenSettings, optional
         Default ``CodegenSettings(jacobian="auto")``.
     """
     settings = settings or CodegenSettings(jacobian="auto")
     plan = choose_plan(N, settings.jacobian, linear_solver=settings.linear_solver)
     return plan.codegen_settings(settings)
-
-
-def _reuse(c: Compiled, sc: Scenario, gains: Gains, key: str) -> Built:
-    """``c``'s loaded library bound to ``sc`` (whose structure key is ``key``)."""
-    cl = c.closed_loop
-    cl = bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks, key=key)
-    lib = dataclasses.replace(c.library, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0)
-    timings = {"symbolic_build": 0.0, "codegen": 0.0, "compile": 0.0}
-    return _bound(cl, lib, (c.image.dyn_p, c.image.outputs_p), c.form, timings)
 
 
 def build(
@@ -164,36 +137,31 @@ def build(
     """Symbolic closed loop -> C -> shared library (cached) -> loaded Functions.
 
     A scenario whose structure (:func:`symbolic.parameters.structure_key`) was built
-    before in this process reuses that build with its own numbers:
-    nothing symbolic, no code generation, no compiler.
+    before in this process reuses that build with its own numbers: nothing symbolic, no
+    code generation, no compiler.
 
     Parameters
     ----------
     sc : Scenario
     gains : Gains
     method : str, optional
-        A registered method (:func:`generated.solvers.get`): its form (ODE or DAE) and
-        what it adds to the library (:meth:`~generated.solvers.Solver.build`); default:
-        the scenario's method.
+        A registered method (default: the scenario's).
     settings : CodegenSettings, optional
         ``jacobian="auto"`` is resolved from ``sc.N`` (:func:`resolve_codegen`).
     closed_loop : ClosedLoop, optional
         A prebuilt closed loop (skips ``build_closed_loop``).
     dense_graph : bool
-        For a method with its own libraries (``native``: the closed loop gives only the
-        outputs, x(0) and the verification's Functions), the closed loop with the graph as
-        data (:func:`symbolic.closed_loop.build_closed_loop`, ``dense``): one symbolic
-        build per N for a study's many graphs, up to
-        :data:`~symbolic.parameters.DENSE_MAX_N` followers. The methods that compile the
-        closed loop keep the graph's own code.
+        For a method with its own libraries (``native``), the closed loop with the graph
+        as data (``build_closed_loop(dense=True)``): one symbolic build per N for a study's
+        many graphs, up to :data:`~symbolic.parameters.DENSE_MAX_N` followers.
     """
     settings = resolve_codegen(sc.N, settings)
     method = method or sc.integration.method
     t0 = time.perf_counter()
     # first: what the method needs of the scenario itself (the per-agent engine's kernels)
     prepared = solvers.get(method).prepare(sc, gains)
-    # the cache folder is part of the key: a build of another cache (HITL_BUILD_DIR) is not reused
     dense = dense_graph and prepared is not None and sc.N <= DENSE_MAX_N
+    # the cache folder is part of the key: a build of another cache (HITL_BUILD_DIR) is not reused
     key = (structure_key(sc, gains, dense=dense), method, settings, cache_root(settings))
     if prepared is not None:  # the method's own libraries: only the closed loop is reused
         if closed_loop is None:
@@ -203,7 +171,11 @@ def build(
         c = current(BUILDS[key])
         if c is not None:
             BUILDS[key] = c
-            return _reuse(c, sc, gains, key[0])
+            cl = _bind(c.closed_loop, sc, gains, key[0])
+            lib = dataclasses.replace(
+                c.library, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0
+            )
+            return _bound(cl, lib, c.image.dyn_p, c.image.outputs_p, c.form, 0.0)
         del BUILDS[key]  # its entry no longer checks out: build again (the cache says why)
     if closed_loop is None:
         closed_loop = build_closed_loop(sc, gains)
@@ -217,118 +189,91 @@ def build(
 _LOOPS = MEMO.namespace("per-agent-loops", 16)
 
 
-def _loop_of(sc: Scenario, gains: Gains, key: tuple, dense: bool = False) -> Any:
-    """``sc``'s closed loop: one built before for its structure bound to its numbers, or a
-    new symbolic build (kept for the next scenario of the structure); ``dense``: the graph
-    as data (``key`` its structure key)."""
+def _bind(cl: Any, sc: Scenario, gains: Gains, structure: str) -> Any:
+    """The parametric closed loop of ``cl`` bound to ``sc``'s numbers."""
+    return bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks, key=structure)
+
+
+def _loop_of(sc: Scenario, gains: Gains, key: tuple, dense: bool) -> Any:
+    """``sc``'s closed loop: the one kept for its structure ``key`` bound to its numbers, or a
+    new symbolic build (kept); ``dense``: the graph as data."""
     cl = _LOOPS.get(key)
     if cl is None or cl.parametric is None:
         cl = build_closed_loop(sc, gains, dense=dense)
     else:
-        cl = bind(cl.parametric, sc, gains, assembly=cl.assembly, blocks=cl.blocks, key=key[0])
+        cl = _bind(cl, sc, gains, key[0])
     _LOOPS[key] = cl
     return cl
 
 
 def build_from_closed_loop(
-    cl: Any,
-    method: str,
-    settings: CodegenSettings | None = None,
-    *,
-    t_symbolic_start: float | None = None,
-    prepared: Any = None,
+    cl: Any, method: str, settings: CodegenSettings | None = None, *, prepared: Any = None
 ) -> Built:
     """Compile an existing :class:`~symbolic.closed_loop.ClosedLoop` for ``method``.
 
     Parameters
     ----------
     cl : ClosedLoop
-        Supplies ``ode_dyn``/``dae_dyn`` and ``outputs``.
     method : str
-        A registered method: its ``form`` picks ``dae_dyn`` or ``ode_dyn`` and its
-        :meth:`~generated.solvers.Solver.build` what else is compiled (``native``: its
-        per-agent kernel libraries instead of the closed loop).
+        A registered method: its ``form`` picks ``dae_dyn`` or ``ode_dyn``, its
+        :meth:`~generated.solvers.Solver.build` what else is compiled.
     settings : CodegenSettings, optional
         ``jacobian="auto"`` is resolved from the closed loop's N (:func:`resolve_codegen`).
-    t_symbolic_start : float, optional
-        ``time.perf_counter()`` when the symbolic build began, so that
-        ``timings["symbolic_build"]`` includes it (default: now).
     prepared : object, optional
-        What the method's :meth:`~generated.solvers.Solver.prepare` returned for the
-        scenario (method ``native``: what its per-agent kernels are built from).
+        What the method's :meth:`~generated.solvers.Solver.prepare` returned for the scenario.
     """
-    return _compile(cl, method, settings, t_symbolic_start, prepared)[0]
+    return _compile(cl, method, settings, time.perf_counter(), prepared)[0]
 
 
 def _compile(
-    cl: Any,
-    method: str,
-    settings: CodegenSettings | None,
-    t_symbolic_start: float | None,
-    prepared: Any,
-) -> tuple[Built, Image | None]:
-    """:func:`build_from_closed_loop`, and the loaded library the Built uses (None when
-    the method runs its own libraries)."""
+    cl: Any, method: str, settings: CodegenSettings | None, t0: float, prepared: Any
+) -> tuple[Built, Any]:
+    """The Built of ``cl`` (symbolic build timed from ``t0``) and its loaded library
+    (:class:`~generated.loaded.Image`; None when the method runs its own libraries)."""
     solver = solvers.get(method)
     settings = resolve_codegen(cl.layout.N, settings)
-    t0 = time.perf_counter() if t_symbolic_start is None else t_symbolic_start
     form = solver.form
     plan = solver.build(cl, settings, prepared)
-    if plan.libraries:  # nothing of the closed loop is compiled
-        return _own_libraries(cl, plan, form, time.perf_counter() - t0), None
-    src_fns = cl if cl.parametric is None else cl.parametric
-    src, name = (src_fns.dae_dyn, DAE_NAME) if form == "dae" else (src_fns.ode_dyn, ODE_NAME)
-    check_dyn_signature(src, f"closed loop {form}_dyn")
-    dyn = renamed(src, name, expand=settings.expand, cse=settings.cse)
-    outs = renamed(src_fns.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
+    src = cl if cl.parametric is None else cl.parametric
+    if plan.libraries:
+        # nothing of the closed loop is compiled: its Functions run in CasADi's virtual
+        # machine; the record is the first library's, a cache hit only when all were
+        libs = plan.libraries
+        lib = dataclasses.replace(
+            libs[0],
+            cache_hit=all(lib.cache_hit for lib in libs),
+            codegen_seconds=sum(lib.codegen_seconds for lib in libs),
+            compile_seconds=sum(lib.compile_seconds for lib in libs),
+        )
+        t_sym = time.perf_counter() - t0 - lib.codegen_seconds - lib.compile_seconds
+        dyn_p = src.dae_dyn if form == "dae" else src.ode_dyn
+        return _bound(cl, lib, dyn_p, src.outputs, form, t_sym, (libs, plan.data)), None
+    dyn, name = (src.dae_dyn, DAE_NAME) if form == "dae" else (src.ode_dyn, ODE_NAME)
+    check_dyn_signature(dyn, f"closed loop {form}_dyn")
+    dyn = renamed(dyn, name, expand=settings.expand, cse=settings.cse)
+    outs = renamed(src.outputs, OUT_NAME, expand=settings.expand, cse=settings.cse)
     t_sym = time.perf_counter() - t0
     lib = build_library([dyn, outs], settings, with_derivatives=[name])
-    timings = {
-        "symbolic_build": t_sym,
-        "codegen": lib.codegen_seconds,
-        "compile": lib.compile_seconds,
-    }
     image = open_image(lib, form)
-    return _bound(cl, lib, (image.dyn_p, image.outputs_p), form, timings), image
-
-
-def _own_libraries(cl: Any, plan: BuildPlan, form: str, t_build: float) -> Built:
-    """The Built of a method that runs its own libraries (``plan.libraries``).
-
-    Nothing of the closed loop is compiled: its right-hand side and outputs are the
-    symbolic Functions with p filled in (CasADi's virtual machine); :attr:`Built.library`
-    is the first of the method's libraries, a cache hit only when all of them were.
-    """
-    libs = plan.libraries
-    codegen = sum(lib.codegen_seconds for lib in libs)
-    compile_s = sum(lib.compile_seconds for lib in libs)
-    lib = dataclasses.replace(
-        libs[0],
-        cache_hit=all(lib.cache_hit for lib in libs),
-        codegen_seconds=codegen,
-        compile_seconds=compile_s,
-    )
-    timings = {
-        "symbolic_build": t_build - codegen - compile_s,
-        "codegen": codegen,
-        "compile": compile_s,
-    }
-    src = cl if cl.parametric is None else cl.parametric
-    dyn_p = src.dae_dyn if form == "dae" else src.ode_dyn
-    return _bound(cl, lib, (dyn_p, src.outputs), form, timings, (libs, plan.data))
+    return _bound(cl, lib, image.dyn_p, image.outputs_p, form, t_sym), image
 
 
 def _bound(
     cl: Any,
     lib: Library,
-    functions: tuple[Any, Any],
+    dyn_p: Any,
+    outputs_p: Any,
     form: str,
-    timings: dict[str, float],
+    t_sym: float,
     agents: Any = None,
 ) -> Built:
-    """The Built of ``cl`` on ``functions`` (right-hand side, outputs; p an input when
-    ``cl`` is parametric), with ``cl``'s p filled in."""
-    dyn_p, outputs_p = functions
+    """The Built of ``cl`` on ``dyn_p``, ``outputs_p`` (p an input when ``cl`` is parametric)
+    with ``cl``'s p filled in; ``t_sym``: seconds of the symbolic build."""
+    timings = {
+        "symbolic_build": t_sym,
+        "codegen": lib.codegen_seconds,
+        "compile": lib.compile_seconds,
+    }
     if cl.parametric is None:
         return Built(cl, lib, dyn_p, outputs_p, form, timings, agents=agents)
     p = np.asarray(cl.p0, dtype=float)
@@ -343,21 +288,19 @@ def integrator_settings(
     codegen: CodegenSettings | None = None,
     fixed_tol: float | None = None,
 ) -> IntegratorSettings:
-    """The scenario's integration settings (tolerances, steps) with the codegen linear algebra.
+    """The scenario's integration settings with the codegen plan's linear algebra.
 
     Parameters
     ----------
     sc : Scenario
-        Supplies ``integration`` (method, rtol, atol, max_steps, fixed_step).
     method : str, optional
         Overrides ``integration.method``.
     codegen : CodegenSettings, optional
         Its Jacobian strategy (``auto`` resolved from ``sc.N``) gives the Newton scheme,
-        the linear solver and the plan's extra SUNDIALS options
-        (:func:`generated.largescale.choose_plan`; default ``jacobian="auto"``).
+        linear solver and extra SUNDIALS options (:func:`generated.largescale.choose_plan`).
     fixed_tol : float, optional
-        Safeguard tolerance of the fixed-step method (sets ``fixed_rtol`` and
-        ``fixed_atol``; default 1e-3, see :class:`IntegratorSettings`).
+        Safeguard tolerance of the fixed-step method (``fixed_rtol`` and ``fixed_atol``;
+        default 1e-3).
     """
     ig = sc.integration
     cg = codegen or CodegenSettings(jacobian="auto")
@@ -375,14 +318,12 @@ def integrator_settings(
 
 
 def breakpoints(built: Built, sc: Scenario) -> list[float]:
-    """Known discontinuity times of a run: the scenario's and the closed loop's, sorted.
+    """Known discontinuity times of a run, the scenario's and the closed loop's, sorted.
 
     Parameters
     ----------
     built : Built
-        Supplies ``closed_loop.breakpoints``.
     sc : Scenario
-        Supplies ``sc.breakpoints()`` (fault onsets, steps in inputs).
     """
     cl_bps = getattr(built.closed_loop, "breakpoints", ())
     return sorted(set(sc.breakpoints()) | {float(b) for b in cl_bps})
@@ -399,9 +340,7 @@ def simulate(
     Parameters
     ----------
     built : Built
-        Its form must match the method (``dae`` for ``idas``, else ``ode``).
     sc : Scenario
-        Supplies the horizon, output step and breakpoints.
     settings : IntegratorSettings, optional
         Default :func:`integrator_settings` of ``sc``.
     progress : callable, optional
@@ -410,15 +349,8 @@ def simulate(
     Returns
     -------
     Trajectory
-        Incomplete (not raised) on an integrator failure (see
-        :func:`generated.solvers.engine.integrate`); a native run's message then ends with
-        the largest state where CVODE stood (:func:`generated.values.stop_note`, the
-        state named as its trajectory.csv column).
-
-    Raises
-    ------
-    IntegrationError
-        If the method does not match ``built.form``.
+        Incomplete (not raised) on an integrator failure; its message then ends with the
+        largest state where the integrator stopped (:func:`generated.values.stop_note`).
     """
     s = settings or integrator_settings(sc)
     t_out = output_grid(sc.integration.horizon, sc.integration.output_step)
@@ -439,15 +371,12 @@ def integrate_built(
     bps: Sequence[float] = (),
     progress: Callable[[float], None] | None = None,
 ) -> Trajectory:
-    """Integrate a compiled closed loop from ``x0`` with the method of ``settings``.
-
-    The one place that runs a method: the registered :class:`~generated.solvers.Solver`
-    of ``settings.method`` checks the build and integrates it.
+    """Integrate ``built`` from ``x0`` with the method of ``settings``: the one place that
+    runs a method (its :class:`~generated.solvers.Solver` checks the build, then runs it).
 
     Parameters
     ----------
     built : Built
-        Built for the method (``idas``: DAE form; ``native``: the native build).
     x0 : ndarray
         Initial state at ``t_out[0]`` (the DAE's z starts from ``closed_loop.z0``).
     t_out : ndarray
@@ -471,18 +400,7 @@ def integrate_built(
 # --------------------------------------------------------------------------- whole run
 @dataclass(frozen=True)
 class RunResult:
-    """What :func:`run` produced: the frame, the trajectory, the files and their record.
-
-    Attributes
-    ----------
-    frame : pandas.DataFrame
-        The trajectory (:func:`trajectory_frame`).
-    trajectory : Trajectory
-    csv_path, meta_path : Path
-        ``trajectory.csv`` and ``meta.json``.
-    record : RunMeta
-        The content of meta.json, typed.
-    """
+    """What :func:`run` produced: the frame, the trajectory, the two files and meta.json typed."""
 
     frame: pd.DataFrame
     trajectory: Trajectory
@@ -494,12 +412,6 @@ class RunResult:
     def meta(self) -> dict[str, Any]:
         """The content of meta.json as a dict (:meth:`RunMeta.to_dict`)."""
         return self.record.to_dict()
-
-
-def _structure(built: Built) -> str:
-    """The structure key of a build's closed loop ("" for a loop built without parameters)."""
-    par = getattr(built.closed_loop, "parametric", None)
-    return par.structure_key if par is not None else ""
 
 
 def _timed(f: Callable[..., Any], *args: Any) -> tuple[Any, float]:
@@ -517,10 +429,8 @@ def _write_trajectory(folder: Path, df: pd.DataFrame, traj: Trajectory) -> tuple
 
 
 def _write_sundials_log(folder: Path, traj: Trajectory) -> None:
-    """SUNDIALS' messages of the run to ``folder/sundials.log`` and one line on stderr.
-
-    Without messages a ``sundials.log`` of an earlier run in the folder is removed.
-    """
+    """SUNDIALS' messages to ``folder/sundials.log`` and one line on stderr (without messages
+    an older ``sundials.log`` is removed)."""
     log = folder / "sundials.log"
     line = sundials_summary(traj.sundials_log, log)
     if line is None:
@@ -553,8 +463,7 @@ def run(
     method : str, optional
         Overrides ``integration.method`` for this run without renaming the output.
     codegen : CodegenSettings, optional
-        Default ``CodegenSettings(jacobian="auto")``: the plan is chosen from N
-        (:func:`resolve_codegen`).
+        Default ``CodegenSettings(jacobian="auto")`` (:func:`resolve_codegen`).
     out_root : str or Path, optional
         Default ``out/`` (``$HITL_OUT``).
     progress : bool
@@ -563,10 +472,6 @@ def run(
         After writing an incomplete trajectory, raise :class:`IntegrationError`.
     fixed_tol : float, optional
         Safeguard tolerance of the fixed-step method (default 1e-3).
-
-    Returns
-    -------
-    RunResult
     """
     t_all = time.perf_counter()
     sc, t_load = _timed(load, path, overrides, variant)
@@ -585,6 +490,8 @@ def run(
     (csv_path, csv_sha), t_write = _timed(_write_trajectory, root / sc.name, df, traj)
     wall = {"load": t_load, "synthesis": ginfo.seconds, **built.timings}
     wall.update(integration=traj.stats.get("wall_seconds"), outputs=t_outputs, write=t_write)
+    par = getattr(built.closed_loop, "parametric", None)
+    structure = par.structure_key if par is not None else ""
     record = RunMeta.of_run(
         sc=sc,
         overrides=overrides,
@@ -596,9 +503,7 @@ def run(
         csv=(len(df), csv_sha),
         inputs=run_inputs(sc, ginfo.sha256, method),
         libraries=library_hashes(built),
-        library=LibraryRecord.of(
-            built.library, codegen, requested, _structure(built), len(built.p)
-        ),
+        library=LibraryRecord.of(built.library, codegen, requested, structure, len(built.p)),
         wall_seconds=WallSeconds(**wall, total=time.perf_counter() - t_all),
     )
     _write_sundials_log(root / sc.name, traj)

@@ -1,10 +1,8 @@
 """``meta.json``: what a run was, what shaped it and how long each stage took.
 
-:class:`RunMeta` is the file's content as typed fields, in the file's key order
-(``dataclasses.asdict`` keeps the field order, so :meth:`RunMeta.to_json` writes the
-keys in the order below). ``verify`` reads the file as a plain dict
-(:func:`generated.reuse.reuse_problem`, :mod:`verify.pipeline`);
-:meth:`RunMeta.from_json` reads it back typed.
+:class:`RunMeta` is the file's content as typed fields in the file's key order
+(``dataclasses.asdict`` keeps it); ``verify`` reads the file as a plain dict
+(:func:`generated.reuse.reuse_problem`).
 """
 
 from __future__ import annotations
@@ -42,24 +40,19 @@ class LibraryRecord:
     path, source : str
         The shared library and its generated C file.
     source_bytes : int
-        Size of the generated C.
     cache_hit : bool
         True when the library was reused, not compiled.
     cflags : list of str
-        The complete compiler flags.
     compiler : str
-        The compiler executable named in the settings.
-    jacobian : str
-        The Jacobian strategy used (``auto`` resolved from N).
-    jacobian_requested : str
-        The strategy asked for (``auto`` unless chosen).
+    jacobian, jacobian_requested : str
+        The Jacobian strategy used (``auto`` resolved from N) and the one asked for.
     expand : bool
         Whether MX Functions were expanded to SX before generating code.
     casadi : str
         The CasADi version.
     structure : str
-        The closed loop's structure key (:func:`symbolic.parameters.structure_key`):
-        runs with equal keys execute the same library with their own numbers.
+        The structure key (:func:`symbolic.parameters.structure_key`): runs with equal
+        keys execute the same library with their own numbers.
     parameters : int
         Length of the runtime parameter vector p the library was called with.
     """
@@ -87,7 +80,7 @@ class LibraryRecord:
         structure: str = "",
         parameters: int = 0,
     ) -> LibraryRecord:
-        """The record of ``lib`` built with ``codegen`` (``requested``: the asked-for Jacobian).
+        """The record of ``lib`` built with ``codegen``.
 
         Parameters
         ----------
@@ -95,11 +88,9 @@ class LibraryRecord:
         codegen : CodegenSettings
             With its Jacobian strategy resolved.
         requested : str
-            The strategy before resolution.
+            The Jacobian strategy before resolution.
         structure : str
-            The closed loop's structure key.
         parameters : int
-            Length of p.
         """
         return cls(
             key=lib.key,
@@ -120,19 +111,8 @@ class LibraryRecord:
 
 @dataclass(frozen=True)
 class WallSeconds:
-    """Wall time of each stage of a run in seconds (``meta["wall_seconds"]``).
-
-    Attributes
-    ----------
-    load, synthesis : float
-        Loading the scenario; reading or synthesizing the gains.
-    symbolic_build, codegen, compile : float
-        Building the closed loop; generating C; compiling (0 on a cache hit).
-    integration : float or None
-        The integrator's own wall time (its ``stats["wall_seconds"]``).
-    outputs, write, total : float
-        Evaluating the outputs; writing trajectory.csv; the whole run.
-    """
+    """Wall time of each stage of a run in seconds (``meta["wall_seconds"]``); ``compile`` is
+    0 on a cache hit, ``integration`` the integrator's own ``stats["wall_seconds"]``."""
 
     load: float
     synthesis: float
@@ -162,7 +142,6 @@ class RunMeta:
     method, form : str
         The integration method and the compiled form (``ode`` or ``dae``).
     rtol, atol : float
-        The integrator's tolerances.
     max_steps : int
     fixed_step, fixed_rtol, fixed_atol : float or None
         The fixed-step method's step and safeguard tolerances (None for other methods).
@@ -177,7 +156,7 @@ class RunMeta:
     trajectory_sha256 : str
         SHA-256 of trajectory.csv's bytes (the pair is checked on reuse).
     inputs : dict
-        :func:`generated.reuse.run_inputs`: what shaped the run besides the library.
+        What shaped the run besides the library (:func:`generated.reuse.run_inputs`).
     libraries : dict
         Path -> SHA-256 of every shared library the run executed.
     complete : bool
@@ -194,10 +173,9 @@ class RunMeta:
         Same as ``library.cache_hit``.
     wall_seconds : WallSeconds
     sundials_messages : dict
-        SUNDIALS' warnings and errors of the run (native method; kept out of the
-        terminal, written to ``sundials.log`` next to meta.json):
-        :func:`generated.sundials_log.sundials_messages` (``count``, ``warnings``,
-        ``errors``, ``first``). Absent from older records: read back as none.
+        SUNDIALS' warnings and errors of the run, written to ``sundials.log``
+        (:func:`generated.sundials_log.sundials_messages`); absent from older records:
+        read back as none.
     """
 
     scenario: str
@@ -263,13 +241,10 @@ class RunMeta:
         overrides : mapping or None
         gains : GainsInfo
         form : str
-            ``ode`` or ``dae``.
         settings : IntegratorSettings
             Its ``method`` is the run's.
         breakpoints : list of float
         trajectory : Trajectory
-            Supplies ``complete``, ``t_reached``, ``message``, ``stats`` and
-            ``sundials_messages`` (counted from ``sundials_log``).
         csv : (int, str)
             Data rows and SHA-256 of trajectory.csv.
         inputs, libraries, library, wall_seconds
@@ -331,7 +306,6 @@ class RunMeta:
         Parameters
         ----------
         text : str
-            The file's content.
 
         Raises
         ------
@@ -351,7 +325,7 @@ class RunMeta:
 
 
 def _json(o: Any) -> Any:
-    """JSON form of what ``json`` cannot write: numpy scalars and arrays, else ``str``."""
+    """JSON form of numpy scalars and arrays; ``str`` of anything else ``json`` cannot write."""
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):

@@ -1,10 +1,5 @@
-"""Whether a previous run may be reused: the inputs that shaped it and the files it left.
-
-A run's ``meta.json`` records the SHA-256 of its scenario (with overrides), the operator
-trace, ``gains.json``, the sources of :data:`CODE_PACKAGES`, the CasADi version and
-every shared library it executed; :func:`reuse_problem` accepts the run only when all
-of them are unchanged and ``trajectory.csv`` is the file meta.json describes.
-"""
+"""Whether a previous run may be reused: the inputs that shaped it and the files it left
+(docs/simulation.md)."""
 
 from __future__ import annotations
 
@@ -33,11 +28,8 @@ MAX_META_DEPTH = 32
 
 @MEMO.memoize("code-sha256", 1)
 def code_sha256() -> str:
-    """SHA-256 of the sources that shape a trajectory (git-independent).
-
-    Every ``*.py``, ``*.c`` and ``*.h`` file under :data:`CODE_PACKAGES` (not the
-    build cache), by relative path and content.
-    """
+    """SHA-256 of every ``*.py``, ``*.c`` and ``*.h`` of :data:`CODE_PACKAGES` (not the build
+    cache) by relative path and content: git-independent."""
     base = Path(__file__).resolve().parent.parent
     h = hashlib.sha256()
     for pkg in CODE_PACKAGES:
@@ -63,11 +55,9 @@ def run_inputs(sc: Scenario, gains_sha256: str | None, method: str) -> dict[str,
     Parameters
     ----------
     sc : Scenario
-        Its hash (the TOML and any overrides) and the data of the files it names.
     gains_sha256 : str or None
         SHA-256 of the ``gains.json`` bytes used.
     method : str
-        The integration method.
     """
     return {
         "scenario_sha256": sc.sha256,
@@ -85,7 +75,7 @@ def library_hashes(built: Built) -> dict[str, str]:
     Parameters
     ----------
     built : Built
-        The build (its library, or the per-agent kernel libraries of method ``native``).
+        Its library, or the per-agent kernel libraries of method ``native``.
     """
     libs = [built.library] if built.agents is None else list(built.agents[0])
     return {str(lib.path): sha256_file(lib.path) for lib in libs}
@@ -94,26 +84,16 @@ def library_hashes(built: Built) -> dict[str, str]:
 def reuse_problem(
     folder: Path, sc: Scenario, method: str | None = None
 ) -> tuple[str | None, tuple[dict[str, Any], bytes] | None]:
-    """Whether ``folder``'s trajectory.csv and meta.json may be reused for ``sc``.
-
-    They may only if meta.json records exactly today's inputs (:func:`run_inputs`
-    with the current ``gains.json``), every library it records still has its hash,
-    the run is complete, and trajectory.csv has the SHA-256 and row count meta.json
-    records (a kill between the two renames leaves a mismatched pair: not reused).
+    """Why ``folder``'s trajectory.csv and meta.json may not be reused for ``sc`` (None: they
+    may), and meta.json with the CSV bytes when they may.
 
     Parameters
     ----------
     folder : Path
         ``out/<name>/``.
     sc : Scenario
-        The scenario to be verified.
     method : str, optional
         Default: the scenario's.
-
-    Returns
-    -------
-    (str or None, (dict, bytes) or None)
-        The reason not to reuse (None to reuse), and meta.json with the CSV bytes.
     """
     meta_p, csv_p = folder / "meta.json", folder / "trajectory.csv"
     if not (meta_p.is_file() and csv_p.is_file()):
