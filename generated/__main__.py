@@ -54,17 +54,12 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str]) -> int:
-    """Run a command: ``sim`` (one-line summary on stderr) or ``cache``.
+    """Run ``sim`` or ``cache``; 0 on success (``run_cli`` turns toolkit errors into status 2).
 
     Parameters
     ----------
     argv : list of str
         Command-line arguments without the program name.
-
-    Returns
-    -------
-    int
-        0 on success; toolkit errors are raised (``run_cli`` turns them into exit status 2).
     """
     args = _parser().parse_args(argv)
     if args.cmd == "cache":

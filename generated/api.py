@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import casadi as ca
 import numpy as np
 import pandas as pd
 
@@ -40,12 +41,12 @@ from generated.built import Built
 from generated.codegen import Library, build_library, cache_root
 from generated.csource import check_dyn_signature, renamed
 from generated.largescale import choose_plan
-from generated.loaded import BUILDS, DAE_NAME, ODE_NAME, OUT_NAME, Compiled, current, open_image
+from generated.loaded import BUILDS, DAE_NAME, ODE_NAME, OUT_NAME, Image, current, open_image
 from generated.meta import LibraryRecord, RunMeta, WallSeconds
 from generated.progress import progress_bar
 from generated.reuse import library_hashes, reuse_problem, run_inputs
 from generated.schedule import output_grid
-from generated.sundials_log import sundials_summary
+from generated.sundials_log import sundials_messages, sundials_summary
 from generated.trajectory_file import (
     column_names,
     csv_text,
@@ -58,7 +59,7 @@ from generated.values import CodegenSettings, IntegratorSettings, Trajectory, st
 from symbolic.closed_loop import bind, build_closed_loop, fix_parameters
 from symbolic.parameters import DENSE_MAX_N, structure_key
 from synthesis.gains import Gains
-from synthesis.gains_cache import ensure_gains, scenario_gains
+from synthesis.gains_cache import GainsInfo, ensure_gains, scenario_gains
 
 #: the names other packages use, from this module or re-exported from the modules above
 __all__ = [
@@ -168,20 +169,21 @@ def build(
             closed_loop = _loop_of(sc, gains, key, dense)
         return _compile(closed_loop, method, settings, t0, prepared)[0]
     if closed_loop is None and key in BUILDS:
-        c = current(BUILDS[key])
-        if c is not None:
-            BUILDS[key] = c
-            cl = _bind(c.closed_loop, sc, gains, key[0])
+        cl, image = BUILDS[key]
+        image = current(image)
+        if image is not None:
+            BUILDS[key] = (cl, image)
             lib = dataclasses.replace(
-                c.library, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0
+                image.library, cache_hit=True, codegen_seconds=0.0, compile_seconds=0.0
             )
-            return _bound(cl, lib, c.image.dyn_p, c.image.outputs_p, c.form, 0.0)
+            cl = _bind(cl, sc, gains, key[0])
+            return _bound(cl, lib, image.dyn_p, image.outputs_p, image.form, 0.0)
         del BUILDS[key]  # its entry no longer checks out: build again (the cache says why)
     if closed_loop is None:
         closed_loop = build_closed_loop(sc, gains)
     built, image = _compile(closed_loop, method, settings, t0, prepared)
     if image is not None and closed_loop.parametric is not None:
-        BUILDS[key] = Compiled(built.closed_loop, built.library, built.form, image)
+        BUILDS[key] = (built.closed_loop, image)
     return built
 
 
@@ -227,9 +229,9 @@ def build_from_closed_loop(
 
 def _compile(
     cl: Any, method: str, settings: CodegenSettings | None, t0: float, prepared: Any
-) -> tuple[Built, Any]:
-    """The Built of ``cl`` (symbolic build timed from ``t0``) and its loaded library
-    (:class:`~generated.loaded.Image`; None when the method runs its own libraries)."""
+) -> tuple[Built, Image | None]:
+    """The Built of ``cl`` (symbolic build timed from ``t0``) and its loaded library (None
+    when the method runs its own libraries)."""
     solver = solvers.get(method)
     settings = resolve_codegen(cl.layout.N, settings)
     form = solver.form
@@ -440,6 +442,78 @@ def _write_sundials_log(folder: Path, traj: Trajectory) -> None:
     print(line, file=sys.stderr)
 
 
+def _record(
+    sc: Scenario,
+    overrides: Mapping[str, Any] | None,
+    ginfo: GainsInfo,
+    built: Built,
+    s: IntegratorSettings,
+    traj: Trajectory,
+    csv: tuple[int, str],
+    codegen: CodegenSettings,
+    requested: str,
+    wall: dict[str, Any],
+    t_all: float,
+) -> RunMeta:
+    """meta.json's record of a run (``csv``: rows and SHA-256 of trajectory.csv; ``requested``:
+    the Jacobian strategy before resolution; ``wall``: seconds per stage, ``t_all``: start)."""
+    used = solvers.get(s.method).settings_used(s)  # the method-specific settings
+    lib, st = built.library, traj.stats
+    par = getattr(built.closed_loop, "parametric", None)
+    library = LibraryRecord(
+        key=lib.key,
+        path=str(lib.path),
+        source=str(lib.source),
+        source_bytes=lib.source_bytes,
+        cache_hit=lib.cache_hit,
+        cflags=list(codegen.cflags),
+        compiler=codegen.compiler,
+        jacobian=codegen.jacobian,
+        jacobian_requested=requested,
+        expand=codegen.expand,
+        casadi=ca.__version__,
+        structure=par.structure_key if par is not None else "",
+        parameters=len(built.p),
+    )
+    return RunMeta(
+        scenario=sc.name,
+        scenario_path=str(sc.path),
+        scenario_sha256=sc.sha256,
+        overrides=dict(overrides or {}),
+        gains_path=str(ginfo.path),
+        gains_sha256=ginfo.sha256,
+        gains_reused=ginfo.reused,
+        method=s.method,
+        form=built.form,
+        rtol=s.rtol,
+        atol=s.atol,
+        max_steps=s.max_steps,
+        fixed_step=used.get("fixed_step"),
+        fixed_rtol=used.get("fixed_rtol"),
+        fixed_atol=used.get("fixed_atol"),
+        newton_scheme=s.newton_scheme,
+        linear_solver=s.linear_solver,
+        integrator_extra_options=dict(s.extra_options),
+        horizon=sc.integration.horizon,
+        output_step=sc.integration.output_step,
+        breakpoints=breakpoints(built, sc),
+        rows=csv[0],
+        trajectory_sha256=csv[1],
+        inputs=run_inputs(sc, ginfo.sha256, s.method),
+        libraries=library_hashes(built),
+        complete=traj.complete,
+        t_reached=traj.t_reached,
+        message=traj.message,
+        steps=st.get("steps"),
+        rhs_evals=st.get("rhs_evals"),
+        stats=st,
+        library=library,
+        cache_hit=library.cache_hit,
+        wall_seconds=WallSeconds(**wall, total=time.perf_counter() - t_all),
+        sundials_messages=sundials_messages(traj.sundials_log),
+    )
+
+
 def run(
     path: str | Path,
     *,
@@ -490,22 +564,8 @@ def run(
     (csv_path, csv_sha), t_write = _timed(_write_trajectory, root / sc.name, df, traj)
     wall = {"load": t_load, "synthesis": ginfo.seconds, **built.timings}
     wall.update(integration=traj.stats.get("wall_seconds"), outputs=t_outputs, write=t_write)
-    par = getattr(built.closed_loop, "parametric", None)
-    structure = par.structure_key if par is not None else ""
-    record = RunMeta.of_run(
-        sc=sc,
-        overrides=overrides,
-        gains=ginfo,
-        form=built.form,
-        settings=s,
-        breakpoints=breakpoints(built, sc),
-        trajectory=traj,
-        csv=(len(df), csv_sha),
-        inputs=run_inputs(sc, ginfo.sha256, method),
-        libraries=library_hashes(built),
-        library=LibraryRecord.of(built.library, codegen, requested, structure, len(built.p)),
-        wall_seconds=WallSeconds(**wall, total=time.perf_counter() - t_all),
-    )
+    csv = (len(df), csv_sha)
+    record = _record(sc, overrides, ginfo, built, s, traj, csv, codegen, requested, wall, t_all)
     _write_sundials_log(root / sc.name, traj)
     meta_path = atomic_write_text(root / sc.name / "meta.json", record.to_json())
     if raise_on_failure:

@@ -1,11 +1,4 @@
-"""The C compiler: its identity (part of every cache key) and one compilation to a library.
-
-:class:`Toolchain` is what a build needs beyond the generated code (hand-written C
-appended to it, include folders, libraries to link); :func:`compile_source` runs the
-compiler (``gcc`` by default, :class:`generated.values.CodegenSettings`) on one
-translation unit and turns its failure into a :class:`core.errors.BuildError` that names
-the source.
-"""
+"""The C compiler: its identity (part of every cache key) and one compilation to a library."""
 
 from __future__ import annotations
 
@@ -32,18 +25,16 @@ class Toolchain:
     Attributes
     ----------
     appended_source : str
-        C text appended to the generated code (one translation unit, so it can call
-        the generated functions directly).
+        C text appended to the generated code (one translation unit: it calls the
+        generated functions directly).
     include_dirs : tuple of Path
-        ``-I`` folders.
     libraries : tuple of Path
-        Shared libraries linked after the source, in dependency order. The library
-        records only their sonames (no rpath): they are loaded by absolute path from the
-        running environment before it (:func:`generated.shared_library.preload`), so a
-        cache entry does not depend on the checkout or environment that built it.
+        Shared libraries linked after the source, in dependency order, recorded by soname
+        only (no rpath; :func:`generated.shared_library.preload`), so a cache entry does
+        not depend on the checkout or environment that built it.
     key : mapping
-        What else identifies the build (hashes of headers and libraries): part of the
-        cache key, so that a changed header or library is never served from the cache.
+        Hashes of headers and libraries: part of the cache key, so that a changed header
+        or library is never served from the cache.
     """
 
     appended_source: str = ""
@@ -60,11 +51,6 @@ def compiler_identity(compiler: str) -> str:
     ----------
     compiler : str
         Executable name or path, looked up on ``PATH``.
-
-    Raises
-    ------
-    BuildError
-        If the compiler is not found.
     """
     path = shutil.which(compiler)
     if path is None:
@@ -84,24 +70,15 @@ def compiler_identity(compiler: str) -> str:
 def compile_source(
     source: str, settings: CodegenSettings, folder: Path, toolchain: Toolchain | None = None
 ) -> float:
-    """Write ``source`` to ``folder/model.c`` and compile ``folder/model.so``.
+    """Write ``source`` to ``folder/model.c``, compile ``folder/model.so``; the wall seconds.
 
     Parameters
     ----------
     source : str
-        The C text.
     settings : CodegenSettings
-        Compiler, flags and timeout.
     folder : Path
-        Output folder, created if missing.
+        Created if missing.
     toolchain : Toolchain, optional
-        Include folders and shared libraries to link (after the source, by soname and
-        without an rpath: :attr:`Toolchain.libraries`).
-
-    Returns
-    -------
-    float
-        Compile wall time in seconds.
 
     Raises
     ------

@@ -1,18 +1,13 @@
 """Compiled libraries loaded in this process, from bytes their cache entry vouches for.
 
 A build-cache entry (:mod:`generated.codegen`) is loaded from a private copy of its
-library's bytes, checked against its manifest (:func:`verified_bytes`), so that a
-rewrite of the entry can never change code this process runs. :data:`BUILDS` keeps,
-per (structure key, method, codegen settings), the loaded library of a build for later
-scenarios of that structure; an entry is used only while its files are the ones it was
-loaded from (:func:`library_stamp`), else it is checked and loaded again
-(:func:`current`).
+library's bytes, checked against its manifest, so that a rewrite of the entry can never
+change code this process runs (docs/simulation.md).
 """
 
 from __future__ import annotations
 
 import ctypes
-import dataclasses
 import os
 import shutil
 import tempfile
@@ -23,12 +18,7 @@ from typing import Any
 
 import casadi as ca
 
-from core.build_cache import (
-    MANIFEST_NAME,
-    TMP_PREFIX,
-    check_entry,
-    entry_bytes,
-)
+from core.build_cache import MANIFEST_NAME, TMP_PREFIX, check_entry, entry_bytes
 from core.errors import BuildError
 from core.memo import MEMO
 from generated import native
@@ -41,26 +31,19 @@ ODE_NAME, DAE_NAME, OUT_NAME = "cl_ode", "cl_dae", "cl_out"
 
 @dataclass(frozen=True)
 class Image:
-    """A library loaded from a private copy of the bytes its cache entry vouches for.
+    """A closed loop's library loaded from a private copy of verified bytes: its right-hand
+    side and outputs (p an input), and the entry's :func:`library_stamp` when read."""
 
-    Attributes
-    ----------
-    stamp : tuple of int
-        :func:`library_stamp` of the cache entry when those bytes were read.
-    dyn_p, outputs_p : casadi.Function
-        The closed loop's right-hand side and outputs, p an input.
-    """
-
+    library: Library
+    form: str
     stamp: tuple[int, ...]
     dyn_p: ca.Function
     outputs_p: ca.Function
 
 
 def library_stamp(lib: Library) -> tuple[int, ...] | None:
-    """Identity of a cache entry's library and manifest files (None if one is missing).
-
-    Device, inode, size, modification and change time: rewriting, replacing or touching
-    either file changes it (the change time cannot be set back).
+    """Identity of a cache entry's library and manifest files (None if one is missing):
+    device, inode, size, modification and change time (which cannot be set back).
 
     Parameters
     ----------
@@ -76,7 +59,7 @@ def library_stamp(lib: Library) -> tuple[int, ...] | None:
 
 
 def verified_bytes(lib: Library) -> tuple[bytes, tuple[int, ...]]:
-    """The library's bytes, checked against its manifest (:func:`entry_bytes`).
+    """The library's bytes checked against its manifest, and the entry's stamp.
 
     Parameters
     ----------
@@ -85,8 +68,8 @@ def verified_bytes(lib: Library) -> tuple[bytes, tuple[int, ...]]:
     Raises
     ------
     BuildError
-        If the entry someone else could have written (:func:`check_entry`), does not
-        check out, or changed while it was read.
+        If someone else could have written the entry (:func:`check_entry`), it does not
+        check out, or it changed while it was read.
     """
     try:
         check_entry(lib.folder, lib.folder.parent)
@@ -104,11 +87,8 @@ def verified_bytes(lib: Library) -> tuple[bytes, tuple[int, ...]]:
 def open_image(lib: Library, form: str) -> Image:
     """Load ``lib`` from a private copy of its verified bytes, removed once loaded.
 
-    A loaded library's file must not change: its pages are mapped from the file, so an
-    in-place rewrite of the cache entry would change code this process runs (and crash
-    it, at the latest when the Functions are released at exit). The copy lives in a
-    folder named like a build's temporary folder (removed with the build leftovers if
-    this process dies before removing it).
+    A loaded library's pages are mapped from its file: an in-place rewrite of the cache
+    entry would change code this process runs (and crash it, at the latest at exit).
 
     Parameters
     ----------
@@ -135,16 +115,13 @@ def open_image(lib: Library, form: str) -> Image:
             ) from None
 
     dyn_p, outputs_p = _from_private_copy(lib, data, load)
-    return Image(stamp, dyn_p, outputs_p)
+    return Image(lib, form, stamp, dyn_p, outputs_p)
 
 
 def _from_private_copy(lib: Library, data: bytes, load: Callable[[Path], Any]) -> Any:
-    """``load`` of a private copy of ``data`` (the entry's verified bytes), removed after.
-
-    The copy lives in a fresh folder of the cache root (a read-only root: of the system's
-    temporary folder), named with the process id so a crash leaves a folder a later build
-    can recognise and remove.
-    """
+    """``load`` of a private copy of ``data``, removed after: in a fresh folder of the cache
+    root named with the process id (a crash leaves a folder a later build removes), or of
+    the system's temporary folder for a read-only root."""
     try:
         tmp = Path(
             tempfile.mkdtemp(
@@ -166,12 +143,8 @@ _KERNELS = MEMO.namespace("kernel-images", 32)
 
 
 def open_kernels(path: Path) -> ctypes.CDLL:
-    """A per-agent kernel library (``generated/agents.py``) loaded from a private copy of
-    the bytes its cache entry vouches for, once per entry and stamp.
-
-    As :func:`open_image`: the process never maps the cache file itself, so an in-place
-    rewrite of the entry cannot change code it runs; an entry that changed since it was
-    built does not check out (:func:`verified_bytes`) and is refused.
+    """A per-agent kernel library (``generated/agents.py``) loaded as :func:`open_image`
+    loads a closed loop's, once per entry and stamp.
 
     Parameters
     ----------
@@ -194,35 +167,22 @@ def open_kernels(path: Path) -> ctypes.CDLL:
     return cdll
 
 
-@dataclass(frozen=True)
-class Compiled:
-    """What a process keeps of a build for later scenarios of its structure.
-
-    Its loaded library (:class:`Image`) is used only while the cache entry is the file
-    it was loaded from (same :func:`library_stamp`); a changed entry is checked and loaded
-    again, or rebuilt.
-    """
-
-    closed_loop: Any
-    library: Library
-    form: str
-    image: Image
+#: (closed loop, Image) of the builds of this process by (structure key, method, codegen
+#: settings), for later scenarios of the structure (core/memo.py)
+BUILDS = MEMO.namespace("compiled-builds", 32)
 
 
-#: compiled builds of this process by (structure key, method, codegen settings)
-BUILDS = MEMO.namespace("compiled-builds", 32)  # core/memo.py
-
-
-def current(c: Compiled) -> Compiled | None:
-    """``c``, loaded again if its cache entry changed on disk; None if it no longer checks out.
+def current(image: Image) -> Image | None:
+    """``image`` while its cache entry is the file it was loaded from (same
+    :func:`library_stamp`), else loaded again; None if it no longer checks out.
 
     Parameters
     ----------
-    c : Compiled
+    image : Image
     """
-    if library_stamp(c.library) == c.image.stamp:
-        return c
+    if library_stamp(image.library) == image.stamp:
+        return image
     try:
-        return dataclasses.replace(c, image=open_image(c.library, c.form))
+        return open_image(image.library, image.form)
     except BuildError:
         return None

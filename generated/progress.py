@@ -19,27 +19,18 @@ REDRAW_SECONDS = 0.1
 def progress_bar(
     label: str, horizon: float, enabled: bool = True, stream: IO[str] | None = None
 ) -> Iterator[Callable[[float], None] | None]:
-    """A callback ``f(t)`` that shows ``t`` out of ``horizon`` simulated seconds.
+    """A callback ``f(t)`` showing the simulated time ``t`` reached out of ``horizon``.
 
-    The bar appears after :data:`DELAY_SECONDS` of wall time, redraws at most every
-    :data:`REDRAW_SECONDS` and ends its line when the block is left. It is off when
-    ``enabled`` is False (``--no-progress``) and when ``stream`` is not a terminal.
+    None (no bar) when ``enabled`` is False (``--no-progress``) or ``stream`` is no terminal.
 
     Parameters
     ----------
     label : str
         Text before the bar.
     horizon : float
-        Simulated time that counts as 100 %.
     enabled : bool
-        False: yield None (no callback).
     stream : file-like, optional
-        Where to draw (default ``sys.stderr``).
-
-    Yields
-    ------
-    callable or None
-        Call it with the simulated time reached (clipped to ``[0, horizon]``).
+        Default ``sys.stderr``.
     """
     out = stream if stream is not None else sys.stderr
     if not enabled or not out.isatty():

@@ -1,9 +1,8 @@
 """Loading compiled shared libraries: their dependencies first, by absolute path.
 
-A library of the build cache names the SUNDIALS libraries it links only by soname (no
-rpath, :class:`generated.compiler.Toolchain`), so the same entry loads from any checkout
-or environment once those are loaded (:func:`preload`); :func:`load_problem` says why a
-library would not load instead of failing on its first use.
+A build-cache library names the SUNDIALS libraries it links only by soname (no rpath,
+:class:`generated.compiler.Toolchain`), so it loads from any checkout or environment once
+those are loaded (:func:`preload`).
 """
 
 from __future__ import annotations
@@ -17,13 +16,11 @@ from core.memo import MEMO
 
 @MEMO.memoize("preloaded-libraries", 8)
 def preload(libraries: tuple[Path, ...]) -> None:
-    """Load shared libraries by absolute path, locally, once per process.
+    """Load shared libraries by absolute path, once per process, so that the dynamic loader
+    matches a NEEDED soname of a library linked against them.
 
-    A library linked against them names them only by soname (no rpath); the dynamic
-    loader matches a NEEDED soname against the libraries already loaded, so loading
-    these first lets it load from any checkout or environment. Locally (RTLD_LOCAL):
-    loaded globally, their symbols would take precedence over those of the SUNDIALS
-    that CasADi's own CVODES and IDAS plugins bring, which have the same names.
+    Locally (RTLD_LOCAL): loaded globally, their symbols would take precedence over those
+    of the SUNDIALS that CasADi's own CVODES and IDAS plugins bring (the same names).
 
     Parameters
     ----------
@@ -42,15 +39,13 @@ def preload(libraries: tuple[Path, ...]) -> None:
 def load_problem(path: Path, libraries: Sequence[Path] = ()) -> str | None:
     """Why the shared library ``path`` cannot be loaded in this process (None: it can).
 
-    ``libraries`` are preloaded (:func:`preload`), then ``path`` is opened with every
-    symbol bound at once (ctypes' ``RTLD_NOW``) and closed again: a NEEDED library that
-    is not found, an unresolved symbol or bytes that are no shared library are reported
-    here instead of as a traceback of the first load.
+    Opened with every symbol bound at once (ctypes' ``RTLD_NOW``) after ``libraries`` and
+    closed again: a missing NEEDED library, an unresolved symbol or bytes that are no
+    shared library are reported here instead of as a traceback of the first load.
 
     Parameters
     ----------
     path : Path
-        The library.
     libraries : sequence of Path
         What it needs loaded first (:attr:`generated.compiler.Toolchain.libraries`).
     """

@@ -36,7 +36,6 @@ def column_names(sc: Scenario) -> list[str]:
     Parameters
     ----------
     sc : Scenario
-        Supplies the sizes ``N``, ``n`` and ``m``.
     """
     m, n, N = sc.m, sc.n, sc.N
     cols = ["t"] + [f"eta0_{k}" for k in range(1, m + 1)]
@@ -61,11 +60,9 @@ def column_names(sc: Scenario) -> list[str]:
 _OUTPUTS = {"u": "u", "b": "b", "et": "et", "eeta": "ebar", "chi": "chi", "V2": "V2", "V1": "V1"}
 
 
-#: mapped outputs Functions by (id of the Function, K): the Function, its map and an
-#: evaluation buffer of the map
-#: how many mapped Functions are kept (one per structure and horizon in use)
-_MAPS_KEPT = 24
-_MAPS = MEMO.namespace("mapped-outputs", _MAPS_KEPT)  # core/memo.py
+#: by (id of the outputs Function, K): the Function, its map and the map's evaluation
+#: buffer; one per structure and horizon in use (core/memo.py)
+_MAPS = MEMO.namespace("mapped-outputs", 24)
 #: one evaluation at a time uses a kept buffer
 _MAPS_LOCK = threading.Lock()
 
@@ -86,31 +83,22 @@ def _mapped(f: ca.Function, K: int) -> tuple[ca.Function, Any, Any]:
 
 
 def _expanded(f: ca.Function) -> ca.Function:
-    """An MX ``f`` (the symbolic closed loop's outputs) as SX: the same operations in the
-    same order, evaluated without the MX virtual machine's per-node overhead (the same
-    numbers, bit for bit: ``tests/test_trajectory_file.py``); ``f`` itself when it is not
-    MX or does not expand (a call into a compiled library)."""
-    if not f.is_a("MXFunction"):
-        return f
+    """An MX ``f`` as SX: the same operations in the same order (the same numbers, bit for
+    bit) without the MX virtual machine's per-node overhead; else ``f`` itself (not MX, or a
+    call into a compiled library that does not expand)."""
     try:
-        return f.expand()
+        return f.expand() if f.is_a("MXFunction") else f
     except RuntimeError:
         return f
 
 
 def evaluate_outputs(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:
-    """All named outputs at every output time: ``name -> array (K, rows, cols)``.
-
-    The library's outputs Function is called once for all times, with the runtime
-    parameters ``built.p`` as its input ``p`` (when it has one), reading and writing
-    numpy arrays directly.
+    """All named outputs at every output time, in one call: ``name -> array (K, rows, cols)``.
 
     Parameters
     ----------
     built : Built
-        Supplies the compiled ``outputs`` Function (``outputs_p`` and ``p``).
     traj : Trajectory
-        The output times and states.
     """
     return {nm: a.transpose(0, 2, 1) for nm, a in _evaluate(built, traj).items()}
 
@@ -122,32 +110,26 @@ def _evaluate(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:
     f = built.outputs if f is None else f
     if K == 0:
         return {nm: np.zeros((0, *f.size_out(j)[::-1])) for j, nm in enumerate(f.name_out())}
-    with _MAPS_LOCK:
-        return _evaluate_mapped(f, K, built, traj)
-
-
-def _evaluate_mapped(
-    f: ca.Function, K: int, built: Built, traj: Trajectory
-) -> dict[str, np.ndarray]:
-    """:func:`_evaluate` through the kept map of ``f`` (:data:`_MAPS_LOCK` held)."""
-    F, buf, call = _mapped(f, K)
     given = {"t": traj.t, "x": traj.x, "p": getattr(built, "p", None)}  # x: K x nx = nx x K
-    args = []  # alive until the call
-    for i, nm in enumerate(f.name_in()):
-        a = np.ascontiguousarray(
+    args = [  # alive until the call
+        np.ascontiguousarray(
             np.zeros(0) if given.get(nm) is None else given[nm], dtype=float
         ).ravel()
-        if a.size != F.nnz_in(i):
-            raise BuildError(
-                f"closed loop outputs: input {nm!r} takes {F.nnz_in(i)} values, "
-                f"the run gives {a.size} (inputs t, x and p are known)"
-            )
-        buf.set_arg(i, memoryview(a))
-        args.append(a)
-    res = [np.empty(F.nnz_out(j)) for j in range(F.n_out())]
-    for j, a in enumerate(res):
-        buf.set_res(j, memoryview(a))
-    call()
+        for nm in f.name_in()
+    ]
+    with _MAPS_LOCK:
+        F, buf, call = _mapped(f, K)
+        for i, (nm, a) in enumerate(zip(f.name_in(), args, strict=True)):
+            if a.size != F.nnz_in(i):
+                raise BuildError(
+                    f"closed loop outputs: input {nm!r} takes {F.nnz_in(i)} values, "
+                    f"the run gives {a.size} (inputs t, x and p are known)"
+                )
+            buf.set_arg(i, memoryview(a))
+        res = [np.empty(F.nnz_out(j)) for j in range(F.n_out())]
+        for j, a in enumerate(res):
+            buf.set_res(j, memoryview(a))
+        call()
     out = {}
     for j, nm in enumerate(f.name_out()):
         r, c = f.size_out(j)
@@ -164,11 +146,8 @@ def trajectory_frame(built: Built, sc: Scenario, traj: Trajectory) -> pd.DataFra
     Parameters
     ----------
     built : Built
-        Supplies the state layout and the compiled outputs.
     sc : Scenario
-        Supplies the sizes ``N``, ``n`` and ``m``.
     traj : Trajectory
-        The output times and states.
 
     Raises
     ------
@@ -176,17 +155,39 @@ def trajectory_frame(built: Built, sc: Scenario, traj: Trajectory) -> pd.DataFra
         If the closed loop's outputs or state layout do not give these columns.
     """
     raw = _evaluate(built, traj)  # (K, cols, rows)
-    named = _frame_outputs({nm: a.shape[:0:-1] for nm, a in raw.items()}, sc)
+    missing = [nm for nm in _OUTPUTS.values() if nm not in raw]
+    if missing:
+        raise BuildError(f"closed loop outputs lack {missing} (it has {', '.join(raw)})")
+    N = sc.N
+    widths = {"u": sc.n, "b": sc.n, "et": sc.n, "eeta": sc.m, "chi": sc.n, "V2": 1}
+    for key, width in widths.items():
+        nm = _OUTPUTS[key]
+        c, r = raw[nm].shape[1:]
+        if (r, c) != (N, width):
+            raise BuildError(
+                f"closed loop output {nm!r} is {r}x{c} per time, "
+                f"expected {N}x{width} (one row per agent)"
+            )
+    if raw["V1"].shape[1:] != (1, 1):
+        raise BuildError("closed loop output 'V1' is not a scalar")
     X = np.asarray(traj.x, dtype=float)
     K, nx = len(traj.t), X.shape[1]
-    # one table [t | x | each output by time, column-major], then every frame column picked
+    # one table [t | x | each output by time, column-major], then every frame column picked:
+    # output entry (i, k) (N x width per time, by columns) is k N + i after its start
     parts = [np.asarray(traj.t, dtype=float).reshape(K, 1), X]
     start, at = {}, 1 + nx
-    for nm in dict.fromkeys(nm for nm, _ in named.values()):
-        start[nm] = at
+    for key, nm in _OUTPUTS.items():
+        start[key] = at
         parts.append(raw[nm].reshape(K, math.prod(raw[nm].shape[1:])))
         at += parts[-1].shape[1]
-    idx = _frame_index(built.closed_loop.layout.slices, nx, sc.N, named, start)
+    sl, x_col = built.closed_loop.layout.slices, 1 + np.arange(nx)
+    idx = [0, *np.atleast_1d(x_col[sl["eta0"]])]
+    for i in range(N):
+        for key in ("p", "q", "eta", "mu", "phi", "thetahat", "ghat"):
+            idx += list(np.atleast_1d(x_col[sl[(key, i)]]))
+        for key, width in widths.items():
+            idx += [start[key] + k * N + i for k in range(width)]
+    idx.append(start["V1"])
     data = np.concatenate(parts, axis=1)[:, idx]
     cols = column_names(sc)
     if data.shape[1] != len(cols):
@@ -196,60 +197,11 @@ def trajectory_frame(built: Built, sc: Scenario, traj: Trajectory) -> pd.DataFra
     return pd.DataFrame(data, columns=cols)
 
 
-def _frame_outputs(shapes: dict[str, tuple[int, ...]], sc: Scenario) -> dict[str, tuple[str, int]]:
-    """The outputs the frame shows: CSV prefix -> (output name, width); shapes checked.
-
-    ``shapes``: output name -> (rows, cols) per time.
-    """
-
-    missing = [nm for nm in _OUTPUTS.values() if nm not in shapes]
-    if missing:
-        raise BuildError(f"closed loop outputs lack {missing} (it has {', '.join(shapes)})")
-    N, n, m = sc.N, sc.n, sc.m
-    named = {}
-    for key, width in (("u", n), ("b", n), ("et", n), ("eeta", m), ("chi", n), ("V2", 1)):
-        nm = _OUTPUTS[key]
-        if tuple(shapes[nm]) != (N, width):
-            r, c = shapes[nm]
-            raise BuildError(
-                f"closed loop output {nm!r} is {r}x{c} per time, "
-                f"expected {N}x{width} (one row per agent)"
-            )
-        named[key] = (nm, width)
-    nm = _OUTPUTS["V1"]
-    if tuple(shapes[nm]) != (1, 1):
-        raise BuildError(f"closed loop output {nm!r} is not a scalar")
-    named["V1"] = (nm, 1)
-    return named
-
-
-def _frame_index(
-    sl: dict, nx: int, N: int, named: dict[str, tuple[str, int]], start: dict[str, int]
-) -> list[int]:
-    """Columns of ``[t | x | outputs]`` in the order of :func:`column_names`.
-
-    Output ``nm`` (N x width per time, stored by columns) starts at ``start[nm]``: its
-    entry (i, k) is ``k N + i`` further.
-    """
-    x_col = 1 + np.arange(nx)
-    idx = [0, *np.atleast_1d(x_col[sl["eta0"]])]
-    for i in range(N):
-        for key in ("p", "q", "eta", "mu", "phi", "thetahat", "ghat"):
-            idx += list(np.atleast_1d(x_col[sl[(key, i)]]))
-        for key in ("u", "b", "et", "eeta", "chi", "V2"):
-            nm, width = named[key]
-            idx += [start[nm] + k * N + i for k in range(width)]
-    idx.append(start[named["V1"][0]])
-    return idx
-
-
 def csv_text(df: pd.DataFrame) -> str:
     """Deterministic CSV: header, then every value as the shortest text that reads back exactly.
 
-    Written by :meth:`pandas.DataFrame.to_csv` without a ``float_format``, which gives
-    each float64 the same text as Python's ``repr`` (shortest round-trip form); ``nan``
-    is spelled out (pandas' default is an empty field) and lines end in ``\\n`` on
-    every platform.
+    Without a ``float_format`` pandas writes each float64 as Python's ``repr`` does;
+    ``nan`` spelled out (pandas' default is an empty field), ``\\n`` on every platform.
 
     Parameters
     ----------
@@ -265,9 +217,7 @@ def trajectory_text(df: pd.DataFrame, traj: Trajectory) -> str:
     Parameters
     ----------
     df : pandas.DataFrame
-        The frame (:func:`trajectory_frame`).
     traj : Trajectory
-        Its ``complete``, ``t_reached`` and ``message`` mark a partial run in the file itself.
     """
     if traj.complete:
         return csv_text(df)
@@ -276,17 +226,12 @@ def trajectory_text(df: pd.DataFrame, traj: Trajectory) -> str:
 
 
 def read_trajectory(data: bytes | str | Path) -> tuple[pd.DataFrame, str | None]:
-    """Parse ``trajectory.csv`` (bytes, text or a path): the frame and the incomplete reason.
+    """Parse ``trajectory.csv``: the frame and the text after ``# incomplete: `` (None if complete).
 
     Parameters
     ----------
     data : bytes, str or Path
         The file's bytes or text, or its path.
-
-    Returns
-    -------
-    (DataFrame, str or None)
-        The reason is the text after ``# incomplete: `` (None for a complete run).
     """
     if isinstance(data, Path):
         data = data.read_bytes()
@@ -297,12 +242,11 @@ def read_trajectory(data: bytes | str | Path) -> tuple[pd.DataFrame, str | None]
 
 
 def data_rows(text: str) -> int:
-    """Rows of a trajectory text: non-empty lines that are neither comments nor the header.
+    """Rows of a ``trajectory.csv`` text: non-empty lines, not comments, not the header.
 
     Parameters
     ----------
     text : str
-        The contents of a ``trajectory.csv``.
     """
     lines = [ln for ln in text.splitlines() if ln and not ln.startswith("#")]
     return max(len(lines) - 1, 0)
