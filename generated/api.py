@@ -99,9 +99,7 @@ def with_method(sc: Scenario, method: str | None) -> Scenario:
     Raises
     ------
     ScenarioError
-        For an unknown method, or one the scenario's rules refuse
-        (:meth:`core.scenario.Scenario.validate`, e.g. ``options.sign = "exact"`` with a
-        variable-step method).
+        An unknown method, or one the scenario's rules refuse (``Scenario.validate``).
     """
     if method is None:
         return sc
@@ -261,21 +259,11 @@ def _compile(
 
 
 def _bound(
-    cl: Any,
-    lib: Library,
-    dyn_p: Any,
-    outputs_p: Any,
-    form: str,
-    t_sym: float,
-    agents: Any = None,
+    cl: Any, lib: Library, dyn_p: Any, outputs_p: Any, form: str, t_sym: float, agents: Any = None
 ) -> Built:
     """The Built of ``cl`` on ``dyn_p``, ``outputs_p`` (p an input when ``cl`` is parametric)
     with ``cl``'s p filled in; ``t_sym``: seconds of the symbolic build."""
-    timings = {
-        "symbolic_build": t_sym,
-        "codegen": lib.codegen_seconds,
-        "compile": lib.compile_seconds,
-    }
+    timings = dict(symbolic_build=t_sym, codegen=lib.codegen_seconds, compile=lib.compile_seconds)
     if cl.parametric is None:
         return Built(cl, lib, dyn_p, outputs_p, form, timings, agents=agents)
     p = np.asarray(cl.p0, dtype=float)

@@ -20,26 +20,18 @@ from generated.values import CodegenSettings
 
 @dataclass(frozen=True)
 class Toolchain:
-    """What a library needs beyond the generated code (the native integrator's driver).
+    """What a library needs beyond the generated code (the native integrator's driver)."""
 
-    Attributes
-    ----------
-    appended_source : str
-        C text appended to the generated code (one translation unit: it calls the
-        generated functions directly).
-    include_dirs : tuple of Path
-    libraries : tuple of Path
-        Shared libraries linked after the source, in dependency order, recorded by soname
-        only (no rpath; :func:`generated.shared_library.preload`), so a cache entry does
-        not depend on the checkout or environment that built it.
-    key : mapping
-        Hashes of headers and libraries: part of the cache key, so that a changed header
-        or library is never served from the cache.
-    """
-
+    # C text appended to the generated code (one translation unit: it calls the generated
+    # functions directly)
     appended_source: str = ""
     include_dirs: tuple[Path, ...] = ()
+    # shared libraries linked after the source, in dependency order, recorded by soname
+    # only (no rpath; shared_library.preload): a cache entry does not depend on the
+    # checkout or environment that built it
     libraries: tuple[Path, ...] = ()
+    # hashes of headers and libraries: part of the cache key, so that a changed header or
+    # library is never served from the cache
     key: Mapping[str, Any] = field(default_factory=dict)
 
 

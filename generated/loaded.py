@@ -96,15 +96,14 @@ def open_image(lib: Library, form: str) -> Image:
     form : str
         ``"ode"`` or ``"dae"``: which right-hand side to load.
     """
-    data, stamp = verified_bytes(lib)
     names = (DAE_NAME if form == "dae" else ODE_NAME, OUT_NAME)
-    for name in names:
-        if name not in lib.names:
-            raise BuildError(
-                f"library {lib.path}: no function {name!r} (it has {', '.join(lib.names)})"
-            )
 
     def load(copy: Path) -> tuple[Any, Any]:
+        for name in names:  # after the bytes checked out
+            if name not in lib.names:
+                raise BuildError(
+                    f"library {lib.path}: no function {name!r} (it has {', '.join(lib.names)})"
+                )
         try:
             preload(lib.preload)  # the libraries it names by soname (native: SUNDIALS)
             return tuple(ca.external(name, str(copy)) for name in names)
@@ -114,14 +113,17 @@ def open_image(lib: Library, form: str) -> Image:
                 f"build cache {lib.folder}: cannot be loaded ({first[0] if first else exc})"
             ) from None
 
-    dyn_p, outputs_p = _from_private_copy(lib, data, load)
+    (dyn_p, outputs_p), stamp = _load_private(lib, load)
     return Image(lib, form, stamp, dyn_p, outputs_p)
 
 
-def _from_private_copy(lib: Library, data: bytes, load: Callable[[Path], Any]) -> Any:
-    """``load`` of a private copy of ``data``, removed after: in a fresh folder of the cache
-    root named with the process id (a crash leaves a folder a later build removes), or of
-    the system's temporary folder for a read-only root."""
+def _load_private(lib: Library, load: Callable[[Path], Any]) -> tuple[Any, tuple[int, ...]]:
+    """``load`` of a private copy of the entry's verified bytes, and the entry's stamp.
+
+    The copy, removed after, is in a fresh folder of the cache root named with the process id
+    (a crash leaves a folder a later build removes), or of the system's temporary folder.
+    """
+    data, stamp = verified_bytes(lib)
     try:
         tmp = Path(
             tempfile.mkdtemp(
@@ -133,7 +135,7 @@ def _from_private_copy(lib: Library, data: bytes, load: Callable[[Path], Any]) -
     try:
         copy = tmp / lib.path.name
         copy.write_bytes(data)
-        return load(copy)
+        return load(copy), stamp
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
@@ -161,8 +163,7 @@ def open_kernels(path: Path) -> ctypes.CDLL:
     hit = _KERNELS.get((str(path), library_stamp(lib)))
     if hit is not None:
         return hit
-    data, stamp = verified_bytes(lib)
-    cdll = _from_private_copy(lib, data, native.open_library)
+    cdll, stamp = _load_private(lib, native.open_library)
     _KERNELS[(str(path), stamp)] = cdll
     return cdll
 

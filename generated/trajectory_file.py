@@ -1,9 +1,6 @@
 """The ``trajectory.csv`` file: its columns, the frame, writing it and reading it back.
 
-Columns (agents and components 1-based): ``t``, the leader's ``eta0_k``, then per
-follower its states and outputs (:func:`column_names`), and ``V1`` last. A run that
-stopped early is written all the same, led by ``# incomplete: t = <t>: <reason>``
-(:data:`INCOMPLETE_MARK`); readers skip ``#`` lines.
+A run that stopped early is written all the same, led by ``# incomplete: t = <t>: <reason>``.
 """
 
 from __future__ import annotations
