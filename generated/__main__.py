@@ -62,9 +62,7 @@ def main(argv: list[str]) -> int:
         Command-line arguments without the program name.
     """
     args = _parser().parse_args(argv)
-    if args.cmd == "cache":
-        return _cache(args.clear)
-    return _sim(args)
+    return _cache(args.clear) if args.cmd == "cache" else _sim(args)
 
 
 def _cache(clear: bool) -> int:

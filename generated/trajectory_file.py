@@ -34,22 +34,15 @@ def column_names(sc: Scenario) -> list[str]:
     ----------
     sc : Scenario
     """
-    m, n, N = sc.m, sc.n, sc.N
+    m, n = sc.m, sc.n
+    # per follower: states, then outputs; width 0: a scalar without a component index
+    states = ("p", n), ("q", n), ("eta", m), ("mu", m), ("phi", 0), ("thetahat", n), ("ghat", 0)
+    outputs = ("u", n), ("b", n), ("et", n), ("eeta", m), ("chi", n)
     cols = ["t"] + [f"eta0_{k}" for k in range(1, m + 1)]
-    for i in range(1, N + 1):
-        cols += [f"p{i}_{r}" for r in range(1, n + 1)]
-        cols += [f"q{i}_{r}" for r in range(1, n + 1)]
-        cols += [f"eta{i}_{k}" for k in range(1, m + 1)]
-        cols += [f"mu{i}_{k}" for k in range(1, m + 1)]
-        cols += [f"phi{i}"]
-        cols += [f"thetahat{i}_{r}" for r in range(1, n + 1)]
-        cols += [f"ghat{i}"]
-        cols += [f"u{i}_{r}" for r in range(1, n + 1)]
-        cols += [f"b{i}_{r}" for r in range(1, n + 1)]
-        cols += [f"et{i}_{r}" for r in range(1, n + 1)]
-        cols += [f"eeta{i}_{k}" for k in range(1, m + 1)]
-        cols += [f"chi{i}_{r}" for r in range(1, n + 1)]
-        cols += [f"V2_{i}"]
+    for i in range(1, sc.N + 1):
+        for name, width in (*states, *outputs):
+            cols += [f"{name}{i}_{k}" for k in range(1, width + 1)] if width else [f"{name}{i}"]
+        cols.append(f"V2_{i}")
     return [*cols, "V1"]
 
 
@@ -65,11 +58,8 @@ _MAPS_LOCK = threading.Lock()
 
 
 def _mapped(f: ca.Function, K: int) -> tuple[ca.Function, Any, Any]:
-    """``f`` evaluated at K times in one call (an input ``p`` shared by all), with a buffer.
-
-    Kept for the next run of the same Function and K (the entry holds ``f``, so its id
-    is not reused while the entry lives). Call with :data:`_MAPS_LOCK` held.
-    """
+    """``f`` evaluated at K times in one call (input ``p`` shared), with a buffer: kept (the
+    entry holds ``f``, so its id is not reused while it lives). :data:`_MAPS_LOCK` held."""
     key = (id(f), K)
     entry = _MAPS.get(key)
     if entry is None:
