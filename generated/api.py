@@ -370,7 +370,6 @@ def integrate_built(
     x0 : ndarray
         Initial state at ``t_out[0]`` (the DAE's z starts from ``closed_loop.z0``).
     t_out : ndarray
-        Output times.
     settings : IntegratorSettings
     bps : sequence of float
         Breakpoints (:func:`breakpoints`).
@@ -519,7 +518,6 @@ def run(
     Parameters
     ----------
     path : str or Path
-        Scenario file.
     overrides, variant
         See :func:`load` (e.g. ``{"options.ablation": True}`` -> ``out/<name>-ablation/``).
     method : str, optional

@@ -124,12 +124,9 @@ def _load_private(lib: Library, load: Callable[[Path], Any]) -> tuple[Any, tuple
     (a crash leaves a folder a later build removes), or of the system's temporary folder.
     """
     data, stamp = verified_bytes(lib)
+    prefix = f"{TMP_PREFIX}{lib.key[:12]}-{os.getpid()}-"
     try:
-        tmp = Path(
-            tempfile.mkdtemp(
-                dir=lib.folder.parent, prefix=f"{TMP_PREFIX}{lib.key[:12]}-{os.getpid()}-"
-            )
-        )
+        tmp = Path(tempfile.mkdtemp(dir=lib.folder.parent, prefix=prefix))
     except OSError:  # a read-only cache root
         tmp = Path(tempfile.mkdtemp(prefix=f"hitl-{lib.key[:12]}-"))
     try:

@@ -106,10 +106,8 @@ def reuse_problem(
     if not isinstance(meta, dict) or not isinstance(meta.get("inputs"), dict):
         return "meta.json records no inputs (older run)", None
     gp = folder / "gains.json"
-    want = run_inputs(
-        sc, sha256_file(gp) if gp.is_file() else None, method or sc.integration.method
-    )
-    for k, v in want.items():
+    gains_sha256 = sha256_file(gp) if gp.is_file() else None
+    for k, v in run_inputs(sc, gains_sha256, method or sc.integration.method).items():
         if meta["inputs"].get(k) != v:
             return f"{k} changed since the run", None
     libs = meta.get("libraries")

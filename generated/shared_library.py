@@ -26,11 +26,6 @@ def preload(libraries: tuple[Path, ...]) -> None:
     ----------
     libraries : tuple of Path
         In dependency order (a library before those that need it).
-
-    Raises
-    ------
-    OSError
-        If one cannot be loaded.
     """
     for lib in libraries:
         ctypes.CDLL(str(lib), mode=ctypes.RTLD_LOCAL)
