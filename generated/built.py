@@ -1,6 +1,4 @@
-"""A closed loop compiled for one method: what :func:`generated.api.build` returns and
-every method's :meth:`~generated.solvers.Solver.run` takes.
-"""
+"""A closed loop compiled for one method: what :func:`generated.api.build` returns."""
 
 from __future__ import annotations
 
@@ -18,34 +16,24 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Built:
-    """A closed loop compiled for one method, bound to one scenario's numbers.
-
-    The library takes the closed loop's runtime parameters p as an input
-    (:mod:`symbolic.parameters`); :attr:`dyn` and :attr:`outputs` are the library's
-    Functions with :attr:`p` filled in; :func:`generated.api.build` binds the same library to every
-    later scenario of the same structure.
+    """A closed loop compiled for one method, bound to one scenario's runtime parameters p.
 
     Attributes
     ----------
     closed_loop : symbolic.closed_loop.ClosedLoop
         Bound to the scenario (``x0``, ``p0``, breakpoints).
     library : Library
-    dyn : casadi.Function
-        The compiled integrator-form right-hand side (ODE, or DAE for ``idas``) with p
-        fixed (its p input is empty).
-    outputs : casadi.Function
-        The compiled ``(t, x) -> named outputs`` with p fixed.
+    dyn, outputs : casadi.Function
+        The library's integrator-form right-hand side (ODE, or DAE for ``idas``) and
+        ``(t, x) -> named outputs``, with p fixed.
     form : str
         ``"ode"`` or ``"dae"``.
     timings : dict
         ``symbolic_build``, ``codegen``, ``compile`` seconds.
     agents : (tuple of Library, AgentProblem) or None
-        Method ``native``: the per-agent kernel libraries (:mod:`generated.agents`) and the scenario's runtime
-        data; :attr:`library` is then the first kernel library's record and :attr:`dyn`,
-        :attr:`outputs` the symbolic closed loop's Functions (CasADi's virtual machine).
-        None otherwise.
+        Method ``native``: the kernel libraries and the scenario's runtime data;
+        :attr:`dyn` and :attr:`outputs` are then the symbolic closed loop's.
     p : ndarray
-        The runtime parameters the library is called with.
     dyn_p, outputs_p : casadi.Function or None
         The library's Functions with p as an input.
     """

@@ -1,10 +1,7 @@
 """What every integration method provides: the :class:`Solver` interface and its :class:`BuildPlan`.
 
-A method is one :class:`Solver` subclass, registered by name
-(:func:`generated.solvers.register`). The pipeline (:mod:`generated.api`) asks the
-registry for the scenario's method and then only calls the interface: ``prepare``
-before the closed loop is built, ``build`` for what goes into the compiled library,
-``run`` for the trajectory. It never compares method names.
+The pipeline (:mod:`generated.api`) calls only this interface (``prepare``, ``build``,
+``run``), never comparing method names; docs/ARCHITECTURE.md has the recipe.
 """
 
 from __future__ import annotations
@@ -35,11 +32,10 @@ class BuildPlan:
     Attributes
     ----------
     libraries : tuple of Library
-        Empty: the closed loop's right-hand side (with its Jacobian) and outputs are
-        compiled. Otherwise the method's own (the per-agent engine's kernels): nothing of
-        the loop is compiled and its outputs are evaluated by CasADi's virtual machine.
+        Empty: the closed loop is compiled. Otherwise nothing of it is, and its outputs
+        are evaluated by CasADi's virtual machine.
     data : object
-        Whatever ``run`` needs besides the libraries (the per-agent engine's problem).
+        Whatever ``run`` needs besides the libraries.
     """
 
     libraries: tuple[Library, ...] = ()
@@ -52,15 +48,13 @@ class Solver(ABC):
     Attributes
     ----------
     name : str
-        The ``integration.method`` (and ``IntegratorSettings.method``) that selects it.
+        The ``integration.method`` that selects it.
     form : str
-        ``"ode"`` (right-hand side ``(t, x) -> ẋ``) or ``"dae"`` (semi-explicit, with
-        algebraic states z): the closed-loop form it integrates.
+        ``"ode"`` or ``"dae"`` (semi-explicit, with algebraic states z).
     summary : str
         One line for listings and errors.
     fixed_step : bool
-        Whether it steps with a fixed step (only such a method may integrate the exact
-        sign function, ``options.sign = "exact"``).
+        Only a fixed-step method may integrate ``options.sign = "exact"``.
     """
 
     name: ClassVar[str]
@@ -69,17 +63,12 @@ class Solver(ABC):
     fixed_step: ClassVar[bool] = False
 
     def prepare(self, sc: Scenario, gains: Gains) -> Any:
-        """Checks and data needed before the closed loop is built (default: none).
+        """Checks and data (passed to :meth:`build`) before the closed loop is built.
 
         Parameters
         ----------
         sc : Scenario
         gains : Gains
-
-        Returns
-        -------
-        object
-            Passed to :meth:`build` as ``prepared``.
         """
         return None
 
@@ -97,8 +86,7 @@ class Solver(ABC):
         return BuildPlan()
 
     def check_built(self, built: Built) -> None:
-        """Raise :class:`~core.errors.IntegrationError` if ``built`` was compiled for
-        another method (default: the form must match).
+        """Raise :class:`~core.errors.IntegrationError` if ``built`` is of another form.
 
         Parameters
         ----------
@@ -120,14 +108,13 @@ class Solver(ABC):
         breakpoints: Sequence[float] = (),
         progress: Callable[[float], None] | None = None,
     ) -> Trajectory:
-        """Integrate ``built`` from ``x0`` at ``t_out[0]`` through ``t_out``.
+        """Integrate ``built`` from ``x0`` at ``t_out[0]``; a failure gives an incomplete result.
 
         Parameters
         ----------
         built : Built
             Compiled for this method (:meth:`check_built` has passed).
         x0 : ndarray
-            Initial state.
         t_out : ndarray
             Increasing output times.
         settings : IntegratorSettings
@@ -135,11 +122,6 @@ class Solver(ABC):
             Known discontinuity times: the run restarts there.
         progress : callable, optional
             Called with the simulated time reached.
-
-        Returns
-        -------
-        Trajectory
-            Incomplete (``status`` not ``OK``), not raised, on an integrator failure.
         """
 
     def linear_algebra(self, N: int, plan: Plan) -> str:
@@ -148,10 +130,8 @@ class Solver(ABC):
         Parameters
         ----------
         N : int
-            Number of followers.
         plan : Plan
-            The large-N plan (:func:`generated.largescale.choose_plan`) the CasADi
-            methods follow.
+            The large-N plan (:func:`generated.largescale.choose_plan`).
         """
         return f"{plan.jacobian}: {plan.strategy} Newton ({plan.reason})"
 
