@@ -278,96 +278,70 @@ def integrate(
     z = np.zeros(nz) if z0 is None else np.asarray(z0, dtype=float).ravel()
     t_out = np.asarray(t_out, dtype=float)
     acc = dict.fromkeys([*_STAT_KEYS, "restarts", "integrator_calls", "refined_intervals"], 0)
-    K = len(t_out)
-    Z = np.full((K, nz), np.nan) if dae else None
-    run = _Run(make_stepper(f, s, nx, nz), acc, np.full((K, nx), np.nan), Z)
-    run.store(0, x, z)
-    failure = run.chunks(schedule(t_out, breakpoints), s.chunk, x, z, dae, progress)
+    stepper = make_stepper(f, s, nx, nz)
+    X = np.full((len(t_out), nx), np.nan)
+    Z = np.full((len(t_out), nz), np.nan) if dae else None
+    X[0], last, failure = x, 0, None
+    if Z is not None:
+        Z[0] = z
+    sched = schedule(t_out, breakpoints)
+    restarts = set(sched.breaks.tolist())  # compared exactly: targets are these times
+    t_cur = float(t_out[0])
+    for ci, targets in enumerate(_chunks(sched, s.chunk)):
+        if ci:
+            acc["restarts"] += 1
+        times = [c[0] for c in targets]
+        new_seg = ci == 0 or t_cur in restarts
+        try:
+            if dae and ci == 0:  # t0 in the grid: row 0 gets the consistent z(t0) IDAS starts from
+                Xc, Zc = stepper(t_cur, x, z, [t_cur, *times], acc)
+                Z[0], Xc, Zc = Zc[0], Xc[1:], Zc[1:]
+            else:
+                Xc, Zc = stepper(t_cur, x, z, times, acc, new_seg)
+        except ChunkFailure:
+            Xc, Zc, failure = _replay(stepper, acc, t_cur, x, z, times, new_seg)
+        for k in range(len(Xc)):
+            tgt, idx = targets[k]
+            x, t_cur = Xc[k], tgt
+            if len(z):
+                z = Zc[k]
+            if idx >= 0:
+                X[idx], last = x, idx
+                if Z is not None:
+                    Z[idx] = z
+        if failure is not None:
+            break
+        if progress is not None:
+            progress(t_cur)
     acc["wall_seconds"] = time.perf_counter() - wall0
-    n = run.last + 1
     message = ""
     if failure is not None:
         message = (
-            f"{s.method} failed after t = {float(t_out[run.last]):.6g} s "
+            f"{s.method} failed after t = {float(t_out[last]):.6g} s "
             f"(working towards t = {failure.t_target:.6g} s): {failure.reason}"
         )
     return Trajectory(
-        t=t_out[:n].copy(),
-        x=run.X[:n],
-        z=None if run.Z is None else run.Z[:n],
+        t=t_out[: last + 1].copy(),
+        x=X[: last + 1],
+        z=None if Z is None else Z[: last + 1],
         method=s.method,
         status=Status.OK if failure is None else failure.status,
-        t_reached=float(t_out[run.last]),
+        t_reached=float(t_out[last]),
         message=message,
         stats=acc,
     )
 
 
-class _Run:
-    """The chunk loop of :func:`integrate` over one stepper, and the output rows it fills."""
-
-    def __init__(self, stepper: Any, acc: dict, X: np.ndarray, Z: np.ndarray | None) -> None:
-        self.stepper, self.acc, self.X, self.Z = stepper, acc, X, Z
-        self.last = 0
-
-    def store(self, idx: int, x: np.ndarray, z: np.ndarray) -> None:
-        self.X[idx] = x
-        if self.Z is not None:
-            self.Z[idx] = z
-        self.last = idx
-
-    def chunks(
-        self,
-        sched: Schedule,
-        chunk: float,
-        x: np.ndarray,
-        z: np.ndarray,
-        dae: bool,
-        progress: Callable[[float], None] | None,
-    ) -> ChunkFailure | None:
-        """Integrate every chunk; return the failure that stopped the run, or None."""
-        restarts = set(sched.breaks.tolist())  # compared exactly: targets are these times
-        t_cur = float(sched.t_out[0])
-        for ci, chunk_targets in enumerate(_chunks(sched, chunk)):
-            if ci:
-                self.acc["restarts"] += 1
-            times = [c[0] for c in chunk_targets]
-            new_seg = ci == 0 or t_cur in restarts
-            Xc, Zc, failure = self._advance(t_cur, x, z, times, new_seg, dae and ci == 0)
-            for k in range(len(Xc)):
-                tgt, idx = chunk_targets[k]
-                x, t_cur = Xc[k], tgt
-                if len(z):
-                    z = Zc[k]
-                if idx >= 0:
-                    self.store(idx, x, z)
-            if failure is not None:
-                return failure
-            if progress is not None:
-                progress(t_cur)
-        return None
-
-    def _advance(
-        self, t0: float, x, z, times: list[float], new_seg: bool, first_dae: bool
-    ) -> tuple[Any, Any, ChunkFailure | None]:
-        """One chunk, replayed target by target after a failure to keep what was reached."""
+def _replay(stepper: Any, acc: dict, t0: float, x, z, times: list[float], new_segment: bool):
+    """A failed chunk target by target: the states reached and the failure (or None)."""
+    xs, zs = [], []
+    for k, tt in enumerate(times):
         try:
-            if first_dae:  # t0 in the grid: row 0 gets the consistent z(t0) the solve started from
-                Xc, Zc = self.stepper(t0, x, z, [t0, *times], self.acc)
-                self.Z[0], Xc, Zc = Zc[0], Xc[1:], Zc[1:]
-                return Xc, Zc, None
-            Xc, Zc = self.stepper(t0, x, z, times, self.acc, new_seg)
-            return Xc, Zc, None
-        except ChunkFailure:
-            pass
-        xs, zs = [], []
-        for k, tt in enumerate(times):
-            try:
-                Xi, Zi = self.stepper(t0, x, z, [tt], self.acc, new_seg and k == 0)
-            except ChunkFailure as fail:
-                return xs, zs, fail
-            x, t0 = Xi[-1], tt
-            z = Zi[-1] if len(Zi[-1]) else z
-            xs.append(x)
-            zs.append(z)
-        return xs, zs, None
+            Xi, Zi = stepper(t0, x, z, [tt], acc, new_segment and k == 0)
+        except ChunkFailure as fail:
+            return xs, zs, fail
+        x, t0 = Xi[-1], tt
+        z = Zi[-1] if len(Zi[-1]) else z
+        xs.append(x)
+        zs.append(z)
+    return xs, zs, None
