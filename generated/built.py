@@ -18,33 +18,18 @@ if TYPE_CHECKING:
 class Built:
     """A closed loop compiled for one method, bound to one scenario's runtime parameters p.
 
-    Attributes
-    ----------
-    closed_loop : symbolic.closed_loop.ClosedLoop
-        Bound to the scenario (``x0``, ``p0``, breakpoints).
-    library : Library
-    dyn, outputs : casadi.Function
-        The library's integrator-form right-hand side (ODE, or DAE for ``idas``) and
-        ``(t, x) -> named outputs``, with p fixed.
-    form : str
-        ``"ode"`` or ``"dae"``.
-    timings : dict
-        ``symbolic_build``, ``codegen``, ``compile`` seconds.
-    agents : (tuple of Library, AgentProblem) or None
-        Method ``native``: the kernel libraries and the scenario's runtime data;
-        :attr:`dyn` and :attr:`outputs` are then the symbolic closed loop's.
-    p : ndarray
-    dyn_p, outputs_p : casadi.Function or None
-        The library's Functions with p as an input.
+    ``dyn`` (the ODE, or the DAE for ``idas``, in integrator form) and ``outputs`` are the
+    library's Functions with p fixed; for method ``native`` (``agents`` set: the kernel
+    libraries and the scenario's runtime data) they are the symbolic closed loop's.
     """
 
-    closed_loop: ClosedLoop
+    closed_loop: ClosedLoop  # bound to the scenario (x0, p0, breakpoints)
     library: Library
     dyn: ca.Function
-    outputs: ca.Function
-    form: str
-    timings: dict[str, float] = field(default_factory=dict)
+    outputs: ca.Function  # (t, x) -> named outputs
+    form: str  # "ode" or "dae"
+    timings: dict[str, float] = field(default_factory=dict)  # symbolic_build, codegen, compile
     agents: tuple[tuple[Library, ...], AgentProblem] | None = None
     p: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    dyn_p: ca.Function | None = None
+    dyn_p: ca.Function | None = None  # the library's Functions with p as an input
     outputs_p: ca.Function | None = None

@@ -47,34 +47,18 @@ from generated.values import CodegenSettings
 
 @dataclass(frozen=True)
 class Library:
-    """A compiled shared library and how it was obtained.
+    """A compiled shared library and how it was obtained."""
 
-    Attributes
-    ----------
-    key : str
-        SHA-256 cache key (the folder name).
-    folder, source, path : Path
-        The cache folder, the generated C file and the shared library.
-    names : tuple of str
-        Functions in the library (with their ``jac_``/``fwd1_`` companions).
-    cache_hit : bool
-    codegen_seconds, compile_seconds : float
-        0 compile seconds on a cache hit.
-    source_bytes : int
-    preload : tuple of Path
-        Shared libraries it needs loaded first (:attr:`Toolchain.libraries`).
-    """
-
-    key: str
+    key: str  # SHA-256 cache key, the folder's name
     folder: Path
-    source: Path
-    path: Path
-    names: tuple[str, ...]
+    source: Path  # the generated C
+    path: Path  # the shared library
+    names: tuple[str, ...]  # its functions, with their jac_/fwd1_ companions
     cache_hit: bool
     codegen_seconds: float
-    compile_seconds: float
+    compile_seconds: float  # 0 on a cache hit
     source_bytes: int
-    preload: tuple[Path, ...] = ()
+    preload: tuple[Path, ...] = ()  # libraries to load first (Toolchain.libraries)
 
     def function(self, name: str) -> ca.Function:
         """Load ``name``, one of :attr:`names`, with :func:`casadi.external`.

@@ -30,27 +30,13 @@ DEFAULT_MAX_KRYLOV = 20
 
 @dataclass(frozen=True)
 class JacobianPlan:
-    """How the Newton systems of the implicit integrators are solved.
+    """How the Newton systems of the implicit integrators are solved."""
 
-    Attributes
-    ----------
-    jacobian : str
-        ``CodegenSettings.jacobian``: ``"sparse"``, ``"jvp"`` or ``"gmres"``.
-    expand : bool or None
-        ``CodegenSettings.expand`` to use (False for ``jvp``); None keeps the caller's.
-    linear_solver : str
-        Direct sparse solver of ``sparse``.
-    extra_options : tuple of (str, value) pairs
-        SUNDIALS options beyond the Newton scheme.
-    reason : str
-        Why this plan was chosen (for reports).
-    """
-
-    jacobian: str
-    expand: bool | None
-    linear_solver: str = "csparse"
-    extra_options: tuple[tuple[str, Any], ...] = ()
-    reason: str = ""
+    jacobian: str  # CodegenSettings.jacobian: "sparse", "jvp" or "gmres"
+    expand: bool | None  # CodegenSettings.expand (False for jvp); None keeps the caller's
+    linear_solver: str = "csparse"  # direct sparse solver of sparse
+    extra_options: tuple[tuple[str, Any], ...] = ()  # SUNDIALS options beyond the scheme
+    reason: str = ""  # why this plan (for reports)
 
     @property
     def strategy(self) -> str:

@@ -56,24 +56,12 @@ class Schedule:
 
     Every two distinct times among ``t0``, ``breaks`` and ``targets`` are more than
     ``tol`` apart, so no integrator is asked for a time within ``tol`` of where it stands.
-
-    Attributes
-    ----------
-    t_out : ndarray
-        The requested output times; the trajectory's rows keep exactly these.
-    targets : ndarray
-        The time integrated to for each row: ``t_out[k]``, or the breakpoint within
-        ``tol`` of it.
-    breaks : ndarray
-        Restart times in ``(t0 + tol, tf - tol)``, sorted, pairwise more than ``tol`` apart.
-    tol : float
-        :func:`time_tolerance` of the run.
     """
 
-    t_out: np.ndarray
-    targets: np.ndarray
-    breaks: np.ndarray
-    tol: float
+    t_out: np.ndarray  # the requested output times: the trajectory's rows keep exactly these
+    targets: np.ndarray  # per row: t_out[k], or the breakpoint within tol of it
+    breaks: np.ndarray  # restarts in (t0 + tol, tf - tol), sorted, pairwise > tol apart
+    tol: float  # time_tolerance of the run
 
     def segments(self) -> list[tuple[float, float, list[int]]]:
         """``(start, end, rows)`` per segment between restarts; ``rows``: the output rows

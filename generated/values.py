@@ -117,41 +117,20 @@ JACOBIAN_CHOICES = ("auto", *JACOBIAN_STRATEGIES)
 
 @dataclass(frozen=True)
 class CodegenSettings:
-    """Every option of code generation, compilation and the integrators' linear algebra.
-
-    docs/simulation.md ("Code generation and the build cache") describes each field.
-
-    Attributes
-    ----------
-    compiler, optimization, kernel_optimization : str
-        C compiler; ``-O1`` (``-O0`` compiles 3-4x faster on large files but the
-        right-hand side then runs slower); ``-O3`` for the small, hot per-agent kernels.
-    extra_cflags : tuple of str
-        Appended after ``-shared -fPIC``.
-    jacobian : str
-        :data:`JACOBIAN_CHOICES` (derivatives generated: :mod:`generated.csource`).
-    linear_solver : str
-        CasADi Linsol plugin of CVODES/IDAS and the fixed-step method.
-    expand, cse : bool
-        Expand MX to SX before generating; common-subexpression elimination.
-    build_root : str or None
-        Cache root; None: :func:`generated.codegen.cache_root`.
-    timeout : float
-        Seconds allowed for one compilation.
-    codegen_options : tuple of (str, value) pairs
-        Options of :class:`casadi.CodeGenerator`.
-    """
+    """Every option of code generation, compilation and the integrators' linear algebra
+    (docs/simulation.md, "Code generation and the build cache")."""
 
     compiler: str = "gcc"
+    #: -O0 compiles 3-4x faster on large files, but the right-hand side then runs slower
     optimization: str = "-O1"
-    kernel_optimization: str = "-O3"
-    extra_cflags: tuple[str, ...] = ()
-    jacobian: str = "sparse"
-    linear_solver: str = "csparse"
-    expand: bool = True
-    cse: bool = True
-    build_root: str | None = None
-    timeout: float = 900.0
+    kernel_optimization: str = "-O3"  # the per-agent kernels: small sources, hot loops
+    extra_cflags: tuple[str, ...] = ()  # after -shared -fPIC
+    jacobian: str = "sparse"  # one of JACOBIAN_CHOICES
+    linear_solver: str = "csparse"  # CasADi Linsol plugin of CVODES/IDAS and ROS2
+    expand: bool = True  # MX to SX before generating
+    cse: bool = True  # common-subexpression elimination
+    build_root: str | None = None  # None: generated.codegen.cache_root
+    timeout: float = 900.0  # seconds per compilation
     codegen_options: tuple[tuple[str, Any], ...] = field(default=(("with_header", False),))
 
     def __post_init__(self) -> None:
@@ -182,45 +161,24 @@ class CodegenSettings:
 
 @dataclass(frozen=True)
 class IntegratorSettings:
-    """How to integrate (docs/simulation.md, "Integration methods").
-
-    Attributes
-    ----------
-    method : str
-        A registered method (:func:`core.methods.names`).
-    rtol, atol : float
-    max_steps : int
-        CVODES/IDAS ``max_num_steps``: steps allowed between two output times.
-    fixed_step, fixed_rtol, fixed_atol : float
-        Largest step of ``fixed``, and its safeguard: an output interval whose error
-        estimate exceeds 1 is recomputed as two halves, at most ``fixed_max_halvings``
-        levels deep. Loose by design: the exact sign's chattering passes.
-    fixed_max_halvings : int
-    chunk : float
-        Simulated seconds per integrator call (restart, progress, failure granularity).
-    newton_scheme, linear_solver : str
-        Linear algebra of CVODES/IDAS (:mod:`generated.largescale`); ``linear_solver``
-        is also the fixed-step method's.
-    algebraic_atol : float
-        IDAS: the z entries of ``abstolv``; 1e30 leaves z out of the Newton test.
-    extra_options : tuple of (str, value) pairs
-        Merged last into the CVODES/IDAS options.
-    """
+    """How to integrate (docs/simulation.md, "Integration methods")."""
 
     # the scenario's [integration] defaults: core.scenario.Integration owns them
     method: str = default_of(Integration, "method")
     rtol: float = default_of(Integration, "rtol")
     atol: float = default_of(Integration, "atol")
-    max_steps: int = default_of(Integration, "max_steps")
-    fixed_step: float = default_of(Integration, "fixed_step")
-    chunk: float = 1.0
+    max_steps: int = default_of(Integration, "max_steps")  # between two output times
+    fixed_step: float = default_of(Integration, "fixed_step")  # the largest step of fixed
+    chunk: float = 1.0  # simulated seconds per integrator call
+    # fixed's safeguard: an output interval whose error estimate exceeds 1 is recomputed
+    # as two halves, at most fixed_max_halvings deep; loose so the exact sign's chattering passes
     fixed_rtol: float = 1e-3
     fixed_atol: float = 1e-3
     fixed_max_halvings: int = 30
-    newton_scheme: str = "direct"
-    linear_solver: str = "csparse"
-    algebraic_atol: float = 1e30
-    extra_options: tuple[tuple[str, Any], ...] = ()
+    newton_scheme: str = "direct"  # CVODES/IDAS (generated.largescale)
+    linear_solver: str = "csparse"  # CVODES/IDAS direct Newton, and fixed
+    algebraic_atol: float = 1e30  # IDAS: z's abstolv; 1e30 leaves z out of the Newton test
+    extra_options: tuple[tuple[str, Any], ...] = ()  # merged last into CVODES/IDAS options
 
     def __post_init__(self) -> None:
         if self.method not in methods.names():
@@ -243,40 +201,19 @@ class IntegratorSettings:
 
 @dataclass(frozen=True)
 class Trajectory:
-    """States at the output times, complete or up to a failure (docs/simulation.md).
+    """States at the output times, complete or up to a failure (docs/simulation.md)."""
 
-    Attributes
-    ----------
-    t : ndarray, shape (K,)
-    x : ndarray, shape (K, nx)
-    z : ndarray or None, shape (K, nz)
-        Algebraic states (IDAS only).
-    method : str
-    status : Status
-    t_reached : float
-        Last output time integrated successfully.
-    message : str
-        Empty when complete, else the reason (method, time reached, solver flag).
-    stats : dict of str to float
-        Counters (``steps``, ``rhs_evals``, ...) and ``wall_seconds``.
-    sundials_log : str
-        SUNDIALS' warnings and errors of a native run, one line each.
-    t_stop : float
-        Where the native driver stood when it returned (NaN for the other methods).
-    x_stop : ndarray or None, shape (nx,)
-        The state at ``t_stop``: tells a run-away state from a stalled integrator.
-    """
-
-    t: np.ndarray
-    x: np.ndarray
-    z: np.ndarray | None
+    t: np.ndarray  # (K,)
+    x: np.ndarray  # (K, nx)
+    z: np.ndarray | None  # (K, nz): algebraic states (IDAS only)
     method: str
     status: Status
-    t_reached: float
-    message: str
-    stats: dict[str, float] = field(default_factory=dict)
-    sundials_log: str = ""
-    t_stop: float = math.nan
+    t_reached: float  # the last output time reached
+    message: str  # empty when complete, else the reason (method, time reached, flag)
+    stats: dict[str, float] = field(default_factory=dict)  # counters, wall_seconds
+    sundials_log: str = ""  # a native run's SUNDIALS warnings and errors, one a line
+    t_stop: float = math.nan  # where the native driver stood when it returned
+    #: the state at t_stop: tells a run-away state from a stalled integrator
     x_stop: np.ndarray | None = None
 
     @property
@@ -305,7 +242,6 @@ def stop_note(t_stop: float, state: str, value: float) -> str:
     state : str
         The name of the largest entry of ``x_stop``.
     value : float
-        Its magnitude.
     """
     return (
         f"; at CVODE's last step, t = {t_stop:.7g} s, the largest state is {state} = "

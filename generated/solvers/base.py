@@ -27,40 +27,20 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class BuildPlan:
-    """The libraries a method runs instead of the closed loop's compiled one.
-
-    Attributes
-    ----------
-    libraries : tuple of Library
-        Empty: the closed loop is compiled. Otherwise nothing of it is, and its outputs
-        are evaluated by CasADi's virtual machine.
-    data : object
-        Whatever ``run`` needs besides the libraries.
-    """
+    """The libraries a method runs instead of the closed loop's compiled one (none: the
+    loop is compiled; else nothing of it is) and the data its ``run`` needs."""
 
     libraries: tuple[Library, ...] = ()
     data: Any = None
 
 
 class Solver(ABC):
-    """One integration method.
+    """One integration method."""
 
-    Attributes
-    ----------
-    name : str
-        The ``integration.method`` that selects it.
-    form : str
-        ``"ode"`` or ``"dae"`` (semi-explicit, with algebraic states z).
-    summary : str
-        One line for listings and errors.
-    fixed_step : bool
-        Only a fixed-step method may integrate ``options.sign = "exact"``.
-    """
-
-    name: ClassVar[str]
-    form: ClassVar[str] = "ode"
-    summary: ClassVar[str] = ""
-    fixed_step: ClassVar[bool] = False
+    name: ClassVar[str]  # the integration.method that selects it
+    form: ClassVar[str] = "ode"  # or "dae" (semi-explicit, with algebraic states z)
+    summary: ClassVar[str] = ""  # one line for listings and errors
+    fixed_step: ClassVar[bool] = False  # only such a method may integrate sign = "exact"
 
     def prepare(self, sc: Scenario, gains: Gains) -> Any:
         """Checks and data (passed to :meth:`build`) before the closed loop is built.

@@ -74,10 +74,7 @@ class CasadiSolver(Solver):
 
 
 class SundialsStepper:
-    """One call of a CasADi SUNDIALS plugin per chunk (a fresh integrator: a restart).
-
-    Subclasses set :attr:`plugin` and may override :meth:`plugin_options` and
-    :meth:`call_options`.
+    """One call of CasADi's SUNDIALS :attr:`plugin` per chunk (a fresh integrator: a restart).
 
     Parameters
     ----------
@@ -118,7 +115,7 @@ class SundialsStepper:
         t0 : float
         x, z : ndarray
         new_segment : bool
-            The call starts a segment (t = 0 or a breakpoint).
+            The call starts a segment.
         """
         return self.opts, z
 
@@ -232,28 +229,25 @@ def integrate(
     z0: np.ndarray | None = None,
     progress: Callable[[float], None] | None = None,
 ) -> Trajectory:
-    """Integrate ``f`` from ``x0`` with ``settings.method`` (a :class:`CasadiSolver`).
+    """Integrate ``f`` from ``x0`` with ``settings.method``, a :class:`CasadiSolver`.
+
+    A failure gives an incomplete :class:`Trajectory` (``status``, ``message``,
+    ``t_reached``), never an exception.
 
     Parameters
     ----------
     f : casadi.Function
         Integrator form; nz = 0 for an ODE method; p and u empty.
     x0 : ndarray
-        Initial state at ``t_out[0]``.
     t_out : ndarray
         Increasing output times.
     settings : IntegratorSettings
     breakpoints : sequence of float
         Known discontinuity times: the run restarts there.
     z0 : ndarray, optional
-        Initial guess of the algebraic states (IDAS).
+        Initial guess of the algebraic states.
     progress : callable, optional
         Called with the simulated time reached after every chunk.
-
-    Returns
-    -------
-    Trajectory
-        Incomplete (``status``, ``message``, ``t_reached``), not raised, on a failure.
     """
     wall0 = time.perf_counter()
     s = settings

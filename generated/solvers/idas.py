@@ -75,9 +75,7 @@ class IdasStepper(SundialsStepper):
 
         Parameters
         ----------
-        t0 : float
-        x, z : ndarray
-        new_segment : bool
+        t0, x, z, new_segment
         """
         if not self.nz:
             return self.opts, z
