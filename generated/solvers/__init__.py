@@ -13,14 +13,7 @@ from core.errors import IntegrationError
 from core.methods import MethodSpec
 from generated.solvers.base import BuildPlan, Solver
 
-__all__ = [
-    "BuildPlan",
-    "Solver",
-    "get",
-    "names",
-    "register",
-    "unregister",
-]
+__all__ = ["BuildPlan", "Solver", "get", "names", "register", "unregister"]
 
 _REGISTRY: dict[str, Solver] = {}
 
