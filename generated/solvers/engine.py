@@ -275,19 +275,52 @@ def integrate(
     stepper = make_stepper(f, s, nx, nz)
     X = np.full((len(t_out), nx), np.nan)
     Z = np.full((len(t_out), nz), np.nan) if dae else None
-    X[0], last, failure = x, 0, None
+    X[0] = x
     if Z is not None:
         Z[0] = z
     sched = schedule(t_out, breakpoints)
+    last, failure = _run_chunks(stepper, sched, s.chunk, x, z, X, Z, acc, progress)
+    acc["wall_seconds"] = time.perf_counter() - wall0
+    message = ""
+    if failure is not None:
+        message = (
+            f"{s.method} failed after t = {float(t_out[last]):.6g} s "
+            f"(working towards t = {failure.t_target:.6g} s): {failure.reason}"
+        )
+    return Trajectory(
+        t=t_out[: last + 1].copy(),
+        x=X[: last + 1],
+        z=None if Z is None else Z[: last + 1],
+        method=s.method,
+        status=Status.OK if failure is None else failure.status,
+        t_reached=float(t_out[last]),
+        message=message,
+        stats=acc,
+    )
+
+
+def _run_chunks(
+    stepper: Any,
+    sched: Schedule,
+    chunk: float,
+    x: np.ndarray,
+    z: np.ndarray,
+    X: np.ndarray,
+    Z: np.ndarray | None,
+    acc: dict,
+    progress: Callable[[float], None] | None,
+) -> tuple[int, ChunkFailure | None]:
+    """Fill the rows X (and Z, for a DAE) reached; return the last one and the failure."""
+    last, failure = 0, None
     restarts = set(sched.breaks.tolist())  # compared exactly: targets are these times
-    t_cur = float(t_out[0])
-    for ci, targets in enumerate(_chunks(sched, s.chunk)):
+    t_cur = float(sched.t_out[0])
+    for ci, targets in enumerate(_chunks(sched, chunk)):
         if ci:
             acc["restarts"] += 1
         times = [c[0] for c in targets]
         new_seg = ci == 0 or t_cur in restarts
         try:
-            if dae and ci == 0:  # t0 in the grid: row 0 gets the consistent z(t0) IDAS starts from
+            if Z is not None and ci == 0:  # row 0 gets the consistent z(t0) IDAS starts from
                 Xc, Zc = stepper(t_cur, x, z, [t_cur, *times], acc)
                 Z[0], Xc, Zc = Zc[0], Xc[1:], Zc[1:]
             else:
@@ -307,23 +340,7 @@ def integrate(
             break
         if progress is not None:
             progress(t_cur)
-    acc["wall_seconds"] = time.perf_counter() - wall0
-    message = ""
-    if failure is not None:
-        message = (
-            f"{s.method} failed after t = {float(t_out[last]):.6g} s "
-            f"(working towards t = {failure.t_target:.6g} s): {failure.reason}"
-        )
-    return Trajectory(
-        t=t_out[: last + 1].copy(),
-        x=X[: last + 1],
-        z=None if Z is None else Z[: last + 1],
-        method=s.method,
-        status=Status.OK if failure is None else failure.status,
-        t_reached=float(t_out[last]),
-        message=message,
-        stats=acc,
-    )
+    return last, failure
 
 
 def _replay(stepper: Any, acc: dict, t0: float, x, z, times: list[float], new_segment: bool):
