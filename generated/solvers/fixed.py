@@ -154,11 +154,7 @@ class Fixed(CasadiSolver):
         ----------
         settings : IntegratorSettings
         """
-        return {
-            "fixed_step": settings.fixed_step,
-            "fixed_rtol": settings.fixed_rtol,
-            "fixed_atol": settings.fixed_atol,
-        }
+        return {k: getattr(settings, k) for k in ("fixed_step", "fixed_rtol", "fixed_atol")}
 
 
 SOLVER = register(Fixed())
