@@ -200,7 +200,16 @@ def _compile_entry(
                 os.replace(tmp, failed)
                 raise BuildError(str(exc).replace(str(tmp), str(failed))) from None
             seal(tmp)
-            info = _manifest(key, tmp, names, settings, tc, len(source), t_compile)
+            info = {
+                "key": key,
+                "library_sha256": sha256_file(tmp / LIBRARY_NAME),
+                "source_sha256": sha256_file(tmp / SOURCE_NAME),
+                "names": list(names),
+                **_built_by(settings),
+                "toolchain": dict(tc.key),
+                "source_bytes": len(source),
+                "compile_seconds": t_compile,
+            }
             # the manifest is written last: its presence marks a complete entry
             text = json.dumps(info, indent=2, sort_keys=True, default=str)
             artifacts.atomic_write_text(tmp / MANIFEST_NAME, text, mode=0o600)
@@ -220,26 +229,4 @@ def _built_by(settings: CodegenSettings) -> dict[str, Any]:
         "cflags": list(settings.cflags),
         "casadi": ca.__version__,
         "settings": settings.key_fields(),
-    }
-
-
-def _manifest(
-    key: str,
-    folder: Path,
-    names: tuple[str, ...],
-    settings: CodegenSettings,
-    tc: Toolchain,
-    source_bytes: int,
-    t_compile: float,
-) -> dict[str, Any]:
-    """The manifest of a compiled entry: its key, hashes and what built it."""
-    return {
-        "key": key,
-        "library_sha256": sha256_file(folder / LIBRARY_NAME),
-        "source_sha256": sha256_file(folder / SOURCE_NAME),
-        "names": list(names),
-        **_built_by(settings),
-        "toolchain": dict(tc.key),
-        "source_bytes": source_bytes,
-        "compile_seconds": t_compile,
     }
