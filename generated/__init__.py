@@ -1,10 +1,5 @@
-"""Generated-C simulation of the closed loop: CasADi codegen, gcc, cache, native CVODE, CVODES/IDAS/fixed step.
+"""Generated-C simulation of the closed loop: CasADi codegen, gcc, cache, integrators.
 
-Stages (each a function in :mod:`generated.api`): load scenario -> synthesize ->
-build (symbolic closed loop, C code generation, compile, cached under
-``<build cache>/<sha256>/``, the user cache folder or ``$HITL_BUILD_DIR``) -> simulate
--> trajectory as a pandas DataFrame.
-``python -m generated sim SCENARIO`` (``make sim``) runs them all and writes
-``out/<name>/trajectory.csv`` and ``meta.json``. The values the modules pass each
-other are in :mod:`generated.values`, the package's import leaf.
+``python -m generated sim SCENARIO`` (``make sim``) writes ``out/<name>/trajectory.csv``
+and ``meta.json``; the stages are functions of :mod:`generated.api`.
 """

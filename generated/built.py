@@ -1,6 +1,4 @@
-"""A closed loop compiled for one method: what :func:`generated.api.build` returns and
-every method's :meth:`~generated.solvers.Solver.run` takes.
-"""
+"""A closed loop compiled for one method: what :func:`generated.api.build` returns."""
 
 from __future__ import annotations
 
@@ -18,45 +16,20 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Built:
-    """A closed loop compiled for one method, bound to one scenario's numbers.
+    """A closed loop compiled for one method, bound to one scenario's runtime parameters p.
 
-    The library takes the closed loop's runtime parameters p as an input
-    (:mod:`symbolic.parameters`); :attr:`dyn` and :attr:`outputs` are the library's
-    Functions with :attr:`p` filled in; :func:`generated.api.build` binds the same library to every
-    later scenario of the same structure.
-
-    Attributes
-    ----------
-    closed_loop : symbolic.closed_loop.ClosedLoop
-        Bound to the scenario (``x0``, ``p0``, breakpoints).
-    library : Library
-    dyn : casadi.Function
-        The compiled integrator-form right-hand side (ODE, or DAE for ``idas``) with p
-        fixed (its p input is empty).
-    outputs : casadi.Function
-        The compiled ``(t, x) -> named outputs`` with p fixed.
-    form : str
-        ``"ode"`` or ``"dae"``.
-    timings : dict
-        ``symbolic_build``, ``codegen``, ``compile`` seconds.
-    agents : (tuple of Library, AgentProblem) or None
-        Method ``native``: the per-agent kernel libraries (:mod:`generated.agents`) and the scenario's runtime
-        data; :attr:`library` is then the first kernel library's record and :attr:`dyn`,
-        :attr:`outputs` the symbolic closed loop's Functions (CasADi's virtual machine).
-        None otherwise.
-    p : ndarray
-        The runtime parameters the library is called with.
-    dyn_p, outputs_p : casadi.Function or None
-        The library's Functions with p as an input.
+    ``dyn`` (the ODE, or the DAE for ``idas``, in integrator form) and ``outputs`` are the
+    library's Functions with p fixed; for method ``native`` (``agents`` set: the kernel
+    libraries and the scenario's runtime data) they are the symbolic closed loop's.
     """
 
-    closed_loop: ClosedLoop
+    closed_loop: ClosedLoop  # bound to the scenario (x0, p0, breakpoints)
     library: Library
     dyn: ca.Function
-    outputs: ca.Function
-    form: str
-    timings: dict[str, float] = field(default_factory=dict)
+    outputs: ca.Function  # (t, x) -> named outputs
+    form: str  # "ode" or "dae"
+    timings: dict[str, float] = field(default_factory=dict)  # symbolic_build, codegen, compile
     agents: tuple[tuple[Library, ...], AgentProblem] | None = None
     p: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    dyn_p: ca.Function | None = None
+    dyn_p: ca.Function | None = None  # the library's Functions with p as an input
     outputs_p: ca.Function | None = None

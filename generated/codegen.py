@@ -1,16 +1,8 @@
-"""What a compiled library is and how it is keyed: the settings, the key, the build.
+"""A compiled library and its key: :func:`build_library` and the cache entry it fills.
 
-One :class:`~generated.values.CodegenSettings` holds every option that shapes the
-generated code and the compiled library (acados-style: one place). :func:`build_library` turns CasADi
-Functions into a shared library under ``<build root>/<sha256>/`` where the key is
-the SHA-256 of everything that produced it: the generated C text, the compiler's
-path and version, the flags, the CasADi version and the settings. An unchanged
-model is never rebuilt; a changed one gets a new key, so it is never served stale.
-
-The steps live in their own modules: the C text (:mod:`generated.csource`), the
-compiler (:mod:`generated.compiler`), the cache's folders and entries
-(:mod:`core.build_cache`) and loading a library with its dependencies
-(:mod:`generated.shared_library`).
+The entry is ``<build root>/<sha256>/``, keyed by everything that produced it (C text,
+compiler, flags, CasADi version, settings): an unchanged model is never rebuilt, a
+changed one is never served stale. The C text is :mod:`generated.csource`'s.
 """
 
 from __future__ import annotations
@@ -55,49 +47,25 @@ from generated.values import CodegenSettings
 
 @dataclass(frozen=True)
 class Library:
-    """A compiled shared library and how it was obtained.
+    """A compiled shared library and how it was obtained."""
 
-    Attributes
-    ----------
-    key : str
-        SHA-256 cache key (the folder name).
-    folder, source, path : Path
-        The cache folder, the generated C file and the shared library.
-    names : tuple of str
-        Functions in the library (with their ``jac_``/``fwd1_`` companions).
-    cache_hit : bool
-        True when the library was reused, not compiled.
-    codegen_seconds, compile_seconds : float
-        Wall time of C generation and of compilation (0 on a cache hit).
-    source_bytes : int
-        Size of the generated C.
-    preload : tuple of Path
-        Shared libraries it needs loaded first (:attr:`Toolchain.libraries`).
-    """
-
-    key: str
+    key: str  # SHA-256 cache key, the folder's name
     folder: Path
-    source: Path
-    path: Path
-    names: tuple[str, ...]
+    source: Path  # the generated C
+    path: Path  # the shared library
+    names: tuple[str, ...]  # its functions, with their jac_/fwd1_ companions
     cache_hit: bool
     codegen_seconds: float
-    compile_seconds: float
+    compile_seconds: float  # 0 on a cache hit
     source_bytes: int
-    preload: tuple[Path, ...] = ()
+    preload: tuple[Path, ...] = ()  # libraries to load first (Toolchain.libraries)
 
     def function(self, name: str) -> ca.Function:
-        """Load ``name`` from the library with :func:`casadi.external`.
+        """Load ``name``, one of :attr:`names`, with :func:`casadi.external`.
 
         Parameters
         ----------
         name : str
-            One of :attr:`names`.
-
-        Raises
-        ------
-        BuildError
-            If the library has no function ``name``.
         """
         if name not in self.names:
             raise BuildError(
@@ -108,8 +76,7 @@ class Library:
 
 
 def cache_root(settings: CodegenSettings) -> Path:
-    """The cache root folder of ``settings``: its ``build_root``, else ``$HITL_BUILD_DIR``
-    or the user cache folder (:func:`core.build_cache.default_build_root`).
+    """``settings.build_root``, else :func:`core.build_cache.default_build_root`.
 
     Parameters
     ----------
@@ -128,19 +95,10 @@ def cache_key(
     source : str
         The complete C text.
     settings : CodegenSettings
-        Its compiler identity, flags and key fields enter the key (not ``build_root``
-        or ``timeout``); the CasADi version does too.
     extra : mapping, optional
-        Further inputs of the build (e.g. the hash of included headers and the identity
-        of linked libraries, :class:`Toolchain`).
+        Further inputs of the build (:attr:`Toolchain.key`).
     """
-    ident = {
-        "source_sha256": hashlib.sha256(source.encode()).hexdigest(),
-        "compiler": compiler_identity(settings.compiler),
-        "cflags": list(settings.cflags),
-        "casadi": ca.__version__,
-        "settings": settings.key_fields(),
-    }
+    ident = {"source_sha256": hashlib.sha256(source.encode()).hexdigest(), **_built_by(settings)}
     if extra:
         ident["extra"] = dict(extra)
     blob = json.dumps(ident, sort_keys=True, default=str).encode()
@@ -158,23 +116,11 @@ def build_library(
     Parameters
     ----------
     functions : sequence of casadi.Function
-        Functions to compile, under their own names.
     settings : CodegenSettings, optional
     with_derivatives : sequence of str
         Names that also get their derivative companions (see :func:`generate_source`).
     toolchain : Toolchain, optional
-        Hand-written C appended to the generated code, include folders and libraries
-        to link; its :attr:`Toolchain.key` enters the cache key.
-
-    Returns
-    -------
-    Library
-
-    Raises
-    ------
-    BuildError
-        Compiler missing, compilation failed (first error lines and the source path;
-        the failed source is kept under ``<root>/failed/<key>/``), or bad settings.
+        Hand-written C appended, include folders and libraries to link.
     """
     settings = settings or CodegenSettings()
     t0 = time.perf_counter()
@@ -234,71 +180,53 @@ def _compile_entry(
     settings: CodegenSettings,
     tc: Toolchain,
 ) -> float:
-    """Compile ``source`` in a temporary folder and install it as ``root/key``.
+    """Compile ``source`` in a temporary folder, install it as ``root/key``, return the time.
 
-    Returns the compile wall time. On a compile failure the source is kept under
-    ``root/failed/key/`` and the error names it. The entry's folders are 0700 and its
-    files 0600 (the library 0700) whatever the umask (:func:`core.private_files.seal`);
-    a failed write (a full disk) names the cache, not the output folder.
+    On a compile failure the source is kept under ``root/failed/key/`` and the error names
+    it. Folders 0700, files 0600 (the library 0700) whatever the umask
+    (:func:`core.private_files.seal`); a failed write (a full disk) names the cache.
     """
     try:
-        return _compile_in(root, key, source, names, settings, tc)
+        tmp = Path(tempfile.mkdtemp(dir=root, prefix=f"{TMP_PREFIX}{key[:12]}-{os.getpid()}-"))
+        folder = root / key
+        try:
+            try:
+                t_compile = compile_source(source, settings, tmp, tc)
+            except BuildError as exc:
+                failed = root / "failed" / key
+                shutil.rmtree(failed, ignore_errors=True)
+                make_private_dir(failed.parent)
+                seal(tmp)
+                os.replace(tmp, failed)
+                raise BuildError(str(exc).replace(str(tmp), str(failed))) from None
+            seal(tmp)
+            info = {
+                "key": key,
+                "library_sha256": sha256_file(tmp / LIBRARY_NAME),
+                "source_sha256": sha256_file(tmp / SOURCE_NAME),
+                "names": list(names),
+                **_built_by(settings),
+                "toolchain": dict(tc.key),
+                "source_bytes": len(source),
+                "compile_seconds": t_compile,
+            }
+            # the manifest is written last: its presence marks a complete entry
+            text = json.dumps(info, indent=2, sort_keys=True, default=str)
+            artifacts.atomic_write_text(tmp / MANIFEST_NAME, text, mode=0o600)
+            install_entry(tmp, folder)
+        finally:
+            if tmp.exists() and tmp != folder:
+                shutil.rmtree(tmp, ignore_errors=True)
     except OSError as exc:
         raise cache_write_error(root, exc) from None
-
-
-def _compile_in(
-    root: Path,
-    key: str,
-    source: str,
-    names: tuple[str, ...],
-    settings: CodegenSettings,
-    tc: Toolchain,
-) -> float:
-    tmp = Path(tempfile.mkdtemp(dir=root, prefix=f"{TMP_PREFIX}{key[:12]}-{os.getpid()}-"))
-    folder = root / key
-    try:
-        try:
-            t_compile = compile_source(source, settings, tmp, tc)
-        except BuildError as exc:
-            failed = root / "failed" / key
-            shutil.rmtree(failed, ignore_errors=True)
-            make_private_dir(failed.parent)
-            seal(tmp)
-            os.replace(tmp, failed)
-            raise BuildError(str(exc).replace(str(tmp), str(failed))) from None
-        seal(tmp)
-        info = _manifest(key, tmp, names, settings, tc, len(source), t_compile)
-        # the manifest is written last: its presence marks a complete entry
-        text = json.dumps(info, indent=2, sort_keys=True, default=str)
-        artifacts.atomic_write_text(tmp / MANIFEST_NAME, text, mode=0o600)
-        install_entry(tmp, folder)
-    finally:
-        if tmp.exists() and tmp != folder:
-            shutil.rmtree(tmp, ignore_errors=True)
     return t_compile
 
 
-def _manifest(
-    key: str,
-    folder: Path,
-    names: tuple[str, ...],
-    settings: CodegenSettings,
-    tc: Toolchain,
-    source_bytes: int,
-    t_compile: float,
-) -> dict[str, Any]:
-    """The manifest of a compiled entry: its key, hashes and what built it."""
+def _built_by(settings: CodegenSettings) -> dict[str, Any]:
+    """What built a library besides its source: compiler, flags, CasADi, settings."""
     return {
-        "key": key,
-        "library_sha256": sha256_file(folder / LIBRARY_NAME),
-        "source_sha256": sha256_file(folder / SOURCE_NAME),
-        "names": list(names),
         "compiler": compiler_identity(settings.compiler),
         "cflags": list(settings.cflags),
         "casadi": ca.__version__,
         "settings": settings.key_fields(),
-        "toolchain": dict(tc.key),
-        "source_bytes": source_bytes,
-        "compile_seconds": t_compile,
     }

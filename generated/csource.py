@@ -1,9 +1,5 @@
 """C source of CasADi Functions: renamed copies, the integrator signature, the derivatives.
 
-:func:`generate_source` writes the functions of one library, with the derivative
-companions the Jacobian strategy asks for (:data:`generated.values.JACOBIAN_STRATEGIES`), into one C text;
-compiling and caching it is :mod:`generated.codegen`.
-
 Facts this module relies on (measured with CasADi 3.8.2): an external Function used
 as an integrator's DAE must have exactly the inputs (t, x, z, p, u) and outputs
 (ode, alg, quad, zero), and the same library must contain ``jac_<name>`` generated
@@ -30,9 +26,7 @@ def renamed(f: ca.Function, name: str, *, expand: bool = True, cse: bool = False
     Parameters
     ----------
     f : casadi.Function
-        The function to copy.
     name : str
-        The new name.
     expand : bool
         Expand an MX ``f`` to SX; it stays MX if expansion fails or ``expand`` is False.
     cse : bool
@@ -48,6 +42,7 @@ def renamed(f: ca.Function, name: str, *, expand: bool = True, cse: bool = False
 
 
 def _expanded(f: ca.Function) -> ca.Function | None:
+    """``f.expand()``, or None where it cannot be expanded."""
     try:
         return f.expand()
     except RuntimeError:  # e.g. calls an external or a Linsol: keep MX
@@ -60,7 +55,6 @@ def check_dyn_signature(f: ca.Function, what: str) -> None:
     Parameters
     ----------
     f : casadi.Function
-        The function to check.
     what : str
         How ``f`` is named in the error message.
     """
@@ -77,23 +71,16 @@ def generate_source(
     settings: CodegenSettings,
     with_derivatives: Sequence[str] = (),
 ) -> tuple[str, tuple[str, ...]]:
-    """C source of ``functions`` plus, for the names in ``with_derivatives``, their Jacobians.
+    """The C text of ``functions`` with derivatives, and the names of all functions in it.
 
     Parameters
     ----------
     functions : sequence of casadi.Function
-        Named functions to put in the library.
     settings : CodegenSettings
     with_derivatives : sequence of str
-        Names whose ``jac_<name>`` (``f.jacobian()``, strategies sparse and gmres) and
-        ``fwd1_<name>`` (``f.forward(1)``, strategies gmres and jvp) are generated as well;
-        with ``jvp`` they also carry their Jacobian's sparsity pattern (no code, O(nnz)
-        integers) so that CVODES/IDAS never allocate a dense nx×nx matrix.
-
-    Returns
-    -------
-    (str, tuple of str)
-        The C text and the names of all functions in it.
+        Names that also get ``jac_<name>`` (``f.jacobian()``: sparse, gmres) and/or
+        ``fwd1_<name>`` (``f.forward(1)``: gmres, jvp); with jvp their Jacobian's
+        sparsity pattern is carried instead (O(nnz) integers, no code).
     """
     if settings.jacobian not in JACOBIAN_STRATEGIES:
         raise BuildError(

@@ -1,22 +1,11 @@
 """Large-N plan: which derivatives to generate and how CVODES/IDAS solve their Newton systems.
 
 CasADi's Jacobian of the mapped closed loop is generated unrolled per agent, so its C
-grows with N until gcc no longer finishes (docs/performance.md); the right-hand side kept
-as an MX ``map`` and its forward derivative ``fwd1_<name>`` stay small. This module only
-chooses (:func:`choose_plan`, from N with ``auto``); a :class:`JacobianPlan` becomes the
-settings of the build and of the integrators (:meth:`JacobianPlan.codegen_settings`,
-:meth:`JacobianPlan.integrator_settings`). Plans, by ``CodegenSettings.jacobian``:
-
-``sparse`` (Newton scheme ``direct``)
-    SX-expanded right-hand side and its sparse Jacobian ``jac_<name>``, factorised by a
-    direct sparse solver (``csparse``): for small N, and the default.
-``jvp`` (Newton scheme ``gmres``), the large-N plan
-    Matrix-free Newton–Krylov: the MX-mapped right-hand side and its Jacobian-vector
-    product ``fwd1_<name>`` only (no Jacobian formed), GMRES without a preconditioner:
-    code size and compile time flat in N, cost per step linear in N·(degree).
-``gmres`` (Newton scheme ``gmres``)
-    ``jac_<name>`` and ``fwd1_<name>``: GMRES preconditioned with the generated Jacobian
-    (CasADi's default). Never chosen by ``auto``.
+grows with N until gcc no longer finishes; the MX-mapped right-hand side and its
+``fwd1_<name>`` stay small. :func:`choose_plan` picks a :class:`JacobianPlan`: ``sparse``
+(direct Newton, the default), ``jvp`` (matrix-free GMRES, no preconditioner: the large-N
+plan of ``auto``) or ``gmres`` (GMRES preconditioned with ``jac_<name>``, never chosen by
+``auto``); docs/simulation.md and docs/performance.md.
 """
 
 from __future__ import annotations
@@ -41,28 +30,13 @@ DEFAULT_MAX_KRYLOV = 20
 
 @dataclass(frozen=True)
 class JacobianPlan:
-    """How the Newton systems of the implicit integrators are solved.
+    """How the Newton systems of the implicit integrators are solved."""
 
-    Attributes
-    ----------
-    jacobian : str
-        ``CodegenSettings.jacobian``: ``"sparse"``, ``"jvp"`` or ``"gmres"``.
-    expand : bool or None
-        ``CodegenSettings.expand`` to use: False for ``jvp`` (the mapped MX graph:
-        code size independent of N); None keeps the caller's.
-    linear_solver : str
-        Direct sparse solver (CasADi Linsol plugin) of ``sparse``.
-    extra_options : tuple of (str, value) pairs
-        ``IntegratorSettings.extra_options`` (SUNDIALS options beyond the Newton scheme).
-    reason : str
-        Why this plan was chosen (for reports).
-    """
-
-    jacobian: str
-    expand: bool | None
-    linear_solver: str = "csparse"
-    extra_options: tuple[tuple[str, Any], ...] = ()
-    reason: str = ""
+    jacobian: str  # CodegenSettings.jacobian: "sparse", "jvp" or "gmres"
+    expand: bool | None  # CodegenSettings.expand (False for jvp); None keeps the caller's
+    linear_solver: str = "csparse"  # direct sparse solver of sparse
+    extra_options: tuple[tuple[str, Any], ...] = ()  # SUNDIALS options beyond the scheme
+    reason: str = ""  # why this plan (for reports)
 
     @property
     def strategy(self) -> str:
@@ -89,7 +63,6 @@ class JacobianPlan:
         Parameters
         ----------
         base : CodegenSettings, optional
-            Compiler, flags and cache root are kept from it.
         """
         base = base or CodegenSettings()
         expand = base.expand if self.expand is None else self.expand
@@ -103,8 +76,7 @@ class JacobianPlan:
         Parameters
         ----------
         base : IntegratorSettings, optional
-            Method, tolerances and chunking are kept from it; the plan's extra options
-            are merged after the base's own (the plan wins).
+            The plan's extra options are merged after the base's own (the plan wins).
         """
         base = base or IntegratorSettings()
         extra = {**dict(base.extra_options), **dict(self.extra_options)}
@@ -124,30 +96,18 @@ def choose_plan(
     max_krylov: int = DEFAULT_MAX_KRYLOV,
     direct_max_agents: int = DIRECT_MAX_AGENTS,
 ) -> JacobianPlan:
-    """The Jacobian / linear-solver plan for N agents.
+    """The Jacobian / linear-solver plan for N followers.
 
     Parameters
     ----------
     N : int
-        Number of followers.
     jacobian : {"auto", "sparse", "jvp", "gmres"}
-        ``auto``: ``sparse`` for ``N <= direct_max_agents``, else ``jvp``; the others
-        as requested. ``jvp`` always keeps the mapped MX graph (``expand=False``).
+        ``auto``: ``sparse`` for ``N <= direct_max_agents``, else ``jvp``.
     linear_solver : str
         Direct sparse solver (CasADi Linsol plugin) of the ``sparse`` plan.
     max_krylov : int
         GMRES subspace size of the ``jvp`` plan.
     direct_max_agents : int
-        Crossover of ``auto``.
-
-    Returns
-    -------
-    JacobianPlan
-
-    Raises
-    ------
-    BuildError
-        Unknown strategy or linear solver, N < 1 or max_krylov < 1.
     """
     if jacobian not in JACOBIAN_CHOICES:
         raise BuildError(

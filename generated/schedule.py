@@ -1,8 +1,7 @@
 """When a run's integrators stop: output times, restarts at breakpoints, the time resolution.
 
-:func:`schedule` is the one place that reconciles output times with breakpoints (fault
-onsets, steps in inputs): the CasADi methods' chunk loop (:mod:`generated.solvers.engine`)
-and the native driver (:mod:`generated.native`) both integrate to its targets.
+:func:`schedule` is the one place that reconciles output times with breakpoints; every
+method integrates to its targets (docs/simulation.md gives the rules and why).
 """
 
 from __future__ import annotations
@@ -22,14 +21,8 @@ def output_grid(horizon: float, output_step: float) -> np.ndarray:
     Parameters
     ----------
     horizon : float
-        Final time (s).
     output_step : float
-        Spacing ``h`` of the output times (s); must divide ``horizon``.
-
-    Raises
-    ------
-    IntegrationError
-        If the step does not divide the horizon (to 1e-9 relative).
+        Must divide ``horizon`` (to 1e-9 relative).
     """
     n = round(horizon / output_step)
     if n < 1 or abs(n * output_step - horizon) > 1e-9 * max(horizon, 1.0):
@@ -47,48 +40,28 @@ TIME_ULPS = 1000
 def time_tolerance(t0: float, tf: float) -> float:
     """The time resolution of a run over ``[t0, tf]``: ``TIME_ULPS · eps · max(1, |t0|, |tf|)``.
 
-    CVODE refuses an output time within ``2 eps |t|`` of the current time (``TOO_CLOSE``)
-    and takes a stop time within ``100 eps (|t| + |h|)`` as reached; 1000 eps of the
-    time scale lies above both and far below any output step (4.4e-12 s at 20 s).
+    Above CVODE's ``TOO_CLOSE`` (2 eps |t|) and stop-time (100 eps (|t| + |h|)) thresholds,
+    far below any output step (4.4e-12 s at 20 s).
 
     Parameters
     ----------
     t0, tf : float
-        First and last output time.
     """
     return TIME_ULPS * float(np.finfo(float).eps) * max(1.0, abs(t0), abs(tf))
 
 
 @dataclass(frozen=True)
 class Schedule:
-    """Where every integrator of a run stops: restarts and the time integrated to per row.
+    """Where every integrator of a run stops (:func:`schedule`).
 
-    Made by :func:`schedule`, the one place that reconciles output times with breakpoints
-    (the CasADi methods here, and the native driver, which receive ``targets`` and
-    ``breaks``). Every two distinct times among ``t0``, ``breaks`` and ``targets`` are
-    more than ``tol`` apart, so no integrator is asked for a time within ``tol`` of the
-    time it stands at.
-
-    Attributes
-    ----------
-    t_out : ndarray
-        The requested output times; the trajectory's rows keep exactly these.
-    targets : ndarray
-        The time integrated to for each row: ``t_out[k]``, or the breakpoint within
-        ``tol`` of it (the row then holds the state at that breakpoint, reached by the
-        segment that ends there; it differs from the state at ``t_out[k]`` by at most
-        ``tol · |ẋ|``).
-    breaks : ndarray
-        Restart times, strictly inside ``(t0 + tol, tf - tol)``, sorted, pairwise more
-        than ``tol`` apart.
-    tol : float
-        :func:`time_tolerance` of the run.
+    Every two distinct times among ``t0``, ``breaks`` and ``targets`` are more than
+    ``tol`` apart, so no integrator is asked for a time within ``tol`` of where it stands.
     """
 
-    t_out: np.ndarray
-    targets: np.ndarray
-    breaks: np.ndarray
-    tol: float
+    t_out: np.ndarray  # the requested output times: the trajectory's rows keep exactly these
+    targets: np.ndarray  # per row: t_out[k], or the breakpoint within tol of it
+    breaks: np.ndarray  # restarts in (t0 + tol, tf - tol), sorted, pairwise > tol apart
+    tol: float  # time_tolerance of the run
 
     def segments(self) -> list[tuple[float, float, list[int]]]:
         """``(start, end, rows)`` per segment between restarts; ``rows``: the output rows
@@ -108,10 +81,8 @@ class Schedule:
 def schedule(t_out: np.ndarray, breakpoints: Sequence[float] = ()) -> Schedule:
     """Reconcile output times with breakpoints (restart times) to the run's time resolution.
 
-    A breakpoint within ``tol`` (:func:`time_tolerance`) of ``t0``, of the horizon or of
-    an earlier kept breakpoint is dropped (the run starts, stops or restarts there
-    already), as is one outside ``(t0, tf)``; an output time within ``tol`` of a kept
-    breakpoint is integrated to that breakpoint (:attr:`Schedule.targets`).
+    A breakpoint outside ``(t0 + tol, tf - tol)`` or within ``tol`` of an earlier kept one
+    is dropped; an output time within ``tol`` of a kept breakpoint is integrated to it.
 
     Parameters
     ----------
@@ -119,15 +90,6 @@ def schedule(t_out: np.ndarray, breakpoints: Sequence[float] = ()) -> Schedule:
         Output times, increasing by more than ``2 tol`` (the first is the start).
     breakpoints : sequence of float
         Known discontinuity times, any order.
-
-    Returns
-    -------
-    Schedule
-
-    Raises
-    ------
-    IntegrationError
-        If the output times are not finite, or two are within ``2 tol`` of each other.
     """
     t_out = np.asarray(t_out, dtype=float).ravel()
     if t_out.size < 1 or not np.all(np.isfinite(t_out)):
@@ -148,11 +110,8 @@ def schedule(t_out: np.ndarray, breakpoints: Sequence[float] = ()) -> Schedule:
 
 
 def _targets(t_out: np.ndarray, breaks: np.ndarray, tol: float) -> np.ndarray:
-    """``t_out`` with every time after the first moved to its nearest break if within ``tol``.
-
-    The nearest of the two breaks around ``t_out[k]`` (the earlier on a tie), for all
-    rows at once.
-    """
+    """``t_out`` with every time after the first moved to its nearest break (the earlier
+    on a tie) if within ``tol``."""
     targets = t_out.copy()
     if not breaks.size or t_out.size < 2:
         return targets

@@ -1,10 +1,7 @@
 """The values generated/'s modules pass each other: settings, run status, trajectories.
 
-The package's spine: this module imports nothing from ``generated`` (the import
-contract in ``pyproject.toml`` keeps it so), so every module of the package may import
-it. How a library is built, how a run is integrated and what a run writes live in the
-modules that use these values (:mod:`generated.codegen`, :mod:`generated.solvers`,
-:mod:`generated.api`).
+The package's import leaf: it imports nothing from ``generated`` (a contract in
+``pyproject.toml``).
 """
 
 from __future__ import annotations
@@ -25,10 +22,7 @@ from core.settings import default_of
 
 
 class Status(enum.Enum):
-    """Why a run ended: callers test this, never the text of the message.
-
-    ``OK`` is a complete run; every other member is an incomplete one.
-    """
+    """Why a run ended (``OK``: complete): callers test this, never the message."""
 
     OK = "complete"
     STEP_LIMIT = "too many steps before the next output time"
@@ -44,26 +38,33 @@ class Status(enum.Enum):
     FAILED = "solver failure"
 
 
-#: SUNDIALS return-flag names (without CV_/IDA_) -> status
-_FLAG_STATUS = {
-    "TOO_MUCH_WORK": Status.STEP_LIMIT,
-    "TOO_MUCH_ACC": Status.ACCURACY,
-    "ERR_FAIL": Status.ERROR_TEST,
-    "ERR_FAILURE": Status.ERROR_TEST,
-    "CONV_FAIL": Status.CONV_FAIL,
-    "CONV_FAILURE": Status.CONV_FAIL,
-    "RHSFUNC_FAIL": Status.RHS_FAIL,
-    "REPTD_RHSFUNC_ERR": Status.RHS_FAIL,
-    "UNREC_RHSFUNC_ERR": Status.RHS_FAIL,
-    "FIRST_RHSFUNC_ERR": Status.RHS_FAIL,
-    "RES_FAIL": Status.RHS_FAIL,
-    "REP_RES_ERR": Status.RHS_FAIL,
-    "FIRST_RES_FAIL": Status.RHS_FAIL,
-    "LSETUP_FAIL": Status.LINEAR_FAIL,
-    "LSOLVE_FAIL": Status.LINEAR_FAIL,
-    "TOO_CLOSE": Status.TOO_CLOSE,
-    "LINESEARCH_FAIL": Status.INIT_FAIL,
-    "NO_RECOVERY": Status.INIT_FAIL,
+_ERR = "error test failed repeatedly (step size too small)"
+_CONV = "Newton iteration failed repeatedly (step size too small)"
+_NO_IC = "consistent initial conditions not found"
+#: SUNDIALS return-flag names (without CV_/IDA_) -> (status, readable reason)
+_FLAGS: dict[str, tuple[Status, str]] = {
+    "TOO_MUCH_WORK": (
+        Status.STEP_LIMIT,
+        "too many steps before the next output time (raise max_steps)",
+    ),
+    "TOO_MUCH_ACC": (Status.ACCURACY, "tolerances too small for machine precision"),
+    "ERR_FAIL": (Status.ERROR_TEST, _ERR),
+    "ERR_FAILURE": (Status.ERROR_TEST, _ERR),
+    "CONV_FAIL": (Status.CONV_FAIL, _CONV),
+    "CONV_FAILURE": (Status.CONV_FAIL, _CONV),
+    "RHSFUNC_FAIL": (Status.RHS_FAIL, "right-hand side failed (NaN or Inf)"),
+    "REPTD_RHSFUNC_ERR": (Status.RHS_FAIL, "solver failure"),
+    "UNREC_RHSFUNC_ERR": (Status.RHS_FAIL, "solver failure"),
+    "FIRST_RHSFUNC_ERR": (Status.RHS_FAIL, "solver failure"),
+    "RES_FAIL": (Status.RHS_FAIL, "residual failed (NaN or Inf)"),
+    "REP_RES_ERR": (Status.RHS_FAIL, "residual failed repeatedly (NaN or Inf)"),
+    "FIRST_RES_FAIL": (Status.RHS_FAIL, "residual failed at the first call"),
+    "LSETUP_FAIL": (Status.LINEAR_FAIL, "linear solver setup failed (singular iteration matrix)"),
+    "LSOLVE_FAIL": (Status.LINEAR_FAIL, "linear solve failed"),
+    "TOO_CLOSE": (Status.TOO_CLOSE, "solver failure"),
+    "LINESEARCH_FAIL": (Status.INIT_FAIL, f"{_NO_IC} (line search)"),
+    "NO_RECOVERY": (Status.INIT_FAIL, _NO_IC),
+    "CONSTR_FAIL": (Status.FAILED, "constraint test failed"),
 }
 
 
@@ -73,9 +74,21 @@ def flag_status(flag: str) -> Status:
     Parameters
     ----------
     flag : str
-        The flag's name with or without its ``CV_``/``IDA_`` prefix.
+        With or without its ``CV_``/``IDA_`` prefix.
     """
-    return _FLAG_STATUS.get(re.sub(r"^(?:CV|IDA)_", "", flag.strip()), Status.FAILED)
+    return _FLAGS.get(re.sub(r"^(?:CV|IDA)_", "", flag.strip()), (Status.FAILED,))[0]
+
+
+def flag_reason(flag: str) -> str:
+    """``"TOO_MUCH_WORK: too many steps ..."`` for a SUNDIALS return flag name.
+
+    Parameters
+    ----------
+    flag : str
+        With or without its ``CV_``/``IDA_`` prefix.
+    """
+    flag = re.sub(r"^(?:CV|IDA)_", "", flag)
+    return f"{flag}: {_FLAGS.get(flag, (None, 'solver failure'))[1]}"
 
 
 class ChunkFailure(Exception):
@@ -95,100 +108,29 @@ class ChunkFailure(Exception):
         self.reason, self.status, self.t_target = reason, status, t_target
 
 
-#: SUNDIALS return flags -> readable reason
-_REASONS = {
-    "TOO_MUCH_WORK": "too many steps before the next output time (raise max_steps)",
-    "TOO_MUCH_ACC": "tolerances too small for machine precision",
-    "ERR_FAIL": "error test failed repeatedly (step size too small)",
-    "ERR_FAILURE": "error test failed repeatedly (step size too small)",
-    "CONV_FAIL": "Newton iteration failed repeatedly (step size too small)",
-    "CONV_FAILURE": "Newton iteration failed repeatedly (step size too small)",
-    "RHSFUNC_FAIL": "right-hand side failed (NaN or Inf)",
-    "RES_FAIL": "residual failed (NaN or Inf)",
-    "REP_RES_ERR": "residual failed repeatedly (NaN or Inf)",
-    "LSETUP_FAIL": "linear solver setup failed (singular iteration matrix)",
-    "LSOLVE_FAIL": "linear solve failed",
-    "CONSTR_FAIL": "constraint test failed",
-    "FIRST_RES_FAIL": "residual failed at the first call",
-    "LINESEARCH_FAIL": "consistent initial conditions not found (line search)",
-    "NO_RECOVERY": "consistent initial conditions not found",
-}
-
-
-def flag_reason(flag: str) -> str:
-    """``"TOO_MUCH_WORK: too many steps ..."`` for a SUNDIALS return flag name.
-
-    Parameters
-    ----------
-    flag : str
-        The flag's name with or without its ``CV_``/``IDA_`` prefix.
-    """
-    flag = re.sub(r"^(?:CV|IDA)_", "", flag)
-    return f"{flag}: {_REASONS.get(flag, 'solver failure')}"
-
-
-#: what derivative code is generated: ``jac_<name>`` (sparse), ``jac_`` and ``fwd1_``
-#: (gmres) or only ``fwd1_<name>`` (jvp) (:mod:`generated.csource`)
+#: derivatives generated: ``jac_<name>`` (sparse), both (gmres) or ``fwd1_<name>`` (jvp)
 JACOBIAN_STRATEGIES = ("sparse", "gmres", "jvp")
 
-#: ``auto`` is resolved from the number of agents by :func:`generated.largescale.choose_plan`
-#: before anything is generated
+#: ``auto``: resolved from N by :func:`generated.largescale.choose_plan` before generating
 JACOBIAN_CHOICES = ("auto", *JACOBIAN_STRATEGIES)
 
 
 @dataclass(frozen=True)
 class CodegenSettings:
-    """Every option of code generation, compilation and the integrators' linear algebra.
-
-    Attributes
-    ----------
-    compiler : str
-        C compiler executable (``gcc``; ``cc``/``clang`` work too).
-    optimization : str
-        Optimisation flag. ``-O1`` is the default: ``-O0`` compiles 3–4× faster on
-        large files but the right-hand side then runs slower.
-    kernel_optimization : str
-        Optimisation flag of the per-agent kernel libraries (``generated/agent_kernels.py``),
-        which replaces ``optimization`` there. ``-O3``: those sources are small and their
-        driver's loops are hot.
-    extra_cflags : tuple of str
-        Appended after the fixed flags ``-shared -fPIC``.
-    jacobian : str
-        ``"sparse"``: ``jac_<name>`` from ``f.jacobian()`` (CasADi's sparse CCS pattern)
-        with a direct sparse linear solver; ``"gmres"``: additionally
-        ``fwd1_<name>`` (``f.forward(1)``, Jacobian-vector products) and the
-        integrators' iterative ``newton_scheme = "gmres"`` (no factorisation, for
-        large N); ``"jvp"``: only ``fwd1_<name>`` and GMRES (no Jacobian generated at
-        all: code size flat in N with ``expand=False``; the fixed-step method then
-        builds its Jacobian from forward sweeps).
-    linear_solver : str
-        Direct sparse linear solver of CVODES/IDAS and of the fixed-step method
-        (a CasADi Linsol plugin: ``csparse``, ``qr``, ``ldl``, ``lapacklu`` (dense)).
-    expand : bool
-        Expand MX Functions to SX before generating code (flat, faster C).
-    cse : bool
-        Common-subexpression elimination (CasADi's ``cse`` option) on SX functions and
-        their generated Jacobians before code is written: the same operations on the same
-        operands, so the same results, in less code.
-    build_root : str or None
-        Cache root; ``None`` = ``$HITL_BUILD_DIR`` or the user cache folder
-        (:func:`generated.codegen.cache_root`).
-    timeout : float
-        Seconds allowed for one compilation.
-    codegen_options : tuple of (str, value) pairs
-        Options for :class:`casadi.CodeGenerator`.
-    """
+    """Every option of code generation, compilation and the integrators' linear algebra
+    (docs/simulation.md, "Code generation and the build cache")."""
 
     compiler: str = "gcc"
+    #: -O0 compiles 3-4x faster on large files, but the right-hand side then runs slower
     optimization: str = "-O1"
-    kernel_optimization: str = "-O3"
-    extra_cflags: tuple[str, ...] = ()
-    jacobian: str = "sparse"
-    linear_solver: str = "csparse"
-    expand: bool = True
-    cse: bool = True
-    build_root: str | None = None
-    timeout: float = 900.0
+    kernel_optimization: str = "-O3"  # the per-agent kernels: small sources, hot loops
+    extra_cflags: tuple[str, ...] = ()  # after -shared -fPIC
+    jacobian: str = "sparse"  # one of JACOBIAN_CHOICES
+    linear_solver: str = "csparse"  # CasADi Linsol plugin of CVODES/IDAS and ROS2
+    expand: bool = True  # MX to SX before generating
+    cse: bool = True  # common-subexpression elimination
+    build_root: str | None = None  # None: generated.codegen.cache_root
+    timeout: float = 900.0  # seconds per compilation
     codegen_options: tuple[tuple[str, Any], ...] = field(default=(("with_header", False),))
 
     def __post_init__(self) -> None:
@@ -219,59 +161,24 @@ class CodegenSettings:
 
 @dataclass(frozen=True)
 class IntegratorSettings:
-    """How to integrate.
-
-    Attributes
-    ----------
-    method : str
-        A registered method (:func:`core.methods.names`): ``cvodes`` (BDF through
-        CasADi, default), ``native`` (BDF, SUNDIALS CVODE driven from C:
-        :mod:`generated.native`), ``idas`` (the DAE form) or ``fixed`` (ROS2).
-    rtol, atol : float
-        Relative and absolute tolerances (CVODES, IDAS).
-    max_steps : int
-        CVODES/IDAS ``max_num_steps``: steps allowed between two output times.
-    fixed_step : float
-        Largest step of the fixed-step method (each output interval is divided
-        into equal steps no longer than this).
-    fixed_rtol, fixed_atol : float
-        Safeguard of the fixed-step method: an output interval whose embedded error
-        estimate ``|h (k1 + k2)/2| / (atol + rtol |x|)`` exceeds 1 anywhere (or that
-        produces NaN) is recomputed as two halves with the same number of steps each
-        (bisection, recursively, at most ``fixed_max_halvings`` levels deep). Loose by design: the exact sign function's chattering (a jump in f of
-        size Δ gives an estimate h Δ / 2) passes; a violent transient does not.
-    fixed_max_halvings : int
-    chunk : float
-        Simulated seconds per integrator call (restart, progress, failure granularity).
-    newton_scheme, linear_solver : str
-        Linear algebra of CVODES/IDAS (see :attr:`generated.largescale.JacobianPlan.integrator_options`);
-        ``linear_solver`` is also the sparse solver of the fixed-step method.
-    algebraic_atol : float
-        IDAS only: absolute tolerance of the algebraic states z. z is not error-tested
-        (``suppress_algebraic``), so this enters only IDAS's Newton convergence test,
-        with weights 1/(rtol|z| + algebraic_atol). The default 1e30 leaves z out of
-        that test: in the semi-explicit form z enters ẋ, so a Newton error in z shows
-        up in the x-corrections (times h/α), as in the ODE form, while testing z itself
-        asks for more digits than z(x) has (docs/simulation.md).
-    extra_options : tuple of (str, value) pairs
-        Merged last into the CVODES/IDAS options (e.g. ``("use_preconditioner", False)``,
-        ``("max_krylov", 50)`` for GMRES at large N).
-    """
+    """How to integrate (docs/simulation.md, "Integration methods")."""
 
     # the scenario's [integration] defaults: core.scenario.Integration owns them
     method: str = default_of(Integration, "method")
     rtol: float = default_of(Integration, "rtol")
     atol: float = default_of(Integration, "atol")
-    max_steps: int = default_of(Integration, "max_steps")
-    fixed_step: float = default_of(Integration, "fixed_step")
-    chunk: float = 1.0
+    max_steps: int = default_of(Integration, "max_steps")  # between two output times
+    fixed_step: float = default_of(Integration, "fixed_step")  # the largest step of fixed
+    chunk: float = 1.0  # simulated seconds per integrator call
+    # fixed's safeguard: an output interval whose error estimate exceeds 1 is recomputed
+    # as two halves, at most fixed_max_halvings deep; loose so the exact sign's chattering passes
     fixed_rtol: float = 1e-3
     fixed_atol: float = 1e-3
     fixed_max_halvings: int = 30
-    newton_scheme: str = "direct"
-    linear_solver: str = "csparse"
-    algebraic_atol: float = 1e30
-    extra_options: tuple[tuple[str, Any], ...] = ()
+    newton_scheme: str = "direct"  # CVODES/IDAS (generated.largescale)
+    linear_solver: str = "csparse"  # CVODES/IDAS direct Newton, and fixed
+    algebraic_atol: float = 1e30  # IDAS: z's abstolv; 1e30 leaves z out of the Newton test
+    extra_options: tuple[tuple[str, Any], ...] = ()  # merged last into CVODES/IDAS options
 
     def __post_init__(self) -> None:
         if self.method not in methods.names():
@@ -294,50 +201,19 @@ class IntegratorSettings:
 
 @dataclass(frozen=True)
 class Trajectory:
-    """States at the output times, complete or up to a failure.
+    """States at the output times, complete or up to a failure (docs/simulation.md)."""
 
-    Attributes
-    ----------
-    t : ndarray, shape (K,)
-    x : ndarray, shape (K, nx)
-    z : ndarray or None, shape (K, nz)
-        Algebraic states (IDAS only).
-    method : str
-    status : Status
-        ``Status.OK`` for a complete run, else why the integrator gave up before the
-        last output time (test this, not the message).
-    t_reached : float
-        Last output time integrated successfully.
-    message : str
-        Empty when complete, else the reason (method, time reached, solver flag).
-    stats : dict of str to float
-        ``steps``, ``rhs_evals``, ``jac_evals``, ``lin_setups``, ``error_test_fails``,
-        ``newton_fails``, ``newton_iters``, ``jtimes_evals``, ``restarts``, ``integrator_calls``,
-        ``wall_seconds`` and, for CVODES/IDAS, ``last_step`` (the last step size taken).
-    sundials_log : str
-        SUNDIALS' warnings and errors of the run, one line each (``[WARNING][CVode]
-        text (cvode.c:line)``; the native driver), empty when there were none; counted
-        by :func:`generated.sundials_log.sundials_messages`.
-    t_stop : float
-        Where the integrator stood when it returned (the native driver; NaN for the
-        others): on a failure CVODE's last internal step, between ``t_reached`` and the
-        next output time; the horizon for a complete run.
-    x_stop : ndarray or None, shape (nx,)
-        The state at ``t_stop`` (the native driver; None for the others). On a failure
-        it tells a state that ran away from an integrator that stalled on a tame one,
-        which the output rows, ending at ``t_reached``, cannot.
-    """
-
-    t: np.ndarray
-    x: np.ndarray
-    z: np.ndarray | None
+    t: np.ndarray  # (K,)
+    x: np.ndarray  # (K, nx)
+    z: np.ndarray | None  # (K, nz): algebraic states (IDAS only)
     method: str
     status: Status
-    t_reached: float
-    message: str
-    stats: dict[str, float] = field(default_factory=dict)
-    sundials_log: str = ""
-    t_stop: float = math.nan
+    t_reached: float  # the last output time reached
+    message: str  # empty when complete, else the reason (method, time reached, flag)
+    stats: dict[str, float] = field(default_factory=dict)  # counters, wall_seconds
+    sundials_log: str = ""  # a native run's SUNDIALS warnings and errors, one a line
+    t_stop: float = math.nan  # where the native driver stood when it returned
+    #: the state at t_stop: tells a run-away state from a stalled integrator
     x_stop: np.ndarray | None = None
 
     @property
@@ -363,11 +239,9 @@ def stop_note(t_stop: float, state: str, value: float) -> str:
     Parameters
     ----------
     t_stop : float
-        ``Trajectory.t_stop``.
     state : str
-        The name of the largest entry of ``x_stop`` (e.g. ``StateLayout.name_of``).
+        The name of the largest entry of ``x_stop``.
     value : float
-        Its magnitude.
     """
     return (
         f"; at CVODE's last step, t = {t_stop:.7g} s, the largest state is {state} = "

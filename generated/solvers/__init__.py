@@ -1,17 +1,7 @@
-"""The integration methods' implementations, by name: one :class:`Solver` per module.
+"""The integration methods' implementations by name (``get``, ``names``, ``register``).
 
-::
-
-    from generated import solvers
-    solvers.get("native")        # the Solver instance; a ToolkitError lists the known names
-    solvers.names()              # ('cvodes', 'native', 'idas', 'fixed', ...)
-    solvers.register(MySolver()) # a method defined outside the registry's list
-
-The one list of methods is :mod:`core.methods` (below this layer, so that the scenario
-loader and ``--method`` ask the same registry): each :class:`~core.methods.MethodSpec`
-names the module that implements it, imported here the first time the method is
-needed, so importing this package stays cheap and the method modules may import the
-integration engine freely.
+The one list of methods is :mod:`core.methods`: each spec names the module that
+implements it, imported on first use, so importing this package stays cheap.
 """
 
 from __future__ import annotations
@@ -23,41 +13,22 @@ from core.errors import IntegrationError
 from core.methods import MethodSpec
 from generated.solvers.base import BuildPlan, Solver
 
-__all__ = [
-    "BuildPlan",
-    "Solver",
-    "get",
-    "names",
-    "register",
-    "unregister",
-]
+__all__ = ["BuildPlan", "Solver", "get", "names", "register", "unregister"]
 
 _REGISTRY: dict[str, Solver] = {}
 
 
 def register(solver: Solver, *, replace: bool = False) -> Solver:
-    """Make ``solver`` the implementation of the method ``solver.name``.
+    """Make ``solver`` the implementation of method ``solver.name`` and return it.
 
-    A method declared in :mod:`core.methods` must agree with it on ``form`` and
-    ``fixed_step``; any other name is declared there from the solver's attributes (so
-    scenario files and ``--method`` accept it too).
+    A name :mod:`core.methods` declares must agree with it on ``form`` and ``fixed_step``;
+    any other name is declared there from the solver's attributes.
 
     Parameters
     ----------
     solver : Solver
     replace : bool
         Allow replacing a method registered under the same name.
-
-    Returns
-    -------
-    Solver
-        ``solver`` (so a module can write ``SOLVER = register(MySolver())``).
-
-    Raises
-    ------
-    IntegrationError
-        For a name taken (without ``replace``), not a plain word, an unknown form or a
-        solver that disagrees with the method's declaration.
     """
     name = getattr(solver, "name", "")
     if solver.form not in methods.FORMS:
@@ -102,12 +73,6 @@ def get(name: str) -> Solver:
     Parameters
     ----------
     name : str
-
-    Raises
-    ------
-    IntegrationError
-        For an unknown name, in one line listing the known ones, or a module that does
-        not register its method.
     """
     solver = _REGISTRY.get(name)
     if solver is None:

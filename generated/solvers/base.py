@@ -1,10 +1,7 @@
 """What every integration method provides: the :class:`Solver` interface and its :class:`BuildPlan`.
 
-A method is one :class:`Solver` subclass, registered by name
-(:func:`generated.solvers.register`). The pipeline (:mod:`generated.api`) asks the
-registry for the scenario's method and then only calls the interface: ``prepare``
-before the closed loop is built, ``build`` for what goes into the compiled library,
-``run`` for the trajectory. It never compares method names.
+The pipeline (:mod:`generated.api`) calls only this interface (``prepare``, ``build``,
+``run``), never comparing method names; docs/ARCHITECTURE.md has the recipe.
 """
 
 from __future__ import annotations
@@ -30,56 +27,28 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class BuildPlan:
-    """The libraries a method runs instead of the closed loop's compiled one.
-
-    Attributes
-    ----------
-    libraries : tuple of Library
-        Empty: the closed loop's right-hand side (with its Jacobian) and outputs are
-        compiled. Otherwise the method's own (the per-agent engine's kernels): nothing of
-        the loop is compiled and its outputs are evaluated by CasADi's virtual machine.
-    data : object
-        Whatever ``run`` needs besides the libraries (the per-agent engine's problem).
-    """
+    """The libraries a method runs instead of the closed loop's compiled one (none: the
+    loop is compiled; else nothing of it is) and the data its ``run`` needs."""
 
     libraries: tuple[Library, ...] = ()
     data: Any = None
 
 
 class Solver(ABC):
-    """One integration method.
+    """One integration method."""
 
-    Attributes
-    ----------
-    name : str
-        The ``integration.method`` (and ``IntegratorSettings.method``) that selects it.
-    form : str
-        ``"ode"`` (right-hand side ``(t, x) -> ẋ``) or ``"dae"`` (semi-explicit, with
-        algebraic states z): the closed-loop form it integrates.
-    summary : str
-        One line for listings and errors.
-    fixed_step : bool
-        Whether it steps with a fixed step (only such a method may integrate the exact
-        sign function, ``options.sign = "exact"``).
-    """
-
-    name: ClassVar[str]
-    form: ClassVar[str] = "ode"
-    summary: ClassVar[str] = ""
-    fixed_step: ClassVar[bool] = False
+    name: ClassVar[str]  # the integration.method that selects it
+    form: ClassVar[str] = "ode"  # or "dae" (semi-explicit, with algebraic states z)
+    summary: ClassVar[str] = ""  # one line for listings and errors
+    fixed_step: ClassVar[bool] = False  # only such a method may integrate sign = "exact"
 
     def prepare(self, sc: Scenario, gains: Gains) -> Any:
-        """Checks and data needed before the closed loop is built (default: none).
+        """Checks and data (passed to :meth:`build`) before the closed loop is built.
 
         Parameters
         ----------
         sc : Scenario
         gains : Gains
-
-        Returns
-        -------
-        object
-            Passed to :meth:`build` as ``prepared``.
         """
         return None
 
@@ -97,8 +66,7 @@ class Solver(ABC):
         return BuildPlan()
 
     def check_built(self, built: Built) -> None:
-        """Raise :class:`~core.errors.IntegrationError` if ``built`` was compiled for
-        another method (default: the form must match).
+        """Raise :class:`~core.errors.IntegrationError` if ``built`` is of another form.
 
         Parameters
         ----------
@@ -120,14 +88,13 @@ class Solver(ABC):
         breakpoints: Sequence[float] = (),
         progress: Callable[[float], None] | None = None,
     ) -> Trajectory:
-        """Integrate ``built`` from ``x0`` at ``t_out[0]`` through ``t_out``.
+        """Integrate ``built`` from ``x0`` at ``t_out[0]``; a failure gives an incomplete result.
 
         Parameters
         ----------
         built : Built
             Compiled for this method (:meth:`check_built` has passed).
         x0 : ndarray
-            Initial state.
         t_out : ndarray
             Increasing output times.
         settings : IntegratorSettings
@@ -135,11 +102,6 @@ class Solver(ABC):
             Known discontinuity times: the run restarts there.
         progress : callable, optional
             Called with the simulated time reached.
-
-        Returns
-        -------
-        Trajectory
-            Incomplete (``status`` not ``OK``), not raised, on an integrator failure.
         """
 
     def linear_algebra(self, N: int, plan: Plan) -> str:
@@ -148,10 +110,8 @@ class Solver(ABC):
         Parameters
         ----------
         N : int
-            Number of followers.
         plan : Plan
-            The large-N plan (:func:`generated.largescale.choose_plan`) the CasADi
-            methods follow.
+            The large-N plan (:func:`generated.largescale.choose_plan`).
         """
         return f"{plan.jacobian}: {plan.strategy} Newton ({plan.reason})"
 

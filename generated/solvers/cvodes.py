@@ -36,7 +36,6 @@ class Cvodes(CasadiSolver):
         Parameters
         ----------
         f, settings, nx, nz
-            As :meth:`generated.solvers.engine.CasadiSolver.stepper`.
         """
         return CvodesStepper(f, settings, nz)
 

@@ -1,22 +1,9 @@
-"""The integration engine over a compiled closed loop: schedule, chunks, replay, statistics.
+"""The chunked integration engine over a compiled closed loop: schedule, chunks, replay.
 
-The methods that integrate a generated ``casadi.Function`` with the integrator signature
-``(t, x, z, p, u) -> (ode, alg, quad, zero)`` (usually a :func:`casadi.external` from
-:mod:`generated.codegen`) are :class:`CasadiSolver` subclasses that each give a
-*stepper* (:mod:`generated.solvers.cvodes`, ``idas``, ``fixed``); :func:`integrate`
-runs it. :class:`SundialsStepper` is the stepper of those that call one of CasADi's
-SUNDIALS plugins per chunk (``cvodes``, ``idas``).
-
-The run is split at the known discontinuity times (fault onsets, steps in inputs,
-:func:`generated.schedule.schedule`): each segment is a fresh integrator started from
-the state reached, so a variable-step method never steps across a jump. Segments are
-further cut into chunks of ``IntegratorSettings.chunk`` seconds: one stepper call each,
-which bounds the work lost on a failure and drives the progress bar. On a failure (a
-stepper raises :class:`generated.values.ChunkFailure`: too many steps, step size too
-small, repeated convergence failures, NaN) the failing chunk is replayed one output
-interval at a time, so the returned :class:`~generated.values.Trajectory` keeps every
-output time reached; it is marked incomplete and carries the method, the time reached
-and the solver's reason.
+:class:`CasadiSolver` subclasses (``cvodes``, ``idas``, ``fixed``) each give a stepper
+over ``Built.dyn``; :func:`integrate` runs it segment by segment between breakpoints,
+in chunks of ``IntegratorSettings.chunk`` s, and replays a failing chunk one output
+interval at a time so the trajectory keeps every output reached (docs/simulation.md).
 """
 
 from __future__ import annotations
@@ -26,7 +13,6 @@ import re
 import time
 from abc import abstractmethod
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import casadi as ca
@@ -50,11 +36,7 @@ if TYPE_CHECKING:
 
 
 class CasadiSolver(Solver):
-    """A method run by the chunked integration engine over ``Built.dyn``.
-
-    Subclasses give :meth:`stepper`; the engine does the schedule (restarts at
-    breakpoints), the chunks, the replay after a failure and the statistics.
-    """
+    """A method run by :func:`integrate` over ``Built.dyn``: subclasses give :meth:`stepper`."""
 
     @abstractmethod
     def stepper(self, f: ca.Function, settings: IntegratorSettings, nx: int, nz: int) -> Any:
@@ -85,23 +67,18 @@ class CasadiSolver(Solver):
         built, x0, t_out, settings, breakpoints, progress
             As :meth:`generated.solvers.Solver.run`.
         """
-        dae = self.form == "dae"
-        z0 = np.asarray(built.closed_loop.z0, dtype=float) if dae else None
+        z0 = np.asarray(built.closed_loop.z0, dtype=float) if self.form == "dae" else None
         return integrate(
             built.dyn, x0, t_out, settings, breakpoints=breakpoints, z0=z0, progress=progress
         )
 
 
 class SundialsStepper:
-    """One call of a CasADi SUNDIALS plugin per chunk (a fresh integrator: a restart).
-
-    Subclasses set :attr:`plugin` and may add options (:meth:`plugin_options`) or choose
-    each call's options and starting z (:meth:`call_options`).
+    """One call of CasADi's SUNDIALS :attr:`plugin` per chunk (a fresh integrator: a restart).
 
     Parameters
     ----------
     f : casadi.Function
-        Integrator form; ``nz`` algebraic states for a DAE plugin, none otherwise.
     s : IntegratorSettings
     nz : int
     """
@@ -138,7 +115,7 @@ class SundialsStepper:
         t0 : float
         x, z : ndarray
         new_segment : bool
-            The call starts a segment (t = 0 or a breakpoint).
+            The call starts a segment.
         """
         return self.opts, z
 
@@ -166,19 +143,7 @@ class SundialsStepper:
         acc: dict,
         new_segment: bool = True,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """States (and algebraic states) at ``times``; raises :class:`ChunkFailure`.
-
-        Parameters
-        ----------
-        t0 : float
-        x, z : ndarray
-            The state and the algebraic states at t0.
-        times : list of float
-            Output times of the chunk.
-        acc : dict
-            Statistics, updated.
-        new_segment : bool
-        """
+        """States (and algebraic states) at ``times``; raises :class:`ChunkFailure`."""
         try:
             res = self._solve(t0, x, z, times, acc, new_segment)
         except RuntimeError as exc:
@@ -254,46 +219,6 @@ def _add_stats(acc: dict[str, Any], st: dict[str, Any]) -> None:
                 break
 
 
-@dataclass
-class _Rows:
-    """The output rows of a run as they are reached (states, algebraic states, last row)."""
-
-    t_out: np.ndarray
-    X: np.ndarray
-    Z: np.ndarray | None
-    last: int = 0
-
-    @classmethod
-    def empty(cls, t_out: np.ndarray, nx: int, nz: int, keep_z: bool) -> _Rows:
-        K = len(t_out)
-        return cls(t_out, np.full((K, nx), np.nan), np.full((K, nz), np.nan) if keep_z else None)
-
-    def store(self, idx: int, x: np.ndarray, z: np.ndarray) -> None:
-        self.X[idx] = x
-        if self.Z is not None:
-            self.Z[idx] = z
-        self.last = idx
-
-    def trajectory(self, method: str, failure: ChunkFailure | None, acc: dict) -> Trajectory:
-        n = self.last + 1
-        message = ""
-        if failure is not None:
-            message = (
-                f"{method} failed after t = {float(self.t_out[self.last]):.6g} s "
-                f"(working towards t = {failure.t_target:.6g} s): {failure.reason}"
-            )
-        return Trajectory(
-            t=self.t_out[:n].copy(),
-            x=self.X[:n],
-            z=None if self.Z is None else self.Z[:n],
-            method=method,
-            status=Status.OK if failure is None else failure.status,
-            t_reached=float(self.t_out[self.last]),
-            message=message,
-            stats=acc,
-        )
-
-
 def integrate(
     f: ca.Function,
     x0: np.ndarray,
@@ -304,34 +229,25 @@ def integrate(
     z0: np.ndarray | None = None,
     progress: Callable[[float], None] | None = None,
 ) -> Trajectory:
-    """Integrate ``f`` from ``x0`` and return the states at the output times.
+    """Integrate ``f`` from ``x0`` with ``settings.method``, a :class:`CasadiSolver`.
+
+    A failure gives an incomplete :class:`Trajectory` (``status``, ``message``,
+    ``t_reached``), never an exception.
 
     Parameters
     ----------
     f : casadi.Function
-        Integrator form ``(t, x, z, p, u) -> (ode, alg, quad, zero)``; for a DAE
-        method (``idas``) with algebraic states z, for an ODE method (``cvodes``,
-        ``fixed``) nz = 0. p and u must be empty.
+        Integrator form; nz = 0 for an ODE method; p and u empty.
     x0 : ndarray
-        Initial state at ``t_out[0]``.
     t_out : ndarray
-        Increasing output times (see :func:`output_grid`).
+        Increasing output times.
     settings : IntegratorSettings
-        Its method must have a stepper over a ``casadi.Function``
-        (:class:`generated.solvers.engine.CasadiSolver`).
     breakpoints : sequence of float
         Known discontinuity times: the run restarts there.
     z0 : ndarray, optional
-        Initial guess of the algebraic states (IDAS).
+        Initial guess of the algebraic states.
     progress : callable, optional
         Called with the simulated time reached after every chunk.
-
-    Returns
-    -------
-    Trajectory
-        Never raises on an integrator failure: the result is then marked
-        incomplete (``status``, ``message``, ``t_reached``); call
-        :meth:`Trajectory.raise_if_incomplete` to turn it into an error.
     """
     wall0 = time.perf_counter()
     s = settings
@@ -342,96 +258,101 @@ def integrate(
             f"method {s.method!r} does not integrate a casadi.Function: "
             "use generated.api.integrate_built"
         )
-    nx, nz = _sizes(f, solver.form)
+    dae = solver.form == "dae"
+    nx, nz = int(f.size1_in(1)), int(f.size1_in(2))
+    if f.nnz_in(3) or f.nnz_in(4):
+        raise IntegrationError(f"{f.name()}: parameters p and controls u must be empty")
+    if not dae and nz:
+        raise IntegrationError(
+            f"an ODE method needs the ODE form (nz = 0); {f.name()} has nz = {nz}"
+        )
     x = np.asarray(x0, dtype=float).ravel()
     if x.size != nx:
         raise IntegrationError(f"x0 has {x.size} entries, {f.name()} expects {nx}")
     z = np.zeros(nz) if z0 is None else np.asarray(z0, dtype=float).ravel()
-    rows = _Rows.empty(np.asarray(t_out, dtype=float), nx, nz, keep_z=solver.form == "dae")
-    rows.store(0, x, z)
+    t_out = np.asarray(t_out, dtype=float)
     acc = dict.fromkeys([*_STAT_KEYS, "restarts", "integrator_calls", "refined_intervals"], 0)
-    run = _Run(make_stepper(f, s, nx, nz), schedule(rows.t_out, breakpoints), rows, acc)
-    failure = run.chunks(s.chunk, x, z, solver.form == "dae", progress)
+    stepper = make_stepper(f, s, nx, nz)
+    X = np.full((len(t_out), nx), np.nan)
+    Z = np.full((len(t_out), nz), np.nan) if dae else None
+    X[0] = x
+    if Z is not None:
+        Z[0] = z
+    sched = schedule(t_out, breakpoints)
+    last, failure = _run_chunks(stepper, sched, s.chunk, x, z, X, Z, acc, progress)
     acc["wall_seconds"] = time.perf_counter() - wall0
-    return rows.trajectory(s.method, failure, acc)
-
-
-def _sizes(f: ca.Function, form: str) -> tuple[int, int]:
-    """``(nx, nz)`` of ``f``, checked against the method's form."""
-    nx = int(f.size1_in(1))
-    nz = int(f.size1_in(2))
-    if f.nnz_in(3) or f.nnz_in(4):
-        raise IntegrationError(f"{f.name()}: parameters p and controls u must be empty")
-    if form != "dae" and nz:
-        raise IntegrationError(
-            f"an ODE method needs the ODE form (nz = 0); {f.name()} has nz = {nz}"
+    message = ""
+    if failure is not None:
+        message = (
+            f"{s.method} failed after t = {float(t_out[last]):.6g} s "
+            f"(working towards t = {failure.t_target:.6g} s): {failure.reason}"
         )
-    return nx, nz
+    return Trajectory(
+        t=t_out[: last + 1].copy(),
+        x=X[: last + 1],
+        z=None if Z is None else Z[: last + 1],
+        method=s.method,
+        status=Status.OK if failure is None else failure.status,
+        t_reached=float(t_out[last]),
+        message=message,
+        stats=acc,
+    )
 
 
-@dataclass
-class _Run:
-    """The chunk loop of :func:`integrate` over one stepper."""
-
-    stepper: Any
-    sched: Schedule
-    rows: _Rows
-    acc: dict
-
-    def chunks(
-        self,
-        chunk: float,
-        x: np.ndarray,
-        z: np.ndarray,
-        dae: bool,
-        progress: Callable[[float], None] | None,
-    ) -> ChunkFailure | None:
-        """Integrate every chunk; return the failure that stopped the run, or None."""
-        restarts = set(self.sched.breaks.tolist())  # compared exactly: targets are these times
-        t_cur = float(self.sched.t_out[0])
-        for ci, chunk_targets in enumerate(_chunks(self.sched, chunk)):
-            if ci:
-                self.acc["restarts"] += 1
-            times = [c[0] for c in chunk_targets]
-            new_seg = ci == 0 or t_cur in restarts
-            Xc, Zc, failure = self._advance(t_cur, x, z, times, new_seg, dae and ci == 0)
-            for k in range(len(Xc)):
-                tgt, idx = chunk_targets[k]
-                x, t_cur = Xc[k], tgt
-                if len(z):
-                    z = Zc[k]
-                if idx >= 0:
-                    self.rows.store(idx, x, z)
-            if failure is not None:
-                return failure
-            if progress is not None:
-                progress(t_cur)
-        return None
-
-    def _advance(
-        self, t0: float, x, z, times: list[float], new_seg: bool, first_dae: bool
-    ) -> tuple[Any, Any, ChunkFailure | None]:
-        """One chunk, replayed target by target after a failure to keep what was reached."""
+def _run_chunks(
+    stepper: Any,
+    sched: Schedule,
+    chunk: float,
+    x: np.ndarray,
+    z: np.ndarray,
+    X: np.ndarray,
+    Z: np.ndarray | None,
+    acc: dict,
+    progress: Callable[[float], None] | None,
+) -> tuple[int, ChunkFailure | None]:
+    """Fill the rows X (and Z, for a DAE) reached; return the last one and the failure."""
+    last, failure = 0, None
+    restarts = set(sched.breaks.tolist())  # compared exactly: targets are these times
+    t_cur = float(sched.t_out[0])
+    for ci, targets in enumerate(_chunks(sched, chunk)):
+        if ci:
+            acc["restarts"] += 1
+        times = [c[0] for c in targets]
+        new_seg = ci == 0 or t_cur in restarts
         try:
-            if first_dae:  # t0 in the grid: row 0 gets the consistent z(t0) the solve started from
-                Xc, Zc = self.stepper(t0, x, z, [t0, *times], self.acc)
-                self.rows.Z[0], Xc, Zc = Zc[0], Xc[1:], Zc[1:]
-                return Xc, Zc, None
-            Xc, Zc = self.stepper(t0, x, z, times, self.acc, new_seg)
-            return Xc, Zc, None
+            if Z is not None and ci == 0:  # row 0 gets the consistent z(t0) IDAS starts from
+                Xc, Zc = stepper(t_cur, x, z, [t_cur, *times], acc)
+                Z[0], Xc, Zc = Zc[0], Xc[1:], Zc[1:]
+            else:
+                Xc, Zc = stepper(t_cur, x, z, times, acc, new_seg)
         except ChunkFailure:
-            return self._replay(t0, x, z, times, new_seg)
+            Xc, Zc, failure = _replay(stepper, acc, t_cur, x, z, times, new_seg)
+        for k in range(len(Xc)):
+            tgt, idx = targets[k]
+            x, t_cur = Xc[k], tgt
+            if len(z):
+                z = Zc[k]
+            if idx >= 0:
+                X[idx], last = x, idx
+                if Z is not None:
+                    Z[idx] = z
+        if failure is not None:
+            break
+        if progress is not None:
+            progress(t_cur)
+    return last, failure
 
-    def _replay(self, t0: float, x, z, times: list[float], new_segment: bool):
-        """Advance target by target; return the states reached and the failure (or None)."""
-        xs, zs = [], []
-        for k, tt in enumerate(times):
-            try:
-                Xi, Zi = self.stepper(t0, x, z, [tt], self.acc, new_segment and k == 0)
-            except ChunkFailure as fail:
-                return xs, zs, fail
-            x, t0 = Xi[-1], tt
-            z = Zi[-1] if len(Zi[-1]) else z
-            xs.append(x)
-            zs.append(z)
-        return xs, zs, None
+
+def _replay(stepper: Any, acc: dict, t0: float, x, z, times: list[float], new_segment: bool):
+    """A failed chunk target by target: the states reached and the failure (or None)."""
+    xs, zs = [], []
+    for k, tt in enumerate(times):
+        try:
+            Xi, Zi = stepper(t0, x, z, [tt], acc, new_segment and k == 0)
+        except ChunkFailure as fail:
+            return xs, zs, fail
+        x, t0 = Xi[-1], tt
+        z = Zi[-1] if len(Zi[-1]) else z
+        xs.append(x)
+        zs.append(z)
+    return xs, zs, None

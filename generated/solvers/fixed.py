@@ -1,25 +1,14 @@
 """Method ``fixed``: the linearly implicit ROS2 method with a fixed step (the exact sign's method).
 
-The fixed-step method is the L-stable two-stage Rosenbrock method ROS2 of Verwer,
-Spee, Blom and Hundsdorfer (SIAM J. Sci. Comput. 20, 1999), applied to the
-autonomised system (t' = 1), with the generated sparse Jacobian and a sparse LU
-(CasADi Linsol), γ = 1 + 1/√2:
+ROS2 (Verwer, Spee, Blom, Hundsdorfer, SIAM J. Sci. Comput. 20, 1999), L-stable, on the
+autonomised system with the generated sparse Jacobian J, γ = 1 + 1/√2:
 
     (I − γhJ) k1 = f(t_n, x_n) + γh ∂f/∂t
     (I − γhJ) k2 = f(t_n + h, x_n + h k1) − 2 k1 − γh ∂f/∂t
     x_{n+1} = x_n + (3/2) h k1 + (1/2) h k2.
 
-It is linearly implicit: no Newton iteration that could fail to converge on the
-exact sign function, and order 2 for any Jacobian approximation (a W-method), so
-the Jacobian of the discontinuous terms (zero almost everywhere) does no harm.
-Explicit RK4 at dt = 1e-4 diverges on the paper's closed loop (its adaptive laws
-are stiff); this scheme is unconditionally stable on the linear part. The step is
-fixed (``fixed_step``, equal steps per output interval); a loose safeguard
-recomputes an output interval as two halves (recursively) where the embedded
-first-order error estimate exceeds ``fixed_rtol``/``fixed_atol`` or a NaN
-appears: at the paper's t = 0 the Jacobian has eigenvalues with real parts
-±1e5 and entries ~1e10 (ĝ's rate), which no fixed step of 1e-3 or 1e-4 resolves.
-The exact sign's chattering (a jump Δ in f gives an estimate hΔ/2) passes it.
+Linearly implicit (no Newton iteration to fail on the exact sign) and order 2 for any
+Jacobian (a W-method). Why it and its safeguard: docs/simulation.md.
 """
 
 from __future__ import annotations
@@ -41,14 +30,12 @@ GAMMA_ROS2 = 1.0 + 1.0 / math.sqrt(2.0)
 
 
 class Ros2Stepper:
-    """The fixed-step ROS2 method over a compiled ``(t, x, ...) -> ode`` with its Jacobian.
+    """ROS2 over an ODE's integrator form whose library has ``jac_<name>``.
 
     Parameters
     ----------
     f : casadi.Function
-        Integrator form of an ODE (its library has ``jac_<name>``).
     s : IntegratorSettings
-        ``fixed_step``, the safeguard tolerances and the sparse linear solver.
     nx : int
     """
 
@@ -82,21 +69,8 @@ class Ros2Stepper:
             f = self._runs[K] = self.step.mapaccum(f"ros2_{K}", K, 2)
         return f
 
-    def advance(self, t0: float, t1: float, x: np.ndarray, acc: dict) -> np.ndarray:
-        """Advance over [t0, t1] in equal steps <= fixed_step; bisect where the error test fails.
-
-        Parameters
-        ----------
-        t0, t1 : float
-        x : ndarray
-            The state at t0.
-        acc : dict
-            Statistics, updated.
-        """
-        K = max(1, math.ceil((t1 - t0) / self.s.fixed_step - 1e-9))
-        return self._advance(t0, t1, x, K, 0, acc)
-
     def _advance(self, t0: float, t1: float, x: np.ndarray, K: int, depth: int, acc: dict):
+        """x(t1) in K equal steps; each half again in K steps where the error test fails."""
         h = (t1 - t0) / K
         tv = t0 + h * np.arange(K)
         t2 = tv + h
@@ -143,7 +117,8 @@ class Ros2Stepper:
         tp, xp = t0, x
         for tt in times:
             try:
-                xp = self.advance(tp, tt, xp, acc)
+                K = max(1, math.ceil((tt - tp) / self.s.fixed_step - 1e-9))
+                xp = self._advance(tp, tt, xp, K, 0, acc)
             except RuntimeError as exc:  # singular iteration matrix, NaN in the factorisation
                 raise ChunkFailure(*failure_reason(exc), tt) from None
             if not np.all(np.isfinite(xp)):
@@ -169,22 +144,17 @@ class Fixed(CasadiSolver):
         Parameters
         ----------
         f, settings, nx, nz
-            As :meth:`generated.solvers.engine.CasadiSolver.stepper`.
         """
         return Ros2Stepper(f, settings, nx)
 
     def settings_used(self, settings: IntegratorSettings) -> dict[str, Any]:
-        """``fixed_step``, ``fixed_rtol`` and ``fixed_atol``.
+        """``fixed_step``, ``fixed_rtol``, ``fixed_atol``.
 
         Parameters
         ----------
         settings : IntegratorSettings
         """
-        return {
-            "fixed_step": settings.fixed_step,
-            "fixed_rtol": settings.fixed_rtol,
-            "fixed_atol": settings.fixed_atol,
-        }
+        return {k: getattr(settings, k) for k in ("fixed_step", "fixed_rtol", "fixed_atol")}
 
 
 SOLVER = register(Fixed())

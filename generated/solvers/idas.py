@@ -1,9 +1,7 @@
 """Method ``idas``: the semi-explicit DAE form (accelerations as algebraic states) with IDAS.
 
-The algebraic states z are out of IDAS's error test (``suppress_algebraic``) and out of
-its Newton test (``abstolv``: ``IntegratorSettings.algebraic_atol`` for z), and z is
-solved from alg(t, x, z) = 0 by a Newton iteration in z at t = 0 and at breakpoints
-(docs/simulation.md, 'IDAS and the algebraic states').
+z is out of IDAS's error and Newton tests and solved from alg(t, x, z) = 0 by Newton in z
+at t = 0 and at breakpoints (docs/simulation.md, "IDAS and the algebraic states").
 """
 
 from __future__ import annotations
@@ -49,17 +47,11 @@ class IdasStepper(SundialsStepper):
             self._znewton = _z_newton_step(self.f, self.nz, self.s.linear_solver)
         return opts
 
-    def consistent_z(self, t0: float, x: np.ndarray, z: np.ndarray) -> np.ndarray | None:
+    def _consistent_z(self, t0: float, x: np.ndarray, z: np.ndarray) -> np.ndarray | None:
         """z with alg(t0, x, z) = 0 (Newton in z, x fixed), or None if that fails.
 
         Replaces IDACalcIC, whose convergence test uses the same weights: with z out of
         it, IDACalcIC stops short of a consistent z (friction DAE of the tests).
-
-        Parameters
-        ----------
-        t0 : float
-        x, z : ndarray
-            The state and the guess of the algebraic states.
         """
         if self._znewton is None:
             return None
@@ -79,18 +71,16 @@ class IdasStepper(SundialsStepper):
     def call_options(
         self, t0: float, x: np.ndarray, z: np.ndarray, new_segment: bool
     ) -> tuple[dict[str, Any], np.ndarray]:
-        """At t0 and at breakpoints z from :meth:`consistent_z`; carried over otherwise.
+        """At t0 and at breakpoints z from :meth:`_consistent_z`; carried over otherwise.
 
         Parameters
         ----------
-        t0 : float
-        x, z : ndarray
-        new_segment : bool
+        t0, x, z, new_segment
         """
         if not self.nz:
             return self.opts, z
         # at other chunk boundaries z is consistent already; IDACalcIC only as a fallback
-        zc = self.consistent_z(t0, x, z) if new_segment else np.asarray(z, dtype=float)
+        zc = self._consistent_z(t0, x, z) if new_segment else np.asarray(z, dtype=float)
         if zc is None:
             return {**self.opts, "calc_ic": True}, z
         xdot = np.array(self.f(t0, x, zc, [], [])[0], dtype=float).ravel()
@@ -110,7 +100,6 @@ class Idas(CasadiSolver):
         Parameters
         ----------
         f, settings, nx, nz
-            As :meth:`generated.solvers.engine.CasadiSolver.stepper`.
         """
         return IdasStepper(f, settings, nz)
 
