@@ -1,19 +1,12 @@
-"""The per-agent driver: the graph as runtime data, one kernel library per follower model.
+"""Method ``native``'s engine: the per-agent driver, with the graph as runtime data.
 
-The graph is not written into the code: the kernels of ONE agent are compiled once per
-follower model (:mod:`generated.agent_kernels`) and the driver ``generated/native/agents.c`` evaluates
-them over the agents in passes (one per jet level), so a cycle is no special case.
-Everything about the graph — N, the pattern, the weights (L + B)_ij, the pinning and
-gauge a_i0 h_i, every switching time and the links' fade time ``graph.link_fade`` — is
-runtime data (:class:`AgentProblem`, CSR arrays per segment of time on which the same
-topologies are active, :mod:`generated.agent_graph`) passed to the driver. The Newton
-systems are reduced to the agents' jets and solved by forward substitution (acyclic), a
-dense LU (small N) or GMRES (any graph); see the driver's header comment. Followers of
-several models run in one CVODE run, each from its own library (the driver gets one
-table of kernel pointers per model).
-
-:func:`build_models` and :func:`kernel_key` are re-exported from
-:mod:`generated.agent_kernels`: ``agents`` is the one import path of the per-agent method.
+The kernels of ONE agent are compiled once per follower model
+(:mod:`generated.agent_kernels`, whose :func:`build_models` and :func:`kernel_key` are
+re-exported: ``agents`` is the one import path of the per-agent method) and
+``generated/native/agents.c`` evaluates them over the agents (its header has the algebra).
+N, the graph, its switching times and fade, and each follower's numbers are runtime data
+(:class:`AgentProblem`, the segments of :mod:`generated.agent_graph`); followers of
+several models run in one CVODE run, each from its own library.
 """
 
 from __future__ import annotations
@@ -32,16 +25,7 @@ from core.errors import IntegrationError, ScenarioError
 from core.scenario import Scenario
 from generated import native
 from generated.agent_graph import Segment, Topology, segments, topology
-from generated.agent_kernels import (
-    GMAT_NAME,
-    JAC_NAME,
-    JET_NAMES,
-    NFAC_NAME,
-    NSOL_NAME,
-    RHS_NAME,
-    build_models,
-    kernel_key,
-)
+from generated.agent_kernels import KERNELS, build_models, kernel_key
 from generated.loaded import open_kernels
 from generated.values import IntegratorSettings, Trajectory
 from symbolic.closed_loop import make_layout, observer_gains
@@ -76,9 +60,7 @@ class AgentProblem:
     model : ndarray
         N ints: each follower's kernel library.
     params : ndarray
-        N × npar, agent-major: each follower's row of runtime numbers
-        (:func:`symbolic.parameters.agent_rows`: per-agent numbers, the observer's gains,
-        u0's and its faults' literals).
+        N × npar: each follower's row of :func:`symbolic.parameters.agent_rows`.
     topologies : tuple of Topology
         The base graph, then one per switching time.
     fade : float
@@ -96,9 +78,7 @@ class AgentProblem:
 
     @cached_property
     def segments(self) -> tuple[Segment, ...]:
-        """What the driver reads: the active topologies of each stretch of time
-        (:func:`generated.agent_graph.segments`), derived from :attr:`topologies` and
-        :attr:`fade` (a problem with other topologies, as the console's calls, gets its own)."""
+        """What the driver reads (:func:`generated.agent_graph.segments`)."""
         return segments(self.topologies, self.fade)
 
     @property
@@ -119,7 +99,6 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
     ----------
     sc : Scenario
     gains : Gains
-        Supplies the gauge h (checked against the graph) and the observer's gains.
     model : ndarray
         From :func:`build_models`.
 
@@ -151,22 +130,9 @@ _FN = ctypes.c_void_p
 
 
 class Kernels(ctypes.Structure):
-    """``hitl_agent_kernels`` of agents.c."""
+    """``hitl_agent_kernels`` of agents.c: the :data:`KERNELS` and their work sizes."""
 
-    _fields_ = [
-        ("jet", _FN * 3),
-        ("rhs", _FN),
-        ("jac", _FN),
-        ("jet_work", _FN * 3),
-        ("rhs_work", _FN),
-        ("jac_work", _FN),
-        ("nfac", _FN),
-        ("nsol", _FN),
-        ("gmat", _FN),
-        ("nfac_work", _FN),
-        ("nsol_work", _FN),
-        ("gmat_work", _FN),
-    ]
+    _fields_ = [("fn", _FN * len(KERNELS)), ("work", _FN * len(KERNELS))]
 
 
 _IP = ctypes.POINTER(ctypes.c_int)
@@ -177,12 +143,7 @@ class Problem(ctypes.Structure):
     """``hitl_agents_problem`` of agents.c."""
 
     _fields_ = [
-        ("N", ctypes.c_int),
-        ("m", ctypes.c_int),
-        ("na", ctypes.c_int),
-        ("n", ctypes.c_int),
-        ("npar", ctypes.c_int),
-        ("nmodels", ctypes.c_int),
+        *((name, ctypes.c_int) for name in ("N", "m", "na", "n", "npar", "nmodels")),
         ("kern", ctypes.POINTER(Kernels)),
         ("model", _IP),
         ("prm", _DP),
@@ -194,8 +155,6 @@ class Problem(ctypes.Structure):
         ("cpl", _DP),
         ("order", _IP),
         ("acyclic", _IP),
-        ("nwaves", _IP),
-        ("wave_ptr", _IP),
         ("solver", ctypes.c_int),
         ("nthreads", ctypes.c_int),
         ("krylov", ctypes.c_int),
@@ -216,20 +175,19 @@ class Problem(ctypes.Structure):
 
 @dataclass(frozen=True)
 class LinearSettings:
-    """How the driver solves its Newton systems and how many threads it uses.
+    """How the driver solves its Newton systems (docs/performance.md) and its threads.
 
     Attributes
     ----------
     solver : str
-        ``auto`` (forward substitution on an acyclic topology, GMRES otherwise),
-        ``forward``, ``dense`` or ``gmres`` (:data:`SOLVERS`).
+        One of :data:`SOLVERS`; ``auto``: forward substitution on an acyclic topology,
+        GMRES otherwise.
     threads : int
         OpenMP threads over the agents; 0 = OpenMP's default.
     krylov : int
         GMRES restart length.
     tol : float
-        GMRES: relative residual of the jets system reached at every solve (a restart
-        that no longer halves it is accepted below a relative 1e-10: rounding).
+        GMRES: relative residual of the jets system reached at every solve.
     max_iter : int
         GMRES iterations per solve before the solve fails (CVODE then retries).
     """
@@ -247,36 +205,24 @@ class LinearSettings:
             )
 
 
-def _fn(lib: ctypes.CDLL, name: str) -> int:
-    return ctypes.cast(getattr(lib, name), ctypes.c_void_p).value
-
-
 def _kernels(lib: ctypes.CDLL) -> Kernels:
+    """The library's :data:`KERNELS` and their work-size functions."""
     k = Kernels()
-    for lev, name in enumerate(JET_NAMES):
-        k.jet[lev] = _fn(lib, name)
-        k.jet_work[lev] = _fn(lib, name + "_work")
-    for name in (RHS_NAME, JAC_NAME, NFAC_NAME, NSOL_NAME, GMAT_NAME):
-        field = name.removeprefix("ag_")
-        setattr(k, field, _fn(lib, name))
-        setattr(k, field + "_work", _fn(lib, name + "_work"))
+    for q, name in enumerate(KERNELS):
+        k.fn[q] = ctypes.cast(getattr(lib, name), _FN).value
+        k.work[q] = ctypes.cast(getattr(lib, name + "_work"), _FN).value
     return k
 
 
 def k_pattern(lib: ctypes.CDLL) -> tuple[int, np.ndarray, np.ndarray]:
-    """K's structural pattern as the library's ``ag_jac`` writes it (column-compressed).
+    """K's structural pattern as the library's ``ag_jac`` writes it (:func:`parse_sparsity`).
 
     Parameters
     ----------
     lib : ctypes.CDLL
         A kernel library (:func:`load`).
-
-    Returns
-    -------
-    (int, ndarray, ndarray)
-        k (K is k × k), the column pointers (k + 1) and the row of every nonzero.
     """
-    return _sparsity_out(lib, JAC_NAME, 1)
+    return _sparsity_out(lib, "ag_jac", 1)
 
 
 def _sparsity_out(lib: ctypes.CDLL, name: str, j: int) -> tuple[int, np.ndarray, np.ndarray]:
@@ -315,7 +261,7 @@ def _k_layout(libs: list[ctypes.CDLL], model: np.ndarray, m: int) -> dict[str, n
     pats = [k_pattern(lib) for lib in libs]
     nnz = np.array([int(pats[j][1][-1]) for j in model])
     # doubles of each agent's packed factorisation P (ag_nfac's first output)
-    npk = np.array([_sparsity_out(lib, NFAC_NAME, 0)[1][-1] for lib in libs])[model]
+    npk = np.array([_sparsity_out(lib, "ag_nfac", 0)[1][-1] for lib in libs])[model]
     _, colind, rows = pats[model[0]]
     lead = -np.ones((m, m), np.int32)  # column-major, as the driver reads it
     for col in range(m):
@@ -330,7 +276,7 @@ def _k_layout(libs: list[ctypes.CDLL], model: np.ndarray, m: int) -> dict[str, n
 
 
 def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
-    """The kernel libraries, loaded and checked (struct sizes against the mirror).
+    """The kernel libraries, loaded and checked (:func:`generated.native.open_library`).
 
     Parameters
     ----------
@@ -338,8 +284,6 @@ def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
 
     Raises
     ------
-    BuildError
-        As :func:`generated.native.open_library`.
     IntegrationError
         If a library's problem struct differs from :class:`Problem`.
     """
@@ -395,10 +339,6 @@ def _c_problem(
         "t_graph": np.ascontiguousarray([t.t_start for t in prob.topologies], float),
         "order": np.ascontiguousarray(np.concatenate([t.order for t in tops]), np.int32),
         "acyclic": np.asarray([int(t.acyclic) for t in tops], np.int32),
-        "nwaves": np.asarray([len(t.waves) - 1 for t in tops], np.int32),
-        "wave_ptr": np.concatenate(
-            [np.pad(t.waves, (0, N + 1 - len(t.waves))) for t in tops]
-        ).astype(np.int32),
         "depth": np.ascontiguousarray(np.concatenate([t.depth for t in tops]), np.int32),
         **_k_layout(libs, np.asarray(prob.model), prob.m),
     }
@@ -447,9 +387,7 @@ def run(
     x0 : ndarray
         The whole closed loop's initial state at ``t_out[0]``.
     t_out : ndarray
-        Increasing output times.
     settings : IntegratorSettings
-        ``rtol``, ``atol`` and ``max_steps``.
     linear : LinearSettings, optional
     breakpoints : sequence of float
         Restart times (faults, graph switches), reconciled with ``t_out``.
@@ -463,16 +401,14 @@ def run(
     wall0 = time.perf_counter()
     libs, cp, _keep = _c_problem(libraries, prob, linear)
     x = _checked_state(x0, prob.nx)
-    call = native.DriverCall.of(x.size, t_out, settings, breakpoints)
     kry = ctypes.c_long(0)
-    libs[0].hitl_agents_run(
-        ctypes.byref(cp),
-        native.dptr(x),
-        ctypes.byref(call.options),
-        ctypes.byref(call.result),
-        ctypes.byref(kry),
-    )
-    traj = call.trajectory("native", wall0, progress)
+
+    def call(options: ctypes._CArgObject, result: ctypes._CArgObject) -> None:
+        libs[0].hitl_agents_run(
+            ctypes.byref(cp), native.dptr(x), options, result, ctypes.byref(kry)
+        )
+
+    traj = native.drive(call, x.size, t_out, settings, breakpoints, wall0, progress)
     traj.stats["krylov_iters"] = int(kry.value)
     return traj
 
@@ -527,10 +463,8 @@ def _checked_state(x: np.ndarray, nx: int) -> np.ndarray:
 
 
 def initial_state(sc: Scenario) -> np.ndarray:
-    """x(0) of ``sc`` without the whole closed loop (``initial.start = "given"``, oracle).
-
-    The same state as :func:`symbolic.closed_loop.initial_state` for these options (which
-    then needs no output of the loop): Table 2's states as given.
+    """x(0) of ``sc`` (Table 2's states) without the whole closed loop: ``initial.start =
+    "given"`` with oracle derivatives only (otherwise it needs the loop's outputs).
 
     Parameters
     ----------

@@ -1,9 +1,4 @@
-"""SUNDIALS' messages of a run: the per-call log file the native driver writes, read back.
-
-The native driver routes SUNDIALS' logger into a per-call file (:func:`new_sundials_log`);
-:func:`take_sundials_log` reads and removes it, :func:`sundials_messages` counts its
-warnings and errors and :func:`sundials_summary` gives the one line the CLI prints.
-"""
+"""SUNDIALS' messages of a run: the per-call log file the native driver writes, read back."""
 
 from __future__ import annotations
 
@@ -21,14 +16,7 @@ _SUNDIALS_LINE = re.compile(
 
 
 def new_sundials_log() -> Path:
-    """A new empty temporary file for a native run's SUNDIALS messages.
-
-    Returns
-    -------
-    Path
-        Passed to the driver (``hitl_options.log_path``), read back and removed by
-        :func:`take_sundials_log`.
-    """
+    """A new empty temporary file for a native run's SUNDIALS messages (``log_path``)."""
     fd, name = tempfile.mkstemp(prefix="hitl-sundials-", suffix=".log")
     os.close(fd)
     return Path(name)
@@ -41,10 +29,6 @@ def take_sundials_log(path: Path | None) -> str:
     ----------
     path : Path or None
         None or a missing file: no messages.
-
-    Returns
-    -------
-    str
     """
     if path is None:
         return ""
@@ -62,15 +46,13 @@ def sundials_messages(log: str) -> dict[str, Any]:
     Parameters
     ----------
     log : str
-        ``Trajectory.sundials_log``: lines as the native driver writes them
-        (``[WARNING][CVode] Warning: t + h = t ... (cvode.c:1234)``); SUNDIALS' own
-        format (``[WARNING][rank 0][/build/path/cvode.c:1234][CVode] ...``) is read too.
+        ``Trajectory.sundials_log`` (SUNDIALS' own line format is read too).
 
     Returns
     -------
     dict
-        ``count`` (messages), ``warnings``, ``errors`` and ``first``: the first message
-        as ``"CVode: t + h = t on the next step ..."`` (no level word, no path), or None.
+        ``count``, ``warnings``, ``errors`` and ``first``: the first message as
+        ``"CVode: t + h = t on the next step ..."`` (no level word, no path), or None.
     """
     count, warnings, first = 0, 0, None
     for line in log.splitlines():
@@ -93,13 +75,7 @@ def sundials_summary(log: str, where: str | os.PathLike[str]) -> str | None:
     log : str
         ``Trajectory.sundials_log``.
     where : str or PathLike
-        The file the messages were written to (``out/<run>/sundials.log``).
-
-    Returns
-    -------
-    str or None
-        e.g. ``SUNDIALS: 2 warnings (first: CVode: t + h = t on the next step ...);
-        see out/run/sundials.log``.
+        The file the messages were written to.
     """
     m = sundials_messages(log)
     if not m["count"]:

@@ -1,77 +1,48 @@
 /*
- * The per-agent native driver (generated/agents.py): one CVODE run whose right-hand side
- * and Newton systems are evaluated agent by agent from per-model kernels, with the graph,
- * N, the pinning, the gauge signs and every switching time as runtime data.
+ * The per-agent native driver (generated/agents.py; the design: docs/performance.md, 'The
+ * graph as data'): one CVODE run whose right-hand side and Newton systems are evaluated
+ * agent by agent from per-model kernels, with the graph, N, the pinning, the gauge signs,
+ * every switching time and the links' fade as runtime data.
  *
- * Appended (after common.c) to the C that CasADi generates for ONE follower model:
+ * Appended (after common.c) to the C that CasADi generates for ONE follower model
+ * (generated/agent_kernels.py):
  *   ag_jet0, ag_jet1, ag_jet2 (t, xb, nb, cpl, prm) -> C0 eta_i, C0 eta_i', C0 eta_i''
  *   ag_rhs (t, xb, nb, cpl, prm) -> (xbdot, jets)
  *   ag_jac (t, xb, nb, cpl, prm) -> (jets, K),  K = d(xbdot, jets)/d(xb, nb): its
  *                                     structural nonzeros (column-compressed)
  *   ag_nfac (c, K) -> (P, pivots)        D = I + c A_ss factorised without pivoting, packed
- *                                         with what a solve reads: P = (LU of D with U's
- *                                         diagonal inverted, c A_s0, c B_s, C_0, C_s, E)
+ *                                         with what a solve reads (c A_s0, c B_s, C_0, C_s, E)
  *   ag_nsol (P, x0, s, b) -> (x, dj)     x = D^{-1} (b - c (A_s0 x0 + B_s s)),
  *                                         dj = C_0 x0 + C_s x + E s
  *   ag_gmat (P) -> (G, H)                G = E - c C_s D^{-1} B_s, H = -c D^{-1} B_s
  * with xb = (eta0, s_i), nb = sum_j (L+B)_ij jets_j (3n) and its two time derivatives,
- * and cpl = (l_ii, a_i0 h_i) with their first two time derivatives (6).
+ * and cpl = (l_ii, a_i0 h_i) with their first two time derivatives (6). The driver gets
+ * one table of kernel pointers per follower model (hitl_agent_kernels): followers of
+ * different models, each from its own library, run in one CVODE run.
  *
- * Links that fade (graph.link_fade = T > 0; eq. (6) with W(t) = W_0 + sum_k sigma_k
- * (W_k - W_{k-1}), sigma_k = sigma((t - s_k)/T) the quintic C^2 fade): time is cut into
- * segments at every s_k and s_k + T; on each, W(t) = sum_k c_k(t) W_k over the active
- * topologies k (c_k = sigma_k - sigma_{k+1}, topology k active on [s_k, s_{k+1} + T)),
- * and the segment's pattern is their union (two acyclic topologies fading into each
- * other may form a cycle: its order, waves and acyclic flag are the union's, so the
- * solver choice sees it). Level l of a neighbour sum is the l-th time derivative of
- * sum_j w_ij C0 eta_j: nb_1 = sum w J_1 + w' J_0, nb_2 = sum w J_2 + 2 w' J_1 + w'' J_0
- * (product rule; hitl_ag_gather), still from the levels <= l of the neighbours' jets,
- * and the kernels add the own and leader terms with cpl's rates. The weights are
- * runtime data (T, the s_k and each topology's weights): no recompile for another T or
- * graph. With T = 0 every segment is one topology and nothing fades.
- * The driver never calls these by name: it receives one table of function pointers per
- * follower model (hitl_agent_kernels), so followers of different models, each from its
- * own library, run in one CVODE run.
+ * Right-hand side: one pass per jet level over all agents (level l reads the levels < l
+ * of the neighbour sums), then the rates: a cycle is no special case. On an acyclic
+ * topology one sweep along the depth waves of a topological order.
  *
- * Right-hand side: passes over all agents, one per jet level. The level-l jet of agent i
- * depends only on its own state and the levels < l of its neighbour sum (eta_i' on psi_i,
- * eta_i'' on psi_i'), so pass l evaluates level l for every agent from the sums of pass
- * l - 1, whatever the graph: a cycle is no special case. The last pass evaluates the
- * agents' rates from the complete sums. On an acyclic topology one pass suffices: along
- * the depth levels ("waves") of a topological order, every agent's sums are complete
- * from the waves before it.
+ * Newton systems (I + c J) x = b (c = -gamma): the leader first; eliminating agent i's
+ * states (D_i x_i = b_i - c (A_s0 x_0 + B_s dnb_i)) leaves the jets system
+ *   dj_i - G_i sum_j w_ij dj_j = r_i,   r_i = C_0 x_0 + C_s D_i^{-1} (b_i - c A_s0 x_0),
+ * solved by HITL_AG_FORWARD (block forward substitution through the states, acyclic
+ * topologies only), HITL_AG_DENSE (LU with partial pivoting, small N) or HITL_AG_GMRES
+ * (restarted, right-preconditioned: hitl_ag_precond); HITL_AG_AUTO takes FORWARD on an
+ * acyclic topology and GMRES otherwise. Then x_i = y_i + H_i dnb_i.
  *
- * Newton systems (I + c J) x = b (c = -gamma): with the leader solved first, agent i's
- * rows are D_i x_i = b_i - c (A_s0 x_0 + B_s dnb_i), D_i = I + c A_ss, and its
- * directional jets dj_i = C_0 x_0 + C_s x_i + E dnb_i, dnb_i = sum_j w_ij dj_j.
- * Eliminating x_i: dj_i = r_i + G_i dnb_i with G_i = E - c C_s D_i^{-1} B_s and
- * r_i = C_0 x_0 + C_s D_i^{-1} (b_i - c A_s0 x_0). The jets system
- *   dj_i - G_i sum_j w_ij dj_j = r_i         (3n unknowns per agent)
- * is solved by
- *   HITL_AG_FORWARD  block forward substitution along a topological order, through the
- *                    states themselves (acyclic topologies only: x_i from the dj of the
- *                    agents it hears, then dj_i; only the D_i are factorised),
- *   HITL_AG_DENSE    a dense LU with partial pivoting of the whole jets system (exact on
- *                    any graph; (3nN)^2 memory, for small N),
- *   HITL_AG_GMRES    restarted GMRES on the jets system, right-preconditioned: on an
- *                    acyclic topology by the forward substitution over the depth waves
- *                    (exact, one iteration); on a cycle level by level (hitl_ag_levels:
- *                    the level-l rows from the complete levels < l, and level l along the
- *                    waves, back edges dropped),
- * then x_i = D_i^{-1} (b_i - c A_s0 x_0) - c D_i^{-1} B_s dnb_i.
- * While links fade dnb_i = sum_j Wb_ij dj_j with the level-triangular blocks
- * Wb = [[w, 0, 0], [w', w, 0], [w'', 2w', w]] (x I_n), the exact linearisation of the
- * faded sums at the Jacobian's time (its weights kept apart from the right-hand side's,
- * hitl_ag_wts wl): every solver solves it exactly, as without a fade (the
- * level-by-level preconditioner adds a delayed level's sum with its rates too).
- * HITL_AG_AUTO takes FORWARD on an acyclic topology and GMRES otherwise.
+ * Links that fade (graph.link_fade = T > 0, eq. (6) with W(t) = W_0 + sum_k sigma_k
+ * (W_k - W_{k-1}), sigma_k the quintic C^2 fade): time is cut into segments at every s_k
+ * and s_k + T; on each, W(t) = sum_k c_k(t) W_k over the active topologies k (c_k =
+ * sigma_k - sigma_{k+1}) on the union of their patterns, whose order, waves and acyclic
+ * flag the solver choice reads. Neighbour sums take the weights' rates (product rule,
+ * hitl_ag_edge_level) and the Newton systems the exact linearisation at the Jacobian's
+ * time: dnb_i = sum_j Wb_ij dj_j, Wb = [[w, 0, 0], [w', w, 0], [w'', 2w', w]] (x I_n).
  *
- * Threads (OpenMP, when compiled with -fopenmp; a serial build has no OpenMP region at
- * all, whose entry costs more than a pass at small N): the passes, the Jacobian blocks,
- * the block factorisations and the GMRES products are split over the agents; what runs
- * along a topological order (the one-pass sweep of an acyclic topology, the forward
- * substitutions, the preconditioner) is one region in which each agent waits on its
- * neighbours' flags (hitl_ag_sweep), not a barrier per wave.
+ * Threads (OpenMP, -fopenmp builds only): passes, Jacobian blocks, factorisations and
+ * GMRES products split over the agents; what runs along a topological order is one region
+ * in which each agent waits on its neighbours' flags (hitl_ag_sweep).
  */
 #ifdef _OPENMP
 #include <omp.h>
@@ -82,12 +53,12 @@ enum { HITL_AG_AUTO = 0, HITL_AG_FORWARD = 1, HITL_AG_DENSE = 2, HITL_AG_GMRES =
 typedef int (*hitl_fn)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int);
 typedef int (*hitl_work_fn)(casadi_int *, casadi_int *, casadi_int *, casadi_int *);
 
-/* One follower model's kernels: pointers into its library (generated/agents.py) */
+/* One follower model's kernels (in generated/agent_kernels.py's KERNELS order) and their
+   work sizes: pointers into its library (generated/agents.py) */
+enum { AG_JET0, AG_RHS = 3, AG_JAC, AG_NFAC, AG_NSOL, AG_GMAT, AG_NKERNELS };
 typedef struct {
-  hitl_fn jet[3], rhs, jac;
-  hitl_work_fn jet_work[3], rhs_work, jac_work;
-  hitl_fn nfac, nsol, gmat; /* the agent's Newton blocks, unrolled on K's pattern */
-  hitl_work_fn nfac_work, nsol_work, gmat_work;
+  hitl_fn fn[AG_NKERNELS];
+  hitl_work_fn work[AG_NKERNELS];
 } hitl_agent_kernels;
 
 /* The problem: sizes, kernels, per-agent data and the graph's topologies as CSR */
@@ -105,9 +76,6 @@ typedef struct {
   const double *cpl;    /* per active topology: N x 2 (l_ii, a_i0 h_i) */
   const int *order;     /* ntop x N: topological order (cycles broken), grouped by depth */
   const int *acyclic;   /* ntop flags (of the union pattern) */
-  const int *nwaves;    /* ntop: depth levels (on a cycle, of the edges the GMRES
-                           preconditioner keeps: all of an acyclic topology's) */
-  const int *wave_ptr;  /* ntop x (N + 1): wave w is order[wave_ptr[w] .. wave_ptr[w+1]) */
   int solver;           /* HITL_AG_* */
   int nthreads;         /* <= 0: OpenMP's default */
   int krylov;           /* GMRES restart length */
@@ -180,7 +148,7 @@ typedef struct {
   double *dj, *dnb, *rj; /* N x n3 */
   double *S;     /* dense jets system (n3 N)^2, HITL_AG_DENSE */
   int *Spiv;
-  int S_ok, ls_top, ls_mode;
+  int ls_top, ls_mode;
   double *V, *H, *cs, *sn, *g, *z; /* GMRES */
   long *done, epoch; /* hitl_ag_sweep's flags: the last level each agent finished */
   long n_krylov;
@@ -201,12 +169,16 @@ static hitl_agwork *hitl_ag_wk(hitl_ag *d) {
 #endif
 }
 
+/* kernel `which` of agent i's model on wk's arguments and results: 0, or non-zero */
+static int hitl_ag_call(const hitl_ag *d, hitl_agwork *wk, int i, int which) {
+  return d->p->kern[d->p->model[i]].fn[which](wk->arg, wk->res, wk->iw, wk->w, 0);
+}
+
 /* agent i's Newton solve through its model's ag_nsol on its packed factorisation: x =
    D_i^{-1} (b - c (A_s0 x0 + B_s s)) and dj = C_0 x0 + C_s x + E s (b is copied first: x
    may be where b was) */
 static int hitl_ag_nsol(hitl_ag *d, hitl_agwork *wk, int i, const double *x0,
                         const double *s, const double *b, double *x, double *dj) {
-  const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
   memcpy(wk->xb, b, sizeof(double) * (size_t)AG_NA(d));
   wk->arg[0] = d->lu + d->p->poff[i];
   wk->arg[1] = x0;
@@ -214,7 +186,7 @@ static int hitl_ag_nsol(hitl_ag *d, hitl_agwork *wk, int i, const double *x0,
   wk->arg[3] = wk->xb;
   wk->res[0] = x;
   wk->res[1] = dj;
-  return kn->nsol(wk->arg, wk->res, wk->iw, wk->w, 0);
+  return hitl_ag_call(d, wk, i, AG_NSOL);
 }
 
 static int hitl_ag_topology(const hitl_agents_problem *p, double t) {
@@ -267,31 +239,10 @@ static void hitl_ag_weights(hitl_ag *d, hitl_ag_wts *W, int seg, double t) {
   }
 }
 
-/* nb_i (levels lo..hi-1, n each) from the agents' jets J (N x n3) on segment top, with
-   the weights in use (d->W): level l is the l-th derivative of sum_j w_ij C0 eta_j, so
-   during a fade it takes the lower levels with the weights' rates (eq. (6), product
-   rule): nb_1 = sum w J_1 + w' J_0, nb_2 = sum w J_2 + 2 w' J_1 + w'' J_0 */
-static void hitl_ag_gather(const hitl_ag *d, int top, int i, const double *J, double *nb,
-                           int lo, int hi) {
-  const hitl_agents_problem *p = d->p;
-  const hitl_ag_wts *W = d->W;
-  const int *ptr = p->ptr + (size_t)top * (d->N + 1);
-  int n = AG_N(d);
-  for (int r = lo * n; r < hi * n; ++r) nb[r] = 0.0;
-  for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
-    const double *jj = J + (size_t)p->idx[q] * AG_N3(d);
-    double w = W->w[0][q - W->base];
-    for (int r = lo * n; r < hi * n; ++r) nb[r] += w * jj[r];
-    if (!W->fade) continue;
-    double w1 = W->w[1][q - W->base], w2 = W->w[2][q - W->base];
-    for (int l = lo > 1 ? lo : 1; l < hi; ++l)
-      for (int r = 0; r < n; ++r)
-        nb[l * n + r] += (l == 1 ? w1 * jj[r] : 2.0 * w1 * jj[n + r] + w2 * jj[r]);
-  }
-}
-
-/* the level-l neighbour sum of edge q's jets zj added to s (levels <= l of zj; the
-   level-by-level preconditioner) */
+/* the level-l neighbour sum of edge q's jets zj added to s, with the weights in use
+   (d->W): level l is the l-th derivative of sum_j w_ij C0 eta_j, so during a fade it takes
+   the lower levels of zj with the weights' rates (eq. (6), product rule): nb_1 = sum w J_1
+   + w' J_0, nb_2 = sum w J_2 + 2 w' J_1 + w'' J_0 */
 static void hitl_ag_edge_level(const hitl_ag *d, int q, int l, const double *zj, double *s) {
   const hitl_ag_wts *W = d->W;
   int n = AG_N(d);
@@ -301,6 +252,16 @@ static void hitl_ag_edge_level(const hitl_ag *d, int q, int l, const double *zj,
   double w1 = W->w[1][q - W->base], w2 = W->w[2][q - W->base];
   for (int r = 0; r < n; ++r)
     s[l * n + r] += (l == 1 ? w1 * zj[r] : 2.0 * w1 * zj[n + r] + w2 * zj[r]);
+}
+
+/* nb_i (levels lo..hi-1, n each) from the agents' jets J (N x n3) on segment top */
+static void hitl_ag_gather(const hitl_ag *d, int top, int i, const double *J, double *nb,
+                           int lo, int hi) {
+  const int *ptr = d->p->ptr + (size_t)top * (d->N + 1);
+  for (int r = lo * AG_N(d); r < hi * AG_N(d); ++r) nb[r] = 0.0;
+  for (int q = ptr[i]; q < ptr[i + 1]; ++q)
+    for (int l = lo; l < hi; ++l)
+      hitl_ag_edge_level(d, q, l, J + (size_t)d->p->idx[q] * AG_N3(d), nb);
 }
 
 /* agent i's kernel inputs in work wk: xb = (eta0, s_i) */
@@ -399,41 +360,40 @@ typedef struct {
   double *ydot, *K;
 } hitl_ag_at;
 
-/* agent i of the one-pass sweep: its neighbour sums (complete: every neighbour is of
-   lower depth), then its rates (ydot) or its Jacobian block (K), the jets coming out of
-   the rate and Jacobian kernels themselves */
+/* agent i's rates into ydot or its Jacobian block into K (the other NULL), its jets into
+   jets (its inputs set by hitl_ag_inputs); 0, or non-zero */
+static int hitl_ag_eval(hitl_ag *d, hitl_agwork *wk, int i, double *jets, double *ydot,
+                        double *K) {
+  if (K) {
+    wk->res[0] = jets;
+    wk->res[1] = K + d->p->koff[i];
+    return hitl_ag_call(d, wk, i, AG_JAC);
+  }
+  wk->res[0] = wk->xbdot;
+  wk->res[1] = jets;
+  if (hitl_ag_call(d, wk, i, AG_RHS)) return 1;
+  if (i == 0) memcpy(ydot, wk->xbdot, sizeof(double) * (size_t)AG_M(d));
+  memcpy(ydot + AG_M(d) + (size_t)AG_NA(d) * i, wk->xbdot + AG_M(d),
+         sizeof(double) * (size_t)AG_NA(d));
+  return 0;
+}
+
+/* agent i of the one-pass sweep of an acyclic topology: its neighbour sums (complete:
+   every neighbour is of lower depth), then its rates or its Jacobian block, the jets
+   coming out of the rate and Jacobian kernels themselves */
 static int hitl_ag_wave_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int lev,
                              void *ctx) {
   const hitl_ag_at *a = (const hitl_ag_at *)ctx;
-  const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
-  int n3 = AG_N3(d);
+  double *jets = d->jets + (size_t)AG_N3(d) * i;
   casadi_real ti = a->t;
   (void)lev;
-  hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)n3 * i, 0, 3);
+  hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)AG_N3(d) * i, 0, 3);
   hitl_ag_inputs(d, wk, i, a->y, &ti);
-  if (a->ydot) {
-    wk->res[0] = wk->xbdot;
-    wk->res[1] = d->jets + (size_t)n3 * i;
-    if (kn->rhs(wk->arg, wk->res, wk->iw, wk->w, 0)) return 1;
-    if (i == 0) memcpy(a->ydot, wk->xbdot, sizeof(double) * (size_t)AG_M(d));
-    memcpy(a->ydot + AG_M(d) + (size_t)AG_NA(d) * i, wk->xbdot + AG_M(d),
-           sizeof(double) * (size_t)AG_NA(d));
-    return 0;
-  }
-  wk->res[0] = d->jets + (size_t)n3 * i;
-  wk->res[1] = a->K + d->p->koff[i];
-  return kn->jac(wk->arg, wk->res, wk->iw, wk->w, 0);
+  return hitl_ag_eval(d, wk, i, jets, a->ydot, a->K);
 }
 
-/* On an acyclic topology: one sweep along its order, ydot or K */
-static int hitl_ag_wave_pass(hitl_ag *d, int top, double t, const double *y, double *ydot,
-                             double *K) {
-  hitl_ag_at a = {t, y, ydot, K};
-  return hitl_ag_sweep(d, top, 1, hitl_ag_wave_step, &a, d->jets);
-}
-
-/* The passes at (t, y): jets and neighbour sums of every level, then ydot (if not NULL)
-   and/or the Jacobian blocks K (if not NULL, at p->koff). Returns 0 or -1. */
+/* The passes at (t, y): jets and neighbour sums of every level, then ydot or the Jacobian
+   blocks K (at p->koff; the other NULL). Returns 0 or -1. */
 static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, double *K,
                         int *top_out) {
   const hitl_agents_problem *p = d->p;
@@ -442,18 +402,19 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
   if (top_out) *top_out = top;
   hitl_ag_weights(d, &d->wr, top, t);
   d->W = &d->wr;
-  if (p->acyclic[top] && (ydot == NULL || K == NULL))
-    return hitl_ag_wave_pass(d, top, t, y, ydot, K);
+  if (p->acyclic[top]) { /* one sweep along its order */
+    hitl_ag_at a = {t, y, ydot, K};
+    return hitl_ag_sweep(d, top, 1, hitl_ag_wave_step, &a, d->jets);
+  }
   memset(d->nb, 0, sizeof(double) * (size_t)N * n3);
   for (int lev = 0; lev < 3; ++lev) {
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
     for (int i = 0; i < N; ++i) {
       hitl_agwork *wk = hitl_ag_wk(d);
       casadi_real ti = t;
-      const hitl_agent_kernels *kn = p->kern + p->model[i];
       hitl_ag_inputs(d, wk, i, y, &ti);
       wk->res[0] = d->jets + (size_t)n3 * i + (size_t)lev * AG_N(d);
-      if (kn->jet[lev](wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
+      if (hitl_ag_call(d, wk, i, AG_JET0 + lev)) fail |= 1;
     }
     if (fail) return -1;
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
@@ -464,21 +425,8 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
   for (int i = 0; i < N; ++i) {
     hitl_agwork *wk = hitl_ag_wk(d);
     casadi_real ti = t;
-    const hitl_agent_kernels *kn = p->kern + p->model[i];
     hitl_ag_inputs(d, wk, i, y, &ti);
-    if (ydot) {
-      wk->res[0] = wk->xbdot;
-      wk->res[1] = wk->jscr;
-      if (kn->rhs(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
-      if (i == 0) memcpy(ydot, wk->xbdot, sizeof(double) * (size_t)AG_M(d));
-      memcpy(ydot + AG_M(d) + (size_t)AG_NA(d) * i, wk->xbdot + AG_M(d),
-             sizeof(double) * (size_t)AG_NA(d));
-    }
-    if (K) {
-      wk->res[0] = wk->jscr;
-      wk->res[1] = K + p->koff[i];
-      if (kn->jac(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
-    }
+    if (hitl_ag_eval(d, wk, i, wk->jscr, ydot, K)) fail |= 1;
   }
   return fail ? -1 : 0;
 }
@@ -594,12 +542,6 @@ static int hitl_ag_forward_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int
   return 0;
 }
 
-/* z = P^{-1} u: forward substitution along the order of an acyclic topology (exact) */
-static void hitl_ag_forward(hitl_ag *d, int top, const double *u, double *z) {
-  hitl_ag_uz a = {u, z};
-  hitl_ag_sweep(d, top, 1, hitl_ag_forward_step, &a, z);
-}
-
 /* agent i's level l of the level-by-level preconditioner: its partial neighbour sums
    ps_i gain level l from the neighbours of lower depth and level l - 1 from the others
    (which sweep l - 1 had not reached), then z_i's level-l rows from levels <= l */
@@ -630,27 +572,22 @@ static int hitl_ag_levels_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int 
   return 0;
 }
 
-/* z = P^{-1} u level by level (cyclic topologies): P keeps every coupling of a level-l
-   row to the levels < l (E's, whole) and, within level l, the edges from lower depths;
-   it drops only couplings of G_i's -c C_s D_i^{-1} B_s part (to higher levels, and the
-   back edges within a level), which vanish with the step, instead of the back edges'
-   E couplings that the agent-by-agent sweep drops */
-static void hitl_ag_levels(hitl_ag *d, int top, const double *u, double *z) {
-  hitl_ag_uz a = {u, z};
-  hitl_ag_sweep(d, top, 3, hitl_ag_levels_step, &a, z);
-}
-
 static double hitl_dot(const double *a, const double *b, long n) {
   double s = 0.0;
   for (long i = 0; i < n; ++i) s += a[i] * b[i];
   return s;
 }
 
-/* GMRES's preconditioner: exact agent by agent on an acyclic topology, level by level on
-   a cycle */
+/* GMRES's preconditioner z = P^{-1} u: on an acyclic topology forward substitution along
+   its order (exact); on a cycle level by level: P keeps every coupling of a level-l
+   row to the levels < l (E's, whole) and, within level l, the edges from lower depths;
+   it drops only couplings of G_i's -c C_s D_i^{-1} B_s part (to higher levels, and the
+   back edges within a level), which vanish with the step, instead of the back edges'
+   E couplings that the agent-by-agent sweep drops */
 static void hitl_ag_precond(hitl_ag *d, int top, const double *u, double *z) {
-  if (d->p->acyclic[top]) hitl_ag_forward(d, top, u, z);
-  else hitl_ag_levels(d, top, u, z);
+  hitl_ag_uz a = {u, z};
+  if (d->p->acyclic[top]) hitl_ag_sweep(d, top, 1, hitl_ag_forward_step, &a, z);
+  else hitl_ag_sweep(d, top, 3, hitl_ag_levels_step, &a, z);
 }
 
 #define HITL_GMRES_FLOOR 1e-10
@@ -743,11 +680,6 @@ static int hitl_ag_forward_x_step(hitl_ag *d, hitl_agwork *wk, int top, int i, i
   return hitl_ag_nsol(d, wk, i, x, s, xi, xi, d->dj + (size_t)AG_N3(d) * i);
 }
 
-/* Block forward substitution through the states along the order of an acyclic topology */
-static int hitl_ag_forward_x(hitl_ag *d, double *x) {
-  return hitl_ag_sweep(d, d->ls_top, 1, hitl_ag_forward_x_step, x, d->dj);
-}
-
 /* Set-up of M = I + c J: the leader's block factorised (dense, pivoting), every agent's
    D_i by its model's ag_nfac (pivots below HITL_PIVOT_MIN fail the set-up) and,
    unless the solve substitutes through the states, G_i by ag_gmat; HITL_AG_DENSE also
@@ -775,14 +707,13 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
   for (int i = 0; i < N; ++i) {
     hitl_agwork *wk = hitl_ag_wk(d);
-    const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
     const double *K = M->K + d->p->koff[i];
     double *P = d->lu + d->p->poff[i];
     wk->arg[0] = &c;
     wk->arg[1] = K;
     wk->res[0] = P;
     wk->res[1] = wk->col; /* the pivots */
-    if (kn->nfac(wk->arg, wk->res, wk->iw, wk->w, 0)) {
+    if (hitl_ag_call(d, wk, i, AG_NFAC)) {
       fail |= 1;
       continue;
     }
@@ -797,7 +728,7 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
     wk->arg[0] = P;
     wk->res[0] = d->G + (size_t)n3 * n3 * i;
     wk->res[1] = d->Hm + (size_t)na * n3 * i;
-    if (kn->gmat(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
+    if (hitl_ag_call(d, wk, i, AG_GMAT)) fail |= 1;
   }
   if (fail) {
     d->base.n_piv_fail++;
@@ -848,7 +779,8 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
   d->W = &d->wl;
   if (x != b) memcpy(x, b, sizeof(double) * (size_t)d->base.nx);
   hitl_lu_solve(d->lul, m, d->piv, x); /* leader */
-  if (d->ls_mode == HITL_AG_FORWARD) return hitl_ag_forward_x(d, x);
+  if (d->ls_mode == HITL_AG_FORWARD) /* along the order of an acyclic topology */
+    return hitl_ag_sweep(d, top, 1, hitl_ag_forward_x_step, x, d->dj);
   /* y_i = D_i^{-1} (b_i - c A_s0 x_0), r_i = C_0 x_0 + C_s y_i: ag_nsol with s = 0 */
   int fail = 0;
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
@@ -934,15 +866,8 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
     hitl_msg(c, "the dense jets solver is for 3nN <= 6000 (use gmres)");
     return -1;
   }
-  for (int q = 0; q < p->nmodels; ++q) {
-    const hitl_agent_kernels *kn = p->kern + q;
-    for (int l = 0; l < 3; ++l) hitl_work_size(kn->jet_work[l], sz);
-    hitl_work_size(kn->rhs_work, sz);
-    hitl_work_size(kn->jac_work, sz);
-    hitl_work_size(kn->nfac_work, sz);
-    hitl_work_size(kn->nsol_work, sz);
-    hitl_work_size(kn->gmat_work, sz);
-  }
+  for (int q = 0; q < p->nmodels; ++q)
+    for (int f = 0; f < AG_NKERNELS; ++f) hitl_work_size(p->kern[q].work[f], sz);
   c->nx = nx;
   d->jets = (double *)calloc((size_t)nj + 1, sizeof(double));
   d->nb = (double *)calloc((size_t)nj + 1, sizeof(double));
@@ -996,7 +921,8 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
     return -1;
   }
   if (hitl_sundials_create(c, s, nx, log_path)) return -1;
-  s->A = hitl_kmat_new((long)p->koff[N], s->ctx);
+  s->K = (double *)calloc((size_t)p->koff[N] + 1, sizeof(double));
+  s->A = s->K ? hitl_kmat_new(s->K, s->ctx) : NULL;
   if (!s->A) {
     hitl_msg(c, "out of memory");
     return -1;

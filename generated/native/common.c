@@ -53,18 +53,16 @@ static void hitl_work_size(int (*work)(casadi_int *, casadi_int *, casadi_int *,
   if (w > sz[3]) sz[3] = w;
 }
 
-/* CVODE's counters since the last (re)initialisation, added to acc[0..6]: steps, RHS,
-   Jacobians, linear-solver set-ups, error-test failures, Newton iterations, Newton
-   convergence failures */
-static void hitl_add_counters(void *mem, long *acc) {
+/* CVODE's counters since the last (re)initialisation, added to the result's */
+static void hitl_add_counters(void *mem, hitl_result *r) {
   long v;
-  CVodeGetNumSteps(mem, &v), acc[0] += v;
-  CVodeGetNumRhsEvals(mem, &v), acc[1] += v;
-  CVodeGetNumJacEvals(mem, &v), acc[2] += v;
-  CVodeGetNumLinSolvSetups(mem, &v), acc[3] += v;
-  CVodeGetNumErrTestFails(mem, &v), acc[4] += v;
-  CVodeGetNumNonlinSolvIters(mem, &v), acc[5] += v;
-  CVodeGetNumNonlinSolvConvFails(mem, &v), acc[6] += v;
+  CVodeGetNumSteps(mem, &v), r->steps += v;
+  CVodeGetNumRhsEvals(mem, &v), r->rhs_evals += v;
+  CVodeGetNumJacEvals(mem, &v), r->jac_evals += v;
+  CVodeGetNumLinSolvSetups(mem, &v), r->lin_setups += v;
+  CVodeGetNumErrTestFails(mem, &v), r->error_test_fails += v;
+  CVodeGetNumNonlinSolvIters(mem, &v), r->newton_iters += v;
+  CVodeGetNumNonlinSolvConvFails(mem, &v), r->newton_fails += v;
 }
 
 /* CVODE with everything it needs: one per run, re-initialised at breakpoints */
@@ -74,6 +72,7 @@ typedef struct {
   SUNMatrix A;
   SUNLinearSolver LS;
   void *mem;
+  double *K; /* the Jacobian's storage, shared by its matrices (hitl_kmat) */
   FILE *log; /* SUNDIALS' messages (hitl_log_msg), or NULL: dropped */
 } hitl_cvode;
 
@@ -139,7 +138,7 @@ static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx, const char *
    CVODE is never asked for a time it already stands at (CV_TOO_CLOSE).
    Returns the rows filled (>= 1); *flag is CVODE's last flag (< 0 on a failure). */
 static int hitl_cvode_outputs(hitl_cvode *s, int nx, const hitl_options *o, hitl_result *r,
-                              long *acc, int *flag) {
+                              int *flag) {
   int filled = 1, ib = 0, nt = o->nt, nb = o->nb;
   const double *t_out = o->t_out, *breaks = o->breaks;
   double t = t_out[0], tstop_set = NAN;
@@ -161,7 +160,7 @@ static int hitl_cvode_outputs(hitl_cvode *s, int nx, const hitl_options *o, hitl
       if (t >= stop) {
         tstop_set = NAN; /* CVODE forgets a stop time once reached */
         if (ib < nb) {   /* a breakpoint: restart from the state reached */
-          hitl_add_counters(s->mem, acc);
+          hitl_add_counters(s->mem, r);
           *flag = CVodeReInit(s->mem, t, s->y);
           if (*flag < 0) return filled;
           r->restarts += 1;
@@ -213,22 +212,6 @@ static int hitl_cvode_options(hitl_cvode *s, void *data, const hitl_options *o,
          CVodeSetJacEvalFrequency(s->mem, 1) || CVodeSetMaxNumSteps(s->mem, o->max_steps);
 }
 
-/* The counters (acc: hitl_add_counters' layout) and the last flag into the result */
-static void hitl_stats(const hitl_ctx *c, const long *acc, double last_step, int flag,
-                       hitl_result *r) {
-  r->steps = acc[0];
-  r->rhs_evals = acc[1];
-  r->jac_evals = acc[2];
-  r->lin_setups = acc[3];
-  r->error_test_fails = acc[4];
-  r->newton_iters = acc[5];
-  r->newton_fails = acc[6];
-  r->last_step = last_step;
-  r->lu_factorizations = c->n_fac;
-  r->pivot_failures = c->n_piv_fail;
-  r->flag = flag;
-}
-
 /* A driver's result before the run: zero counters, an empty message, x_out kept */
 static void hitl_result_start(hitl_result *r) {
   double *x_out = r->x_out, *x_stop = r->x_stop;
@@ -255,7 +238,6 @@ static int hitl_cvode_run(hitl_ctx *c, hitl_cvode *s, int ok, void *data, CVRhsF
                           CVLsJacFn jac, const double *x0, const hitl_options *o,
                           hitl_result *r) {
   int nx = c->nx, filled = -1, flag = 0;
-  long acc[7] = {0, 0, 0, 0, 0, 0, 0};
   sunrealtype h = 0;
   if (ok) {
     memcpy(N_VGetArrayPointer(s->y), x0, (size_t)nx * sizeof(double));
@@ -263,15 +245,18 @@ static int hitl_cvode_run(hitl_ctx *c, hitl_cvode *s, int ok, void *data, CVRhsF
     r->t_stop = o->t_out[0];
     if (!CVodeInit(s->mem, rhs, o->t_out[0], s->y) &&
         !hitl_cvode_options(s, data, o, jac)) /* else: msg set by the error handler */
-      filled = hitl_cvode_outputs(s, nx, o, r, acc, &flag);
+      filled = hitl_cvode_outputs(s, nx, o, r, &flag);
     if (filled >= 1 && r->x_stop)
       memcpy(r->x_stop, N_VGetArrayPointer(s->y), (size_t)nx * sizeof(double));
   }
   if (s->mem) {
-    hitl_add_counters(s->mem, acc);
+    hitl_add_counters(s->mem, r);
     CVodeGetLastStep(s->mem, &h);
   }
-  hitl_stats(c, acc, h, flag, r);
+  r->last_step = h;
+  r->lu_factorizations = c->n_fac;
+  r->pivot_failures = c->n_piv_fail;
+  r->flag = flag;
   r->filled = filled;
   r->t_reached = filled >= 1 ? o->t_out[filled - 1] : o->t_out[0];
   if (flag < 0) hitl_flag_message(c, flag);
@@ -282,27 +267,21 @@ static void hitl_cvode_free(hitl_cvode *s) {
   if (s->mem) CVodeFree(&s->mem);
   if (s->LS) SUNLinSolFree(s->LS);
   if (s->A) SUNMatDestroy(s->A);
+  free(s->K);
   if (s->y) N_VDestroy(s->y);
   if (s->ctx) SUNContext_Free(&s->ctx);
   if (s->log) fclose(s->log), s->log = NULL;
 }
 
 /* ------------------------------------------------- the per-follower block matrix */
-/* The Jacobian of the per-agent driver (agents.c): one block K_i per
-   follower, laid out by the driver, representing c J (+ I once shifted). */
+/* The Jacobian of the per-agent driver (agents.c): one block K_i per follower, laid out
+   by the driver, representing c J (+ I once shifted). K (hitl_cvode.K) is shared, not
+   copied, by the matrices CVODE copies into each other (its saved Jacobian and the
+   Newton matrix): only the Jacobian evaluation writes K, and it writes every entry;
+   CVODE copies the matrix it evaluated into the saved one right after. The shift c (and
+   top, the topology K was evaluated on: agents.c) is kept per matrix. */
 typedef struct {
   double *K;
-  int refs;
-} hitl_kbuf;
-
-/* K is shared, not copied, by the matrices CVODE copies into each other (its saved
-   Jacobian and the Newton matrix): only the Jacobian evaluation writes K, and it writes
-   every entry; CVODE copies the matrix it evaluated into the saved one right after. The
-   shift c (and top, the topology K was evaluated on: agents.c) is kept per matrix. */
-typedef struct {
-  long len;
-  hitl_kbuf *buf;
-  double *K; /* buf->K */
   double c;
   int shifted, top;
 } hitl_kmat;
@@ -314,26 +293,16 @@ static SUNMatrix_ID hitl_kmat_id(SUNMatrix A) {
   return SUNMATRIX_CUSTOM;
 }
 
-static SUNMatrix hitl_kmat_new(long len, SUNContext ctx);
+static SUNMatrix hitl_kmat_new(double *K, SUNContext ctx);
 
 static SUNMatrix hitl_kmat_clone(SUNMatrix A) {
-  return hitl_kmat_new(HITL_KMAT(A)->len, A->sunctx);
-}
-
-static void hitl_kbuf_release(hitl_kbuf *b) {
-  if (b && --b->refs == 0) {
-    free(b->K);
-    free(b);
-  }
+  return hitl_kmat_new(HITL_KMAT(A)->K, A->sunctx);
 }
 
 static void hitl_kmat_destroy(SUNMatrix A) {
   if (!A) return;
-  if (A->content) {
-    hitl_kbuf_release(HITL_KMAT(A)->buf);
-    free(A->content);
-    A->content = NULL;
-  }
+  free(A->content);
+  A->content = NULL;
   SUNMatFreeEmpty(A);
 }
 
@@ -347,12 +316,6 @@ static SUNErrCode hitl_kmat_zero(SUNMatrix A) {
 
 static SUNErrCode hitl_kmat_copy(SUNMatrix A, SUNMatrix B) {
   hitl_kmat *a = HITL_KMAT(A), *b = HITL_KMAT(B);
-  if (b->buf != a->buf) {
-    hitl_kbuf_release(b->buf);
-    b->buf = a->buf;
-    b->buf->refs++;
-    b->K = a->K;
-  }
   b->c = a->c;
   b->shifted = a->shifted;
   b->top = a->top;
@@ -368,23 +331,15 @@ static SUNErrCode hitl_kmat_scaleaddi(sunrealtype c, SUNMatrix A) {
   return SUN_SUCCESS;
 }
 
-/* A block matrix of len entries (zero), or NULL when out of memory */
-static SUNMatrix hitl_kmat_new(long len, SUNContext ctx) {
+/* A block matrix on the storage K, or NULL when out of memory */
+static SUNMatrix hitl_kmat_new(double *K, SUNContext ctx) {
   SUNMatrix A = SUNMatNewEmpty(ctx);
-  hitl_kmat *m;
-  if (!A) return NULL;
-  m = (hitl_kmat *)calloc(1, sizeof *m);
-  if (m) m->buf = (hitl_kbuf *)calloc(1, sizeof *m->buf);
-  if (m && m->buf) m->buf->K = (double *)calloc((size_t)len + 1, sizeof(double));
-  if (!m || !m->buf || !m->buf->K) {
-    if (m) free(m->buf);
-    free(m);
-    SUNMatFreeEmpty(A);
+  hitl_kmat *m = A ? (hitl_kmat *)calloc(1, sizeof *m) : NULL;
+  if (!m) {
+    if (A) SUNMatFreeEmpty(A);
     return NULL;
   }
-  m->buf->refs = 1;
-  m->K = m->buf->K;
-  m->len = len;
+  m->K = K;
   m->c = 1.0;
   A->content = m;
   A->ops->getid = hitl_kmat_id;
