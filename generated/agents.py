@@ -234,18 +234,13 @@ def _sparsity_out(lib: ctypes.CDLL, name: str, j: int) -> tuple[int, np.ndarray,
 
 
 def parse_sparsity(sp: Sequence[int]) -> tuple[int, np.ndarray, np.ndarray]:
-    """A pattern in CasADi's generated-code format: (nrow, ncol, colind..., row...).
+    """nrow, the column pointers and the rows of a pattern in CasADi's generated-code format.
 
     Parameters
     ----------
     sp : indexable of int
-        ``nrow, ncol`` then the ncol + 1 column pointers and the rows of the nonzeros,
-        or ``nrow, ncol, 1`` for a dense pattern (CasADi's shorthand).
-
-    Returns
-    -------
-    (int, ndarray, ndarray)
-        nrow, the column pointers and the rows.
+        ``nrow, ncol``, the ncol + 1 column pointers and the rows of the nonzeros, or
+        ``nrow, ncol, 1`` for a dense pattern.
     """
     nrow, ncol = int(sp[0]), int(sp[1])
     if sp[2] == 1:  # a general pattern's first column pointer is 0
@@ -309,8 +304,7 @@ def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
 def _c_problem(
     libraries: Sequence[Path], prob: AgentProblem, linear: LinearSettings | None
 ) -> tuple[list[ctypes.CDLL], Problem, list]:
-    """The loaded libraries, the driver's problem struct and the arrays it points into
-    (kept alive by the caller)."""
+    """The loaded libraries, the driver's problem struct and the arrays it points into."""
     libs = load(libraries)
     ls = linear or LinearSettings()
     if ls.threads != 1 and not libs[0].hitl_agents_openmp():
@@ -320,7 +314,6 @@ def _c_problem(
         )
     segs = prob.segments
     tops = [s.graph for s in segs]  # each segment's pattern (the union while links fade)
-    N = prob.N
     offs = np.cumsum([0] + [len(t.idx) for t in tops])
     ptr = np.concatenate([t.ptr + offs[k] for k, t in enumerate(tops)]).astype(np.int32)
     nact = [len(s.active) for s in segs]
@@ -344,7 +337,7 @@ def _c_problem(
     }
     kern = (Kernels * len(libs))(*[_kernels(lib) for lib in libs])
     c = Problem(
-        N=N,
+        N=prob.N,
         m=prob.m,
         na=prob.na,
         n=prob.n,
@@ -377,7 +370,7 @@ def run(
     breakpoints: Sequence[float] = (),
     progress: Callable[[float], None] | None = None,
 ) -> Trajectory:
-    """Integrate the closed loop with the per-agent driver.
+    """Integrate the closed loop with the per-agent driver (``stats["krylov_iters"]``: GMRES).
 
     Parameters
     ----------
@@ -385,18 +378,12 @@ def run(
         ``Library.path`` of :func:`build_models`, in model order.
     prob : AgentProblem
     x0 : ndarray
-        The whole closed loop's initial state at ``t_out[0]``.
     t_out : ndarray
     settings : IntegratorSettings
     linear : LinearSettings, optional
     breakpoints : sequence of float
-        Restart times (faults, graph switches), reconciled with ``t_out``.
+        Restart times (faults, graph switches).
     progress : callable, optional
-
-    Returns
-    -------
-    Trajectory
-        Method ``"native"``; ``stats["krylov_iters"]`` counts GMRES iterations.
     """
     wall0 = time.perf_counter()
     libs, cp, _keep = _c_problem(libraries, prob, linear)
@@ -432,10 +419,6 @@ def probe(
     x, b : ndarray
     gamma : float
     linear : LinearSettings, optional
-
-    Returns
-    -------
-    (xdot, sol) : (ndarray, ndarray)
 
     Raises
     ------
@@ -473,8 +456,7 @@ def initial_state(sc: Scenario) -> np.ndarray:
     Raises
     ------
     ScenarioError
-        For ``initial.start = "formation"`` or filtered derivatives (their x(0) needs
-        η̇_i(0) and b_i(0): use the whole closed loop's x0).
+        For ``initial.start = "formation"`` or filtered derivatives.
     """
     if sc.initial.start != "given" or sc.options.derivatives != "oracle":
         raise ScenarioError(
@@ -485,8 +467,7 @@ def initial_state(sc: Scenario) -> np.ndarray:
             "closed loop's x0",
         )
     N = sc.N
-    lay = make_layout(sc.m, sc.n, N, False)
-    return lay.pack(
+    return make_layout(sc.m, sc.n, N, False).pack(
         {
             "eta0": sc.leader.eta0,
             "mu": sc.initial.mu,

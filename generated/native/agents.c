@@ -131,7 +131,7 @@ typedef struct {
 } hitl_ag_wts;
 
 typedef struct {
-  hitl_ctx base; /* first member: CVODE's messages and counters */
+  hitl_cvode s; /* CVODE, its messages and counters */
   const hitl_agents_problem *p;
   int N, m, na, n, n3, k, npar, nthreads;
   double *jets, *nb; /* N x n3 */
@@ -139,7 +139,7 @@ typedef struct {
   /* linear solver */
   double *lu;    /* p->poff[N]: each agent's P (ag_nfac) at p->poff[i] */
   double *lul;   /* m x m: the leader's dense LU */
-  int *piv;      /* na: the leader's row swaps */
+  int *piv;      /* m: the leader's row swaps */
   double *G;     /* N x n3 x n3 (column-major) */
   double *Hm;    /* N x na x n3 (column-major): -c D_i^{-1} B_s */
   double *ps;    /* N x n3: the level-by-level preconditioner's partial neighbour sums */
@@ -151,6 +151,7 @@ typedef struct {
   int ls_top, ls_mode;
   double *V, *H, *cs, *sn, *g, *z; /* GMRES */
   long *done, epoch; /* hitl_ag_sweep's flags: the last level each agent finished */
+  double *mem;       /* the block every double array above is carved from */
   long n_krylov;
   hitl_ag_wts wr, wl; /* the weights of the right-hand side (at t) and of the Newton
                          systems (at the Jacobian's time t_jac) */
@@ -435,7 +436,7 @@ static int hitl_ag_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data) {
   hitl_ag *d = (hitl_ag *)data;
   casadi_real *out = N_VGetArrayPointer(ydot);
   if (hitl_ag_pass(d, t, N_VGetArrayPointer(y), out, NULL, NULL)) return -1;
-  for (int i = 0; i < d->base.nx; ++i)
+  for (int i = 0; i < d->s.nx; ++i)
     if (!isfinite(out[i])) return 1; /* recoverable: CVODE retries with a smaller step */
   return 0;
 }
@@ -690,7 +691,7 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
   int m = AG_M(d), na = AG_NA(d), n3 = AG_N3(d), N = d->N, fail = 0;
   double c = M->c;
   if (!M->shifted) return -1; /* CVODE always hands over I - gamma J */
-  d->base.n_fac++;
+  d->s.n_fac++;
   hitl_ag_weights(d, &d->wl, M->top, d->t_jac);
   d->W = &d->wl;
   d->ls_top = M->top;
@@ -731,7 +732,7 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
     if (hitl_ag_call(d, wk, i, AG_GMAT)) fail |= 1;
   }
   if (fail) {
-    d->base.n_piv_fail++;
+    d->s.n_piv_fail++;
     return SUNLS_LUFACT_FAIL; /* recoverable: CVODE retries with a smaller step */
   }
   if (d->ls_mode == HITL_AG_FORWARD && !d->p->acyclic[M->top]) return -1; /* forward substitution on a cycle: unrecoverable */
@@ -761,7 +762,7 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
       }
     }
     if (hitl_lu(d->S, (int)nj, d->Spiv)) {
-      d->base.n_piv_fail++;
+      d->s.n_piv_fail++;
       return SUNLS_LUFACT_FAIL;
     }
   }
@@ -777,7 +778,7 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
   const double *b = N_VGetArrayPointer(bv);
   (void)A, (void)tol; /* the factorisations of the set-up are all a solve reads */
   d->W = &d->wl;
-  if (x != b) memcpy(x, b, sizeof(double) * (size_t)d->base.nx);
+  if (x != b) memcpy(x, b, sizeof(double) * (size_t)d->s.nx);
   hitl_lu_solve(d->lul, m, d->piv, x); /* leader */
   if (d->ls_mode == HITL_AG_FORWARD) /* along the order of an acyclic topology */
     return hitl_ag_sweep(d, top, 1, hitl_ag_forward_x_step, x, d->dj);
@@ -833,17 +834,16 @@ static int hitl_ag_work_alloc(hitl_ag *d, const casadi_int *sz) {
   return 0;
 }
 
-static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p, char *msg,
-                        int msglen, const char *log_path) {
-  hitl_ctx *c = &d->base;
+static int hitl_ag_init(hitl_ag *d, const hitl_agents_problem *p, char *msg, int msglen,
+                        const char *log_path) {
+  hitl_cvode *s = &d->s;
   casadi_int sz[4] = {0, 0, 0, 0};
   int N = p->N, m = p->m, na = p->na, n = p->n;
   int nx = m + N * na;
   long nj = (long)N * 3 * n;
   memset(d, 0, sizeof *d);
-  memset(s, 0, sizeof *s);
-  c->msg = msg;
-  c->msglen = msglen;
+  s->msg = msg;
+  s->msglen = msglen;
   if (msglen > 0) msg[0] = '\0';
   d->p = p;
   d->N = N, d->m = m, d->na = na, d->n = n, d->n3 = 3 * n, d->k = m + na + 3 * n;
@@ -855,96 +855,72 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
 #endif
   if ((HITL_AG_N_OUT && n != HITL_AG_N_OUT) || (HITL_AG_N_STATE && na != HITL_AG_N_STATE) ||
       (HITL_AG_N_LEADER && m != HITL_AG_N_LEADER)) {
-    hitl_msg(c, "the problem's sizes (m, na, n) differ from those the driver was compiled for");
+    hitl_msg(s, "the problem's sizes (m, na, n) differ from those the driver was compiled for");
     return -1;
   }
   if (d->n3 > 64) {
-    hitl_msg(c, "more than 21 output coordinates per follower");
+    hitl_msg(s, "more than 21 output coordinates per follower");
     return -1;
   }
   if (p->solver == HITL_AG_DENSE && nj > 6000) {
-    hitl_msg(c, "the dense jets solver is for 3nN <= 6000 (use gmres)");
+    hitl_msg(s, "the dense jets solver is for 3nN <= 6000 (use gmres)");
     return -1;
   }
   for (int q = 0; q < p->nmodels; ++q)
     for (int f = 0; f < AG_NKERNELS; ++f) hitl_work_size(p->kern[q].work[f], sz);
-  c->nx = nx;
-  d->jets = (double *)calloc((size_t)nj + 1, sizeof(double));
-  d->nb = (double *)calloc((size_t)nj + 1, sizeof(double));
-  d->lu = (double *)calloc((size_t)p->poff[N] + 1, sizeof(double));
-  d->lul = (double *)calloc((size_t)m * m + 1, sizeof(double));
+  s->nx = nx;
+  int maxnnz = 0, kr = p->krylov > 0 ? p->krylov : 1;
+  for (int sg = 0; sg < p->ntop; ++sg) {
+    int nz = p->ptr[(size_t)sg * (N + 1) + N] - p->ptr[(size_t)sg * (N + 1)];
+    if (nz > maxnnz) maxnnz = nz;
+  }
+  struct {
+    double **a;
+    size_t n;
+  } arr[] = {
+      {&d->jets, nj}, {&d->nb, nj}, {&d->dj, nj}, {&d->dnb, nj}, {&d->rj, nj}, {&d->z, nj},
+      {&d->ps, nj}, {&d->lu, p->poff[N]}, {&d->lul, m * m}, {&d->zero, d->n3},
+      {&d->G, nj * d->n3}, {&d->Hm, (size_t)N * na * d->n3}, {&d->y, (size_t)N * na},
+      {&d->V, nj * (kr + 1)}, {&d->H, (kr + 1) * (kr + 1)}, {&d->cs, kr}, {&d->sn, kr},
+      {&d->g, kr + 1}, {&d->S, p->solver == HITL_AG_DENSE ? nj * nj : 0},
+      {&d->wr.w[0], maxnnz}, {&d->wr.w[1], maxnnz}, {&d->wr.w[2], maxnnz},
+      {&d->wl.w[0], maxnnz}, {&d->wl.w[1], maxnnz}, {&d->wl.w[2], maxnnz},
+      {&d->wr.cpl, N * 6}, {&d->wl.cpl, N * 6}, {&s->K, p->koff[N]}};
+  size_t total = 0, narr = sizeof arr / sizeof arr[0];
+  for (size_t q = 0; q < narr; ++q) total += arr[q].n + 1;
+  d->mem = (double *)calloc(total, sizeof(double));
+  for (size_t q = 0, off = 0; d->mem && q < narr; ++q) {
+    *arr[q].a = d->mem + off;
+    off += arr[q].n + 1;
+  }
+  d->wr.seg = d->wl.seg = -1;
+  d->W = &d->wr;
   d->piv = (int *)calloc((size_t)m + 1, sizeof(int));
-  d->zero = (double *)calloc((size_t)d->n3 + 1, sizeof(double));
-  d->G = (double *)calloc((size_t)N * d->n3 * d->n3 + 1, sizeof(double));
-  d->Hm = (double *)calloc((size_t)N * na * d->n3 + 1, sizeof(double));
-  d->ps = (double *)calloc((size_t)N * d->n3 + 1, sizeof(double));
-  d->y = (double *)calloc((size_t)N * na + 1, sizeof(double));
-  d->dj = (double *)calloc((size_t)nj + 1, sizeof(double));
-  d->dnb = (double *)calloc((size_t)nj + 1, sizeof(double));
-  d->rj = (double *)calloc((size_t)nj + 1, sizeof(double));
-  d->z = (double *)calloc((size_t)nj + 1, sizeof(double));
+  d->Spiv = (int *)calloc((size_t)nj + 1, sizeof(int));
   d->done = (long *)calloc((size_t)N + 1, sizeof(long));
-  {
-    int maxnnz = 0;
-    for (int sg = 0; sg < p->ntop; ++sg) {
-      int nz = p->ptr[(size_t)sg * (N + 1) + N] - p->ptr[(size_t)sg * (N + 1)];
-      if (nz > maxnnz) maxnnz = nz;
-    }
-    hitl_ag_wts *ws[2] = {&d->wr, &d->wl};
-    for (int q = 0; q < 2; ++q) {
-      ws[q]->seg = -1;
-      for (int l = 0; l < 3; ++l) ws[q]->w[l] = (double *)calloc((size_t)maxnnz + 1, sizeof(double));
-      ws[q]->cpl = (double *)calloc((size_t)N * 6 + 1, sizeof(double));
-      if (!ws[q]->w[0] || !ws[q]->w[1] || !ws[q]->w[2] || !ws[q]->cpl) {
-        hitl_msg(c, "out of memory");
-        return -1;
-      }
-    }
-    d->W = &d->wr;
-  }
-  if (p->solver == HITL_AG_DENSE) {
-    d->S = (double *)calloc((size_t)nj * nj + 1, sizeof(double));
-    d->Spiv = (int *)calloc((size_t)nj + 1, sizeof(int));
-  }
-  {
-    int kr = p->krylov > 0 ? p->krylov : 1;
-    d->V = (double *)calloc((size_t)nj * (kr + 1) + 1, sizeof(double));
-    d->H = (double *)calloc((size_t)(kr + 1) * (kr + 1), sizeof(double));
-    d->cs = (double *)calloc((size_t)kr + 1, sizeof(double));
-    d->sn = (double *)calloc((size_t)kr + 1, sizeof(double));
-    d->g = (double *)calloc((size_t)kr + 2, sizeof(double));
-  }
-  if (!d->jets || !d->nb || !d->lu || !d->lul || !d->piv || !d->zero || !d->G || !d->Hm || !d->ps || !d->y ||
-      !d->dj || !d->dnb || !d->rj || !d->z || !d->done || !d->V || !d->H || !d->cs || !d->sn || !d->g ||
-      (p->solver == HITL_AG_DENSE && (!d->S || !d->Spiv)) || hitl_ag_work_alloc(d, sz)) {
-    hitl_msg(c, "out of memory");
+  if (!d->mem || !d->piv || !d->Spiv || !d->done || hitl_ag_work_alloc(d, sz)) {
+    hitl_msg(s, "out of memory");
     return -1;
   }
-  if (hitl_sundials_create(c, s, nx, log_path)) return -1;
-  s->K = (double *)calloc((size_t)p->koff[N] + 1, sizeof(double));
-  s->A = s->K ? hitl_kmat_new(s->K, s->ctx) : NULL;
+  if (hitl_sundials_create(s, log_path)) return -1;
+  s->A = hitl_kmat_new(s->K, s->ctx);
   if (!s->A) {
-    hitl_msg(c, "out of memory");
+    hitl_msg(s, "out of memory");
     return -1;
   }
   hitl_ls_attach(s, d, hitl_ag_ls_setup, hitl_ag_ls_solve);
   return 0;
 }
 
-static void hitl_ag_free(hitl_ag *d, hitl_cvode *s) {
+static void hitl_ag_free(hitl_ag *d) {
   if (d->wk)
     for (int q = 0; q < d->nthreads; ++q) {
       hitl_agwork *wk = d->wk + q;
       free(wk->arg), free(wk->res), free(wk->iw), free(wk->w), free(wk->xb);
       free(wk->xbdot), free(wk->jscr), free(wk->col);
     }
-  free(d->wk);
-  free(d->jets), free(d->nb), free(d->lu), free(d->lul), free(d->piv), free(d->zero);
-  free(d->G), free(d->Hm), free(d->ps), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S), free(d->done);
-  free(d->Spiv), free(d->V), free(d->H), free(d->cs), free(d->sn), free(d->g);
-  for (int l = 0; l < 3; ++l) free(d->wr.w[l]), free(d->wl.w[l]);
-  free(d->wr.cpl), free(d->wl.cpl);
-  hitl_cvode_free(s);
+  hitl_cvode_free(&d->s);
+  free(d->wk), free(d->mem), free(d->piv), free(d->Spiv), free(d->done);
 }
 
 /* 1 if compiled with OpenMP (threads over the agents), else 0 */
@@ -969,13 +945,12 @@ CASADI_SYMBOL_EXPORT int hitl_agents_run(const hitl_agents_problem *p, const dou
                                          const hitl_options *o, hitl_result *r,
                                          long *krylov_iters) {
   hitl_ag d;
-  hitl_cvode s;
   int ok, filled;
   hitl_result_start(r);
-  ok = hitl_ag_init(&d, &s, p, r->msg, HITL_MSG_LEN, o->log_path) == 0;
-  filled = hitl_cvode_run(&d.base, &s, ok, &d, hitl_ag_rhs, hitl_ag_jac, x0, o, r);
+  ok = hitl_ag_init(&d, p, r->msg, HITL_MSG_LEN, o->log_path) == 0;
+  filled = hitl_cvode_run(&d.s, ok, &d, hitl_ag_rhs, hitl_ag_jac, x0, o, r);
   if (krylov_iters) *krylov_iters = d.n_krylov;
-  hitl_ag_free(&d, &s);
+  hitl_ag_free(&d);
   return filled;
 }
 
@@ -988,20 +963,20 @@ CASADI_SYMBOL_EXPORT int hitl_agents_probe(const hitl_agents_problem *p, double 
                                            const double *x, double gamma, const double *b,
                                            double *xdot, double *sol, char *msg, int msglen) {
   hitl_ag d;
-  hitl_cvode s;
+  hitl_cvode *s = &d.s;
   int nx = p->m + p->N * p->na, ret = -1;
   N_Vector bv = NULL, xv = NULL;
-  if (hitl_ag_init(&d, &s, p, msg, msglen, NULL)) goto done;
-  bv = N_VNew_Serial(nx, s.ctx);
-  xv = N_VNew_Serial(nx, s.ctx);
+  if (hitl_ag_init(&d, p, msg, msglen, NULL)) goto done;
+  bv = N_VNew_Serial(nx, s->ctx);
+  xv = N_VNew_Serial(nx, s->ctx);
   if (!bv || !xv) goto done;
-  memcpy(N_VGetArrayPointer(s.y), x, (size_t)nx * sizeof(double));
+  memcpy(N_VGetArrayPointer(s->y), x, (size_t)nx * sizeof(double));
   memcpy(N_VGetArrayPointer(bv), b, (size_t)nx * sizeof(double));
   if (hitl_ag_pass(&d, t, x, xdot, NULL, NULL)) goto done;
-  if (hitl_ag_jac(t, s.y, NULL, s.A, &d, NULL, NULL, NULL)) goto done;
-  if (SUNMatScaleAddI(-gamma, s.A) || hitl_ag_ls_setup(s.LS, s.A) ||
-      hitl_ag_ls_solve(s.LS, s.A, xv, bv, 0.0)) {
-    hitl_msg(&d.base, "linear solve failed");
+  if (hitl_ag_jac(t, s->y, NULL, s->A, &d, NULL, NULL, NULL)) goto done;
+  if (SUNMatScaleAddI(-gamma, s->A) || hitl_ag_ls_setup(s->LS, s->A) ||
+      hitl_ag_ls_solve(s->LS, s->A, xv, bv, 0.0)) {
+    hitl_msg(s, "linear solve failed");
     goto done;
   }
   memcpy(sol, N_VGetArrayPointer(xv), (size_t)nx * sizeof(double));
@@ -1010,6 +985,6 @@ CASADI_SYMBOL_EXPORT int hitl_agents_probe(const hitl_agents_problem *p, double 
 done:
   if (bv) N_VDestroy(bv);
   if (xv) N_VDestroy(xv);
-  hitl_ag_free(&d, &s);
+  hitl_ag_free(&d);
   return ret;
 }

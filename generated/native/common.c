@@ -1,8 +1,8 @@
 /*
  * The SUNDIALS side of the hitl-formation CVODE driver (generated/native.py): SUNDIALS
- * includes, the driver's context (message, counters), CVODE's set-up and its output loop with breakpoints,
- * a custom SUNLinearSolver shell, CVODE's counters, the SUNDIALS version/index check,
- * and the per-follower block matrix hitl_kmat. Prepended to agents.c (the per-agent
+ * includes, CVODE's set-up and its output loop with breakpoints, a custom SUNLinearSolver
+ * shell, CVODE's counters, the SUNDIALS version/index check, and the per-follower block
+ * matrix hitl_kmat. Prepended to agents.c (the per-agent
  * engine); the generated C of the follower kernels comes first. The entry points take
  * hitl_options and fill hitl_result (hitl_native.h).
  */
@@ -22,14 +22,23 @@
 /* a pivot below this (or not finite) makes the setup fail recoverably */
 #define HITL_PIVOT_MIN 1e-13
 
+/* CVODE with everything it needs and what a run reports: one per run, re-initialised at
+   breakpoints */
 typedef struct {
+  SUNContext ctx;
+  N_Vector y;
+  SUNMatrix A;
+  SUNLinearSolver LS;
+  void *mem;
+  double *K; /* the Jacobian's storage, shared by its matrices (hitl_kmat; the driver's) */
+  FILE *log; /* SUNDIALS' messages (hitl_log_msg), or NULL: dropped */
   int nx;
-  long n_fac, n_piv_fail;
-  char *msg;
+  long n_fac, n_piv_fail; /* set-ups of the driver's linear solver, and those refused */
+  char *msg;              /* the last message (msglen bytes) */
   int msglen;
-} hitl_ctx;
+} hitl_cvode;
 
-static void hitl_msg(hitl_ctx *c, const char *text) {
+static void hitl_msg(hitl_cvode *c, const char *text) {
   if (c->msg && c->msglen > 0) {
     strncpy(c->msg, text, (size_t)c->msglen - 1);
     c->msg[c->msglen - 1] = '\0';
@@ -39,7 +48,7 @@ static void hitl_msg(hitl_ctx *c, const char *text) {
 static void hitl_err_handler(int line, const char *func, const char *file, const char *msg,
                              SUNErrCode code, void *data, SUNContext ctx) {
   /* keep SUNDIALS' last message instead of printing it */
-  hitl_msg((hitl_ctx *)data, msg ? msg : "SUNDIALS error");
+  hitl_msg((hitl_cvode *)data, msg ? msg : "SUNDIALS error");
   (void)line; (void)func; (void)file; (void)code; (void)ctx;
 }
 
@@ -64,17 +73,6 @@ static void hitl_add_counters(void *mem, hitl_result *r) {
   CVodeGetNumNonlinSolvIters(mem, &v), r->newton_iters += v;
   CVodeGetNumNonlinSolvConvFails(mem, &v), r->newton_fails += v;
 }
-
-/* CVODE with everything it needs: one per run, re-initialised at breakpoints */
-typedef struct {
-  SUNContext ctx;
-  N_Vector y;
-  SUNMatrix A;
-  SUNLinearSolver LS;
-  void *mem;
-  double *K; /* the Jacobian's storage, shared by its matrices (hitl_kmat) */
-  FILE *log; /* SUNDIALS' messages (hitl_log_msg), or NULL: dropped */
-} hitl_cvode;
 
 /* SUNDIALS' logger queue function: one line per message, "[WARNING][CVode] text
    (cvode.c:1234)", appended to the run's log (content: its FILE *, or NULL) instead of
@@ -101,15 +99,15 @@ static SUNErrCode hitl_log_flush(SUNLogger logger, SUNLogLevel lvl, void *conten
 }
 
 /* The SUNDIALS context, the state vector, an empty linear solver (the driver sets its
-   content and operations) and CVODE (BDF) for nx states. The driver creates the matrix
-   s->A. SUNDIALS' warnings and errors go to the file log_path (appended; NULL or "":
-   dropped), never to the terminal; the last error also to c->msg. Returns 0, or -1 with
-   c->msg set. */
-static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx, const char *log_path) {
+   content and operations) and CVODE (BDF) for s->nx states. The driver creates the
+   matrix s->A. SUNDIALS' warnings and errors go to the file log_path (appended; NULL or
+   "": dropped), never to the terminal; the last error also to s->msg. Returns 0, or -1
+   with s->msg set. */
+static int hitl_sundials_create(hitl_cvode *s, const char *log_path) {
   SUNLogger logger = NULL;
   if (SUNContext_Create(SUN_COMM_NULL, &s->ctx) != SUN_SUCCESS) {
     s->ctx = NULL;
-    hitl_msg(c, "SUNContext_Create failed");
+    hitl_msg(s, "SUNContext_Create failed");
     return -1;
   }
   if (log_path && *log_path) s->log = fopen(log_path, "a");
@@ -117,12 +115,12 @@ static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx, const char *
     SUNLogger_SetQueueAndFlushMsgFns(logger, hitl_log_msg, hitl_log_flush, s->log);
   SUNContext_ClearErrHandlers(s->ctx);
   SUNContext_PushErrHandler(s->ctx, SUNLogErrHandlerFn, NULL); /* errors into the log */
-  SUNContext_PushErrHandler(s->ctx, hitl_err_handler, c);
-  s->y = N_VNew_Serial(nx, s->ctx);
+  SUNContext_PushErrHandler(s->ctx, hitl_err_handler, s);
+  s->y = N_VNew_Serial(s->nx, s->ctx);
   s->LS = SUNLinSolNewEmpty(s->ctx);
   s->mem = CVodeCreate(CV_BDF, s->ctx);
   if (!s->y || !s->LS || !s->mem) {
-    hitl_msg(c, "CVODE could not allocate its memory");
+    hitl_msg(s, "CVODE could not allocate its memory");
     return -1;
   }
   return 0;
@@ -222,7 +220,7 @@ static void hitl_result_start(hitl_result *r) {
 }
 
 /* CVODE's flag name and the last SUNDIALS message, as "NAME: message", into c->msg */
-static void hitl_flag_message(hitl_ctx *c, int flag) {
+static void hitl_flag_message(hitl_cvode *c, int flag) {
   char *name = CVodeGetReturnFlagName(flag);
   char text[640];
   snprintf(text, sizeof text, "%s: %s", name ? name : "CV_UNKNOWN", c->msg ? c->msg : "");
@@ -234,10 +232,9 @@ static void hitl_flag_message(hitl_ctx *c, int flag) {
    t_out[0] through every output time (hitl_cvode_outputs), then CVODE's counters, the
    last flag and its message into the result (reset by hitl_result_start first). Returns
    the rows of x_out filled (>= 1), or -1 if CVODE could not be started. */
-static int hitl_cvode_run(hitl_ctx *c, hitl_cvode *s, int ok, void *data, CVRhsFn rhs,
-                          CVLsJacFn jac, const double *x0, const hitl_options *o,
-                          hitl_result *r) {
-  int nx = c->nx, filled = -1, flag = 0;
+static int hitl_cvode_run(hitl_cvode *s, int ok, void *data, CVRhsFn rhs, CVLsJacFn jac,
+                          const double *x0, const hitl_options *o, hitl_result *r) {
+  int nx = s->nx, filled = -1, flag = 0;
   sunrealtype h = 0;
   if (ok) {
     memcpy(N_VGetArrayPointer(s->y), x0, (size_t)nx * sizeof(double));
@@ -254,12 +251,12 @@ static int hitl_cvode_run(hitl_ctx *c, hitl_cvode *s, int ok, void *data, CVRhsF
     CVodeGetLastStep(s->mem, &h);
   }
   r->last_step = h;
-  r->lu_factorizations = c->n_fac;
-  r->pivot_failures = c->n_piv_fail;
+  r->lu_factorizations = s->n_fac;
+  r->pivot_failures = s->n_piv_fail;
   r->flag = flag;
   r->filled = filled;
   r->t_reached = filled >= 1 ? o->t_out[filled - 1] : o->t_out[0];
-  if (flag < 0) hitl_flag_message(c, flag);
+  if (flag < 0) hitl_flag_message(s, flag);
   return filled;
 }
 
@@ -267,7 +264,6 @@ static void hitl_cvode_free(hitl_cvode *s) {
   if (s->mem) CVodeFree(&s->mem);
   if (s->LS) SUNLinSolFree(s->LS);
   if (s->A) SUNMatDestroy(s->A);
-  free(s->K);
   if (s->y) N_VDestroy(s->y);
   if (s->ctx) SUNContext_Free(&s->ctx);
   if (s->log) fclose(s->log), s->log = NULL;
