@@ -125,17 +125,15 @@ class Segment:
     """A stretch of time on which the same topologies are active (the driver's unit).
 
     With ``graph.link_fade`` = T > 0 the weights are W(t) = Σ_k c_k(t) W_k with
-    c_k = σ_k − σ_{k+1} (σ_0 = 1, σ_K = 0, σ_k = σ((t − s_k)/T), :func:`core.graph.fade_jets`):
-    topology k is active on [s_k, s_{k+1} + T). A segment's pattern is the union of its
-    active topologies' (two acyclic graphs fading into each other may form a cycle: its
-    order and ``acyclic`` are the union's); with T = 0 every segment is one topology.
+    c_k = σ_k − σ_{k+1} (σ_0 = 1, σ_K = 0, σ_k = σ((t − s_k)/T), :func:`core.graph.fade_jets`).
+    A segment's pattern is the union of its active topologies' (two acyclic graphs fading
+    into each other may form a cycle); with T = 0 every segment is one topology.
 
     Attributes
     ----------
     t_start : float
     graph : Topology
-        The union pattern, its order and depths (its ``w`` and ``cpl``: the first active
-        topology's, on the union pattern).
+        The union pattern, its order and depths (``w``, ``cpl``: the first active one's).
     active : ndarray
         Indices k of the active topologies.
     w : ndarray
@@ -175,8 +173,7 @@ def segments(tops: tuple[Topology, ...], fade: float) -> tuple[Segment, ...]:
     """The driver's segments of a switched graph whose links fade over ``fade`` seconds.
 
     Boundaries at every switching time s_k and, with ``fade`` = T > 0, at every s_k + T;
-    topology k is active on [s_k, s_{k+1} + T) (s_0 = 0, s_K = ∞), where its coefficient
-    c_k = σ_k − σ_{k+1} of :class:`Segment` is not identically 0.
+    topology k is active on [s_k, s_{k+1} + T) (s_0 = 0, s_K = ∞), where its c_k ≠ 0.
 
     Parameters
     ----------

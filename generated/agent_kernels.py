@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+from itertools import accumulate
 
 import casadi as ca
 import numpy as np
@@ -90,7 +91,10 @@ def _newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list
     blocks = [LU, c * sub[st, :m], c * sub[st, jt], sub[jt, :m], sub[jt, st], sub[jt, jt]]
     P = ca.vertcat(*(blk.nz[:] for blk in blocks))
     Ps = ca.SX.sym("P", P.numel())
-    LUs, cA_s0, cB_s, C_0, C_s, E = _unpack(Ps, [blk.sparsity() for blk in blocks])
+    at = [0, *accumulate(blk.nnz() for blk in blocks)]  # the blocks' slices of P
+    LUs, cA_s0, cB_s, C_0, C_s, E = (
+        ca.SX(blk.sparsity(), Ps[at[q] : at[q + 1]]) for q, blk in enumerate(blocks)
+    )
     x0, s, b = ca.SX.sym("x0", m), ca.SX.sym("s", n3), ca.SX.sym("b", na)
     x = lu.solve(LUs, b - (cA_s0 @ x0 + cB_s @ s))
     dj = C_0 @ x0 + C_s @ x + E @ s
@@ -101,15 +105,6 @@ def _newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list
         ca.Function("ag_nsol", [Ps, x0, s, b], [x, dj], ["P", "x0", "s", "b"], ["x", "dj"], opts),
         ca.Function("ag_gmat", [Ps], [G, H], ["P"], ["G", "H"], opts),
     ]
-
-
-def _unpack(v: ca.SX, patterns: list[ca.Sparsity]) -> list[ca.SX]:
-    """Consecutive slices of ``v`` as the nonzeros of matrices on ``patterns``."""
-    out, a = [], 0
-    for sp in patterns:
-        out.append(ca.SX(sp, v[a : a + sp.nnz()]))
-        a += sp.nnz()
-    return out
 
 
 def _kernel_settings(settings: CodegenSettings | None, openmp: bool) -> CodegenSettings:

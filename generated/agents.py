@@ -25,25 +25,15 @@ from core.errors import IntegrationError, ScenarioError
 from core.scenario import Scenario
 from generated import native
 from generated.agent_graph import Segment, Topology, segments, topology
-from generated.agent_kernels import KERNELS, build_models, kernel_key
+from generated.agent_kernels import KERNELS
+from generated.agent_kernels import build_models as build_models
+from generated.agent_kernels import kernel_key as kernel_key
 from generated.loaded import open_kernels
 from generated.values import IntegratorSettings, Trajectory
-from symbolic.closed_loop import make_layout, observer_gains
+from symbolic.closed_loop import make_layout as make_layout
+from symbolic.closed_loop import observer_gains
 from symbolic.parameters import agent_rows
 from synthesis.gains import Gains
-
-__all__ = [
-    "AgentProblem",
-    "LinearSettings",
-    "build_models",
-    "initial_state",
-    "kernel_key",
-    "load",
-    "make_layout",
-    "probe",
-    "problem",
-    "run",
-]
 
 #: Newton-system solvers of the driver (``HITL_AG_*`` in agents.c)
 SOLVERS = {"auto": 0, "forward": 1, "dense": 2, "gmres": 3}
@@ -157,9 +147,6 @@ class Problem(ctypes.Structure):
         ("acyclic", _IP),
         ("solver", ctypes.c_int),
         ("nthreads", ctypes.c_int),
-        ("krylov", ctypes.c_int),
-        ("ls_tol", ctypes.c_double),
-        ("max_iter", ctypes.c_int),
         ("koff", _IP),
         ("poff", _IP),
         ("lead_nz", _IP),
@@ -184,19 +171,10 @@ class LinearSettings:
         GMRES otherwise.
     threads : int
         OpenMP threads over the agents; 0 = OpenMP's default.
-    krylov : int
-        GMRES restart length.
-    tol : float
-        GMRES: relative residual of the jets system reached at every solve.
-    max_iter : int
-        GMRES iterations per solve before the solve fails (CVODE then retries).
     """
 
     solver: str = "auto"
     threads: int = 1
-    krylov: int = 30
-    tol: float = 1e-14
-    max_iter: int = 300
 
     def __post_init__(self) -> None:
         if self.solver not in SOLVERS:
@@ -349,9 +327,6 @@ def _c_problem(
         fade=float(prob.fade),
         solver=SOLVERS[ls.solver],
         nthreads=int(ls.threads),
-        krylov=int(ls.krylov),
-        ls_tol=float(ls.tol),
-        max_iter=int(ls.max_iter),
     )
     for name, a in arrays.items():
         ptype = _IP if a.dtype == np.int32 else _DP

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import ctypes
 import importlib.util
+import os
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -24,7 +26,6 @@ from core.memo import MEMO
 from generated.compiler import Toolchain
 from generated.schedule import schedule
 from generated.shared_library import preload
-from generated.sundials_log import new_sundials_log, take_sundials_log
 from generated.values import (
     IntegratorSettings,
     Status,
@@ -209,12 +210,9 @@ def drive(
         ``call(options, result)`` runs the driver on references to :class:`Options` and
         :class:`Result`.
     nx : int
-        States per row.
     t_out : ndarray
-        Output times (the driver runs to the targets of :func:`generated.schedule.schedule`).
     settings : IntegratorSettings
     breakpoints : sequence of float
-        Restart times.
     wall0 : float
         ``time.perf_counter()`` when the run began.
     progress : callable, optional
@@ -226,7 +224,9 @@ def drive(
         If the driver could not start.
     """
     sched = schedule(t_out, breakpoints)
-    log = new_sundials_log()
+    fd, name = tempfile.mkstemp(prefix="hitl-sundials-", suffix=".log")  # SUNDIALS' messages
+    os.close(fd)
+    log = Path(name)
     tq = np.ascontiguousarray(sched.targets, dtype=float)
     bps = np.ascontiguousarray(sched.breaks, dtype=float)
     X, x_stop = np.full((len(sched.t_out), nx), np.nan), np.full(nx, np.nan)
@@ -242,7 +242,11 @@ def drive(
     )
     result = Result(x_out=dptr(X), x_stop=dptr(x_stop))
     call(ctypes.byref(options), ctypes.byref(result))
-    sundials_log = take_sundials_log(log)  # the temporary file removed
+    try:
+        sundials_log = log.read_text(errors="replace")
+    except OSError:
+        sundials_log = ""
+    log.unlink(missing_ok=True)
     t_out = sched.t_out
     text = result.msg.decode(errors="replace").strip()
     filled = int(result.filled)

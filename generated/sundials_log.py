@@ -1,11 +1,9 @@
-"""SUNDIALS' messages of a run: the per-call log file the native driver writes, read back."""
+"""SUNDIALS' messages of a run (the log file the native driver writes, generated/native.py)."""
 
 from __future__ import annotations
 
 import os
 import re
-import tempfile
-from pathlib import Path
 from typing import Any
 
 #: one SUNDIALS message line: level, module, text, optional "(file:line)" at the end
@@ -13,31 +11,6 @@ _SUNDIALS_LINE = re.compile(
     r"^\[(?P<level>ERROR|WARNING)\](?:\[rank \d+\])?(?:\[(?P<scope>[^\]]*)\])?"
     r"\[(?P<label>[^\]]*)\]\s*(?P<text>.*?)(?:\s+\([^()]*\.c:\d+\))?$"
 )
-
-
-def new_sundials_log() -> Path:
-    """A new empty temporary file for a native run's SUNDIALS messages (``log_path``)."""
-    fd, name = tempfile.mkstemp(prefix="hitl-sundials-", suffix=".log")
-    os.close(fd)
-    return Path(name)
-
-
-def take_sundials_log(path: Path | None) -> str:
-    """The text a driver wrote to ``path`` (:func:`new_sundials_log`); the file removed.
-
-    Parameters
-    ----------
-    path : Path or None
-        None or a missing file: no messages.
-    """
-    if path is None:
-        return ""
-    try:
-        text = path.read_text(errors="replace")
-    except OSError:
-        return ""
-    path.unlink(missing_ok=True)
-    return text
 
 
 def sundials_messages(log: str) -> dict[str, Any]:

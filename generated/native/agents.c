@@ -78,9 +78,6 @@ typedef struct {
   const int *acyclic;   /* ntop flags (of the union pattern) */
   int solver;           /* HITL_AG_* */
   int nthreads;         /* <= 0: OpenMP's default */
-  int krylov;           /* GMRES restart length */
-  double ls_tol;        /* GMRES: relative residual reached */
-  int max_iter;         /* GMRES: iterations per solve before the setup fails */
   const int *koff;      /* N + 1: agent i's nonzeros of K at koff[i] .. koff[i+1] */
   const int *poff;      /* N + 1: agent i's packed factorisation P at poff[i] .. poff[i+1] */
   const int *lead_nz;   /* m x m (column-major): the leader block's nonzero in agent 0's
@@ -300,14 +297,10 @@ static void hitl_ag_wait(const long *done, int j, long need) {
 
 /* One sweep over the agents of topology top, `levels` times, level-major, in its order
    (grouped by depth): agent i's level l reads its neighbours' level l where they are of
-   lower depth and their level l - 1 otherwise (on an acyclic topology every neighbour is
-   of lower depth), which the serial order provides. With threads, one OpenMP region: the
-   order is dealt out in chunks and each agent waits on its neighbours' flags instead of a
-   barrier per wave. Every wait is on an item earlier in (level, position) and every
-   thread takes its items in that order, so the least unfinished item is always ready.
-   An agent's result does not depend on the thread that computes it. nbrows (N x n3, or
-   NULL): what a step reads of its neighbours, prefetched with their flags one item ahead
-   (another thread wrote them, and fetching them takes longer than one agent's work).
+   lower depth and their level l - 1 otherwise. With threads, one OpenMP region in which
+   the order is dealt out in chunks and each agent waits on its neighbours' flags
+   (docs/performance.md, item Threads: why it cannot deadlock); nbrows (N x n3, or NULL):
+   what a step reads of its neighbours, prefetched with their flags one item ahead.
    Returns 0 or -1. */
 static int hitl_ag_sweep(hitl_ag *d, int top, int levels, hitl_ag_step_fn f, void *ctx,
                          const double *nbrows) {
@@ -591,23 +584,25 @@ static void hitl_ag_precond(hitl_ag *d, int top, const double *u, double *z) {
   else hitl_ag_sweep(d, top, 3, hitl_ag_levels_step, &a, z);
 }
 
-#define HITL_GMRES_FLOOR 1e-10
+#define HITL_GMRES_KRYLOV 30    /* restart length */
+#define HITL_GMRES_TOL 1e-14     /* relative residual reached at every solve */
+#define HITL_GMRES_FLOOR 1e-10   /* ... or this, where a restart no longer halves it */
+#define HITL_GMRES_MAX_ITER 300  /* iterations per solve before it fails (CVODE retries) */
 
 /* Restarted right-preconditioned GMRES on the jets system: x from rhs (x: initial guess
-   0). Returns 0, or -1 if the residual did not reach ls_tol * |rhs| (or stagnated above
-   HITL_GMRES_FLOOR * |rhs|) in max_iter. */
+   0). Returns 0, or -1 if the residual did not reach HITL_GMRES_TOL * |rhs| (or
+   stagnated above HITL_GMRES_FLOOR * |rhs|) in HITL_GMRES_MAX_ITER. */
 static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
-  const hitl_agents_problem *p = d->p;
   long n = (long)d->N * AG_N3(d);
-  int kr = p->krylov, it = 0;
-  double beta0 = sqrt(hitl_dot(rhs, rhs, n)), tol = p->ls_tol * beta0;
+  int kr = HITL_GMRES_KRYLOV, it = 0;
+  double beta0 = sqrt(hitl_dot(rhs, rhs, n)), tol = HITL_GMRES_TOL * beta0;
   double *V = d->V, *H = d->H, *z = d->z;
   memset(x, 0, sizeof(double) * (size_t)n);
   if (beta0 == 0.0) return 0;
   double *r = d->rj; /* residual */
   memcpy(r, rhs, sizeof(double) * (size_t)n);
   double beta_prev = HUGE_VAL;
-  while (it < p->max_iter) {
+  while (it < HITL_GMRES_MAX_ITER) {
     double beta = sqrt(hitl_dot(r, r, n));
     if (beta <= tol) return 0;
     /* a restart that no longer halves the true residual has reached rounding: accept it
@@ -618,7 +613,7 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
     for (int q = 0; q <= kr; ++q) d->g[q] = 0.0;
     d->g[0] = beta;
     int j = 0;
-    for (; j < kr && it < p->max_iter; ++j, ++it) {
+    for (; j < kr && it < HITL_GMRES_MAX_ITER; ++j, ++it) {
       double *vj = V + (size_t)n * j, *w = V + (size_t)n * (j + 1);
       hitl_ag_precond(d, top, vj, z);
       hitl_ag_apply(d, top, z, w);
@@ -714,18 +709,11 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
     wk->arg[1] = K;
     wk->res[0] = P;
     wk->res[1] = wk->col; /* the pivots */
-    if (hitl_ag_call(d, wk, i, AG_NFAC)) {
-      fail |= 1;
-      continue;
-    }
-    int bad = 0;
+    if (hitl_ag_call(d, wk, i, AG_NFAC)) fail |= 1;
     for (int r = 0; r < na; ++r)
-      if (!(fabs(wk->col[r]) > HITL_PIVOT_MIN)) bad = 1; /* also catches NaN */
-    if (bad) {
-      fail |= 1;
-      continue;
-    }
-    if (d->ls_mode == HITL_AG_FORWARD) continue; /* the solve substitutes through x */
+      if (!(fabs(wk->col[r]) > HITL_PIVOT_MIN)) fail |= 1; /* also catches NaN */
+    /* after a failure the set-up fails; FORWARD: the solve substitutes through x */
+    if (fail || d->ls_mode == HITL_AG_FORWARD) continue;
     wk->arg[0] = P;
     wk->res[0] = d->G + (size_t)n3 * n3 * i;
     wk->res[1] = d->Hm + (size_t)na * n3 * i;
@@ -869,7 +857,7 @@ static int hitl_ag_init(hitl_ag *d, const hitl_agents_problem *p, char *msg, int
   for (int q = 0; q < p->nmodels; ++q)
     for (int f = 0; f < AG_NKERNELS; ++f) hitl_work_size(p->kern[q].work[f], sz);
   s->nx = nx;
-  int maxnnz = 0, kr = p->krylov > 0 ? p->krylov : 1;
+  int maxnnz = 0, kr = HITL_GMRES_KRYLOV;
   for (int sg = 0; sg < p->ntop; ++sg) {
     int nz = p->ptr[(size_t)sg * (N + 1) + N] - p->ptr[(size_t)sg * (N + 1)];
     if (nz > maxnnz) maxnnz = nz;

@@ -129,12 +129,10 @@ static int hitl_sundials_create(hitl_cvode *s, const char *log_path) {
 /* From CVodeInit's state at t_out[0], integrate to every t_out[k] and store the state
    there (row-major x_out[k * nx + i]; CVODE's interpolant between its steps). CVODE
    restarts (CVodeReInit) at every breakpoint; it stops exactly there and at the horizon
-   (CVodeSetStopTime), never stepping beyond. t_out and breaks are the targets and
-   restart times of generated.schedule.schedule: increasing, breaks strictly inside
-   (t_out[0], t_out[nt-1]), every two distinct times more than its tolerance apart, and
-   an output time that coincides with a breakpoint to that tolerance replaced by it, so
-   CVODE is never asked for a time it already stands at (CV_TOO_CLOSE).
-   Returns the rows filled (>= 1); *flag is CVODE's last flag (< 0 on a failure). */
+   (CVodeSetStopTime), never stepping beyond. t_out and breaks are the targets and restart
+   times of generated.schedule.schedule, so CVODE is never asked for a time it already
+   stands at (CV_TOO_CLOSE). Returns the rows filled (>= 1); *flag is CVODE's last flag
+   (< 0 on a failure). */
 static int hitl_cvode_outputs(hitl_cvode *s, int nx, const hitl_options *o, hitl_result *r,
                               int *flag) {
   int filled = 1, ib = 0, nt = o->nt, nb = o->nb;
@@ -196,13 +194,11 @@ static void hitl_ls_attach(hitl_cvode *s, void *content, int (*setup)(SUNLinearS
 
 /* CVODE's options after CVodeInit: user data, tolerances, linear solver, Jacobian.
    J is evaluated afresh at every set-up of the Newton matrix, as CasADi's cvodes does
-   (CVODE's default keeps one for up to 51 steps, error-test failures included): the
-   closed loop's right-hand side has kinks (the ghat projection, |chi|, the torque
-   limit) across which J changes by orders of magnitude, and Newton iterates from a J of
-   the far side pass the convergence test (it measures corrections, not residuals) with
-   the step's derivative history wrong. Measured on the start-up of
-   tests/data/startup-projection-kink.toml: one ghat_i's history rate 2e5 where its
-   right-hand side was 0, error-test failures down to h = 1e-10, the run lost. */
+   (CVODE's default keeps one for up to 51 steps): the closed loop's right-hand side has
+   kinks (the ghat projection, |chi|, the torque limit) across which J changes by orders
+   of magnitude, and Newton iterates from a J of the far side pass the convergence test
+   with the step's derivative history wrong (tests/data/startup-projection-kink.toml was
+   lost so, docs/simulation.md). */
 static int hitl_cvode_options(hitl_cvode *s, void *data, const hitl_options *o,
                               CVLsJacFn jac) {
   return CVodeSetUserData(s->mem, data) || CVodeSStolerances(s->mem, o->rtol, o->atol) ||
