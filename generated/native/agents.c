@@ -21,8 +21,7 @@
  * different models, each from its own library, run in one CVODE run.
  *
  * Right-hand side: one pass per jet level over all agents (level l reads the levels < l
- * of the neighbour sums), then the rates: a cycle is no special case. On an acyclic
- * topology one sweep along the depth waves of a topological order.
+ * of the neighbour sums), then the rates; on an acyclic topology one sweep along its order.
  *
  * Newton systems (I + c J) x = b (c = -gamma): the leader first; eliminating agent i's
  * states (D_i x_i = b_i - c (A_s0 x_0 + B_s dnb_i)) leaves the jets system
@@ -32,17 +31,12 @@
  * (restarted, right-preconditioned: hitl_ag_precond); HITL_AG_AUTO takes FORWARD on an
  * acyclic topology and GMRES otherwise. Then x_i = y_i + H_i dnb_i.
  *
- * Links that fade (graph.link_fade = T > 0, eq. (6) with W(t) = W_0 + sum_k sigma_k
- * (W_k - W_{k-1}), sigma_k the quintic C^2 fade): time is cut into segments at every s_k
- * and s_k + T; on each, W(t) = sum_k c_k(t) W_k over the active topologies k (c_k =
- * sigma_k - sigma_{k+1}) on the union of their patterns, whose order, waves and acyclic
- * flag the solver choice reads. Neighbour sums take the weights' rates (product rule,
- * hitl_ag_edge_level) and the Newton systems the exact linearisation at the Jacobian's
- * time: dnb_i = sum_j Wb_ij dj_j, Wb = [[w, 0, 0], [w', w, 0], [w'', 2w', w]] (x I_n).
- *
- * Threads (OpenMP, -fopenmp builds only): passes, Jacobian blocks, factorisations and
- * GMRES products split over the agents; what runs along a topological order is one region
- * in which each agent waits on its neighbours' flags (hitl_ag_sweep).
+ * Links that fade (graph.link_fade = T > 0): time is cut into segments at every switch
+ * s_k and s_k + T; on each, W(t) = sum_k c_k(t) W_k over the active topologies
+ * (hitl_ag_weights) on the union of their patterns, whose order and acyclic flag the
+ * solver choice reads. Neighbour sums take the weights' rates (hitl_ag_edge_level) and
+ * the Newton systems the exact linearisation at the Jacobian's time: dnb_i = sum_j Wb_ij
+ * dj_j, Wb = [[w, 0, 0], [w', w, 0], [w'', 2w', w]] (x I_n).
  */
 #ifdef _OPENMP
 #include <omp.h>
@@ -439,8 +433,7 @@ static int hitl_ag_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, void
   hitl_ag *d = (hitl_ag *)data;
   hitl_kmat *M = HITL_KMAT(J);
   (void)fy; (void)t1; (void)t2; (void)t3;
-  M->c = 1.0;
-  M->shifted = 0;
+  hitl_kmat_zero(J);
   d->t_jac = t; /* the Newton systems couple the agents with the weights at t */
   return hitl_ag_pass(d, t, N_VGetArrayPointer(y), NULL, M->K, &M->top) ? -1 : 0;
 }
@@ -498,20 +491,25 @@ static int hitl_ag_mode(const hitl_ag *d, int top) {
   return s;
 }
 
+/* out_i = u_i + sign G_i sum_j w_ij v_j: the jets system's product (sign -1, u = v) or a
+   step of its forward substitution (sign +1) */
+static void hitl_ag_gs(const hitl_ag *d, int top, int i, const double *v, const double *u,
+                       double *out, double sign) {
+  int n3 = AG_N3(d);
+  double s[64];
+  const double *G = d->G + (size_t)n3 * n3 * i;
+  hitl_ag_gather(d, top, i, v, s, 0, 3);
+  for (int r = 0; r < n3; ++r) {
+    double acc = u[(size_t)n3 * i + r];
+    for (int q = 0; q < n3; ++q) acc += sign * G[(size_t)q * n3 + r] * s[q];
+    out[(size_t)n3 * i + r] = acc;
+  }
+}
+
 /* y = A_jets v: (A v)_i = v_i - G_i sum_j w_ij v_j */
 static void hitl_ag_apply(hitl_ag *d, int top, const double *v, double *out) {
-  int n3 = AG_N3(d), N = d->N;
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
-  for (int i = 0; i < N; ++i) {
-    double s[64];
-    const double *G = d->G + (size_t)n3 * n3 * i;
-    hitl_ag_gather(d, top, i, v, s, 0, 3);
-    for (int r = 0; r < n3; ++r) {
-      double acc = v[(size_t)n3 * i + r];
-      for (int q = 0; q < n3; ++q) acc -= G[(size_t)q * n3 + r] * s[q];
-      out[(size_t)n3 * i + r] = acc;
-    }
-  }
+  for (int i = 0; i < d->N; ++i) hitl_ag_gs(d, top, i, v, v, out, -1.0);
 }
 
 /* agent i of P^{-1} u on an acyclic topology: z_i = u_i + G_i sum_j w_ij z_j */
@@ -523,16 +521,8 @@ typedef struct {
 static int hitl_ag_forward_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int lev,
                                 void *ctx) {
   const hitl_ag_uz *a = (const hitl_ag_uz *)ctx;
-  int n3 = AG_N3(d);
-  double s[64];
-  const double *G = d->G + (size_t)n3 * n3 * i;
   (void)wk, (void)lev;
-  hitl_ag_gather(d, top, i, a->z, s, 0, 3);
-  for (int r = 0; r < n3; ++r) {
-    double acc = a->u[(size_t)n3 * i + r];
-    for (int q = 0; q < n3; ++q) acc += G[(size_t)q * n3 + r] * s[q];
-    a->z[(size_t)n3 * i + r] = acc;
-  }
+  hitl_ag_gs(d, top, i, a->z, a->u, a->z, 1.0);
   return 0;
 }
 
@@ -573,11 +563,8 @@ static double hitl_dot(const double *a, const double *b, long n) {
 }
 
 /* GMRES's preconditioner z = P^{-1} u: on an acyclic topology forward substitution along
-   its order (exact); on a cycle level by level: P keeps every coupling of a level-l
-   row to the levels < l (E's, whole) and, within level l, the edges from lower depths;
-   it drops only couplings of G_i's -c C_s D_i^{-1} B_s part (to higher levels, and the
-   back edges within a level), which vanish with the step, instead of the back edges'
-   E couplings that the agent-by-agent sweep drops */
+   its order (exact); on a cycle level by level, which drops only couplings of G_i's
+   -c C_s D_i^{-1} B_s part, vanishing with the step (docs/performance.md) */
 static void hitl_ag_precond(hitl_ag *d, int top, const double *u, double *z) {
   hitl_ag_uz a = {u, z};
   if (d->p->acyclic[top]) hitl_ag_sweep(d, top, 1, hitl_ag_forward_step, &a, z);
@@ -801,8 +788,9 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
 }
 
 /* ---------------------------------------------------------------- set-up */
+/* each thread's work arrays; w (CasADi's) is followed by xb, xbdot, jscr and col */
 static int hitl_ag_work_alloc(hitl_ag *d, const casadi_int *sz) {
-  int m = d->m, na = d->na, n3 = d->n3, k = d->k;
+  size_t nw = (size_t)sz[3] + 1, nb = (size_t)(d->m + d->na), n3 = (size_t)d->n3 + 1;
   d->wk = (hitl_agwork *)calloc((size_t)d->nthreads, sizeof(hitl_agwork));
   if (!d->wk) return -1;
   for (int q = 0; q < d->nthreads; ++q) {
@@ -810,14 +798,10 @@ static int hitl_ag_work_alloc(hitl_ag *d, const casadi_int *sz) {
     wk->arg = (const casadi_real **)calloc((size_t)sz[0] + 1, sizeof(casadi_real *));
     wk->res = (casadi_real **)calloc((size_t)sz[1] + 1, sizeof(casadi_real *));
     wk->iw = (casadi_int *)calloc((size_t)sz[2] + 1, sizeof(casadi_int));
-    wk->w = (casadi_real *)calloc((size_t)sz[3] + 1, sizeof(casadi_real));
-    wk->xb = (double *)calloc((size_t)(m + na), sizeof(double));
-    wk->xbdot = (double *)calloc((size_t)(m + na), sizeof(double));
-    wk->jscr = (double *)calloc((size_t)n3 + 1, sizeof(double));
-    wk->col = (double *)calloc((size_t)k + 1, sizeof(double));
-    if (!wk->arg || !wk->res || !wk->iw || !wk->w || !wk->xb || !wk->xbdot ||
-        !wk->jscr || !wk->col)
-      return -1;
+    wk->w = (casadi_real *)calloc(nw + 2 * nb + n3 + (size_t)d->k + 1, sizeof(casadi_real));
+    if (!wk->arg || !wk->res || !wk->iw || !wk->w) return -1;
+    wk->xb = wk->w + nw, wk->xbdot = wk->xb + nb, wk->jscr = wk->xbdot + nb;
+    wk->col = wk->jscr + n3;
   }
   return 0;
 }
@@ -901,12 +885,8 @@ static int hitl_ag_init(hitl_ag *d, const hitl_agents_problem *p, char *msg, int
 }
 
 static void hitl_ag_free(hitl_ag *d) {
-  if (d->wk)
-    for (int q = 0; q < d->nthreads; ++q) {
-      hitl_agwork *wk = d->wk + q;
-      free(wk->arg), free(wk->res), free(wk->iw), free(wk->w), free(wk->xb);
-      free(wk->xbdot), free(wk->jscr), free(wk->col);
-    }
+  for (int q = 0; d->wk && q < d->nthreads; ++q)
+    free(d->wk[q].arg), free(d->wk[q].res), free(d->wk[q].iw), free(d->wk[q].w);
   hitl_cvode_free(&d->s);
   free(d->wk), free(d->mem), free(d->piv), free(d->Spiv), free(d->done);
 }
