@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -29,7 +30,8 @@ from generated.agent_kernels import KERNELS
 from generated.agent_kernels import build_models as build_models
 from generated.agent_kernels import kernel_key as kernel_key
 from generated.loaded import open_kernels
-from generated.values import IntegratorSettings, Trajectory
+from generated.schedule import schedule
+from generated.values import IntegratorSettings, Status, Trajectory, flag_reason, flag_status
 from symbolic.closed_loop import make_layout as make_layout
 from symbolic.closed_loop import observer_gains
 from symbolic.parameters import agent_rows
@@ -363,16 +365,80 @@ def run(
     wall0 = time.perf_counter()
     libs, cp, _keep = _c_problem(libraries, prob, linear)
     x = _checked_state(x0, prob.nx)
+    sched = schedule(t_out, breakpoints)
+    fd, name = tempfile.mkstemp(prefix="hitl-sundials-", suffix=".log")  # SUNDIALS' messages
+    os.close(fd)
+    log = Path(name)
+    tq = np.ascontiguousarray(sched.targets, dtype=float)
+    bps = np.ascontiguousarray(sched.breaks, dtype=float)
+    X, x_stop = np.full((len(sched.t_out), x.size), np.nan), np.full(x.size, np.nan)
+    options = native.Options(
+        rtol=float(settings.rtol),
+        atol=float(settings.atol),
+        max_steps=int(settings.max_steps),
+        nt=len(tq),
+        t_out=_dptr(tq),
+        nb=len(bps),
+        breaks=_dptr(bps),
+        log_path=str(log).encode(),
+    )
+    result = native.Result(x_out=_dptr(X), x_stop=_dptr(x_stop))
     kry = ctypes.c_long(0)
-
-    def call(options: ctypes._CArgObject, result: ctypes._CArgObject) -> None:
-        libs[0].hitl_agents_run(
-            ctypes.byref(cp), native.dptr(x), options, result, ctypes.byref(kry)
-        )
-
-    traj = native.drive(call, x.size, t_out, settings, breakpoints, wall0, progress)
+    libs[0].hitl_agents_run(
+        ctypes.byref(cp), _dptr(x), ctypes.byref(options), ctypes.byref(result), ctypes.byref(kry)
+    )
+    try:
+        sundials_log = log.read_text(errors="replace")
+    except OSError:
+        sundials_log = ""
+    log.unlink(missing_ok=True)
+    traj = _trajectory(result, sched.t_out, X, x_stop, sundials_log, wall0)
     traj.stats["krylov_iters"] = int(kry.value)
+    if progress is not None:
+        progress(traj.t_reached)
     return traj
+
+
+def _trajectory(
+    result: native.Result,
+    t_out: np.ndarray,
+    X: np.ndarray,
+    x_stop: np.ndarray,
+    sundials_log: str,
+    wall0: float,
+) -> Trajectory:
+    """The :class:`Trajectory` of what the driver filled in (rows of ``X`` up to ``filled``)."""
+    text = result.msg.decode(errors="replace").strip()
+    filled = int(result.filled)
+    if filled < 1:
+        raise IntegrationError(f"native integrator could not start: {text or 'unknown error'}")
+    stats: dict[str, float | int] = {k: int(getattr(result, k)) for k in native.COUNTERS}
+    stats.update(last_step=float(result.last_step), integrator_calls=1, jtimes_evals=0)
+    stats["wall_seconds"] = time.perf_counter() - wall0
+    t_reached = float(t_out[filled - 1])
+    message, status = "", Status.OK
+    if filled < len(t_out):  # "FLAG_NAME: SUNDIALS message"
+        name, _, detail = text.partition(":")
+        flag = name.strip() or str(int(result.flag))
+        status = flag_status(flag)
+        message = (
+            f"native failed after t = {t_reached:.6g} s (working towards t = "
+            f"{float(t_out[filled]):.6g} s): {flag_reason(flag)}"
+            + (f" ({detail.strip()})" if detail.strip() else "")
+        )
+    return Trajectory(
+        t=t_out[:filled].copy(),
+        x=X[:filled],
+        z=None,
+        method="native",
+        status=status,
+        t_reached=t_reached,
+        message=message,
+        stats=stats,
+        sundials_log=sundials_log,
+        t_stop=float(result.t_stop),
+        x_stop=x_stop.copy(),
+    )
 
 
 def probe(
@@ -404,12 +470,16 @@ def probe(
     x, b = _checked_state(x, prob.nx), _checked_state(b, prob.nx)
     xdot, sol = np.zeros_like(x), np.zeros_like(x)
     msg = ctypes.create_string_buffer(native.MSG_LEN)
-    dp = native.dptr
-    args = (dp(x), float(gamma), dp(b), dp(xdot), dp(sol), msg, native.MSG_LEN)
+    args = (_dptr(x), float(gamma), _dptr(b), _dptr(xdot), _dptr(sol), msg, native.MSG_LEN)
     if libs[0].hitl_agents_probe(ctypes.byref(cp), float(t), *args) != 0:
         why = msg.value.decode(errors="replace") or "solve failed"
         raise IntegrationError(f"per-agent driver: {why}")
     return xdot, sol
+
+
+def _dptr(a: np.ndarray) -> ctypes._Pointer:
+    """A ``double *`` into a C-contiguous float64 array (the caller keeps it alive)."""
+    return a.ctypes.data_as(_DP)
 
 
 def _checked_state(x: np.ndarray, nx: int) -> np.ndarray:

@@ -12,27 +12,13 @@ from __future__ import annotations
 
 import ctypes
 import importlib.util
-import os
-import tempfile
-import time
-from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import numpy as np
-
 from core.artifacts import sha256_file
-from core.errors import BuildError, IntegrationError
+from core.errors import BuildError
 from core.memo import MEMO
 from generated.compiler import Toolchain
-from generated.schedule import schedule
 from generated.shared_library import preload
-from generated.values import (
-    IntegratorSettings,
-    Status,
-    Trajectory,
-    flag_reason,
-    flag_status,
-)
 
 NATIVE_DIR = Path(__file__).resolve().parent / "native"
 INCLUDE_DIR = NATIVE_DIR / "include"
@@ -181,103 +167,3 @@ def open_library(path: Path) -> ctypes.CDLL:
             "(install scikit-sundae==1.2.*, whose SUNDIALS 7.9 the vendored headers match)"
         )
     return lib
-
-
-def dptr(a: np.ndarray) -> ctypes._Pointer:
-    """A ``double *`` into a C-contiguous float64 array (the caller keeps it alive).
-
-    Parameters
-    ----------
-    a : ndarray
-    """
-    return a.ctypes.data_as(_DP)
-
-
-def drive(
-    call: Callable[[ctypes._CArgObject, ctypes._CArgObject], object],
-    nx: int,
-    t_out: np.ndarray,
-    settings: IntegratorSettings,
-    breakpoints: Sequence[float],
-    wall0: float,
-    progress: Callable[[float], None] | None = None,
-) -> Trajectory:
-    """One driver run: its options from the settings and the schedule, its result read back.
-
-    Parameters
-    ----------
-    call : callable
-        ``call(options, result)`` runs the driver on references to :class:`Options` and
-        :class:`Result`.
-    nx : int
-    t_out : ndarray
-    settings : IntegratorSettings
-    breakpoints : sequence of float
-    wall0 : float
-        ``time.perf_counter()`` when the run began.
-    progress : callable, optional
-        Called once with the time reached.
-
-    Raises
-    ------
-    IntegrationError
-        If the driver could not start.
-    """
-    sched = schedule(t_out, breakpoints)
-    fd, name = tempfile.mkstemp(prefix="hitl-sundials-", suffix=".log")  # SUNDIALS' messages
-    os.close(fd)
-    log = Path(name)
-    tq = np.ascontiguousarray(sched.targets, dtype=float)
-    bps = np.ascontiguousarray(sched.breaks, dtype=float)
-    X, x_stop = np.full((len(sched.t_out), nx), np.nan), np.full(nx, np.nan)
-    options = Options(
-        rtol=float(settings.rtol),
-        atol=float(settings.atol),
-        max_steps=int(settings.max_steps),
-        nt=len(tq),
-        t_out=dptr(tq),
-        nb=len(bps),
-        breaks=dptr(bps),
-        log_path=str(log).encode(),
-    )
-    result = Result(x_out=dptr(X), x_stop=dptr(x_stop))
-    call(ctypes.byref(options), ctypes.byref(result))
-    try:
-        sundials_log = log.read_text(errors="replace")
-    except OSError:
-        sundials_log = ""
-    log.unlink(missing_ok=True)
-    t_out = sched.t_out
-    text = result.msg.decode(errors="replace").strip()
-    filled = int(result.filled)
-    if filled < 1:
-        raise IntegrationError(f"native integrator could not start: {text or 'unknown error'}")
-    stats: dict[str, float | int] = {k: int(getattr(result, k)) for k in COUNTERS}
-    stats.update(last_step=float(result.last_step), integrator_calls=1, jtimes_evals=0)
-    stats["wall_seconds"] = time.perf_counter() - wall0
-    t_reached = float(t_out[filled - 1])
-    message, status = "", Status.OK
-    if filled < len(t_out):  # "FLAG_NAME: SUNDIALS message"
-        name, _, detail = text.partition(":")
-        flag = name.strip() or str(int(result.flag))
-        status = flag_status(flag)
-        message = (
-            f"native failed after t = {t_reached:.6g} s (working towards t = "
-            f"{float(t_out[filled]):.6g} s): {flag_reason(flag)}"
-            + (f" ({detail.strip()})" if detail.strip() else "")
-        )
-    if progress is not None:
-        progress(t_reached)
-    return Trajectory(
-        t=t_out[:filled].copy(),
-        x=X[:filled],
-        z=None,
-        method="native",
-        status=status,
-        t_reached=t_reached,
-        message=message,
-        stats=stats,
-        sundials_log=sundials_log,
-        t_stop=float(result.t_stop),
-        x_stop=x_stop.copy(),
-    )

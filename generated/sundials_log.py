@@ -1,4 +1,4 @@
-"""SUNDIALS' messages of a run (the log file the native driver writes, generated/native.py)."""
+"""SUNDIALS' messages of a run (the log file the native driver writes, generated/agents.py)."""
 
 from __future__ import annotations
 

@@ -395,28 +395,24 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
     return hitl_ag_sweep(d, top, 1, hitl_ag_wave_step, &a, d->jets);
   }
   memset(d->nb, 0, sizeof(double) * (size_t)N * n3);
-  for (int lev = 0; lev < 3; ++lev) {
+  for (int lev = 0;; ++lev) { /* the jets level by level, then the rates or K */
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
     for (int i = 0; i < N; ++i) {
       hitl_agwork *wk = hitl_ag_wk(d);
       casadi_real ti = t;
       hitl_ag_inputs(d, wk, i, y, &ti);
+      if (lev == 3) {
+        if (hitl_ag_eval(d, wk, i, wk->jscr, ydot, K)) fail |= 1;
+        continue;
+      }
       wk->res[0] = d->jets + (size_t)n3 * i + (size_t)lev * AG_N(d);
       if (hitl_ag_call(d, wk, i, AG_JET0 + lev)) fail |= 1;
     }
-    if (fail) return -1;
+    if (fail || lev == 3) return fail ? -1 : 0;
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
     for (int i = 0; i < N; ++i)
       hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)n3 * i, lev, lev + 1);
   }
-#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
-  for (int i = 0; i < N; ++i) {
-    hitl_agwork *wk = hitl_ag_wk(d);
-    casadi_real ti = t;
-    hitl_ag_inputs(d, wk, i, y, &ti);
-    if (hitl_ag_eval(d, wk, i, wk->jscr, ydot, K)) fail |= 1;
-  }
-  return fail ? -1 : 0;
 }
 
 static int hitl_ag_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data) {
@@ -880,7 +876,11 @@ static int hitl_ag_init(hitl_ag *d, const hitl_agents_problem *p, char *msg, int
     hitl_msg(s, "out of memory");
     return -1;
   }
-  hitl_ls_attach(s, d, hitl_ag_ls_setup, hitl_ag_ls_solve);
+  s->LS->content = d; /* the driver's linear solver: direct, custom, freed empty */
+  s->LS->ops->gettype = hitl_ls_type;
+  s->LS->ops->setup = hitl_ag_ls_setup;
+  s->LS->ops->solve = hitl_ag_ls_solve;
+  s->LS->ops->free = hitl_ls_free;
   return 0;
 }
 

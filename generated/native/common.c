@@ -170,8 +170,7 @@ static int hitl_cvode_outputs(hitl_cvode *s, int nx, const hitl_options *o, hitl
   return filled;
 }
 
-/* The driver's linear solver is direct, custom and freed empty: attach it, with
-   its content, set-up and solve, to s->LS */
+/* the driver's linear solver: direct, custom (its content and operations: agents.c) */
 static SUNLinearSolver_Type hitl_ls_type(SUNLinearSolver S) {
   (void)S;
   return SUNLINEARSOLVER_DIRECT;
@@ -180,16 +179,6 @@ static SUNLinearSolver_Type hitl_ls_type(SUNLinearSolver S) {
 static SUNErrCode hitl_ls_free(SUNLinearSolver S) {
   if (S) SUNLinSolFreeEmpty(S);
   return SUN_SUCCESS;
-}
-
-static void hitl_ls_attach(hitl_cvode *s, void *content, int (*setup)(SUNLinearSolver, SUNMatrix),
-                           int (*solve)(SUNLinearSolver, SUNMatrix, N_Vector, N_Vector,
-                                        sunrealtype)) {
-  s->LS->content = content;
-  s->LS->ops->gettype = hitl_ls_type;
-  s->LS->ops->setup = setup;
-  s->LS->ops->solve = solve;
-  s->LS->ops->free = hitl_ls_free;
 }
 
 /* CVODE's options after CVodeInit: user data, tolerances, linear solver, Jacobian.
