@@ -1,11 +1,8 @@
 """The graph as the per-agent driver reads it: CSR rows of L + B, an order grouped by depth.
 
 One :class:`Topology` per graph of a scenario (the base graph, then one per switching
-time) is runtime data of :mod:`generated.agents`, never compiled in: follower i hears
-``idx[ptr[i]:ptr[i+1]]`` with the weights (L + B)_ij, and an order grouped by depth lets
-the driver solve an acyclic graph's Newton systems by forward substitution; on a cycle
-the depths are those of the edges from earlier followers, which the GMRES preconditioner
-keeps.
+time) and the :class:`Segment` of fading links are runtime data of
+:mod:`generated.agents`, never compiled in.
 """
 
 from __future__ import annotations
@@ -20,12 +17,10 @@ from core.graph import pinned_laplacian
 def _order(ptr: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, bool, np.ndarray]:
     """An order of the followers grouped by depth, whether it is topological, the depths.
 
-    Kahn's algorithm; when a cycle blocks it, the waiting follower with the fewest
-    unheard followers goes next (ties by index), so the order is still a good one for the
-    forward-substitution preconditioner. A follower's depth is 1 + the largest depth of
-    the followers it hears that come before it in that order (0 if none): on a cycle the
-    edges from later followers (the back edges) are dropped, which is the
-    preconditioner's graph. The order is then sorted by (depth, position).
+    Kahn's algorithm; a cycle is broken at the waiting follower with the fewest unheard
+    followers (ties by index). A follower's depth is 1 + the largest depth of the
+    followers it hears that come before it (0 if none): on a cycle the back edges are
+    dropped, which is the preconditioner's graph.
     """
     N = len(ptr) - 1
     indeg = np.diff(ptr).astype(int)

@@ -1,12 +1,8 @@
 """The per-agent kernels: one follower model's compiled library, whatever the graph.
 
-Once per follower model and option set, the kernels of ONE agent
-(:func:`symbolic.cascade.agent_block`) are generated as C, ``generated/native/agents.c``
-appended (its header lists them), and compiled. Compiled in, and so the library's identity
-(:func:`kernel_key`): the follower model and its parameters, the options, the leader and
-the templates of u0 and of the fault expressions, the patterns of the observer's gain
-matrices; never the graph, N, or a gain's or an expression's numbers (columns of each
-agent's row, :func:`symbolic.parameters.row_layout`).
+The kernels of ONE agent (:func:`symbolic.cascade.agent_block`) as C, with
+``generated/native/agents.c`` appended (its header lists them); what is compiled in, and
+so the library's identity, is :func:`kernel_key` (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -171,9 +167,8 @@ def kernel_key(
 
 
 def _driver_toolchain(sc: Scenario) -> Toolchain:
-    """The driver compiled for one follower's sizes (``HITL_AG_*`` in agents.c): the same
-    for every model of a scenario, as constants they let gcc unroll the per-agent loops
-    (the driver refuses a problem of other sizes)."""
+    """The driver compiled for one follower's sizes (``HITL_AG_*`` in agents.c: gcc unrolls
+    the per-agent loops; the driver refuses a problem of other sizes)."""
     tc = native.toolchain()
     na = make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered").agent_size
     sizes = (

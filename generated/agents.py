@@ -1,12 +1,9 @@
 """Method ``native``'s engine: the per-agent driver, with the graph as runtime data.
 
-The kernels of ONE agent are compiled once per follower model
-(:mod:`generated.agent_kernels`, whose :func:`build_models` and :func:`kernel_key` are
-re-exported: ``agents`` is the one import path of the per-agent method) and
-``generated/native/agents.c`` evaluates them over the agents (its header has the algebra).
-N, the graph, its switching times and fade, and each follower's numbers are runtime data
-(:class:`AgentProblem`, the segments of :mod:`generated.agent_graph`); followers of
-several models run in one CVODE run, each from its own library.
+One kernel library per follower model (:mod:`generated.agent_kernels`, whose
+:func:`build_models` and :func:`kernel_key` are re-exported here: the one import path of
+the method), evaluated over the agents by ``generated/native/agents.c``; N, the graph and
+each follower's numbers are an :class:`AgentProblem`.
 """
 
 from __future__ import annotations
@@ -104,7 +101,6 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
         raise ScenarioError("gains", "H", f"gauge has entries {h}", f"{sc.N} signs +1/-1")
     lay = make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered")
     tops = tuple(topology(t.t_start, t.adjacency, t.pinning, h) for t in sc.graph.topologies())
-    fade = float(sc.graph.link_fade) if len(tops) > 1 else 0.0
     return AgentProblem(
         N=sc.N,
         m=sc.m,
@@ -113,7 +109,7 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
         model=np.asarray(model, np.int32),
         params=np.ascontiguousarray(agent_rows(sc, observer_gains(sc, gains)), dtype=float),
         topologies=tops,
-        fade=fade,
+        fade=float(sc.graph.link_fade) if len(tops) > 1 else 0.0,
     )
 
 
@@ -127,8 +123,7 @@ class Kernels(ctypes.Structure):
     _fields_ = [("fn", _FN * len(KERNELS)), ("work", _FN * len(KERNELS))]
 
 
-_IP = ctypes.POINTER(ctypes.c_int)
-_DP = ctypes.POINTER(ctypes.c_double)
+_IP, _DP = ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
 
 
 class Problem(ctypes.Structure):
@@ -239,10 +234,9 @@ def _k_layout(libs: list[ctypes.CDLL], model: np.ndarray, m: int) -> dict[str, n
     npk = np.array([_sparsity_out(lib, "ag_nfac", 0)[1][-1] for lib in libs])[model]
     _, colind, rows = pats[model[0]]
     lead = -np.ones((m, m), np.int32)  # column-major, as the driver reads it
-    for col in range(m):
-        for q in range(colind[col], colind[col + 1]):
-            if rows[q] < m:
-                lead[col, rows[q]] = q
+    q = np.arange(colind[m])  # the nonzeros of the leader's columns, then its rows
+    q = q[rows[q] < m]
+    lead[np.searchsorted(colind, q, side="right") - 1, rows[q]] = q
     return {
         "koff": np.concatenate([[0], np.cumsum(nnz)]).astype(np.int32),
         "poff": np.concatenate([[0], np.cumsum(npk)]).astype(np.int32),
@@ -262,9 +256,8 @@ def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
     IntegrationError
         If a library's problem struct differs from :class:`Problem`.
     """
-    # libgomp reads its wait policy once, when the first OpenMP library loads: the driver
-    # enters a parallel region per pass and per wave, microseconds apart, and threads that
-    # sleep between them cost more to wake than a wave takes (docs/performance.md)
+    # read once, when the first OpenMP library loads: sleeping threads cost more to wake
+    # than a wave takes (docs/performance.md)
     os.environ.setdefault("OMP_WAIT_POLICY", "active")
     libs = [open_kernels(Path(p)) for p in libraries]  # from verified private copies
     ci, cd, prob = ctypes.c_int, ctypes.c_double, ctypes.POINTER(Problem)

@@ -1,11 +1,8 @@
-"""The native CVODE driver's Python side: its toolchain, loading and calling convention.
+"""The native CVODE driver's toolchain, loading and calling convention (``hitl_native.h``).
 
-Its libraries are one follower model's kernels with ``native/common.c`` and
-``native/agents.c`` appended (:mod:`generated.agent_kernels`), linked against the SUNDIALS
-7.9 of the ``scikit-sundae`` wheel, whose headers are vendored (``native/README.md``).
-:func:`open_library` refuses a library whose SUNDIALS (version, index type) or structs
-differ from the headers and the ctypes mirror of ``hitl_native.h``: a clear error, never
-corrupt memory.
+Its libraries link the SUNDIALS 7.9 of the ``scikit-sundae`` wheel, whose headers are
+vendored (``native/README.md``); :func:`open_library` refuses one whose SUNDIALS or structs
+differ from the headers and the ctypes mirror: a clear error, never corrupt memory.
 """
 
 from __future__ import annotations
@@ -140,8 +137,7 @@ def open_library(path: Path) -> ctypes.CDLL:
     Raises
     ------
     BuildError
-        If it cannot be loaded, the SUNDIALS it runs against differs from the vendored
-        headers, or its structs differ in size from the ctypes mirror (:data:`STRUCTS`).
+        If it cannot be loaded, or its SUNDIALS or structs differ from the headers'.
     """
     try:
         preload(toolchain().libraries)  # its NEEDED sonames, from this environment

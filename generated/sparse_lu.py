@@ -1,11 +1,8 @@
 """A sparse LU factorisation without pivoting, written out as straight-line generated code.
 
-The per-agent kernels (:mod:`generated.agent_kernels`) factorise each follower's
-diagonal block D = I + c A_ss of CVODE's Newton matrix on its fixed sparsity pattern:
-the elimination is done once *symbolically*, in the order of the states, and generated
-as C (no pivot search or pointer chasing at run time). The pivots are returned: the
-caller treats a tiny or non-finite pivot as a recoverable failure of the set-up (CVODE
-then retries with a smaller step, where D → I).
+The per-agent kernels factorise each follower's block D = I + c A_ss on its fixed pattern,
+eliminated once *symbolically*; the caller treats a tiny or non-finite pivot as a
+recoverable failure of the set-up (CVODE then retries with a smaller step, where D → I).
 """
 
 from __future__ import annotations
@@ -62,7 +59,11 @@ def sparse_lu(
     BuildError
         If the pattern is not square or lacks a diagonal entry.
     """
-    n = _check_pattern(pattern)
+    n = pattern.size1()
+    if pattern.size2() != n:
+        raise BuildError(f"sparse_lu: pattern is {n}x{pattern.size2()}, expected square")
+    if (pattern + ca.Sparsity.diag(n)).nnz() != pattern.nnz():
+        raise BuildError("sparse_lu: pattern lacks diagonal entries (add ca.Sparsity.diag(n))")
     M = ca.SX.sym("M", pattern)
     rows = _rows_by_index(M.nz, pattern, n)
     pivots = _eliminate(rows, n)
@@ -84,17 +85,6 @@ def sparse_lu(
     )
     solve = _solve_function(f"{prefix}_solve", lu_sp, n, opts, reciprocal)
     return SparseLU(pattern, factor, solve, lu_sp.nnz() - pattern.nnz())
-
-
-def _check_pattern(pattern: ca.Sparsity) -> int:
-    """The size n of a square pattern with its whole diagonal (else :class:`BuildError`)."""
-    n = pattern.size1()
-    if pattern.size2() != n:
-        raise BuildError(f"sparse_lu: pattern is {n}x{pattern.size2()}, expected square")
-    diag = ca.Sparsity.diag(n)
-    if (pattern + diag).nnz() != pattern.nnz():
-        raise BuildError("sparse_lu: pattern lacks diagonal entries (add ca.Sparsity.diag(n))")
-    return n
 
 
 def _rows_by_index(nz: Any, pattern: ca.Sparsity, n: int) -> list[dict[int, ca.SX]]:

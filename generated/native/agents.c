@@ -57,8 +57,7 @@ typedef struct {
 
 /* The problem: sizes, kernels, per-agent data and the graph's topologies as CSR */
 typedef struct {
-  int N, m, na, n, npar;
-  int nmodels;
+  int N, m, na, n, npar, nmodels;
   const hitl_agent_kernels *kern; /* nmodels */
   const int *model;               /* N: kernel table of each follower */
   const double *prm;    /* N x npar, agent-major */
@@ -109,6 +108,7 @@ typedef struct {
   casadi_int *iw;
   casadi_real *w;
   double *xb, *xbdot, *jscr, *col;
+  casadi_real t; /* the kernels' time argument */
 } hitl_agwork;
 
 /* The graph's weights at one time on one segment's pattern: W(t) = sum_k c_k(t) W_k and
@@ -124,7 +124,7 @@ typedef struct {
 typedef struct {
   hitl_cvode s; /* CVODE, its messages and counters */
   const hitl_agents_problem *p;
-  int N, m, na, n, n3, k, npar, nthreads;
+  int N, m, na, n, n3, nthreads;
   double *jets, *nb; /* N x n3 */
   hitl_agwork *wk;           /* nthreads */
   /* linear solver */
@@ -166,9 +166,7 @@ static int hitl_ag_call(const hitl_ag *d, hitl_agwork *wk, int i, int which) {
   return d->p->kern[d->p->model[i]].fn[which](wk->arg, wk->res, wk->iw, wk->w, 0);
 }
 
-/* agent i's Newton solve through its model's ag_nsol on its packed factorisation: x =
-   D_i^{-1} (b - c (A_s0 x0 + B_s s)) and dj = C_0 x0 + C_s x + E s (b is copied first: x
-   may be where b was) */
+/* agent i's ag_nsol on its packed factorisation (b is copied first: x may be where b was) */
 static int hitl_ag_nsol(hitl_ag *d, hitl_agwork *wk, int i, const double *x0,
                         const double *s, const double *b, double *x, double *dj) {
   memcpy(wk->xb, b, sizeof(double) * (size_t)AG_NA(d));
@@ -257,16 +255,16 @@ static void hitl_ag_gather(const hitl_ag *d, int top, int i, const double *J, do
 }
 
 /* agent i's kernel inputs in work wk: xb = (eta0, s_i) */
-static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int i, const double *y, double *tt) {
-  const hitl_agents_problem *p = d->p;
+static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int i, const double *y, double t) {
+  wk->t = t;
   memcpy(wk->xb, y, sizeof(double) * (size_t)AG_M(d));
   memcpy(wk->xb + AG_M(d), y + AG_M(d) + (size_t)AG_NA(d) * i,
          sizeof(double) * (size_t)AG_NA(d));
-  wk->arg[0] = tt;
+  wk->arg[0] = &wk->t;
   wk->arg[1] = wk->xb;
   wk->arg[2] = d->nb + (size_t)AG_N3(d) * i;
   wk->arg[3] = d->W->cpl + (size_t)6 * i; /* the weights in use, at the pass's t */
-  wk->arg[4] = p->prm + (size_t)d->npar * i;
+  wk->arg[4] = d->p->prm + (size_t)d->p->npar * i;
 }
 
 /* What one agent computes at one level of a sweep (hitl_ag_sweep): 0, or non-zero */
@@ -366,17 +364,15 @@ static int hitl_ag_eval(hitl_ag *d, hitl_agwork *wk, int i, double *jets, double
   return 0;
 }
 
-/* agent i of the one-pass sweep of an acyclic topology: its neighbour sums (complete:
-   every neighbour is of lower depth), then its rates or its Jacobian block, the jets
-   coming out of the rate and Jacobian kernels themselves */
+/* agent i of the one-pass sweep of an acyclic topology: its neighbour sums (complete),
+   then its rates or its Jacobian block, which give its jets too */
 static int hitl_ag_wave_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int lev,
                              void *ctx) {
   const hitl_ag_at *a = (const hitl_ag_at *)ctx;
   double *jets = d->jets + (size_t)AG_N3(d) * i;
-  casadi_real ti = a->t;
   (void)lev;
   hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)AG_N3(d) * i, 0, 3);
-  hitl_ag_inputs(d, wk, i, a->y, &ti);
+  hitl_ag_inputs(d, wk, i, a->y, a->t);
   return hitl_ag_eval(d, wk, i, jets, a->ydot, a->K);
 }
 
@@ -399,8 +395,7 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
     for (int i = 0; i < N; ++i) {
       hitl_agwork *wk = hitl_ag_wk(d);
-      casadi_real ti = t;
-      hitl_ag_inputs(d, wk, i, y, &ti);
+      hitl_ag_inputs(d, wk, i, y, t);
       if (lev == 3) {
         if (hitl_ag_eval(d, wk, i, wk->jscr, ydot, K)) fail |= 1;
         continue;
@@ -609,13 +604,12 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
       H[(size_t)j * (kr + 1) + j + 1] = hn;
       if (hn > 0.0)
         for (long e = 0; e < n; ++e) w[e] /= hn;
+      double *hc = H + (size_t)j * (kr + 1);
       for (int q = 0; q < j; ++q) { /* earlier rotations */
-        double *hc = H + (size_t)j * (kr + 1);
         double a = hc[q], b = hc[q + 1];
         hc[q] = d->cs[q] * a + d->sn[q] * b;
         hc[q + 1] = -d->sn[q] * a + d->cs[q] * b;
       }
-      double *hc = H + (size_t)j * (kr + 1);
       double den = hypot(hc[j], hc[j + 1]);
       d->cs[j] = den > 0 ? hc[j] / den : 1.0;
       d->sn[j] = den > 0 ? hc[j + 1] / den : 0.0;
@@ -784,7 +778,8 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
 }
 
 /* ---------------------------------------------------------------- set-up */
-/* each thread's work arrays; w (CasADi's) is followed by xb, xbdot, jscr and col */
+/* each thread's work arrays; w (CasADi's) is followed by xb, xbdot (m + na), jscr (3n + 1)
+   and col (m + na + 3n + 1) */
 static int hitl_ag_work_alloc(hitl_ag *d, const casadi_int *sz) {
   size_t nw = (size_t)sz[3] + 1, nb = (size_t)(d->m + d->na), n3 = (size_t)d->n3 + 1;
   d->wk = (hitl_agwork *)calloc((size_t)d->nthreads, sizeof(hitl_agwork));
@@ -794,7 +789,7 @@ static int hitl_ag_work_alloc(hitl_ag *d, const casadi_int *sz) {
     wk->arg = (const casadi_real **)calloc((size_t)sz[0] + 1, sizeof(casadi_real *));
     wk->res = (casadi_real **)calloc((size_t)sz[1] + 1, sizeof(casadi_real *));
     wk->iw = (casadi_int *)calloc((size_t)sz[2] + 1, sizeof(casadi_int));
-    wk->w = (casadi_real *)calloc(nw + 2 * nb + n3 + (size_t)d->k + 1, sizeof(casadi_real));
+    wk->w = (casadi_real *)calloc(nw + 3 * nb + 2 * n3, sizeof(casadi_real));
     if (!wk->arg || !wk->res || !wk->iw || !wk->w) return -1;
     wk->xb = wk->w + nw, wk->xbdot = wk->xb + nb, wk->jscr = wk->xbdot + nb;
     wk->col = wk->jscr + n3;
@@ -814,8 +809,7 @@ static int hitl_ag_init(hitl_ag *d, const hitl_agents_problem *p, char *msg, int
   s->msglen = msglen;
   if (msglen > 0) msg[0] = '\0';
   d->p = p;
-  d->N = N, d->m = m, d->na = na, d->n = n, d->n3 = 3 * n, d->k = m + na + 3 * n;
-  d->npar = p->npar;
+  d->N = N, d->m = m, d->na = na, d->n = n, d->n3 = 3 * n;
 #ifdef _OPENMP
   d->nthreads = p->nthreads > 0 ? p->nthreads : omp_get_max_threads();
 #else

@@ -1,10 +1,6 @@
 /*
- * The SUNDIALS side of the hitl-formation CVODE driver (generated/native.py): SUNDIALS
- * includes, CVODE's set-up and its output loop with breakpoints, a custom SUNLinearSolver
- * shell, CVODE's counters, the SUNDIALS version/index check, and the per-follower block
- * matrix hitl_kmat. Prepended to agents.c (the per-agent
- * engine); the generated C of the follower kernels comes first. The entry points take
- * hitl_options and fill hitl_result (hitl_native.h).
+ * The SUNDIALS side of the native CVODE driver (generated/native/README.md), prepended to
+ * agents.c after the generated C of the follower kernels.
  */
 #include <math.h>
 #include <stdio.h>

@@ -1,8 +1,7 @@
 /*
- * The native driver's calling convention (generated/native/agents.c): a run takes one
- * options struct and fills one result struct, mirrored in Python as ctypes Structures
- * (generated/native.py). tests/test_solver_interface.py compares every offset, and every
- * library reports its sizes (hitl_struct_size) when it is loaded. Plain C types only.
+ * The native driver's calling convention: a run takes one options struct and fills one
+ * result struct, mirrored in generated/native.py (tests/test_solver_interface.py compares
+ * every offset; every library reports its sizes, hitl_struct_size). Plain C types only.
  */
 #ifndef HITL_NATIVE_H
 #define HITL_NATIVE_H

@@ -1,8 +1,7 @@
 """Method ``native``: SUNDIALS CVODE (BDF) driven from C, one call from Python per run.
 
-The engine is the per-agent one (:mod:`generated.agents`) for every N: any graph and
-mixed models are carried and a new graph compiles nothing. The closed loop's outputs of
-a run are evaluated from the symbolic closed loop by CasADi's virtual machine.
+The engine is the per-agent one (:mod:`generated.agents`) for every N: a new graph
+compiles nothing.
 """
 
 from __future__ import annotations
@@ -51,7 +50,6 @@ class Native(Solver):
         cl : ClosedLoop
         settings : CodegenSettings
         prepared : (Scenario, Gains)
-            From :meth:`prepare`.
         """
         if prepared is None:
             raise IntegrationError(
