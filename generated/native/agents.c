@@ -84,9 +84,8 @@ typedef struct {
   double fade;          /* T (graph.link_fade): the links' fade time, 0 = raw */
 } hitl_agents_problem;
 
-/* The sizes of one follower, known when the driver is compiled with its model
-   (generated/agent_kernels.py defines them; hitl_ag_init checks them against the
-   problem), so the small per-agent loops unroll. 0: read at run time. */
+/* One follower's sizes, compiled in (generated/agent_kernels.py; hitl_ag_init checks them)
+   so that the small per-agent loops unroll. 0: read at run time. */
 #ifndef HITL_AG_N_OUT
 #define HITL_AG_N_OUT 0
 #endif

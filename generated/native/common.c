@@ -251,12 +251,9 @@ static void hitl_cvode_free(hitl_cvode *s) {
 }
 
 /* ------------------------------------------------- the per-follower block matrix */
-/* The Jacobian of the per-agent driver (agents.c): one block K_i per follower, laid out
-   by the driver, representing c J (+ I once shifted). K (hitl_cvode.K) is shared, not
-   copied, by the matrices CVODE copies into each other (its saved Jacobian and the
-   Newton matrix): only the Jacobian evaluation writes K, and it writes every entry;
-   CVODE copies the matrix it evaluated into the saved one right after. The shift c (and
-   top, the topology K was evaluated on: agents.c) is kept per matrix. */
+/* The Jacobian of the per-agent driver (agents.c): one block K_i per follower, representing
+   c J (+ I once shifted). Its matrices share K (hitl_cvode.K; docs/performance.md, item
+   Storage: why that is safe) and keep the shift c and top, the topology K was evaluated on. */
 typedef struct {
   double *K;
   double c;
