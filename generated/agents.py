@@ -214,8 +214,7 @@ def parse_sparsity(sp: Sequence[int]) -> tuple[int, np.ndarray, np.ndarray]:
     Parameters
     ----------
     sp : indexable of int
-        ``nrow, ncol``, the ncol + 1 column pointers and the rows of the nonzeros, or
-        ``nrow, ncol, 1`` for a dense pattern.
+        ``nrow, ncol``, column pointers, rows; or ``nrow, ncol, 1`` for a dense pattern.
     """
     nrow, ncol = int(sp[0]), int(sp[1])
     if sp[2] == 1:  # a general pattern's first column pointer is 0
@@ -226,8 +225,7 @@ def parse_sparsity(sp: Sequence[int]) -> tuple[int, np.ndarray, np.ndarray]:
 
 
 def _k_layout(libs: list[ctypes.CDLL], model: np.ndarray, m: int) -> dict[str, np.ndarray]:
-    """Each agent's offsets into the stored K nonzeros and into the packed factorisations,
-    and the leader block's nonzeros."""
+    """koff, poff (each agent's K nonzeros and packed factorisation) and lead_nz."""
     pats = [k_pattern(lib) for lib in libs]
     nnz = np.array([int(pats[j][1][-1]) for j in model])
     # doubles of each agent's packed factorisation P (ag_nfac's first output)

@@ -51,8 +51,8 @@ def sparse_lu(
         The Functions are named ``<prefix>_factor`` and ``<prefix>_solve``.
     cse : bool
     reciprocal : bool
-        Store 1 / u_kk on LU's diagonal, so that a solve has no division (a solve is
-        called many times per factorisation; the rounding differs from the default's).
+        Store 1 / u_kk on LU's diagonal: a solve, called many times per factorisation,
+        has no division (the rounding differs from the default's).
 
     Raises
     ------
