@@ -1,11 +1,8 @@
-"""The graph as the per-agent driver reads it: CSR rows of L + B, an order, depth waves.
+"""The graph as the per-agent driver reads it: CSR rows of L + B, an order grouped by depth.
 
 One :class:`Topology` per graph of a scenario (the base graph, then one per switching
-time) is runtime data of :mod:`generated.agents`, never compiled in: follower i hears
-``idx[ptr[i]:ptr[i+1]]`` with the weights (L + B)_ij, and a topological order grouped
-into waves of equal depth lets the driver solve an acyclic graph's Newton systems by
-forward substitution; on a cycle the waves are those of the edges from earlier
-followers, which the GMRES preconditioner keeps.
+time) and the :class:`Segment` of fading links are runtime data of
+:mod:`generated.agents`, never compiled in.
 """
 
 from __future__ import annotations
@@ -17,24 +14,13 @@ import numpy as np
 from core.graph import pinned_laplacian
 
 
-def topological_order(ptr: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, bool]:
-    """An order of the followers in which each comes after the ones it hears, if any.
+def _order(ptr: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, bool, np.ndarray]:
+    """An order of the followers grouped by depth, whether it is topological, the depths.
 
-    Kahn's algorithm; when a cycle blocks it, the waiting follower with the fewest
-    unheard followers goes next (ties by index), so the order is still a good one for
-    the forward-substitution preconditioner.
-
-    Parameters
-    ----------
-    ptr, idx : ndarray
-        CSR: follower i hears ``idx[ptr[i]:ptr[i+1]]``.
-
-    Returns
-    -------
-    order : ndarray
-        N ints.
-    acyclic : bool
-        Whether no follower was placed before one it hears.
+    Kahn's algorithm; a cycle is broken at the waiting follower with the fewest unheard
+    followers (ties by index). A follower's depth is 1 + the largest depth of the
+    followers it hears that come before it (0 if none): on a cycle the back edges are
+    dropped, which is the preconditioner's graph.
     """
     N = len(ptr) - 1
     indeg = np.diff(ptr).astype(int)
@@ -61,7 +47,14 @@ def topological_order(ptr: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, boo
             if indeg[i] == 0 and not done[i]:
                 ready.append(i)
         ready.sort()
-    return np.asarray(order, dtype=np.int32), acyclic
+    pos = np.empty(N, dtype=int)
+    pos[order] = np.arange(N)
+    depth = np.zeros(N, dtype=int)
+    for i in order:
+        js = [j for j in idx[ptr[i] : ptr[i + 1]] if pos[j] < pos[i]]
+        depth[i] = 1 + depth[js].max() if js else 0
+    grouped = np.asarray(sorted(order, key=lambda i: (depth[i], pos[i])), dtype=np.int32)
+    return grouped, acyclic, depth.astype(np.int32)
 
 
 @dataclass(frozen=True)
@@ -76,15 +69,10 @@ class Topology:
     cpl : ndarray
         N × 2: (l̄_ii, a_i0 h_i).
     order : ndarray
-        Sorted by depth (:func:`depth_waves`): on an acyclic topology each follower
-        comes after all it hears.
+        Sorted by depth: on an acyclic topology each follower comes after all it hears.
     acyclic : bool
-    waves : ndarray
-        Pointers into ``order``: wave w (followers of depth w) is
-        ``order[waves[w]:waves[w+1]]``; on a cycle, the waves of the edges kept by
-        the forward-substitution preconditioner.
     depth : ndarray
-        N: each follower's wave.
+        N: each follower's depth (on a cycle, over the edges from earlier followers).
     """
 
     t_start: float
@@ -94,43 +82,15 @@ class Topology:
     cpl: np.ndarray
     order: np.ndarray
     acyclic: bool
-    waves: np.ndarray
     depth: np.ndarray
 
 
-def depth_waves(
-    ptr: np.ndarray, idx: np.ndarray, order: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``order`` regrouped by depth over the edges it keeps (from earlier followers).
-
-    A follower's depth is 1 + the largest depth of the followers it hears that come
-    before it in ``order`` (0 if none): on an acyclic topology with a topological order
-    every edge counts; on a cycle the edges from later followers (the back edges) are
-    dropped, which is the forward-substitution preconditioner's graph.
-
-    Parameters
-    ----------
-    ptr, idx : ndarray
-        CSR: follower i hears ``idx[ptr[i]:ptr[i+1]]``.
-    order : ndarray
-        An order of the followers (:func:`topological_order`).
-
-    Returns
-    -------
-    (order, waves, depth) : (ndarray, ndarray, ndarray)
-        The followers sorted by (depth, position in ``order``), the wave pointers
-        (wave w is ``order[waves[w]:waves[w+1]]``) and each follower's depth.
-    """
-    pos = np.empty(len(order), dtype=int)
-    pos[order] = np.arange(len(order))
-    depth = np.zeros(len(order), dtype=int)
-    for i in order:
-        js = [j for j in idx[ptr[i] : ptr[i + 1]] if pos[j] < pos[i]]
-        depth[i] = 1 + depth[js].max() if js else 0
-    new = np.asarray(sorted(order, key=lambda i: (depth[i], pos[i])), dtype=np.int32)
-    counts = np.bincount(depth, minlength=depth.max() + 1)
-    waves = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
-    return new, waves, depth.astype(np.int32)
+def _csr(
+    t_start: float, ptr: np.ndarray, idx: np.ndarray, w: np.ndarray, cpl: np.ndarray
+) -> Topology:
+    """The :class:`Topology` of a CSR pattern, with its order and depths."""
+    order, acyclic, depth = _order(ptr, idx)
+    return Topology(float(t_start), ptr, idx, w, cpl, order, acyclic, depth)
 
 
 def topology(t_start: float, adjacency: np.ndarray, pinning: np.ndarray, h: np.ndarray) -> Topology:
@@ -147,18 +107,12 @@ def topology(t_start: float, adjacency: np.ndarray, pinning: np.ndarray, h: np.n
         N gauge signs.
     """
     L_B = pinned_laplacian(np.asarray(adjacency, float), np.asarray(pinning, float)).toarray()
-    N = L_B.shape[0]
-    ptr, idx, w = [0], [], []
-    for i in range(N):
-        js = [int(j) for j in np.flatnonzero(L_B[i]) if j != i]
-        idx += js
-        w += [float(L_B[i, j]) for j in js]
-        ptr.append(len(idx))
-    p, q = np.asarray(ptr, np.int32), np.asarray(idx, np.int32)
-    order, acyclic = topological_order(p, q)
-    order, waves, depth = depth_waves(p, q, order)
+    off = L_B != 0
+    np.fill_diagonal(off, False)
+    ptr = np.concatenate([[0], np.cumsum(off.sum(axis=1))]).astype(np.int32)
+    idx = np.nonzero(off)[1].astype(np.int32)
     cpl = np.column_stack([np.diag(L_B), np.asarray(pinning, float) * h]).astype(float)
-    return Topology(float(t_start), p, q, np.asarray(w, float), cpl, order, acyclic, waves, depth)
+    return _csr(t_start, ptr, idx, L_B[off].astype(float), cpl)
 
 
 @dataclass(frozen=True)
@@ -166,17 +120,15 @@ class Segment:
     """A stretch of time on which the same topologies are active (the driver's unit).
 
     With ``graph.link_fade`` = T > 0 the weights are W(t) = Σ_k c_k(t) W_k with
-    c_k = σ_k − σ_{k+1} (σ_0 = 1, σ_K = 0, σ_k = σ((t − s_k)/T), :func:`core.graph.fade_jets`):
-    topology k is active on [s_k, s_{k+1} + T). A segment's pattern is the union of its
-    active topologies' (two acyclic graphs fading into each other may form a cycle: its
-    order and ``acyclic`` are the union's); with T = 0 every segment is one topology.
+    c_k = σ_k − σ_{k+1} (σ_0 = 1, σ_K = 0, σ_k = σ((t − s_k)/T), :func:`core.graph.fade_jets`).
+    A segment's pattern is the union of its active topologies' (two acyclic graphs fading
+    into each other may form a cycle); with T = 0 every segment is one topology.
 
     Attributes
     ----------
     t_start : float
     graph : Topology
-        The union pattern, its order, waves and depth (its ``w`` and ``cpl``: the
-        first active topology's, on the union pattern).
+        The union pattern, its order and depths (``w``, ``cpl``: the first active one's).
     active : ndarray
         Indices k of the active topologies.
     w : ndarray
@@ -192,35 +144,23 @@ class Segment:
     cpl: np.ndarray
 
 
-def _union(t_start: float, tops: list[Topology], active: list[int]) -> Segment:
+def _union(t_start: float, tops: tuple[Topology, ...], active: list[int]) -> Segment:
     """The segment of ``active`` topologies: union pattern, each one's weights on it."""
-    N = len(tops[0].ptr) - 1
     if len(active) == 1:
         tp = tops[active[0]]
         return Segment(
             float(t_start), tp, np.asarray(active, np.int32), tp.w[None, :], tp.cpl[None]
         )
-    rows = [
-        sorted({int(j) for k in active for j in tops[k].idx[tops[k].ptr[i] : tops[k].ptr[i + 1]]})
-        for i in range(N)
-    ]
-    ptr = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int32)
-    idx = np.asarray([j for r in rows for j in r], np.int32)
-    w = np.zeros((len(active), len(idx)))
-    for a, k in enumerate(active):
-        tp = tops[k]
-        for i in range(N):
-            at = {
-                int(j): float(v)
-                for j, v in zip(
-                    tp.idx[tp.ptr[i] : tp.ptr[i + 1]], tp.w[tp.ptr[i] : tp.ptr[i + 1]], strict=True
-                )
-            }
-            w[a, ptr[i] : ptr[i + 1]] = [at.get(j, 0.0) for j in rows[i]]
-    order, acyclic = topological_order(ptr, idx)
-    order, waves, depth = depth_waves(ptr, idx, order)
+    N = len(tops[0].ptr) - 1
+    # edge (i, j) as i N + j: sorted, the union's keys are its CSR order
+    keys = [np.repeat(np.arange(N), np.diff(tops[k].ptr)) * N + tops[k].idx for k in active]
+    union = np.unique(np.concatenate(keys))
+    w = np.zeros((len(active), len(union)))
+    for a, (k, key) in enumerate(zip(active, keys, strict=True)):
+        w[a, np.searchsorted(union, key)] = tops[k].w
+    ptr = np.searchsorted(union, np.arange(N + 1) * N).astype(np.int32)
     cpl = np.stack([tops[k].cpl for k in active])
-    g = Topology(float(t_start), ptr, idx, w[0], cpl[0], order, acyclic, waves, depth)
+    g = _csr(t_start, ptr, (union % N).astype(np.int32), w[0], cpl[0])
     return Segment(float(t_start), g, np.asarray(active, np.int32), w, cpl)
 
 
@@ -228,8 +168,7 @@ def segments(tops: tuple[Topology, ...], fade: float) -> tuple[Segment, ...]:
     """The driver's segments of a switched graph whose links fade over ``fade`` seconds.
 
     Boundaries at every switching time s_k and, with ``fade`` = T > 0, at every s_k + T;
-    topology k is active on [s_k, s_{k+1} + T) (s_0 = 0, s_K = ∞), where its coefficient
-    c_k = σ_k − σ_{k+1} of :class:`Segment` is not identically 0.
+    topology k is active on [s_k, s_{k+1} + T) (s_0 = 0, s_K = ∞), where its c_k ≠ 0.
 
     Parameters
     ----------
@@ -240,14 +179,13 @@ def segments(tops: tuple[Topology, ...], fade: float) -> tuple[Segment, ...]:
     """
     starts = [t.t_start for t in tops]
     if fade <= 0.0 or len(tops) == 1:
-        return tuple(_union(s, list(tops), [k]) for k, s in enumerate(starts))
-    bounds = sorted({*starts, *(s + fade for s in starts[1:])})
+        return tuple(_union(s, tops, [k]) for k, s in enumerate(starts))
     out = []
-    for b in bounds:
+    for b in sorted({*starts, *(s + fade for s in starts[1:])}):
         act = [
             k
             for k in range(len(tops))
             if starts[k] <= b and (k + 1 == len(tops) or b < starts[k + 1] + fade)
         ]
-        out.append(_union(b, list(tops), act))
+        out.append(_union(b, tops, act))
     return tuple(out)

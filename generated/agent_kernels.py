@@ -1,26 +1,8 @@
 """The per-agent kernels: one follower model's compiled library, whatever the graph.
 
-:mod:`generated.agents` runs them; this module compiles, once per follower model and
-option set, the kernels of ONE agent (:func:`symbolic.cascade.agent_block`, as C):
-
-* ``ag_jet0``, ``ag_jet1``, ``ag_jet2``: the jets C0 η_i, C0 η̇_i, C0 η̈_i its listeners
-  sum (level l reads only the levels < l of the agent's own neighbour sum);
-* ``ag_rhs``: the agent's rates (and the leader's, eq. (3));
-* ``ag_jac``: their Jacobian block K = ∂(ẋ_b, jets)/∂(x_b, nb), its structural
-  nonzeros only (column-compressed, ``ag_jac_sparsity_out(1)``);
-* ``ag_nfac``, ``ag_nsol``, ``ag_gmat``: the agent's part of CVODE's Newton systems on
-  the structural pattern of K (:func:`newton_functions`): the LU of D = I + c A_ss without
-  pivoting, unrolled (:mod:`generated.sparse_lu`) and packed with the blocks a solve
-  reads, the solve x = D⁻¹ (b − c (A_s0 x0 + B_s s)) with its jets C_0 x0 + C_s x + E s,
-  and G = E − c C_s D⁻¹ B_s;
-
-and appends the driver ``generated/native/agents.c``. What is compiled in, and so is the
-library's identity (the cache key is the hash of the C source): the follower model and
-its physical parameters, the options, the leader (A0, B0, C0 and the templates of u0),
-the patterns of the observer's gain matrices and the templates of the fault
-expressions; never the graph, never N, never a gain's or an expression's numbers
-(:func:`kernel_key`): Q, λ1, λ2, the UIO's matrices and the literals of u0, g_i and f_i
-are columns of each agent's row (:func:`symbolic.parameters.row_layout`).
+The kernels of ONE agent (:func:`symbolic.cascade.agent_block`) as C, with
+``generated/native/agents.c`` appended (its header lists them); what is compiled in, and
+so the library's identity, is :func:`kernel_key` (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -28,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+from itertools import accumulate
 
 import casadi as ca
 import numpy as np
@@ -45,33 +28,22 @@ from symbolic.closed_loop import make_layout, model_groups, observer_gains
 from symbolic.parameters import row_layout, structure
 from synthesis.gains import Gains
 
-JET_NAMES = ("ag_jet0", "ag_jet1", "ag_jet2")
-RHS_NAME, JAC_NAME = "ag_rhs", "ag_jac"
-NFAC_NAME, NSOL_NAME, GMAT_NAME = "ag_nfac", "ag_nsol", "ag_gmat"
-#: compile flags of the kernel libraries: OpenMP threads over the agents of a pass
-OPENMP_FLAGS = ("-fopenmp",)
+#: the kernels, in the order of the driver's table (``AG_*`` in agents.c)
+KERNELS = ("ag_jet0", "ag_jet1", "ag_jet2", "ag_rhs", "ag_jac", "ag_nfac", "ag_nsol", "ag_gmat")
 
 
 def kernel_functions(
     sc: Scenario, gains: Gains, model_index: int, *, cse: bool = True
 ) -> list[ca.Function]:
-    """The kernels of one follower model (module docstring), as CasADi Functions.
+    """The kernels of one follower model (:data:`KERNELS`), as CasADi Functions.
 
     Parameters
     ----------
     sc : Scenario
     gains : Gains
-        The observer gains and the UIO (their patterns compiled in, their values rows).
     model_index : int
         0-based follower whose model and parameters the kernels use.
     cse : bool
-        Common-subexpression elimination in the generated code.
-
-    Returns
-    -------
-    list of casadi.Function
-        ``ag_jet0..2``, ``ag_rhs``, ``ag_jac`` with inputs ``(t, xb, nb, cpl, prm)``
-        and the Newton kernels (:func:`newton_functions`).
     """
     lay = make_layout(sc.m, sc.n, 1, sc.options.derivatives == "filtered")
     block = agent_block(sc, observer_gains(sc, gains), lay, model_index)
@@ -84,40 +56,23 @@ def kernel_functions(
     opts = {"cse": True} if cse else {}
     names = block.name_in()
     fns = [
-        ca.Function(JET_NAMES[lev], args, [jets[lev * n : (lev + 1) * n]], names, ["jet"], opts)
+        ca.Function(f"ag_jet{lev}", args, [jets[lev * n : (lev + 1) * n]], names, ["jet"], opts)
         for lev in range(3)
     ]
-    fns.append(ca.Function(RHS_NAME, args, [xbdot, jets], names, ["xbdot", "jets"], opts))
-    fns.append(ca.Function(JAC_NAME, args, [jets, K], names, ["jets", "K"], opts))
-    return fns + newton_functions(K.sparsity(), sc.m, 3 * n, opts)
+    fns.append(ca.Function("ag_rhs", args, [xbdot, jets], names, ["xbdot", "jets"], opts))
+    fns.append(ca.Function("ag_jac", args, [jets, K], names, ["jets", "K"], opts))
+    return fns + _newton_functions(K.sparsity(), sc.m, 3 * n, opts)
 
 
-def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[ca.Function]:
-    """One agent's part of the Newton systems (I + c J) x = b on K's structural ``pattern``.
+def _newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[ca.Function]:
+    """``ag_nfac``, ``ag_nsol``, ``ag_gmat`` on K's structural ``pattern`` (agents.c, header).
 
     K's rows are (leader's rates, agent's rates, jets), its columns (leader's state,
-    agent's state, neighbour sums): blocks A_s0, A_ss, B_s and C_0, C_s, E
-    (generated/native/agents.c, header). D = I + c A_ss is factorised without pivoting
-    (the driver checks the pivots). The factorisation
-    packs all a solve reads into one vector P, its LU with U's diagonal inverted
-    (:func:`generated.sparse_lu.sparse_lu`, ``reciprocal``) followed by c A_s0, c B_s,
-    C_0, C_s and E (nonzeros): a solve then reads one contiguous block per agent and
-    divides nowhere.
-
-    * ``ag_nfac(c, K) -> (P, pivots)``, K's structural nonzeros as ag_jac writes them;
-    * ``ag_nsol(P, x0, s, b) -> (x, dj)``: x = D⁻¹ (b − c (A_s0 x0 + B_s s)),
-      dj = C_0 x0 + C_s x + E s;
-    * ``ag_gmat(P) -> (G, H)``: G = E − c C_s D⁻¹ B_s (dense n3 × n3) and
-      H = −c D⁻¹ B_s (dense na × n3), so that x = D⁻¹ (b − c A_s0 x0) + H s.
-
-    Parameters
-    ----------
-    pattern : casadi.Sparsity
-        Structural pattern of K (k × k, k = m + na + n3).
-    m, n3 : int
-        Leader states and jets per agent.
-    opts : dict
-        CasADi Function options (``cse``).
+    agent's state, neighbour sums): blocks A_s0, A_ss, B_s and C_0, C_s, E. The
+    factorisation packs all a solve reads into one vector P, the LU of D = I + c A_ss
+    without pivoting and with U's diagonal inverted (the driver checks the pivots),
+    followed by c A_s0, c B_s, C_0, C_s and E: a solve then reads one contiguous block per
+    agent and divides nowhere.
     """
     k = pattern.size1()
     na = k - m - n3
@@ -132,26 +87,20 @@ def newton_functions(pattern: ca.Sparsity, m: int, n3: int, opts: dict) -> list[
     blocks = [LU, c * sub[st, :m], c * sub[st, jt], sub[jt, :m], sub[jt, st], sub[jt, jt]]
     P = ca.vertcat(*(blk.nz[:] for blk in blocks))
     Ps = ca.SX.sym("P", P.numel())
-    LUs, cA_s0, cB_s, C_0, C_s, E = _unpack(Ps, [blk.sparsity() for blk in blocks])
+    at = [0, *accumulate(blk.nnz() for blk in blocks)]  # the blocks' slices of P
+    LUs, cA_s0, cB_s, C_0, C_s, E = (
+        ca.SX(blk.sparsity(), Ps[at[q] : at[q + 1]]) for q, blk in enumerate(blocks)
+    )
     x0, s, b = ca.SX.sym("x0", m), ca.SX.sym("s", n3), ca.SX.sym("b", na)
     x = lu.solve(LUs, b - (cA_s0 @ x0 + cB_s @ s))
     dj = C_0 @ x0 + C_s @ x + E @ s
     H = ca.densify(-ca.horzcat(*(lu.solve(LUs, ca.densify(cB_s[:, q])) for q in range(n3))))
     G = ca.densify(E + C_s @ H)  # x = D⁻¹ (b − c A_s0 x0) + H s
     return [
-        ca.Function(NFAC_NAME, [c, sub], [P, pivots], ["c", "K"], ["P", "pivots"], opts),
-        ca.Function(NSOL_NAME, [Ps, x0, s, b], [x, dj], ["P", "x0", "s", "b"], ["x", "dj"], opts),
-        ca.Function(GMAT_NAME, [Ps], [G, H], ["P"], ["G", "H"], opts),
+        ca.Function("ag_nfac", [c, sub], [P, pivots], ["c", "K"], ["P", "pivots"], opts),
+        ca.Function("ag_nsol", [Ps, x0, s, b], [x, dj], ["P", "x0", "s", "b"], ["x", "dj"], opts),
+        ca.Function("ag_gmat", [Ps], [G, H], ["P"], ["G", "H"], opts),
     ]
-
-
-def _unpack(v: ca.SX, patterns: list[ca.Sparsity]) -> list[ca.SX]:
-    """Consecutive slices of ``v`` as the nonzeros of matrices on ``patterns``."""
-    out, a = [], 0
-    for sp in patterns:
-        out.append(ca.SX(sp, v[a : a + sp.nnz()]))
-        a += sp.nnz()
-    return out
 
 
 def _kernel_settings(settings: CodegenSettings | None, openmp: bool) -> CodegenSettings:
@@ -159,8 +108,8 @@ def _kernel_settings(settings: CodegenSettings | None, openmp: bool) -> CodegenS
     (a serial build has no OpenMP region: at small N entering one costs more than a pass)."""
     s = settings or CodegenSettings()
     extra = tuple(s.extra_cflags)
-    if openmp:
-        extra += tuple(f for f in OPENMP_FLAGS if f not in extra)
+    if openmp and "-fopenmp" not in extra:
+        extra += ("-fopenmp",)
     return dataclasses.replace(
         s,
         optimization=s.kernel_optimization,
@@ -186,12 +135,7 @@ def kernel_key(
 ) -> str:
     """SHA-256 of everything the kernels of one model compile in (never the graph, never N).
 
-    The follower model and its parameters, the leader (u0 as templates), the
-    controller's and options' structural settings (:func:`symbolic.parameters.structure`
-    without its graph, followers, observer and gains), the gains of :data:`KERNEL_GAINS`, the row
-    layout (:meth:`symbolic.parameters.RowLayout.key`: the fault templates, the patterns
-    of the observer's gain matrices), the driver sources and the compiler settings. Two scenarios
-    with equal keys compile to the same library: this process builds it once
+    Two scenarios with equal keys compile to the same library: this process builds it once
     (the build cache keys it again by its source).
 
     Parameters
@@ -223,9 +167,8 @@ def kernel_key(
 
 
 def _driver_toolchain(sc: Scenario) -> Toolchain:
-    """The driver compiled for one follower's sizes (``HITL_AG_*`` in agents.c): the same
-    for every model of a scenario, as constants they let gcc unroll the per-agent loops
-    (the driver refuses a problem of other sizes)."""
+    """The driver compiled for one follower's sizes (``HITL_AG_*`` in agents.c: gcc unrolls
+    the per-agent loops; the driver refuses a problem of other sizes)."""
     tc = native.toolchain()
     na = make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered").agent_size
     sizes = (
@@ -238,20 +181,15 @@ def _driver_toolchain(sc: Scenario) -> Toolchain:
 def build_models(
     sc: Scenario, gains: Gains, settings: CodegenSettings | None = None, openmp: bool = False
 ) -> tuple[list[Library], np.ndarray]:
-    """Compile (or reuse from the cache) one kernel library per follower model.
-
-    A model whose :func:`kernel_key` was built before in this process reuses that
-    library without building anything symbolic.
+    """Compile (or reuse from this process or the cache) one kernel library per follower model.
 
     Parameters
     ----------
     sc : Scenario
     gains : Gains
     settings : CodegenSettings, optional
-        Compiler, flags, cache root and ``cse``.
     openmp : bool
-        A threaded build, needed for ``LinearSettings.threads``
-        above 1.
+        A threaded build, needed for ``LinearSettings.threads`` above 1.
 
     Returns
     -------

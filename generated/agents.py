@@ -1,25 +1,16 @@
-"""The per-agent driver: the graph as runtime data, one kernel library per follower model.
+"""Method ``native``'s engine: the per-agent driver, with the graph as runtime data.
 
-The graph is not written into the code: the kernels of ONE agent are compiled once per
-follower model (:mod:`generated.agent_kernels`) and the driver ``generated/native/agents.c`` evaluates
-them over the agents in passes (one per jet level), so a cycle is no special case.
-Everything about the graph — N, the pattern, the weights (L + B)_ij, the pinning and
-gauge a_i0 h_i, every switching time and the links' fade time ``graph.link_fade`` — is
-runtime data (:class:`AgentProblem`, CSR arrays per segment of time on which the same
-topologies are active, :mod:`generated.agent_graph`) passed to the driver. The Newton
-systems are reduced to the agents' jets and solved by forward substitution (acyclic), a
-dense LU (small N) or GMRES (any graph); see the driver's header comment. Followers of
-several models run in one CVODE run, each from its own library (the driver gets one
-table of kernel pointers per model).
-
-:func:`build_models` and :func:`kernel_key` are re-exported from
-:mod:`generated.agent_kernels`: ``agents`` is the one import path of the per-agent method.
+One kernel library per follower model (:mod:`generated.agent_kernels`, whose
+:func:`build_models` and :func:`kernel_key` are re-exported here: the one import path of
+the method), evaluated over the agents by ``generated/native/agents.c``; N, the graph and
+each follower's numbers are an :class:`AgentProblem`.
 """
 
 from __future__ import annotations
 
 import ctypes
 import os
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -32,34 +23,16 @@ from core.errors import IntegrationError, ScenarioError
 from core.scenario import Scenario
 from generated import native
 from generated.agent_graph import Segment, Topology, segments, topology
-from generated.agent_kernels import (
-    GMAT_NAME,
-    JAC_NAME,
-    JET_NAMES,
-    NFAC_NAME,
-    NSOL_NAME,
-    RHS_NAME,
-    build_models,
-    kernel_key,
-)
+from generated.agent_kernels import KERNELS
+from generated.agent_kernels import build_models as build_models
+from generated.agent_kernels import kernel_key as kernel_key
 from generated.loaded import open_kernels
-from generated.values import IntegratorSettings, Trajectory
-from symbolic.closed_loop import make_layout, observer_gains
+from generated.schedule import schedule
+from generated.values import IntegratorSettings, Status, Trajectory, flag_reason, flag_status
+from symbolic.closed_loop import make_layout as make_layout
+from symbolic.closed_loop import observer_gains
 from symbolic.parameters import agent_rows
 from synthesis.gains import Gains
-
-__all__ = [
-    "AgentProblem",
-    "LinearSettings",
-    "build_models",
-    "initial_state",
-    "kernel_key",
-    "load",
-    "make_layout",
-    "probe",
-    "problem",
-    "run",
-]
 
 #: Newton-system solvers of the driver (``HITL_AG_*`` in agents.c)
 SOLVERS = {"auto": 0, "forward": 1, "dense": 2, "gmres": 3}
@@ -76,9 +49,7 @@ class AgentProblem:
     model : ndarray
         N ints: each follower's kernel library.
     params : ndarray
-        N × npar, agent-major: each follower's row of runtime numbers
-        (:func:`symbolic.parameters.agent_rows`: per-agent numbers, the observer's gains,
-        u0's and its faults' literals).
+        N × npar: each follower's row of :func:`symbolic.parameters.agent_rows`.
     topologies : tuple of Topology
         The base graph, then one per switching time.
     fade : float
@@ -96,9 +67,7 @@ class AgentProblem:
 
     @cached_property
     def segments(self) -> tuple[Segment, ...]:
-        """What the driver reads: the active topologies of each stretch of time
-        (:func:`generated.agent_graph.segments`), derived from :attr:`topologies` and
-        :attr:`fade` (a problem with other topologies, as the console's calls, gets its own)."""
+        """What the driver reads (:func:`generated.agent_graph.segments`)."""
         return segments(self.topologies, self.fade)
 
     @property
@@ -119,7 +88,6 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
     ----------
     sc : Scenario
     gains : Gains
-        Supplies the gauge h (checked against the graph) and the observer's gains.
     model : ndarray
         From :func:`build_models`.
 
@@ -133,7 +101,6 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
         raise ScenarioError("gains", "H", f"gauge has entries {h}", f"{sc.N} signs +1/-1")
     lay = make_layout(sc.m, sc.n, sc.N, sc.options.derivatives == "filtered")
     tops = tuple(topology(t.t_start, t.adjacency, t.pinning, h) for t in sc.graph.topologies())
-    fade = float(sc.graph.link_fade) if len(tops) > 1 else 0.0
     return AgentProblem(
         N=sc.N,
         m=sc.m,
@@ -142,7 +109,7 @@ def problem(sc: Scenario, gains: Gains, model: np.ndarray) -> AgentProblem:
         model=np.asarray(model, np.int32),
         params=np.ascontiguousarray(agent_rows(sc, observer_gains(sc, gains)), dtype=float),
         topologies=tops,
-        fade=fade,
+        fade=float(sc.graph.link_fade) if len(tops) > 1 else 0.0,
     )
 
 
@@ -151,38 +118,19 @@ _FN = ctypes.c_void_p
 
 
 class Kernels(ctypes.Structure):
-    """``hitl_agent_kernels`` of agents.c."""
+    """``hitl_agent_kernels`` of agents.c: the :data:`KERNELS` and their work sizes."""
 
-    _fields_ = [
-        ("jet", _FN * 3),
-        ("rhs", _FN),
-        ("jac", _FN),
-        ("jet_work", _FN * 3),
-        ("rhs_work", _FN),
-        ("jac_work", _FN),
-        ("nfac", _FN),
-        ("nsol", _FN),
-        ("gmat", _FN),
-        ("nfac_work", _FN),
-        ("nsol_work", _FN),
-        ("gmat_work", _FN),
-    ]
+    _fields_ = [("fn", _FN * len(KERNELS)), ("work", _FN * len(KERNELS))]
 
 
-_IP = ctypes.POINTER(ctypes.c_int)
-_DP = ctypes.POINTER(ctypes.c_double)
+_IP, _DP = ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double)
 
 
 class Problem(ctypes.Structure):
     """``hitl_agents_problem`` of agents.c."""
 
     _fields_ = [
-        ("N", ctypes.c_int),
-        ("m", ctypes.c_int),
-        ("na", ctypes.c_int),
-        ("n", ctypes.c_int),
-        ("npar", ctypes.c_int),
-        ("nmodels", ctypes.c_int),
+        *((name, ctypes.c_int) for name in ("N", "m", "na", "n", "npar", "nmodels")),
         ("kern", ctypes.POINTER(Kernels)),
         ("model", _IP),
         ("prm", _DP),
@@ -194,13 +142,8 @@ class Problem(ctypes.Structure):
         ("cpl", _DP),
         ("order", _IP),
         ("acyclic", _IP),
-        ("nwaves", _IP),
-        ("wave_ptr", _IP),
         ("solver", ctypes.c_int),
         ("nthreads", ctypes.c_int),
-        ("krylov", ctypes.c_int),
-        ("ls_tol", ctypes.c_double),
-        ("max_iter", ctypes.c_int),
         ("koff", _IP),
         ("poff", _IP),
         ("lead_nz", _IP),
@@ -216,29 +159,19 @@ class Problem(ctypes.Structure):
 
 @dataclass(frozen=True)
 class LinearSettings:
-    """How the driver solves its Newton systems and how many threads it uses.
+    """How the driver solves its Newton systems (docs/performance.md) and its threads.
 
     Attributes
     ----------
     solver : str
-        ``auto`` (forward substitution on an acyclic topology, GMRES otherwise),
-        ``forward``, ``dense`` or ``gmres`` (:data:`SOLVERS`).
+        One of :data:`SOLVERS`; ``auto``: forward substitution on an acyclic topology,
+        GMRES otherwise.
     threads : int
         OpenMP threads over the agents; 0 = OpenMP's default.
-    krylov : int
-        GMRES restart length.
-    tol : float
-        GMRES: relative residual of the jets system reached at every solve (a restart
-        that no longer halves it is accepted below a relative 1e-10: rounding).
-    max_iter : int
-        GMRES iterations per solve before the solve fails (CVODE then retries).
     """
 
     solver: str = "auto"
     threads: int = 1
-    krylov: int = 30
-    tol: float = 1e-14
-    max_iter: int = 300
 
     def __post_init__(self) -> None:
         if self.solver not in SOLVERS:
@@ -247,36 +180,24 @@ class LinearSettings:
             )
 
 
-def _fn(lib: ctypes.CDLL, name: str) -> int:
-    return ctypes.cast(getattr(lib, name), ctypes.c_void_p).value
-
-
 def _kernels(lib: ctypes.CDLL) -> Kernels:
+    """The library's :data:`KERNELS` and their work-size functions."""
     k = Kernels()
-    for lev, name in enumerate(JET_NAMES):
-        k.jet[lev] = _fn(lib, name)
-        k.jet_work[lev] = _fn(lib, name + "_work")
-    for name in (RHS_NAME, JAC_NAME, NFAC_NAME, NSOL_NAME, GMAT_NAME):
-        field = name.removeprefix("ag_")
-        setattr(k, field, _fn(lib, name))
-        setattr(k, field + "_work", _fn(lib, name + "_work"))
+    for q, name in enumerate(KERNELS):
+        k.fn[q] = ctypes.cast(getattr(lib, name), _FN).value
+        k.work[q] = ctypes.cast(getattr(lib, name + "_work"), _FN).value
     return k
 
 
 def k_pattern(lib: ctypes.CDLL) -> tuple[int, np.ndarray, np.ndarray]:
-    """K's structural pattern as the library's ``ag_jac`` writes it (column-compressed).
+    """K's structural pattern as the library's ``ag_jac`` writes it (:func:`parse_sparsity`).
 
     Parameters
     ----------
     lib : ctypes.CDLL
         A kernel library (:func:`load`).
-
-    Returns
-    -------
-    (int, ndarray, ndarray)
-        k (K is k × k), the column pointers (k + 1) and the row of every nonzero.
     """
-    return _sparsity_out(lib, JAC_NAME, 1)
+    return _sparsity_out(lib, "ag_jac", 1)
 
 
 def _sparsity_out(lib: ctypes.CDLL, name: str, j: int) -> tuple[int, np.ndarray, np.ndarray]:
@@ -288,18 +209,12 @@ def _sparsity_out(lib: ctypes.CDLL, name: str, j: int) -> tuple[int, np.ndarray,
 
 
 def parse_sparsity(sp: Sequence[int]) -> tuple[int, np.ndarray, np.ndarray]:
-    """A pattern in CasADi's generated-code format: (nrow, ncol, colind..., row...).
+    """nrow, the column pointers and the rows of a pattern in CasADi's generated-code format.
 
     Parameters
     ----------
     sp : indexable of int
-        ``nrow, ncol`` then the ncol + 1 column pointers and the rows of the nonzeros,
-        or ``nrow, ncol, 1`` for a dense pattern (CasADi's shorthand).
-
-    Returns
-    -------
-    (int, ndarray, ndarray)
-        nrow, the column pointers and the rows.
+        ``nrow, ncol``, column pointers, rows; or ``nrow, ncol, 1`` for a dense pattern.
     """
     nrow, ncol = int(sp[0]), int(sp[1])
     if sp[2] == 1:  # a general pattern's first column pointer is 0
@@ -310,18 +225,16 @@ def parse_sparsity(sp: Sequence[int]) -> tuple[int, np.ndarray, np.ndarray]:
 
 
 def _k_layout(libs: list[ctypes.CDLL], model: np.ndarray, m: int) -> dict[str, np.ndarray]:
-    """Each agent's offsets into the stored K nonzeros and into the packed factorisations,
-    and the leader block's nonzeros."""
+    """koff, poff (each agent's K nonzeros and packed factorisation) and lead_nz."""
     pats = [k_pattern(lib) for lib in libs]
     nnz = np.array([int(pats[j][1][-1]) for j in model])
     # doubles of each agent's packed factorisation P (ag_nfac's first output)
-    npk = np.array([_sparsity_out(lib, NFAC_NAME, 0)[1][-1] for lib in libs])[model]
+    npk = np.array([_sparsity_out(lib, "ag_nfac", 0)[1][-1] for lib in libs])[model]
     _, colind, rows = pats[model[0]]
     lead = -np.ones((m, m), np.int32)  # column-major, as the driver reads it
-    for col in range(m):
-        for q in range(colind[col], colind[col + 1]):
-            if rows[q] < m:
-                lead[col, rows[q]] = q
+    q = np.arange(colind[m])  # the nonzeros of the leader's columns, then its rows
+    q = q[rows[q] < m]
+    lead[np.searchsorted(colind, q, side="right") - 1, rows[q]] = q
     return {
         "koff": np.concatenate([[0], np.cumsum(nnz)]).astype(np.int32),
         "poff": np.concatenate([[0], np.cumsum(npk)]).astype(np.int32),
@@ -330,7 +243,7 @@ def _k_layout(libs: list[ctypes.CDLL], model: np.ndarray, m: int) -> dict[str, n
 
 
 def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
-    """The kernel libraries, loaded and checked (struct sizes against the mirror).
+    """The kernel libraries, loaded and checked (:func:`generated.native.open_library`).
 
     Parameters
     ----------
@@ -338,14 +251,11 @@ def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
 
     Raises
     ------
-    BuildError
-        As :func:`generated.native.open_library`.
     IntegrationError
         If a library's problem struct differs from :class:`Problem`.
     """
-    # libgomp reads its wait policy once, when the first OpenMP library loads: the driver
-    # enters a parallel region per pass and per wave, microseconds apart, and threads that
-    # sleep between them cost more to wake than a wave takes (docs/performance.md)
+    # read once, when the first OpenMP library loads: sleeping threads cost more to wake
+    # than a wave takes (docs/performance.md)
     os.environ.setdefault("OMP_WAIT_POLICY", "active")
     libs = [open_kernels(Path(p)) for p in libraries]  # from verified private copies
     ci, cd, prob = ctypes.c_int, ctypes.c_double, ctypes.POINTER(Problem)
@@ -365,8 +275,7 @@ def load(libraries: Sequence[Path]) -> list[ctypes.CDLL]:
 def _c_problem(
     libraries: Sequence[Path], prob: AgentProblem, linear: LinearSettings | None
 ) -> tuple[list[ctypes.CDLL], Problem, list]:
-    """The loaded libraries, the driver's problem struct and the arrays it points into
-    (kept alive by the caller)."""
+    """The loaded libraries, the driver's problem struct and the arrays it points into."""
     libs = load(libraries)
     ls = linear or LinearSettings()
     if ls.threads != 1 and not libs[0].hitl_agents_openmp():
@@ -376,7 +285,6 @@ def _c_problem(
         )
     segs = prob.segments
     tops = [s.graph for s in segs]  # each segment's pattern (the union while links fade)
-    N = prob.N
     offs = np.cumsum([0] + [len(t.idx) for t in tops])
     ptr = np.concatenate([t.ptr + offs[k] for k, t in enumerate(tops)]).astype(np.int32)
     nact = [len(s.active) for s in segs]
@@ -395,16 +303,12 @@ def _c_problem(
         "t_graph": np.ascontiguousarray([t.t_start for t in prob.topologies], float),
         "order": np.ascontiguousarray(np.concatenate([t.order for t in tops]), np.int32),
         "acyclic": np.asarray([int(t.acyclic) for t in tops], np.int32),
-        "nwaves": np.asarray([len(t.waves) - 1 for t in tops], np.int32),
-        "wave_ptr": np.concatenate(
-            [np.pad(t.waves, (0, N + 1 - len(t.waves))) for t in tops]
-        ).astype(np.int32),
         "depth": np.ascontiguousarray(np.concatenate([t.depth for t in tops]), np.int32),
         **_k_layout(libs, np.asarray(prob.model), prob.m),
     }
     kern = (Kernels * len(libs))(*[_kernels(lib) for lib in libs])
     c = Problem(
-        N=N,
+        N=prob.N,
         m=prob.m,
         na=prob.na,
         n=prob.n,
@@ -416,9 +320,6 @@ def _c_problem(
         fade=float(prob.fade),
         solver=SOLVERS[ls.solver],
         nthreads=int(ls.threads),
-        krylov=int(ls.krylov),
-        ls_tol=float(ls.tol),
-        max_iter=int(ls.max_iter),
     )
     for name, a in arrays.items():
         ptype = _IP if a.dtype == np.int32 else _DP
@@ -437,7 +338,7 @@ def run(
     breakpoints: Sequence[float] = (),
     progress: Callable[[float], None] | None = None,
 ) -> Trajectory:
-    """Integrate the closed loop with the per-agent driver.
+    """Integrate the closed loop with the per-agent driver (``stats["krylov_iters"]``: GMRES).
 
     Parameters
     ----------
@@ -445,36 +346,90 @@ def run(
         ``Library.path`` of :func:`build_models`, in model order.
     prob : AgentProblem
     x0 : ndarray
-        The whole closed loop's initial state at ``t_out[0]``.
     t_out : ndarray
-        Increasing output times.
     settings : IntegratorSettings
-        ``rtol``, ``atol`` and ``max_steps``.
     linear : LinearSettings, optional
     breakpoints : sequence of float
-        Restart times (faults, graph switches), reconciled with ``t_out``.
+        Restart times (faults, graph switches).
     progress : callable, optional
-
-    Returns
-    -------
-    Trajectory
-        Method ``"native"``; ``stats["krylov_iters"]`` counts GMRES iterations.
     """
     wall0 = time.perf_counter()
     libs, cp, _keep = _c_problem(libraries, prob, linear)
     x = _checked_state(x0, prob.nx)
-    call = native.DriverCall.of(x.size, t_out, settings, breakpoints)
+    sched = schedule(t_out, breakpoints)
+    fd, name = tempfile.mkstemp(prefix="hitl-sundials-", suffix=".log")  # SUNDIALS' messages
+    os.close(fd)
+    log = Path(name)
+    tq = np.ascontiguousarray(sched.targets, dtype=float)
+    bps = np.ascontiguousarray(sched.breaks, dtype=float)
+    X, x_stop = np.full((len(sched.t_out), x.size), np.nan), np.full(x.size, np.nan)
+    options = native.Options(
+        rtol=float(settings.rtol),
+        atol=float(settings.atol),
+        max_steps=int(settings.max_steps),
+        nt=len(tq),
+        t_out=_dptr(tq),
+        nb=len(bps),
+        breaks=_dptr(bps),
+        log_path=str(log).encode(),
+    )
+    result = native.Result(x_out=_dptr(X), x_stop=_dptr(x_stop))
     kry = ctypes.c_long(0)
     libs[0].hitl_agents_run(
-        ctypes.byref(cp),
-        native.dptr(x),
-        ctypes.byref(call.options),
-        ctypes.byref(call.result),
-        ctypes.byref(kry),
+        ctypes.byref(cp), _dptr(x), ctypes.byref(options), ctypes.byref(result), ctypes.byref(kry)
     )
-    traj = call.trajectory("native", wall0, progress)
+    try:
+        sundials_log = log.read_text(errors="replace")
+    except OSError:
+        sundials_log = ""
+    log.unlink(missing_ok=True)
+    traj = _trajectory(result, sched.t_out, X, x_stop, sundials_log, wall0)
     traj.stats["krylov_iters"] = int(kry.value)
+    if progress is not None:
+        progress(traj.t_reached)
     return traj
+
+
+def _trajectory(
+    result: native.Result,
+    t_out: np.ndarray,
+    X: np.ndarray,
+    x_stop: np.ndarray,
+    sundials_log: str,
+    wall0: float,
+) -> Trajectory:
+    """The :class:`Trajectory` of what the driver filled in (rows of ``X`` up to ``filled``)."""
+    text = result.msg.decode(errors="replace").strip()
+    filled = int(result.filled)
+    if filled < 1:
+        raise IntegrationError(f"native integrator could not start: {text or 'unknown error'}")
+    stats: dict[str, float | int] = {k: int(getattr(result, k)) for k in native.COUNTERS}
+    stats.update(last_step=float(result.last_step), integrator_calls=1, jtimes_evals=0)
+    stats["wall_seconds"] = time.perf_counter() - wall0
+    t_reached = float(t_out[filled - 1])
+    message, status = "", Status.OK
+    if filled < len(t_out):  # "FLAG_NAME: SUNDIALS message"
+        name, _, detail = text.partition(":")
+        flag = name.strip() or str(int(result.flag))
+        status = flag_status(flag)
+        message = (
+            f"native failed after t = {t_reached:.6g} s (working towards t = "
+            f"{float(t_out[filled]):.6g} s): {flag_reason(flag)}"
+            + (f" ({detail.strip()})" if detail.strip() else "")
+        )
+    return Trajectory(
+        t=t_out[:filled].copy(),
+        x=X[:filled],
+        z=None,
+        method="native",
+        status=status,
+        t_reached=t_reached,
+        message=message,
+        stats=stats,
+        sundials_log=sundials_log,
+        t_stop=float(result.t_stop),
+        x_stop=x_stop.copy(),
+    )
 
 
 def probe(
@@ -497,10 +452,6 @@ def probe(
     gamma : float
     linear : LinearSettings, optional
 
-    Returns
-    -------
-    (xdot, sol) : (ndarray, ndarray)
-
     Raises
     ------
     IntegrationError
@@ -510,12 +461,16 @@ def probe(
     x, b = _checked_state(x, prob.nx), _checked_state(b, prob.nx)
     xdot, sol = np.zeros_like(x), np.zeros_like(x)
     msg = ctypes.create_string_buffer(native.MSG_LEN)
-    dp = native.dptr
-    args = (dp(x), float(gamma), dp(b), dp(xdot), dp(sol), msg, native.MSG_LEN)
+    args = (_dptr(x), float(gamma), _dptr(b), _dptr(xdot), _dptr(sol), msg, native.MSG_LEN)
     if libs[0].hitl_agents_probe(ctypes.byref(cp), float(t), *args) != 0:
         why = msg.value.decode(errors="replace") or "solve failed"
         raise IntegrationError(f"per-agent driver: {why}")
     return xdot, sol
+
+
+def _dptr(a: np.ndarray) -> ctypes._Pointer:
+    """A ``double *`` into a C-contiguous float64 array (the caller keeps it alive)."""
+    return a.ctypes.data_as(_DP)
 
 
 def _checked_state(x: np.ndarray, nx: int) -> np.ndarray:
@@ -527,10 +482,8 @@ def _checked_state(x: np.ndarray, nx: int) -> np.ndarray:
 
 
 def initial_state(sc: Scenario) -> np.ndarray:
-    """x(0) of ``sc`` without the whole closed loop (``initial.start = "given"``, oracle).
-
-    The same state as :func:`symbolic.closed_loop.initial_state` for these options (which
-    then needs no output of the loop): Table 2's states as given.
+    """x(0) of ``sc`` (Table 2's states) without the whole closed loop: ``initial.start =
+    "given"`` with oracle derivatives only (otherwise it needs the loop's outputs).
 
     Parameters
     ----------
@@ -539,8 +492,7 @@ def initial_state(sc: Scenario) -> np.ndarray:
     Raises
     ------
     ScenarioError
-        For ``initial.start = "formation"`` or filtered derivatives (their x(0) needs
-        η̇_i(0) and b_i(0): use the whole closed loop's x0).
+        For ``initial.start = "formation"`` or filtered derivatives.
     """
     if sc.initial.start != "given" or sc.options.derivatives != "oracle":
         raise ScenarioError(
@@ -551,8 +503,7 @@ def initial_state(sc: Scenario) -> np.ndarray:
             "closed loop's x0",
         )
     N = sc.N
-    lay = make_layout(sc.m, sc.n, N, False)
-    return lay.pack(
+    return make_layout(sc.m, sc.n, N, False).pack(
         {
             "eta0": sc.leader.eta0,
             "mu": sc.initial.mu,

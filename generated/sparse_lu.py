@@ -1,16 +1,8 @@
 """A sparse LU factorisation without pivoting, written out as straight-line generated code.
 
-The per-agent kernels (:mod:`generated.agent_kernels`) factorise each follower's
-diagonal block D = I + c A_ss of CVODE's Newton matrix on its fixed sparsity pattern.
-The elimination is done once *symbolically* on the pattern, in the order of the
-states, and the resulting expressions are generated as C: no symbolic analysis, pivot
-search or pointer chasing at run time, and only the structural nonzeros are touched.
-
-No pivoting means the pivots are whatever elimination produces. They are returned,
-and the caller treats a pivot that is not finite or is tiny as a recoverable failure
-of the linear solver setup (CVODE then retries with a smaller step, where
-``M → I`` and the pivots tend to 1). The test suite checks the solve against numpy
-on random patterns and the native run against CVODES.
+The per-agent kernels factorise each follower's block D = I + c A_ss on its fixed pattern,
+eliminated once *symbolically*; the caller treats a tiny or non-finite pivot as a
+recoverable failure of the set-up (CVODE then retries with a smaller step, where D → I).
 """
 
 from __future__ import annotations
@@ -35,19 +27,15 @@ class SparseLU:
         ``M -> (LU, pivots)``: the unit-lower L (below the diagonal) and U (on and
         above it) in one sparse matrix with the fill-in pattern, and U's diagonal.
     solve : casadi.Function
-        ``(LU, b) -> x`` with ``M x = b`` (forward then backward substitution).
+        ``(LU, b) -> x`` with ``M x = b``.
     fill : int
         Nonzeros of LU minus those of M.
-    reciprocal : bool
-        LU's diagonal holds 1 / u_kk and the solve multiplies by it (``pivots`` stays
-        u_kk).
     """
 
     pattern: ca.Sparsity
     factor: ca.Function
     solve: ca.Function
     fill: int
-    reciprocal: bool = False
 
 
 def sparse_lu(
@@ -62,21 +50,25 @@ def sparse_lu(
     prefix : str
         The Functions are named ``<prefix>_factor`` and ``<prefix>_solve``.
     cse : bool
-        Eliminate common subexpressions (CasADi's ``cse`` option).
     reciprocal : bool
-        Store 1 / u_kk on LU's diagonal, so that a solve has no division (a solve is
-        called many times per factorisation; the rounding differs from the default's).
+        Store 1 / u_kk on LU's diagonal: a solve, called many times per factorisation,
+        has no division (the rounding differs from the default's).
 
     Raises
     ------
     BuildError
         If the pattern is not square or lacks a diagonal entry.
     """
-    n = _check_pattern(pattern)
+    n = pattern.size1()
+    if pattern.size2() != n:
+        raise BuildError(f"sparse_lu: pattern is {n}x{pattern.size2()}, expected square")
+    if (pattern + ca.Sparsity.diag(n)).nnz() != pattern.nnz():
+        raise BuildError("sparse_lu: pattern lacks diagonal entries (add ca.Sparsity.diag(n))")
     M = ca.SX.sym("M", pattern)
     rows = _rows_by_index(M.nz, pattern, n)
     pivots = _eliminate(rows, n)
-    lu_sp = _lu_pattern(rows, n)
+    ij = [(i, j) for i in range(n) for j in rows[i]]  # the eliminated rows' pattern
+    lu_sp = ca.Sparsity.triplet(n, n, [i for i, _ in ij], [j for _, j in ij])
     lci, lrow = lu_sp.colind(), lu_sp.row()
     if reciprocal:
         for i in range(n):
@@ -92,18 +84,7 @@ def sparse_lu(
         opts,
     )
     solve = _solve_function(f"{prefix}_solve", lu_sp, n, opts, reciprocal)
-    return SparseLU(pattern, factor, solve, lu_sp.nnz() - pattern.nnz(), reciprocal)
-
-
-def _check_pattern(pattern: ca.Sparsity) -> int:
-    """The size n of a square pattern with its whole diagonal (else :class:`BuildError`)."""
-    n = pattern.size1()
-    if pattern.size2() != n:
-        raise BuildError(f"sparse_lu: pattern is {n}x{pattern.size2()}, expected square")
-    diag = ca.Sparsity.diag(n)
-    if (pattern + diag).nnz() != pattern.nnz():
-        raise BuildError("sparse_lu: pattern lacks diagonal entries (add ca.Sparsity.diag(n))")
-    return n
+    return SparseLU(pattern, factor, solve, lu_sp.nnz() - pattern.nnz())
 
 
 def _rows_by_index(nz: Any, pattern: ca.Sparsity, n: int) -> list[dict[int, ca.SX]]:
@@ -137,16 +118,6 @@ def _eliminate(rows: list[dict[int, ca.SX]], n: int) -> list[ca.SX]:
                     below[j].append(i)  # fill-in below the diagonal, eliminated later
                 rows[i][j] = rows[i].get(j, 0) - lik * v
     return pivots
-
-
-def _lu_pattern(rows: list[dict[int, ca.SX]], n: int) -> ca.Sparsity:
-    """The pattern of the eliminated rows (column-major, CCS)."""
-    trip_r, trip_c = [], []
-    for i in range(n):
-        for j in rows[i]:
-            trip_r.append(i)
-            trip_c.append(j)
-    return ca.Sparsity.triplet(n, n, trip_r, trip_c)
 
 
 def _solve_function(

@@ -1,4 +1,4 @@
-"""The driver's graph data (generated/agent_graph.py): orders, waves and depths.
+"""The driver's graph data (generated/agent_graph.py): orders and depths.
 
 Independent truth: the definitions themselves, checked edge by edge on random digraphs
 with and without cycles.
@@ -23,7 +23,7 @@ def _random_digraph(N: int, p: float, seed: int, acyclic: bool) -> np.ndarray:
 
 @pytest.mark.parametrize("acyclic", [True, False])
 @pytest.mark.parametrize("seed", range(5))
-def test_waves_hold_the_forward_substitutions_edges(acyclic, seed):
+def test_depths_hold_the_forward_substitutions_edges(acyclic, seed):
     N = 12
     A = _random_digraph(N, 0.25, seed, acyclic)
     pin = np.zeros(N)
@@ -31,9 +31,8 @@ def test_waves_hold_the_forward_substitutions_edges(acyclic, seed):
     top = topology(0.0, A, pin, np.ones(N))
     assert top.acyclic == acyclic
     assert sorted(top.order) == list(range(N))
-    # the waves partition the order by depth
-    for w in range(len(top.waves) - 1):
-        assert all(top.depth[i] == w for i in top.order[top.waves[w] : top.waves[w + 1]])
+    # the order is grouped by depth, 0 first
+    assert top.depth[top.order[0]] == 0 and np.all(np.diff(top.depth[top.order]) >= 0)
     pos = np.empty(N, int)
     pos[top.order] = np.arange(N)
     kept = dropped = 0

@@ -1,77 +1,42 @@
 /*
- * The per-agent native driver (generated/agents.py): one CVODE run whose right-hand side
- * and Newton systems are evaluated agent by agent from per-model kernels, with the graph,
- * N, the pinning, the gauge signs and every switching time as runtime data.
+ * The per-agent native driver (generated/agents.py; the design: docs/performance.md, 'The
+ * graph as data'): one CVODE run whose right-hand side and Newton systems are evaluated
+ * agent by agent from per-model kernels, with the graph, N, the pinning, the gauge signs,
+ * every switching time and the links' fade as runtime data.
  *
- * Appended (after common.c) to the C that CasADi generates for ONE follower model:
+ * Appended (after common.c) to the C that CasADi generates for ONE follower model
+ * (generated/agent_kernels.py):
  *   ag_jet0, ag_jet1, ag_jet2 (t, xb, nb, cpl, prm) -> C0 eta_i, C0 eta_i', C0 eta_i''
  *   ag_rhs (t, xb, nb, cpl, prm) -> (xbdot, jets)
  *   ag_jac (t, xb, nb, cpl, prm) -> (jets, K),  K = d(xbdot, jets)/d(xb, nb): its
  *                                     structural nonzeros (column-compressed)
  *   ag_nfac (c, K) -> (P, pivots)        D = I + c A_ss factorised without pivoting, packed
- *                                         with what a solve reads: P = (LU of D with U's
- *                                         diagonal inverted, c A_s0, c B_s, C_0, C_s, E)
+ *                                         with what a solve reads (c A_s0, c B_s, C_0, C_s, E)
  *   ag_nsol (P, x0, s, b) -> (x, dj)     x = D^{-1} (b - c (A_s0 x0 + B_s s)),
  *                                         dj = C_0 x0 + C_s x + E s
  *   ag_gmat (P) -> (G, H)                G = E - c C_s D^{-1} B_s, H = -c D^{-1} B_s
  * with xb = (eta0, s_i), nb = sum_j (L+B)_ij jets_j (3n) and its two time derivatives,
- * and cpl = (l_ii, a_i0 h_i) with their first two time derivatives (6).
+ * and cpl = (l_ii, a_i0 h_i) with their first two time derivatives (6). The driver gets
+ * one table of kernel pointers per follower model (hitl_agent_kernels): followers of
+ * different models, each from its own library, run in one CVODE run.
  *
- * Links that fade (graph.link_fade = T > 0; eq. (6) with W(t) = W_0 + sum_k sigma_k
- * (W_k - W_{k-1}), sigma_k = sigma((t - s_k)/T) the quintic C^2 fade): time is cut into
- * segments at every s_k and s_k + T; on each, W(t) = sum_k c_k(t) W_k over the active
- * topologies k (c_k = sigma_k - sigma_{k+1}, topology k active on [s_k, s_{k+1} + T)),
- * and the segment's pattern is their union (two acyclic topologies fading into each
- * other may form a cycle: its order, waves and acyclic flag are the union's, so the
- * solver choice sees it). Level l of a neighbour sum is the l-th time derivative of
- * sum_j w_ij C0 eta_j: nb_1 = sum w J_1 + w' J_0, nb_2 = sum w J_2 + 2 w' J_1 + w'' J_0
- * (product rule; hitl_ag_gather), still from the levels <= l of the neighbours' jets,
- * and the kernels add the own and leader terms with cpl's rates. The weights are
- * runtime data (T, the s_k and each topology's weights): no recompile for another T or
- * graph. With T = 0 every segment is one topology and nothing fades.
- * The driver never calls these by name: it receives one table of function pointers per
- * follower model (hitl_agent_kernels), so followers of different models, each from its
- * own library, run in one CVODE run.
+ * Right-hand side: one pass per jet level over all agents (level l reads the levels < l
+ * of the neighbour sums), then the rates; on an acyclic topology one sweep along its order.
  *
- * Right-hand side: passes over all agents, one per jet level. The level-l jet of agent i
- * depends only on its own state and the levels < l of its neighbour sum (eta_i' on psi_i,
- * eta_i'' on psi_i'), so pass l evaluates level l for every agent from the sums of pass
- * l - 1, whatever the graph: a cycle is no special case. The last pass evaluates the
- * agents' rates from the complete sums. On an acyclic topology one pass suffices: along
- * the depth levels ("waves") of a topological order, every agent's sums are complete
- * from the waves before it.
+ * Newton systems (I + c J) x = b (c = -gamma): the leader first; eliminating agent i's
+ * states (D_i x_i = b_i - c (A_s0 x_0 + B_s dnb_i)) leaves the jets system
+ *   dj_i - G_i sum_j w_ij dj_j = r_i,   r_i = C_0 x_0 + C_s D_i^{-1} (b_i - c A_s0 x_0),
+ * solved by HITL_AG_FORWARD (block forward substitution through the states, acyclic
+ * topologies only), HITL_AG_DENSE (LU with partial pivoting, small N) or HITL_AG_GMRES
+ * (restarted, right-preconditioned: hitl_ag_precond); HITL_AG_AUTO takes FORWARD on an
+ * acyclic topology and GMRES otherwise. Then x_i = y_i + H_i dnb_i.
  *
- * Newton systems (I + c J) x = b (c = -gamma): with the leader solved first, agent i's
- * rows are D_i x_i = b_i - c (A_s0 x_0 + B_s dnb_i), D_i = I + c A_ss, and its
- * directional jets dj_i = C_0 x_0 + C_s x_i + E dnb_i, dnb_i = sum_j w_ij dj_j.
- * Eliminating x_i: dj_i = r_i + G_i dnb_i with G_i = E - c C_s D_i^{-1} B_s and
- * r_i = C_0 x_0 + C_s D_i^{-1} (b_i - c A_s0 x_0). The jets system
- *   dj_i - G_i sum_j w_ij dj_j = r_i         (3n unknowns per agent)
- * is solved by
- *   HITL_AG_FORWARD  block forward substitution along a topological order, through the
- *                    states themselves (acyclic topologies only: x_i from the dj of the
- *                    agents it hears, then dj_i; only the D_i are factorised),
- *   HITL_AG_DENSE    a dense LU with partial pivoting of the whole jets system (exact on
- *                    any graph; (3nN)^2 memory, for small N),
- *   HITL_AG_GMRES    restarted GMRES on the jets system, right-preconditioned: on an
- *                    acyclic topology by the forward substitution over the depth waves
- *                    (exact, one iteration); on a cycle level by level (hitl_ag_levels:
- *                    the level-l rows from the complete levels < l, and level l along the
- *                    waves, back edges dropped),
- * then x_i = D_i^{-1} (b_i - c A_s0 x_0) - c D_i^{-1} B_s dnb_i.
- * While links fade dnb_i = sum_j Wb_ij dj_j with the level-triangular blocks
- * Wb = [[w, 0, 0], [w', w, 0], [w'', 2w', w]] (x I_n), the exact linearisation of the
- * faded sums at the Jacobian's time (its weights kept apart from the right-hand side's,
- * hitl_ag_wts wl): every solver solves it exactly, as without a fade (the
- * level-by-level preconditioner adds a delayed level's sum with its rates too).
- * HITL_AG_AUTO takes FORWARD on an acyclic topology and GMRES otherwise.
- *
- * Threads (OpenMP, when compiled with -fopenmp; a serial build has no OpenMP region at
- * all, whose entry costs more than a pass at small N): the passes, the Jacobian blocks,
- * the block factorisations and the GMRES products are split over the agents; what runs
- * along a topological order (the one-pass sweep of an acyclic topology, the forward
- * substitutions, the preconditioner) is one region in which each agent waits on its
- * neighbours' flags (hitl_ag_sweep), not a barrier per wave.
+ * Links that fade (graph.link_fade = T > 0): time is cut into segments at every switch
+ * s_k and s_k + T; on each, W(t) = sum_k c_k(t) W_k over the active topologies
+ * (hitl_ag_weights) on the union of their patterns, whose order and acyclic flag the
+ * solver choice reads. Neighbour sums take the weights' rates (hitl_ag_edge_level) and
+ * the Newton systems the exact linearisation at the Jacobian's time: dnb_i = sum_j Wb_ij
+ * dj_j, Wb = [[w, 0, 0], [w', w, 0], [w'', 2w', w]] (x I_n).
  */
 #ifdef _OPENMP
 #include <omp.h>
@@ -82,18 +47,17 @@ enum { HITL_AG_AUTO = 0, HITL_AG_FORWARD = 1, HITL_AG_DENSE = 2, HITL_AG_GMRES =
 typedef int (*hitl_fn)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int);
 typedef int (*hitl_work_fn)(casadi_int *, casadi_int *, casadi_int *, casadi_int *);
 
-/* One follower model's kernels: pointers into its library (generated/agents.py) */
+/* One follower model's kernels (in generated/agent_kernels.py's KERNELS order) and their
+   work sizes: pointers into its library (generated/agents.py) */
+enum { AG_JET0, AG_RHS = 3, AG_JAC, AG_NFAC, AG_NSOL, AG_GMAT, AG_NKERNELS };
 typedef struct {
-  hitl_fn jet[3], rhs, jac;
-  hitl_work_fn jet_work[3], rhs_work, jac_work;
-  hitl_fn nfac, nsol, gmat; /* the agent's Newton blocks, unrolled on K's pattern */
-  hitl_work_fn nfac_work, nsol_work, gmat_work;
+  hitl_fn fn[AG_NKERNELS];
+  hitl_work_fn work[AG_NKERNELS];
 } hitl_agent_kernels;
 
 /* The problem: sizes, kernels, per-agent data and the graph's topologies as CSR */
 typedef struct {
-  int N, m, na, n, npar;
-  int nmodels;
+  int N, m, na, n, npar, nmodels;
   const hitl_agent_kernels *kern; /* nmodels */
   const int *model;               /* N: kernel table of each follower */
   const double *prm;    /* N x npar, agent-major */
@@ -105,14 +69,8 @@ typedef struct {
   const double *cpl;    /* per active topology: N x 2 (l_ii, a_i0 h_i) */
   const int *order;     /* ntop x N: topological order (cycles broken), grouped by depth */
   const int *acyclic;   /* ntop flags (of the union pattern) */
-  const int *nwaves;    /* ntop: depth levels (on a cycle, of the edges the GMRES
-                           preconditioner keeps: all of an acyclic topology's) */
-  const int *wave_ptr;  /* ntop x (N + 1): wave w is order[wave_ptr[w] .. wave_ptr[w+1]) */
   int solver;           /* HITL_AG_* */
   int nthreads;         /* <= 0: OpenMP's default */
-  int krylov;           /* GMRES restart length */
-  double ls_tol;        /* GMRES: relative residual reached */
-  int max_iter;         /* GMRES: iterations per solve before the setup fails */
   const int *koff;      /* N + 1: agent i's nonzeros of K at koff[i] .. koff[i+1] */
   const int *poff;      /* N + 1: agent i's packed factorisation P at poff[i] .. poff[i+1] */
   const int *lead_nz;   /* m x m (column-major): the leader block's nonzero in agent 0's
@@ -126,9 +84,8 @@ typedef struct {
   double fade;          /* T (graph.link_fade): the links' fade time, 0 = raw */
 } hitl_agents_problem;
 
-/* The sizes of one follower, known when the driver is compiled with its model
-   (generated/agent_kernels.py defines them; hitl_ag_init checks them against the
-   problem), so the small per-agent loops unroll. 0: read at run time. */
+/* One follower's sizes, compiled in (generated/agent_kernels.py; hitl_ag_init checks them)
+   so that the small per-agent loops unroll. 0: read at run time. */
 #ifndef HITL_AG_N_OUT
 #define HITL_AG_N_OUT 0
 #endif
@@ -150,6 +107,7 @@ typedef struct {
   casadi_int *iw;
   casadi_real *w;
   double *xb, *xbdot, *jscr, *col;
+  casadi_real t; /* the kernels' time argument */
 } hitl_agwork;
 
 /* The graph's weights at one time on one segment's pattern: W(t) = sum_k c_k(t) W_k and
@@ -163,15 +121,15 @@ typedef struct {
 } hitl_ag_wts;
 
 typedef struct {
-  hitl_ctx base; /* first member: CVODE's messages and counters */
+  hitl_cvode s; /* CVODE, its messages and counters */
   const hitl_agents_problem *p;
-  int N, m, na, n, n3, k, npar, nthreads;
+  int N, m, na, n, n3, nthreads;
   double *jets, *nb; /* N x n3 */
   hitl_agwork *wk;           /* nthreads */
   /* linear solver */
   double *lu;    /* p->poff[N]: each agent's P (ag_nfac) at p->poff[i] */
   double *lul;   /* m x m: the leader's dense LU */
-  int *piv;      /* na: the leader's row swaps */
+  int *piv;      /* m: the leader's row swaps */
   double *G;     /* N x n3 x n3 (column-major) */
   double *Hm;    /* N x na x n3 (column-major): -c D_i^{-1} B_s */
   double *ps;    /* N x n3: the level-by-level preconditioner's partial neighbour sums */
@@ -180,9 +138,10 @@ typedef struct {
   double *dj, *dnb, *rj; /* N x n3 */
   double *S;     /* dense jets system (n3 N)^2, HITL_AG_DENSE */
   int *Spiv;
-  int S_ok, ls_top, ls_mode;
+  int ls_top, ls_mode;
   double *V, *H, *cs, *sn, *g, *z; /* GMRES */
   long *done, epoch; /* hitl_ag_sweep's flags: the last level each agent finished */
+  double *mem;       /* the block every double array above is carved from */
   long n_krylov;
   hitl_ag_wts wr, wl; /* the weights of the right-hand side (at t) and of the Newton
                          systems (at the Jacobian's time t_jac) */
@@ -201,12 +160,14 @@ static hitl_agwork *hitl_ag_wk(hitl_ag *d) {
 #endif
 }
 
-/* agent i's Newton solve through its model's ag_nsol on its packed factorisation: x =
-   D_i^{-1} (b - c (A_s0 x0 + B_s s)) and dj = C_0 x0 + C_s x + E s (b is copied first: x
-   may be where b was) */
+/* kernel `which` of agent i's model on wk's arguments and results: 0, or non-zero */
+static int hitl_ag_call(const hitl_ag *d, hitl_agwork *wk, int i, int which) {
+  return d->p->kern[d->p->model[i]].fn[which](wk->arg, wk->res, wk->iw, wk->w, 0);
+}
+
+/* agent i's ag_nsol on its packed factorisation (b is copied first: x may be where b was) */
 static int hitl_ag_nsol(hitl_ag *d, hitl_agwork *wk, int i, const double *x0,
                         const double *s, const double *b, double *x, double *dj) {
-  const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
   memcpy(wk->xb, b, sizeof(double) * (size_t)AG_NA(d));
   wk->arg[0] = d->lu + d->p->poff[i];
   wk->arg[1] = x0;
@@ -214,7 +175,7 @@ static int hitl_ag_nsol(hitl_ag *d, hitl_agwork *wk, int i, const double *x0,
   wk->arg[3] = wk->xb;
   wk->res[0] = x;
   wk->res[1] = dj;
-  return kn->nsol(wk->arg, wk->res, wk->iw, wk->w, 0);
+  return hitl_ag_call(d, wk, i, AG_NSOL);
 }
 
 static int hitl_ag_topology(const hitl_agents_problem *p, double t) {
@@ -267,31 +228,10 @@ static void hitl_ag_weights(hitl_ag *d, hitl_ag_wts *W, int seg, double t) {
   }
 }
 
-/* nb_i (levels lo..hi-1, n each) from the agents' jets J (N x n3) on segment top, with
-   the weights in use (d->W): level l is the l-th derivative of sum_j w_ij C0 eta_j, so
-   during a fade it takes the lower levels with the weights' rates (eq. (6), product
-   rule): nb_1 = sum w J_1 + w' J_0, nb_2 = sum w J_2 + 2 w' J_1 + w'' J_0 */
-static void hitl_ag_gather(const hitl_ag *d, int top, int i, const double *J, double *nb,
-                           int lo, int hi) {
-  const hitl_agents_problem *p = d->p;
-  const hitl_ag_wts *W = d->W;
-  const int *ptr = p->ptr + (size_t)top * (d->N + 1);
-  int n = AG_N(d);
-  for (int r = lo * n; r < hi * n; ++r) nb[r] = 0.0;
-  for (int q = ptr[i]; q < ptr[i + 1]; ++q) {
-    const double *jj = J + (size_t)p->idx[q] * AG_N3(d);
-    double w = W->w[0][q - W->base];
-    for (int r = lo * n; r < hi * n; ++r) nb[r] += w * jj[r];
-    if (!W->fade) continue;
-    double w1 = W->w[1][q - W->base], w2 = W->w[2][q - W->base];
-    for (int l = lo > 1 ? lo : 1; l < hi; ++l)
-      for (int r = 0; r < n; ++r)
-        nb[l * n + r] += (l == 1 ? w1 * jj[r] : 2.0 * w1 * jj[n + r] + w2 * jj[r]);
-  }
-}
-
-/* the level-l neighbour sum of edge q's jets zj added to s (levels <= l of zj; the
-   level-by-level preconditioner) */
+/* the level-l neighbour sum of edge q's jets zj added to s, with the weights in use
+   (d->W): level l is the l-th derivative of sum_j w_ij C0 eta_j, so during a fade it takes
+   the lower levels of zj with the weights' rates (eq. (6), product rule): nb_1 = sum w J_1
+   + w' J_0, nb_2 = sum w J_2 + 2 w' J_1 + w'' J_0 */
 static void hitl_ag_edge_level(const hitl_ag *d, int q, int l, const double *zj, double *s) {
   const hitl_ag_wts *W = d->W;
   int n = AG_N(d);
@@ -303,17 +243,27 @@ static void hitl_ag_edge_level(const hitl_ag *d, int q, int l, const double *zj,
     s[l * n + r] += (l == 1 ? w1 * zj[r] : 2.0 * w1 * zj[n + r] + w2 * zj[r]);
 }
 
+/* nb_i (levels lo..hi-1, n each) from the agents' jets J (N x n3) on segment top */
+static void hitl_ag_gather(const hitl_ag *d, int top, int i, const double *J, double *nb,
+                           int lo, int hi) {
+  const int *ptr = d->p->ptr + (size_t)top * (d->N + 1);
+  for (int r = lo * AG_N(d); r < hi * AG_N(d); ++r) nb[r] = 0.0;
+  for (int q = ptr[i]; q < ptr[i + 1]; ++q)
+    for (int l = lo; l < hi; ++l)
+      hitl_ag_edge_level(d, q, l, J + (size_t)d->p->idx[q] * AG_N3(d), nb);
+}
+
 /* agent i's kernel inputs in work wk: xb = (eta0, s_i) */
-static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int i, const double *y, double *tt) {
-  const hitl_agents_problem *p = d->p;
+static void hitl_ag_inputs(hitl_ag *d, hitl_agwork *wk, int i, const double *y, double t) {
+  wk->t = t;
   memcpy(wk->xb, y, sizeof(double) * (size_t)AG_M(d));
   memcpy(wk->xb + AG_M(d), y + AG_M(d) + (size_t)AG_NA(d) * i,
          sizeof(double) * (size_t)AG_NA(d));
-  wk->arg[0] = tt;
+  wk->arg[0] = &wk->t;
   wk->arg[1] = wk->xb;
   wk->arg[2] = d->nb + (size_t)AG_N3(d) * i;
   wk->arg[3] = d->W->cpl + (size_t)6 * i; /* the weights in use, at the pass's t */
-  wk->arg[4] = p->prm + (size_t)d->npar * i;
+  wk->arg[4] = d->p->prm + (size_t)d->p->npar * i;
 }
 
 /* What one agent computes at one level of a sweep (hitl_ag_sweep): 0, or non-zero */
@@ -338,14 +288,10 @@ static void hitl_ag_wait(const long *done, int j, long need) {
 
 /* One sweep over the agents of topology top, `levels` times, level-major, in its order
    (grouped by depth): agent i's level l reads its neighbours' level l where they are of
-   lower depth and their level l - 1 otherwise (on an acyclic topology every neighbour is
-   of lower depth), which the serial order provides. With threads, one OpenMP region: the
-   order is dealt out in chunks and each agent waits on its neighbours' flags instead of a
-   barrier per wave. Every wait is on an item earlier in (level, position) and every
-   thread takes its items in that order, so the least unfinished item is always ready.
-   An agent's result does not depend on the thread that computes it. nbrows (N x n3, or
-   NULL): what a step reads of its neighbours, prefetched with their flags one item ahead
-   (another thread wrote them, and fetching them takes longer than one agent's work).
+   lower depth and their level l - 1 otherwise. With threads, one OpenMP region in which
+   the order is dealt out in chunks and each agent waits on its neighbours' flags
+   (docs/performance.md, item Threads: why it cannot deadlock); nbrows (N x n3, or NULL):
+   what a step reads of its neighbours, prefetched with their flags one item ahead.
    Returns 0 or -1. */
 static int hitl_ag_sweep(hitl_ag *d, int top, int levels, hitl_ag_step_fn f, void *ctx,
                          const double *nbrows) {
@@ -399,41 +345,38 @@ typedef struct {
   double *ydot, *K;
 } hitl_ag_at;
 
-/* agent i of the one-pass sweep: its neighbour sums (complete: every neighbour is of
-   lower depth), then its rates (ydot) or its Jacobian block (K), the jets coming out of
-   the rate and Jacobian kernels themselves */
+/* agent i's rates into ydot or its Jacobian block into K (the other NULL), its jets into
+   jets (its inputs set by hitl_ag_inputs); 0, or non-zero */
+static int hitl_ag_eval(hitl_ag *d, hitl_agwork *wk, int i, double *jets, double *ydot,
+                        double *K) {
+  if (K) {
+    wk->res[0] = jets;
+    wk->res[1] = K + d->p->koff[i];
+    return hitl_ag_call(d, wk, i, AG_JAC);
+  }
+  wk->res[0] = wk->xbdot;
+  wk->res[1] = jets;
+  if (hitl_ag_call(d, wk, i, AG_RHS)) return 1;
+  if (i == 0) memcpy(ydot, wk->xbdot, sizeof(double) * (size_t)AG_M(d));
+  memcpy(ydot + AG_M(d) + (size_t)AG_NA(d) * i, wk->xbdot + AG_M(d),
+         sizeof(double) * (size_t)AG_NA(d));
+  return 0;
+}
+
+/* agent i of the one-pass sweep of an acyclic topology: its neighbour sums (complete),
+   then its rates or its Jacobian block, which give its jets too */
 static int hitl_ag_wave_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int lev,
                              void *ctx) {
   const hitl_ag_at *a = (const hitl_ag_at *)ctx;
-  const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
-  int n3 = AG_N3(d);
-  casadi_real ti = a->t;
+  double *jets = d->jets + (size_t)AG_N3(d) * i;
   (void)lev;
-  hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)n3 * i, 0, 3);
-  hitl_ag_inputs(d, wk, i, a->y, &ti);
-  if (a->ydot) {
-    wk->res[0] = wk->xbdot;
-    wk->res[1] = d->jets + (size_t)n3 * i;
-    if (kn->rhs(wk->arg, wk->res, wk->iw, wk->w, 0)) return 1;
-    if (i == 0) memcpy(a->ydot, wk->xbdot, sizeof(double) * (size_t)AG_M(d));
-    memcpy(a->ydot + AG_M(d) + (size_t)AG_NA(d) * i, wk->xbdot + AG_M(d),
-           sizeof(double) * (size_t)AG_NA(d));
-    return 0;
-  }
-  wk->res[0] = d->jets + (size_t)n3 * i;
-  wk->res[1] = a->K + d->p->koff[i];
-  return kn->jac(wk->arg, wk->res, wk->iw, wk->w, 0);
+  hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)AG_N3(d) * i, 0, 3);
+  hitl_ag_inputs(d, wk, i, a->y, a->t);
+  return hitl_ag_eval(d, wk, i, jets, a->ydot, a->K);
 }
 
-/* On an acyclic topology: one sweep along its order, ydot or K */
-static int hitl_ag_wave_pass(hitl_ag *d, int top, double t, const double *y, double *ydot,
-                             double *K) {
-  hitl_ag_at a = {t, y, ydot, K};
-  return hitl_ag_sweep(d, top, 1, hitl_ag_wave_step, &a, d->jets);
-}
-
-/* The passes at (t, y): jets and neighbour sums of every level, then ydot (if not NULL)
-   and/or the Jacobian blocks K (if not NULL, at p->koff). Returns 0 or -1. */
+/* The passes at (t, y): jets and neighbour sums of every level, then ydot or the Jacobian
+   blocks K (at p->koff; the other NULL). Returns 0 or -1. */
 static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, double *K,
                         int *top_out) {
   const hitl_agents_problem *p = d->p;
@@ -442,52 +385,35 @@ static int hitl_ag_pass(hitl_ag *d, double t, const double *y, double *ydot, dou
   if (top_out) *top_out = top;
   hitl_ag_weights(d, &d->wr, top, t);
   d->W = &d->wr;
-  if (p->acyclic[top] && (ydot == NULL || K == NULL))
-    return hitl_ag_wave_pass(d, top, t, y, ydot, K);
+  if (p->acyclic[top]) { /* one sweep along its order */
+    hitl_ag_at a = {t, y, ydot, K};
+    return hitl_ag_sweep(d, top, 1, hitl_ag_wave_step, &a, d->jets);
+  }
   memset(d->nb, 0, sizeof(double) * (size_t)N * n3);
-  for (int lev = 0; lev < 3; ++lev) {
+  for (int lev = 0;; ++lev) { /* the jets level by level, then the rates or K */
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
     for (int i = 0; i < N; ++i) {
       hitl_agwork *wk = hitl_ag_wk(d);
-      casadi_real ti = t;
-      const hitl_agent_kernels *kn = p->kern + p->model[i];
-      hitl_ag_inputs(d, wk, i, y, &ti);
+      hitl_ag_inputs(d, wk, i, y, t);
+      if (lev == 3) {
+        if (hitl_ag_eval(d, wk, i, wk->jscr, ydot, K)) fail |= 1;
+        continue;
+      }
       wk->res[0] = d->jets + (size_t)n3 * i + (size_t)lev * AG_N(d);
-      if (kn->jet[lev](wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
+      if (hitl_ag_call(d, wk, i, AG_JET0 + lev)) fail |= 1;
     }
-    if (fail) return -1;
+    if (fail || lev == 3) return fail ? -1 : 0;
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
     for (int i = 0; i < N; ++i)
       hitl_ag_gather(d, top, i, d->jets, d->nb + (size_t)n3 * i, lev, lev + 1);
   }
-#pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
-  for (int i = 0; i < N; ++i) {
-    hitl_agwork *wk = hitl_ag_wk(d);
-    casadi_real ti = t;
-    const hitl_agent_kernels *kn = p->kern + p->model[i];
-    hitl_ag_inputs(d, wk, i, y, &ti);
-    if (ydot) {
-      wk->res[0] = wk->xbdot;
-      wk->res[1] = wk->jscr;
-      if (kn->rhs(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
-      if (i == 0) memcpy(ydot, wk->xbdot, sizeof(double) * (size_t)AG_M(d));
-      memcpy(ydot + AG_M(d) + (size_t)AG_NA(d) * i, wk->xbdot + AG_M(d),
-             sizeof(double) * (size_t)AG_NA(d));
-    }
-    if (K) {
-      wk->res[0] = wk->jscr;
-      wk->res[1] = K + p->koff[i];
-      if (kn->jac(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
-    }
-  }
-  return fail ? -1 : 0;
 }
 
 static int hitl_ag_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data) {
   hitl_ag *d = (hitl_ag *)data;
   casadi_real *out = N_VGetArrayPointer(ydot);
   if (hitl_ag_pass(d, t, N_VGetArrayPointer(y), out, NULL, NULL)) return -1;
-  for (int i = 0; i < d->base.nx; ++i)
+  for (int i = 0; i < d->s.nx; ++i)
     if (!isfinite(out[i])) return 1; /* recoverable: CVODE retries with a smaller step */
   return 0;
 }
@@ -497,8 +423,7 @@ static int hitl_ag_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix J, void
   hitl_ag *d = (hitl_ag *)data;
   hitl_kmat *M = HITL_KMAT(J);
   (void)fy; (void)t1; (void)t2; (void)t3;
-  M->c = 1.0;
-  M->shifted = 0;
+  hitl_kmat_zero(J);
   d->t_jac = t; /* the Newton systems couple the agents with the weights at t */
   return hitl_ag_pass(d, t, N_VGetArrayPointer(y), NULL, M->K, &M->top) ? -1 : 0;
 }
@@ -556,20 +481,25 @@ static int hitl_ag_mode(const hitl_ag *d, int top) {
   return s;
 }
 
+/* out_i = u_i + sign G_i sum_j w_ij v_j: the jets system's product (sign -1, u = v) or a
+   step of its forward substitution (sign +1) */
+static void hitl_ag_gs(const hitl_ag *d, int top, int i, const double *v, const double *u,
+                       double *out, double sign) {
+  int n3 = AG_N3(d);
+  double s[64];
+  const double *G = d->G + (size_t)n3 * n3 * i;
+  hitl_ag_gather(d, top, i, v, s, 0, 3);
+  for (int r = 0; r < n3; ++r) {
+    double acc = u[(size_t)n3 * i + r];
+    for (int q = 0; q < n3; ++q) acc += sign * G[(size_t)q * n3 + r] * s[q];
+    out[(size_t)n3 * i + r] = acc;
+  }
+}
+
 /* y = A_jets v: (A v)_i = v_i - G_i sum_j w_ij v_j */
 static void hitl_ag_apply(hitl_ag *d, int top, const double *v, double *out) {
-  int n3 = AG_N3(d), N = d->N;
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1)
-  for (int i = 0; i < N; ++i) {
-    double s[64];
-    const double *G = d->G + (size_t)n3 * n3 * i;
-    hitl_ag_gather(d, top, i, v, s, 0, 3);
-    for (int r = 0; r < n3; ++r) {
-      double acc = v[(size_t)n3 * i + r];
-      for (int q = 0; q < n3; ++q) acc -= G[(size_t)q * n3 + r] * s[q];
-      out[(size_t)n3 * i + r] = acc;
-    }
-  }
+  for (int i = 0; i < d->N; ++i) hitl_ag_gs(d, top, i, v, v, out, -1.0);
 }
 
 /* agent i of P^{-1} u on an acyclic topology: z_i = u_i + G_i sum_j w_ij z_j */
@@ -581,23 +511,9 @@ typedef struct {
 static int hitl_ag_forward_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int lev,
                                 void *ctx) {
   const hitl_ag_uz *a = (const hitl_ag_uz *)ctx;
-  int n3 = AG_N3(d);
-  double s[64];
-  const double *G = d->G + (size_t)n3 * n3 * i;
   (void)wk, (void)lev;
-  hitl_ag_gather(d, top, i, a->z, s, 0, 3);
-  for (int r = 0; r < n3; ++r) {
-    double acc = a->u[(size_t)n3 * i + r];
-    for (int q = 0; q < n3; ++q) acc += G[(size_t)q * n3 + r] * s[q];
-    a->z[(size_t)n3 * i + r] = acc;
-  }
+  hitl_ag_gs(d, top, i, a->z, a->u, a->z, 1.0);
   return 0;
-}
-
-/* z = P^{-1} u: forward substitution along the order of an acyclic topology (exact) */
-static void hitl_ag_forward(hitl_ag *d, int top, const double *u, double *z) {
-  hitl_ag_uz a = {u, z};
-  hitl_ag_sweep(d, top, 1, hitl_ag_forward_step, &a, z);
 }
 
 /* agent i's level l of the level-by-level preconditioner: its partial neighbour sums
@@ -630,46 +546,40 @@ static int hitl_ag_levels_step(hitl_ag *d, hitl_agwork *wk, int top, int i, int 
   return 0;
 }
 
-/* z = P^{-1} u level by level (cyclic topologies): P keeps every coupling of a level-l
-   row to the levels < l (E's, whole) and, within level l, the edges from lower depths;
-   it drops only couplings of G_i's -c C_s D_i^{-1} B_s part (to higher levels, and the
-   back edges within a level), which vanish with the step, instead of the back edges'
-   E couplings that the agent-by-agent sweep drops */
-static void hitl_ag_levels(hitl_ag *d, int top, const double *u, double *z) {
-  hitl_ag_uz a = {u, z};
-  hitl_ag_sweep(d, top, 3, hitl_ag_levels_step, &a, z);
-}
-
 static double hitl_dot(const double *a, const double *b, long n) {
   double s = 0.0;
   for (long i = 0; i < n; ++i) s += a[i] * b[i];
   return s;
 }
 
-/* GMRES's preconditioner: exact agent by agent on an acyclic topology, level by level on
-   a cycle */
+/* GMRES's preconditioner z = P^{-1} u: on an acyclic topology forward substitution along
+   its order (exact); on a cycle level by level, which drops only couplings of G_i's
+   -c C_s D_i^{-1} B_s part, vanishing with the step (docs/performance.md) */
 static void hitl_ag_precond(hitl_ag *d, int top, const double *u, double *z) {
-  if (d->p->acyclic[top]) hitl_ag_forward(d, top, u, z);
-  else hitl_ag_levels(d, top, u, z);
+  hitl_ag_uz a = {u, z};
+  if (d->p->acyclic[top]) hitl_ag_sweep(d, top, 1, hitl_ag_forward_step, &a, z);
+  else hitl_ag_sweep(d, top, 3, hitl_ag_levels_step, &a, z);
 }
 
-#define HITL_GMRES_FLOOR 1e-10
+#define HITL_GMRES_KRYLOV 30    /* restart length */
+#define HITL_GMRES_TOL 1e-14     /* relative residual reached at every solve */
+#define HITL_GMRES_FLOOR 1e-10   /* ... or this, where a restart no longer halves it */
+#define HITL_GMRES_MAX_ITER 300  /* iterations per solve before it fails (CVODE retries) */
 
 /* Restarted right-preconditioned GMRES on the jets system: x from rhs (x: initial guess
-   0). Returns 0, or -1 if the residual did not reach ls_tol * |rhs| (or stagnated above
-   HITL_GMRES_FLOOR * |rhs|) in max_iter. */
+   0). Returns 0, or -1 if the residual did not reach HITL_GMRES_TOL * |rhs| (or
+   stagnated above HITL_GMRES_FLOOR * |rhs|) in HITL_GMRES_MAX_ITER. */
 static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
-  const hitl_agents_problem *p = d->p;
   long n = (long)d->N * AG_N3(d);
-  int kr = p->krylov, it = 0;
-  double beta0 = sqrt(hitl_dot(rhs, rhs, n)), tol = p->ls_tol * beta0;
+  int kr = HITL_GMRES_KRYLOV, it = 0;
+  double beta0 = sqrt(hitl_dot(rhs, rhs, n)), tol = HITL_GMRES_TOL * beta0;
   double *V = d->V, *H = d->H, *z = d->z;
   memset(x, 0, sizeof(double) * (size_t)n);
   if (beta0 == 0.0) return 0;
   double *r = d->rj; /* residual */
   memcpy(r, rhs, sizeof(double) * (size_t)n);
   double beta_prev = HUGE_VAL;
-  while (it < p->max_iter) {
+  while (it < HITL_GMRES_MAX_ITER) {
     double beta = sqrt(hitl_dot(r, r, n));
     if (beta <= tol) return 0;
     /* a restart that no longer halves the true residual has reached rounding: accept it
@@ -680,7 +590,7 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
     for (int q = 0; q <= kr; ++q) d->g[q] = 0.0;
     d->g[0] = beta;
     int j = 0;
-    for (; j < kr && it < p->max_iter; ++j, ++it) {
+    for (; j < kr && it < HITL_GMRES_MAX_ITER; ++j, ++it) {
       double *vj = V + (size_t)n * j, *w = V + (size_t)n * (j + 1);
       hitl_ag_precond(d, top, vj, z);
       hitl_ag_apply(d, top, z, w);
@@ -693,13 +603,12 @@ static int hitl_ag_gmres(hitl_ag *d, int top, const double *rhs, double *x) {
       H[(size_t)j * (kr + 1) + j + 1] = hn;
       if (hn > 0.0)
         for (long e = 0; e < n; ++e) w[e] /= hn;
+      double *hc = H + (size_t)j * (kr + 1);
       for (int q = 0; q < j; ++q) { /* earlier rotations */
-        double *hc = H + (size_t)j * (kr + 1);
         double a = hc[q], b = hc[q + 1];
         hc[q] = d->cs[q] * a + d->sn[q] * b;
         hc[q + 1] = -d->sn[q] * a + d->cs[q] * b;
       }
-      double *hc = H + (size_t)j * (kr + 1);
       double den = hypot(hc[j], hc[j + 1]);
       d->cs[j] = den > 0 ? hc[j] / den : 1.0;
       d->sn[j] = den > 0 ? hc[j + 1] / den : 0.0;
@@ -743,11 +652,6 @@ static int hitl_ag_forward_x_step(hitl_ag *d, hitl_agwork *wk, int top, int i, i
   return hitl_ag_nsol(d, wk, i, x, s, xi, xi, d->dj + (size_t)AG_N3(d) * i);
 }
 
-/* Block forward substitution through the states along the order of an acyclic topology */
-static int hitl_ag_forward_x(hitl_ag *d, double *x) {
-  return hitl_ag_sweep(d, d->ls_top, 1, hitl_ag_forward_x_step, x, d->dj);
-}
-
 /* Set-up of M = I + c J: the leader's block factorised (dense, pivoting), every agent's
    D_i by its model's ag_nfac (pivots below HITL_PIVOT_MIN fail the set-up) and,
    unless the solve substitutes through the states, G_i by ag_gmat; HITL_AG_DENSE also
@@ -758,7 +662,7 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
   int m = AG_M(d), na = AG_NA(d), n3 = AG_N3(d), N = d->N, fail = 0;
   double c = M->c;
   if (!M->shifted) return -1; /* CVODE always hands over I - gamma J */
-  d->base.n_fac++;
+  d->s.n_fac++;
   hitl_ag_weights(d, &d->wl, M->top, d->t_jac);
   d->W = &d->wl;
   d->ls_top = M->top;
@@ -775,32 +679,24 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
   for (int i = 0; i < N; ++i) {
     hitl_agwork *wk = hitl_ag_wk(d);
-    const hitl_agent_kernels *kn = d->p->kern + d->p->model[i];
     const double *K = M->K + d->p->koff[i];
     double *P = d->lu + d->p->poff[i];
     wk->arg[0] = &c;
     wk->arg[1] = K;
     wk->res[0] = P;
     wk->res[1] = wk->col; /* the pivots */
-    if (kn->nfac(wk->arg, wk->res, wk->iw, wk->w, 0)) {
-      fail |= 1;
-      continue;
-    }
-    int bad = 0;
+    if (hitl_ag_call(d, wk, i, AG_NFAC)) fail |= 1;
     for (int r = 0; r < na; ++r)
-      if (!(fabs(wk->col[r]) > HITL_PIVOT_MIN)) bad = 1; /* also catches NaN */
-    if (bad) {
-      fail |= 1;
-      continue;
-    }
-    if (d->ls_mode == HITL_AG_FORWARD) continue; /* the solve substitutes through x */
+      if (!(fabs(wk->col[r]) > HITL_PIVOT_MIN)) fail |= 1; /* also catches NaN */
+    /* after a failure the set-up fails; FORWARD: the solve substitutes through x */
+    if (fail || d->ls_mode == HITL_AG_FORWARD) continue;
     wk->arg[0] = P;
     wk->res[0] = d->G + (size_t)n3 * n3 * i;
     wk->res[1] = d->Hm + (size_t)na * n3 * i;
-    if (kn->gmat(wk->arg, wk->res, wk->iw, wk->w, 0)) fail |= 1;
+    if (hitl_ag_call(d, wk, i, AG_GMAT)) fail |= 1;
   }
   if (fail) {
-    d->base.n_piv_fail++;
+    d->s.n_piv_fail++;
     return SUNLS_LUFACT_FAIL; /* recoverable: CVODE retries with a smaller step */
   }
   if (d->ls_mode == HITL_AG_FORWARD && !d->p->acyclic[M->top]) return -1; /* forward substitution on a cycle: unrecoverable */
@@ -830,7 +726,7 @@ static int hitl_ag_ls_setup(SUNLinearSolver S, SUNMatrix A) {
       }
     }
     if (hitl_lu(d->S, (int)nj, d->Spiv)) {
-      d->base.n_piv_fail++;
+      d->s.n_piv_fail++;
       return SUNLS_LUFACT_FAIL;
     }
   }
@@ -846,9 +742,10 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
   const double *b = N_VGetArrayPointer(bv);
   (void)A, (void)tol; /* the factorisations of the set-up are all a solve reads */
   d->W = &d->wl;
-  if (x != b) memcpy(x, b, sizeof(double) * (size_t)d->base.nx);
+  if (x != b) memcpy(x, b, sizeof(double) * (size_t)d->s.nx);
   hitl_lu_solve(d->lul, m, d->piv, x); /* leader */
-  if (d->ls_mode == HITL_AG_FORWARD) return hitl_ag_forward_x(d, x);
+  if (d->ls_mode == HITL_AG_FORWARD) /* along the order of an acyclic topology */
+    return hitl_ag_sweep(d, top, 1, hitl_ag_forward_x_step, x, d->dj);
   /* y_i = D_i^{-1} (b_i - c A_s0 x_0), r_i = C_0 x_0 + C_s y_i: ag_nsol with s = 0 */
   int fail = 0;
 #pragma omp parallel for schedule(static) num_threads(hitl_ag_threads(d)) if(hitl_ag_threads(d) > 1) reduction(| : fail)
@@ -880,8 +777,10 @@ static int hitl_ag_ls_solve(SUNLinearSolver S, SUNMatrix A, N_Vector xv, N_Vecto
 }
 
 /* ---------------------------------------------------------------- set-up */
+/* each thread's work arrays; w (CasADi's) is followed by xb, xbdot (m + na), jscr (3n + 1)
+   and col (m + na + 3n + 1) */
 static int hitl_ag_work_alloc(hitl_ag *d, const casadi_int *sz) {
-  int m = d->m, na = d->na, n3 = d->n3, k = d->k;
+  size_t nw = (size_t)sz[3] + 1, nb = (size_t)(d->m + d->na), n3 = (size_t)d->n3 + 1;
   d->wk = (hitl_agwork *)calloc((size_t)d->nthreads, sizeof(hitl_agwork));
   if (!d->wk) return -1;
   for (int q = 0; q < d->nthreads; ++q) {
@@ -889,33 +788,27 @@ static int hitl_ag_work_alloc(hitl_ag *d, const casadi_int *sz) {
     wk->arg = (const casadi_real **)calloc((size_t)sz[0] + 1, sizeof(casadi_real *));
     wk->res = (casadi_real **)calloc((size_t)sz[1] + 1, sizeof(casadi_real *));
     wk->iw = (casadi_int *)calloc((size_t)sz[2] + 1, sizeof(casadi_int));
-    wk->w = (casadi_real *)calloc((size_t)sz[3] + 1, sizeof(casadi_real));
-    wk->xb = (double *)calloc((size_t)(m + na), sizeof(double));
-    wk->xbdot = (double *)calloc((size_t)(m + na), sizeof(double));
-    wk->jscr = (double *)calloc((size_t)n3 + 1, sizeof(double));
-    wk->col = (double *)calloc((size_t)k + 1, sizeof(double));
-    if (!wk->arg || !wk->res || !wk->iw || !wk->w || !wk->xb || !wk->xbdot ||
-        !wk->jscr || !wk->col)
-      return -1;
+    wk->w = (casadi_real *)calloc(nw + 3 * nb + 2 * n3, sizeof(casadi_real));
+    if (!wk->arg || !wk->res || !wk->iw || !wk->w) return -1;
+    wk->xb = wk->w + nw, wk->xbdot = wk->xb + nb, wk->jscr = wk->xbdot + nb;
+    wk->col = wk->jscr + n3;
   }
   return 0;
 }
 
-static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p, char *msg,
-                        int msglen, const char *log_path) {
-  hitl_ctx *c = &d->base;
+static int hitl_ag_init(hitl_ag *d, const hitl_agents_problem *p, char *msg, int msglen,
+                        const char *log_path) {
+  hitl_cvode *s = &d->s;
   casadi_int sz[4] = {0, 0, 0, 0};
   int N = p->N, m = p->m, na = p->na, n = p->n;
   int nx = m + N * na;
   long nj = (long)N * 3 * n;
   memset(d, 0, sizeof *d);
-  memset(s, 0, sizeof *s);
-  c->msg = msg;
-  c->msglen = msglen;
+  s->msg = msg;
+  s->msglen = msglen;
   if (msglen > 0) msg[0] = '\0';
   d->p = p;
-  d->N = N, d->m = m, d->na = na, d->n = n, d->n3 = 3 * n, d->k = m + na + 3 * n;
-  d->npar = p->npar;
+  d->N = N, d->m = m, d->na = na, d->n = n, d->n3 = 3 * n;
 #ifdef _OPENMP
   d->nthreads = p->nthreads > 0 ? p->nthreads : omp_get_max_threads();
 #else
@@ -923,102 +816,72 @@ static int hitl_ag_init(hitl_ag *d, hitl_cvode *s, const hitl_agents_problem *p,
 #endif
   if ((HITL_AG_N_OUT && n != HITL_AG_N_OUT) || (HITL_AG_N_STATE && na != HITL_AG_N_STATE) ||
       (HITL_AG_N_LEADER && m != HITL_AG_N_LEADER)) {
-    hitl_msg(c, "the problem's sizes (m, na, n) differ from those the driver was compiled for");
+    hitl_msg(s, "the problem's sizes (m, na, n) differ from those the driver was compiled for");
     return -1;
   }
   if (d->n3 > 64) {
-    hitl_msg(c, "more than 21 output coordinates per follower");
+    hitl_msg(s, "more than 21 output coordinates per follower");
     return -1;
   }
   if (p->solver == HITL_AG_DENSE && nj > 6000) {
-    hitl_msg(c, "the dense jets solver is for 3nN <= 6000 (use gmres)");
+    hitl_msg(s, "the dense jets solver is for 3nN <= 6000 (use gmres)");
     return -1;
   }
-  for (int q = 0; q < p->nmodels; ++q) {
-    const hitl_agent_kernels *kn = p->kern + q;
-    for (int l = 0; l < 3; ++l) hitl_work_size(kn->jet_work[l], sz);
-    hitl_work_size(kn->rhs_work, sz);
-    hitl_work_size(kn->jac_work, sz);
-    hitl_work_size(kn->nfac_work, sz);
-    hitl_work_size(kn->nsol_work, sz);
-    hitl_work_size(kn->gmat_work, sz);
+  for (int q = 0; q < p->nmodels; ++q)
+    for (int f = 0; f < AG_NKERNELS; ++f) hitl_work_size(p->kern[q].work[f], sz);
+  s->nx = nx;
+  int maxnnz = 0, kr = HITL_GMRES_KRYLOV;
+  for (int sg = 0; sg < p->ntop; ++sg) {
+    int nz = p->ptr[(size_t)sg * (N + 1) + N] - p->ptr[(size_t)sg * (N + 1)];
+    if (nz > maxnnz) maxnnz = nz;
   }
-  c->nx = nx;
-  d->jets = (double *)calloc((size_t)nj + 1, sizeof(double));
-  d->nb = (double *)calloc((size_t)nj + 1, sizeof(double));
-  d->lu = (double *)calloc((size_t)p->poff[N] + 1, sizeof(double));
-  d->lul = (double *)calloc((size_t)m * m + 1, sizeof(double));
+  struct {
+    double **a;
+    size_t n;
+  } arr[] = {
+      {&d->jets, nj}, {&d->nb, nj}, {&d->dj, nj}, {&d->dnb, nj}, {&d->rj, nj}, {&d->z, nj},
+      {&d->ps, nj}, {&d->lu, p->poff[N]}, {&d->lul, m * m}, {&d->zero, d->n3},
+      {&d->G, nj * d->n3}, {&d->Hm, (size_t)N * na * d->n3}, {&d->y, (size_t)N * na},
+      {&d->V, nj * (kr + 1)}, {&d->H, (kr + 1) * (kr + 1)}, {&d->cs, kr}, {&d->sn, kr},
+      {&d->g, kr + 1}, {&d->S, p->solver == HITL_AG_DENSE ? nj * nj : 0},
+      {&d->wr.w[0], maxnnz}, {&d->wr.w[1], maxnnz}, {&d->wr.w[2], maxnnz},
+      {&d->wl.w[0], maxnnz}, {&d->wl.w[1], maxnnz}, {&d->wl.w[2], maxnnz},
+      {&d->wr.cpl, N * 6}, {&d->wl.cpl, N * 6}, {&s->K, p->koff[N]}};
+  size_t total = 0, narr = sizeof arr / sizeof arr[0];
+  for (size_t q = 0; q < narr; ++q) total += arr[q].n + 1;
+  d->mem = (double *)calloc(total, sizeof(double));
+  for (size_t q = 0, off = 0; d->mem && q < narr; ++q) {
+    *arr[q].a = d->mem + off;
+    off += arr[q].n + 1;
+  }
+  d->wr.seg = d->wl.seg = -1;
+  d->W = &d->wr;
   d->piv = (int *)calloc((size_t)m + 1, sizeof(int));
-  d->zero = (double *)calloc((size_t)d->n3 + 1, sizeof(double));
-  d->G = (double *)calloc((size_t)N * d->n3 * d->n3 + 1, sizeof(double));
-  d->Hm = (double *)calloc((size_t)N * na * d->n3 + 1, sizeof(double));
-  d->ps = (double *)calloc((size_t)N * d->n3 + 1, sizeof(double));
-  d->y = (double *)calloc((size_t)N * na + 1, sizeof(double));
-  d->dj = (double *)calloc((size_t)nj + 1, sizeof(double));
-  d->dnb = (double *)calloc((size_t)nj + 1, sizeof(double));
-  d->rj = (double *)calloc((size_t)nj + 1, sizeof(double));
-  d->z = (double *)calloc((size_t)nj + 1, sizeof(double));
+  d->Spiv = (int *)calloc((size_t)nj + 1, sizeof(int));
   d->done = (long *)calloc((size_t)N + 1, sizeof(long));
-  {
-    int maxnnz = 0;
-    for (int sg = 0; sg < p->ntop; ++sg) {
-      int nz = p->ptr[(size_t)sg * (N + 1) + N] - p->ptr[(size_t)sg * (N + 1)];
-      if (nz > maxnnz) maxnnz = nz;
-    }
-    hitl_ag_wts *ws[2] = {&d->wr, &d->wl};
-    for (int q = 0; q < 2; ++q) {
-      ws[q]->seg = -1;
-      for (int l = 0; l < 3; ++l) ws[q]->w[l] = (double *)calloc((size_t)maxnnz + 1, sizeof(double));
-      ws[q]->cpl = (double *)calloc((size_t)N * 6 + 1, sizeof(double));
-      if (!ws[q]->w[0] || !ws[q]->w[1] || !ws[q]->w[2] || !ws[q]->cpl) {
-        hitl_msg(c, "out of memory");
-        return -1;
-      }
-    }
-    d->W = &d->wr;
-  }
-  if (p->solver == HITL_AG_DENSE) {
-    d->S = (double *)calloc((size_t)nj * nj + 1, sizeof(double));
-    d->Spiv = (int *)calloc((size_t)nj + 1, sizeof(int));
-  }
-  {
-    int kr = p->krylov > 0 ? p->krylov : 1;
-    d->V = (double *)calloc((size_t)nj * (kr + 1) + 1, sizeof(double));
-    d->H = (double *)calloc((size_t)(kr + 1) * (kr + 1), sizeof(double));
-    d->cs = (double *)calloc((size_t)kr + 1, sizeof(double));
-    d->sn = (double *)calloc((size_t)kr + 1, sizeof(double));
-    d->g = (double *)calloc((size_t)kr + 2, sizeof(double));
-  }
-  if (!d->jets || !d->nb || !d->lu || !d->lul || !d->piv || !d->zero || !d->G || !d->Hm || !d->ps || !d->y ||
-      !d->dj || !d->dnb || !d->rj || !d->z || !d->done || !d->V || !d->H || !d->cs || !d->sn || !d->g ||
-      (p->solver == HITL_AG_DENSE && (!d->S || !d->Spiv)) || hitl_ag_work_alloc(d, sz)) {
-    hitl_msg(c, "out of memory");
+  if (!d->mem || !d->piv || !d->Spiv || !d->done || hitl_ag_work_alloc(d, sz)) {
+    hitl_msg(s, "out of memory");
     return -1;
   }
-  if (hitl_sundials_create(c, s, nx, log_path)) return -1;
-  s->A = hitl_kmat_new((long)p->koff[N], s->ctx);
+  if (hitl_sundials_create(s, log_path)) return -1;
+  s->A = hitl_kmat_new(s->K, s->ctx);
   if (!s->A) {
-    hitl_msg(c, "out of memory");
+    hitl_msg(s, "out of memory");
     return -1;
   }
-  hitl_ls_attach(s, d, hitl_ag_ls_setup, hitl_ag_ls_solve);
+  s->LS->content = d; /* the driver's linear solver: direct, custom, freed empty */
+  s->LS->ops->gettype = hitl_ls_type;
+  s->LS->ops->setup = hitl_ag_ls_setup;
+  s->LS->ops->solve = hitl_ag_ls_solve;
+  s->LS->ops->free = hitl_ls_free;
   return 0;
 }
 
-static void hitl_ag_free(hitl_ag *d, hitl_cvode *s) {
-  if (d->wk)
-    for (int q = 0; q < d->nthreads; ++q) {
-      hitl_agwork *wk = d->wk + q;
-      free(wk->arg), free(wk->res), free(wk->iw), free(wk->w), free(wk->xb);
-      free(wk->xbdot), free(wk->jscr), free(wk->col);
-    }
-  free(d->wk);
-  free(d->jets), free(d->nb), free(d->lu), free(d->lul), free(d->piv), free(d->zero);
-  free(d->G), free(d->Hm), free(d->ps), free(d->y), free(d->dj), free(d->dnb), free(d->rj), free(d->z), free(d->S), free(d->done);
-  free(d->Spiv), free(d->V), free(d->H), free(d->cs), free(d->sn), free(d->g);
-  for (int l = 0; l < 3; ++l) free(d->wr.w[l]), free(d->wl.w[l]);
-  free(d->wr.cpl), free(d->wl.cpl);
-  hitl_cvode_free(s);
+static void hitl_ag_free(hitl_ag *d) {
+  for (int q = 0; d->wk && q < d->nthreads; ++q)
+    free(d->wk[q].arg), free(d->wk[q].res), free(d->wk[q].iw), free(d->wk[q].w);
+  hitl_cvode_free(&d->s);
+  free(d->wk), free(d->mem), free(d->piv), free(d->Spiv), free(d->done);
 }
 
 /* 1 if compiled with OpenMP (threads over the agents), else 0 */
@@ -1043,13 +906,12 @@ CASADI_SYMBOL_EXPORT int hitl_agents_run(const hitl_agents_problem *p, const dou
                                          const hitl_options *o, hitl_result *r,
                                          long *krylov_iters) {
   hitl_ag d;
-  hitl_cvode s;
   int ok, filled;
   hitl_result_start(r);
-  ok = hitl_ag_init(&d, &s, p, r->msg, HITL_MSG_LEN, o->log_path) == 0;
-  filled = hitl_cvode_run(&d.base, &s, ok, &d, hitl_ag_rhs, hitl_ag_jac, x0, o, r);
+  ok = hitl_ag_init(&d, p, r->msg, HITL_MSG_LEN, o->log_path) == 0;
+  filled = hitl_cvode_run(&d.s, ok, &d, hitl_ag_rhs, hitl_ag_jac, x0, o, r);
   if (krylov_iters) *krylov_iters = d.n_krylov;
-  hitl_ag_free(&d, &s);
+  hitl_ag_free(&d);
   return filled;
 }
 
@@ -1062,20 +924,20 @@ CASADI_SYMBOL_EXPORT int hitl_agents_probe(const hitl_agents_problem *p, double 
                                            const double *x, double gamma, const double *b,
                                            double *xdot, double *sol, char *msg, int msglen) {
   hitl_ag d;
-  hitl_cvode s;
+  hitl_cvode *s = &d.s;
   int nx = p->m + p->N * p->na, ret = -1;
   N_Vector bv = NULL, xv = NULL;
-  if (hitl_ag_init(&d, &s, p, msg, msglen, NULL)) goto done;
-  bv = N_VNew_Serial(nx, s.ctx);
-  xv = N_VNew_Serial(nx, s.ctx);
+  if (hitl_ag_init(&d, p, msg, msglen, NULL)) goto done;
+  bv = N_VNew_Serial(nx, s->ctx);
+  xv = N_VNew_Serial(nx, s->ctx);
   if (!bv || !xv) goto done;
-  memcpy(N_VGetArrayPointer(s.y), x, (size_t)nx * sizeof(double));
+  memcpy(N_VGetArrayPointer(s->y), x, (size_t)nx * sizeof(double));
   memcpy(N_VGetArrayPointer(bv), b, (size_t)nx * sizeof(double));
   if (hitl_ag_pass(&d, t, x, xdot, NULL, NULL)) goto done;
-  if (hitl_ag_jac(t, s.y, NULL, s.A, &d, NULL, NULL, NULL)) goto done;
-  if (SUNMatScaleAddI(-gamma, s.A) || hitl_ag_ls_setup(s.LS, s.A) ||
-      hitl_ag_ls_solve(s.LS, s.A, xv, bv, 0.0)) {
-    hitl_msg(&d.base, "linear solve failed");
+  if (hitl_ag_jac(t, s->y, NULL, s->A, &d, NULL, NULL, NULL)) goto done;
+  if (SUNMatScaleAddI(-gamma, s->A) || hitl_ag_ls_setup(s->LS, s->A) ||
+      hitl_ag_ls_solve(s->LS, s->A, xv, bv, 0.0)) {
+    hitl_msg(s, "linear solve failed");
     goto done;
   }
   memcpy(sol, N_VGetArrayPointer(xv), (size_t)nx * sizeof(double));
@@ -1084,6 +946,6 @@ CASADI_SYMBOL_EXPORT int hitl_agents_probe(const hitl_agents_problem *p, double 
 done:
   if (bv) N_VDestroy(bv);
   if (xv) N_VDestroy(xv);
-  hitl_ag_free(&d, &s);
+  hitl_ag_free(&d);
   return ret;
 }

@@ -1,10 +1,6 @@
 /*
- * The SUNDIALS side of the hitl-formation CVODE driver (generated/native.py): SUNDIALS
- * includes, the driver's context (message, counters), CVODE's set-up and its output loop with breakpoints,
- * a custom SUNLinearSolver shell, CVODE's counters, the SUNDIALS version/index check,
- * and the per-follower block matrix hitl_kmat. Prepended to agents.c (the per-agent
- * engine); the generated C of the follower kernels comes first. The entry points take
- * hitl_options and fill hitl_result (hitl_native.h).
+ * The SUNDIALS side of the native CVODE driver (generated/native/README.md), prepended to
+ * agents.c after the generated C of the follower kernels.
  */
 #include <math.h>
 #include <stdio.h>
@@ -22,14 +18,23 @@
 /* a pivot below this (or not finite) makes the setup fail recoverably */
 #define HITL_PIVOT_MIN 1e-13
 
+/* CVODE with everything it needs and what a run reports: one per run, re-initialised at
+   breakpoints */
 typedef struct {
+  SUNContext ctx;
+  N_Vector y;
+  SUNMatrix A;
+  SUNLinearSolver LS;
+  void *mem;
+  double *K; /* the Jacobian's storage, shared by its matrices (hitl_kmat; the driver's) */
+  FILE *log; /* SUNDIALS' messages (hitl_log_msg), or NULL: dropped */
   int nx;
-  long n_fac, n_piv_fail;
-  char *msg;
+  long n_fac, n_piv_fail; /* set-ups of the driver's linear solver, and those refused */
+  char *msg;              /* the last message (msglen bytes) */
   int msglen;
-} hitl_ctx;
+} hitl_cvode;
 
-static void hitl_msg(hitl_ctx *c, const char *text) {
+static void hitl_msg(hitl_cvode *c, const char *text) {
   if (c->msg && c->msglen > 0) {
     strncpy(c->msg, text, (size_t)c->msglen - 1);
     c->msg[c->msglen - 1] = '\0';
@@ -39,7 +44,7 @@ static void hitl_msg(hitl_ctx *c, const char *text) {
 static void hitl_err_handler(int line, const char *func, const char *file, const char *msg,
                              SUNErrCode code, void *data, SUNContext ctx) {
   /* keep SUNDIALS' last message instead of printing it */
-  hitl_msg((hitl_ctx *)data, msg ? msg : "SUNDIALS error");
+  hitl_msg((hitl_cvode *)data, msg ? msg : "SUNDIALS error");
   (void)line; (void)func; (void)file; (void)code; (void)ctx;
 }
 
@@ -53,29 +58,17 @@ static void hitl_work_size(int (*work)(casadi_int *, casadi_int *, casadi_int *,
   if (w > sz[3]) sz[3] = w;
 }
 
-/* CVODE's counters since the last (re)initialisation, added to acc[0..6]: steps, RHS,
-   Jacobians, linear-solver set-ups, error-test failures, Newton iterations, Newton
-   convergence failures */
-static void hitl_add_counters(void *mem, long *acc) {
+/* CVODE's counters since the last (re)initialisation, added to the result's */
+static void hitl_add_counters(void *mem, hitl_result *r) {
   long v;
-  CVodeGetNumSteps(mem, &v), acc[0] += v;
-  CVodeGetNumRhsEvals(mem, &v), acc[1] += v;
-  CVodeGetNumJacEvals(mem, &v), acc[2] += v;
-  CVodeGetNumLinSolvSetups(mem, &v), acc[3] += v;
-  CVodeGetNumErrTestFails(mem, &v), acc[4] += v;
-  CVodeGetNumNonlinSolvIters(mem, &v), acc[5] += v;
-  CVodeGetNumNonlinSolvConvFails(mem, &v), acc[6] += v;
+  CVodeGetNumSteps(mem, &v), r->steps += v;
+  CVodeGetNumRhsEvals(mem, &v), r->rhs_evals += v;
+  CVodeGetNumJacEvals(mem, &v), r->jac_evals += v;
+  CVodeGetNumLinSolvSetups(mem, &v), r->lin_setups += v;
+  CVodeGetNumErrTestFails(mem, &v), r->error_test_fails += v;
+  CVodeGetNumNonlinSolvIters(mem, &v), r->newton_iters += v;
+  CVodeGetNumNonlinSolvConvFails(mem, &v), r->newton_fails += v;
 }
-
-/* CVODE with everything it needs: one per run, re-initialised at breakpoints */
-typedef struct {
-  SUNContext ctx;
-  N_Vector y;
-  SUNMatrix A;
-  SUNLinearSolver LS;
-  void *mem;
-  FILE *log; /* SUNDIALS' messages (hitl_log_msg), or NULL: dropped */
-} hitl_cvode;
 
 /* SUNDIALS' logger queue function: one line per message, "[WARNING][CVode] text
    (cvode.c:1234)", appended to the run's log (content: its FILE *, or NULL) instead of
@@ -102,15 +95,15 @@ static SUNErrCode hitl_log_flush(SUNLogger logger, SUNLogLevel lvl, void *conten
 }
 
 /* The SUNDIALS context, the state vector, an empty linear solver (the driver sets its
-   content and operations) and CVODE (BDF) for nx states. The driver creates the matrix
-   s->A. SUNDIALS' warnings and errors go to the file log_path (appended; NULL or "":
-   dropped), never to the terminal; the last error also to c->msg. Returns 0, or -1 with
-   c->msg set. */
-static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx, const char *log_path) {
+   content and operations) and CVODE (BDF) for s->nx states. The driver creates the
+   matrix s->A. SUNDIALS' warnings and errors go to the file log_path (appended; NULL or
+   "": dropped), never to the terminal; the last error also to s->msg. Returns 0, or -1
+   with s->msg set. */
+static int hitl_sundials_create(hitl_cvode *s, const char *log_path) {
   SUNLogger logger = NULL;
   if (SUNContext_Create(SUN_COMM_NULL, &s->ctx) != SUN_SUCCESS) {
     s->ctx = NULL;
-    hitl_msg(c, "SUNContext_Create failed");
+    hitl_msg(s, "SUNContext_Create failed");
     return -1;
   }
   if (log_path && *log_path) s->log = fopen(log_path, "a");
@@ -118,12 +111,12 @@ static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx, const char *
     SUNLogger_SetQueueAndFlushMsgFns(logger, hitl_log_msg, hitl_log_flush, s->log);
   SUNContext_ClearErrHandlers(s->ctx);
   SUNContext_PushErrHandler(s->ctx, SUNLogErrHandlerFn, NULL); /* errors into the log */
-  SUNContext_PushErrHandler(s->ctx, hitl_err_handler, c);
-  s->y = N_VNew_Serial(nx, s->ctx);
+  SUNContext_PushErrHandler(s->ctx, hitl_err_handler, s);
+  s->y = N_VNew_Serial(s->nx, s->ctx);
   s->LS = SUNLinSolNewEmpty(s->ctx);
   s->mem = CVodeCreate(CV_BDF, s->ctx);
   if (!s->y || !s->LS || !s->mem) {
-    hitl_msg(c, "CVODE could not allocate its memory");
+    hitl_msg(s, "CVODE could not allocate its memory");
     return -1;
   }
   return 0;
@@ -132,14 +125,12 @@ static int hitl_sundials_create(hitl_ctx *c, hitl_cvode *s, int nx, const char *
 /* From CVodeInit's state at t_out[0], integrate to every t_out[k] and store the state
    there (row-major x_out[k * nx + i]; CVODE's interpolant between its steps). CVODE
    restarts (CVodeReInit) at every breakpoint; it stops exactly there and at the horizon
-   (CVodeSetStopTime), never stepping beyond. t_out and breaks are the targets and
-   restart times of generated.schedule.schedule: increasing, breaks strictly inside
-   (t_out[0], t_out[nt-1]), every two distinct times more than its tolerance apart, and
-   an output time that coincides with a breakpoint to that tolerance replaced by it, so
-   CVODE is never asked for a time it already stands at (CV_TOO_CLOSE).
-   Returns the rows filled (>= 1); *flag is CVODE's last flag (< 0 on a failure). */
+   (CVodeSetStopTime), never stepping beyond. t_out and breaks are the targets and restart
+   times of generated.schedule.schedule, so CVODE is never asked for a time it already
+   stands at (CV_TOO_CLOSE). Returns the rows filled (>= 1); *flag is CVODE's last flag
+   (< 0 on a failure). */
 static int hitl_cvode_outputs(hitl_cvode *s, int nx, const hitl_options *o, hitl_result *r,
-                              long *acc, int *flag) {
+                              int *flag) {
   int filled = 1, ib = 0, nt = o->nt, nb = o->nb;
   const double *t_out = o->t_out, *breaks = o->breaks;
   double t = t_out[0], tstop_set = NAN;
@@ -161,7 +152,7 @@ static int hitl_cvode_outputs(hitl_cvode *s, int nx, const hitl_options *o, hitl
       if (t >= stop) {
         tstop_set = NAN; /* CVODE forgets a stop time once reached */
         if (ib < nb) {   /* a breakpoint: restart from the state reached */
-          hitl_add_counters(s->mem, acc);
+          hitl_add_counters(s->mem, r);
           *flag = CVodeReInit(s->mem, t, s->y);
           if (*flag < 0) return filled;
           r->restarts += 1;
@@ -175,8 +166,7 @@ static int hitl_cvode_outputs(hitl_cvode *s, int nx, const hitl_options *o, hitl
   return filled;
 }
 
-/* The driver's linear solver is direct, custom and freed empty: attach it, with
-   its content, set-up and solve, to s->LS */
+/* the driver's linear solver: direct, custom (its content and operations: agents.c) */
 static SUNLinearSolver_Type hitl_ls_type(SUNLinearSolver S) {
   (void)S;
   return SUNLINEARSOLVER_DIRECT;
@@ -187,46 +177,18 @@ static SUNErrCode hitl_ls_free(SUNLinearSolver S) {
   return SUN_SUCCESS;
 }
 
-static void hitl_ls_attach(hitl_cvode *s, void *content, int (*setup)(SUNLinearSolver, SUNMatrix),
-                           int (*solve)(SUNLinearSolver, SUNMatrix, N_Vector, N_Vector,
-                                        sunrealtype)) {
-  s->LS->content = content;
-  s->LS->ops->gettype = hitl_ls_type;
-  s->LS->ops->setup = setup;
-  s->LS->ops->solve = solve;
-  s->LS->ops->free = hitl_ls_free;
-}
-
 /* CVODE's options after CVodeInit: user data, tolerances, linear solver, Jacobian.
    J is evaluated afresh at every set-up of the Newton matrix, as CasADi's cvodes does
-   (CVODE's default keeps one for up to 51 steps, error-test failures included): the
-   closed loop's right-hand side has kinks (the ghat projection, |chi|, the torque
-   limit) across which J changes by orders of magnitude, and Newton iterates from a J of
-   the far side pass the convergence test (it measures corrections, not residuals) with
-   the step's derivative history wrong. Measured on the start-up of
-   tests/data/startup-projection-kink.toml: one ghat_i's history rate 2e5 where its
-   right-hand side was 0, error-test failures down to h = 1e-10, the run lost. */
+   (CVODE's default keeps one for up to 51 steps): the closed loop's right-hand side has
+   kinks (the ghat projection, |chi|, the torque limit) across which J changes by orders
+   of magnitude, and Newton iterates from a J of the far side pass the convergence test
+   with the step's derivative history wrong (tests/data/startup-projection-kink.toml was
+   lost so, docs/simulation.md). */
 static int hitl_cvode_options(hitl_cvode *s, void *data, const hitl_options *o,
                               CVLsJacFn jac) {
   return CVodeSetUserData(s->mem, data) || CVodeSStolerances(s->mem, o->rtol, o->atol) ||
          CVodeSetLinearSolver(s->mem, s->LS, s->A) || CVodeSetJacFn(s->mem, jac) ||
          CVodeSetJacEvalFrequency(s->mem, 1) || CVodeSetMaxNumSteps(s->mem, o->max_steps);
-}
-
-/* The counters (acc: hitl_add_counters' layout) and the last flag into the result */
-static void hitl_stats(const hitl_ctx *c, const long *acc, double last_step, int flag,
-                       hitl_result *r) {
-  r->steps = acc[0];
-  r->rhs_evals = acc[1];
-  r->jac_evals = acc[2];
-  r->lin_setups = acc[3];
-  r->error_test_fails = acc[4];
-  r->newton_iters = acc[5];
-  r->newton_fails = acc[6];
-  r->last_step = last_step;
-  r->lu_factorizations = c->n_fac;
-  r->pivot_failures = c->n_piv_fail;
-  r->flag = flag;
 }
 
 /* A driver's result before the run: zero counters, an empty message, x_out kept */
@@ -239,7 +201,7 @@ static void hitl_result_start(hitl_result *r) {
 }
 
 /* CVODE's flag name and the last SUNDIALS message, as "NAME: message", into c->msg */
-static void hitl_flag_message(hitl_ctx *c, int flag) {
+static void hitl_flag_message(hitl_cvode *c, int flag) {
   char *name = CVodeGetReturnFlagName(flag);
   char text[640];
   snprintf(text, sizeof text, "%s: %s", name ? name : "CV_UNKNOWN", c->msg ? c->msg : "");
@@ -251,11 +213,9 @@ static void hitl_flag_message(hitl_ctx *c, int flag) {
    t_out[0] through every output time (hitl_cvode_outputs), then CVODE's counters, the
    last flag and its message into the result (reset by hitl_result_start first). Returns
    the rows of x_out filled (>= 1), or -1 if CVODE could not be started. */
-static int hitl_cvode_run(hitl_ctx *c, hitl_cvode *s, int ok, void *data, CVRhsFn rhs,
-                          CVLsJacFn jac, const double *x0, const hitl_options *o,
-                          hitl_result *r) {
-  int nx = c->nx, filled = -1, flag = 0;
-  long acc[7] = {0, 0, 0, 0, 0, 0, 0};
+static int hitl_cvode_run(hitl_cvode *s, int ok, void *data, CVRhsFn rhs, CVLsJacFn jac,
+                          const double *x0, const hitl_options *o, hitl_result *r) {
+  int nx = s->nx, filled = -1, flag = 0;
   sunrealtype h = 0;
   if (ok) {
     memcpy(N_VGetArrayPointer(s->y), x0, (size_t)nx * sizeof(double));
@@ -263,18 +223,21 @@ static int hitl_cvode_run(hitl_ctx *c, hitl_cvode *s, int ok, void *data, CVRhsF
     r->t_stop = o->t_out[0];
     if (!CVodeInit(s->mem, rhs, o->t_out[0], s->y) &&
         !hitl_cvode_options(s, data, o, jac)) /* else: msg set by the error handler */
-      filled = hitl_cvode_outputs(s, nx, o, r, acc, &flag);
+      filled = hitl_cvode_outputs(s, nx, o, r, &flag);
     if (filled >= 1 && r->x_stop)
       memcpy(r->x_stop, N_VGetArrayPointer(s->y), (size_t)nx * sizeof(double));
   }
   if (s->mem) {
-    hitl_add_counters(s->mem, acc);
+    hitl_add_counters(s->mem, r);
     CVodeGetLastStep(s->mem, &h);
   }
-  hitl_stats(c, acc, h, flag, r);
+  r->last_step = h;
+  r->lu_factorizations = s->n_fac;
+  r->pivot_failures = s->n_piv_fail;
+  r->flag = flag;
   r->filled = filled;
   r->t_reached = filled >= 1 ? o->t_out[filled - 1] : o->t_out[0];
-  if (flag < 0) hitl_flag_message(c, flag);
+  if (flag < 0) hitl_flag_message(s, flag);
   return filled;
 }
 
@@ -288,21 +251,11 @@ static void hitl_cvode_free(hitl_cvode *s) {
 }
 
 /* ------------------------------------------------- the per-follower block matrix */
-/* The Jacobian of the per-agent driver (agents.c): one block K_i per
-   follower, laid out by the driver, representing c J (+ I once shifted). */
+/* The Jacobian of the per-agent driver (agents.c): one block K_i per follower, representing
+   c J (+ I once shifted). Its matrices share K (hitl_cvode.K; docs/performance.md, item
+   Storage: why that is safe) and keep the shift c and top, the topology K was evaluated on. */
 typedef struct {
   double *K;
-  int refs;
-} hitl_kbuf;
-
-/* K is shared, not copied, by the matrices CVODE copies into each other (its saved
-   Jacobian and the Newton matrix): only the Jacobian evaluation writes K, and it writes
-   every entry; CVODE copies the matrix it evaluated into the saved one right after. The
-   shift c (and top, the topology K was evaluated on: agents.c) is kept per matrix. */
-typedef struct {
-  long len;
-  hitl_kbuf *buf;
-  double *K; /* buf->K */
   double c;
   int shifted, top;
 } hitl_kmat;
@@ -314,26 +267,16 @@ static SUNMatrix_ID hitl_kmat_id(SUNMatrix A) {
   return SUNMATRIX_CUSTOM;
 }
 
-static SUNMatrix hitl_kmat_new(long len, SUNContext ctx);
+static SUNMatrix hitl_kmat_new(double *K, SUNContext ctx);
 
 static SUNMatrix hitl_kmat_clone(SUNMatrix A) {
-  return hitl_kmat_new(HITL_KMAT(A)->len, A->sunctx);
-}
-
-static void hitl_kbuf_release(hitl_kbuf *b) {
-  if (b && --b->refs == 0) {
-    free(b->K);
-    free(b);
-  }
+  return hitl_kmat_new(HITL_KMAT(A)->K, A->sunctx);
 }
 
 static void hitl_kmat_destroy(SUNMatrix A) {
   if (!A) return;
-  if (A->content) {
-    hitl_kbuf_release(HITL_KMAT(A)->buf);
-    free(A->content);
-    A->content = NULL;
-  }
+  free(A->content);
+  A->content = NULL;
   SUNMatFreeEmpty(A);
 }
 
@@ -347,12 +290,6 @@ static SUNErrCode hitl_kmat_zero(SUNMatrix A) {
 
 static SUNErrCode hitl_kmat_copy(SUNMatrix A, SUNMatrix B) {
   hitl_kmat *a = HITL_KMAT(A), *b = HITL_KMAT(B);
-  if (b->buf != a->buf) {
-    hitl_kbuf_release(b->buf);
-    b->buf = a->buf;
-    b->buf->refs++;
-    b->K = a->K;
-  }
   b->c = a->c;
   b->shifted = a->shifted;
   b->top = a->top;
@@ -368,23 +305,15 @@ static SUNErrCode hitl_kmat_scaleaddi(sunrealtype c, SUNMatrix A) {
   return SUN_SUCCESS;
 }
 
-/* A block matrix of len entries (zero), or NULL when out of memory */
-static SUNMatrix hitl_kmat_new(long len, SUNContext ctx) {
+/* A block matrix on the storage K, or NULL when out of memory */
+static SUNMatrix hitl_kmat_new(double *K, SUNContext ctx) {
   SUNMatrix A = SUNMatNewEmpty(ctx);
-  hitl_kmat *m;
-  if (!A) return NULL;
-  m = (hitl_kmat *)calloc(1, sizeof *m);
-  if (m) m->buf = (hitl_kbuf *)calloc(1, sizeof *m->buf);
-  if (m && m->buf) m->buf->K = (double *)calloc((size_t)len + 1, sizeof(double));
-  if (!m || !m->buf || !m->buf->K) {
-    if (m) free(m->buf);
-    free(m);
-    SUNMatFreeEmpty(A);
+  hitl_kmat *m = A ? (hitl_kmat *)calloc(1, sizeof *m) : NULL;
+  if (!m) {
+    if (A) SUNMatFreeEmpty(A);
     return NULL;
   }
-  m->buf->refs = 1;
-  m->K = m->buf->K;
-  m->len = len;
+  m->K = K;
   m->c = 1.0;
   A->content = m;
   A->ops->getid = hitl_kmat_id;

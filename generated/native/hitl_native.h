@@ -1,12 +1,7 @@
 /*
- * The native driver's calling convention (generated/native/agents.c): a run takes
- * one options struct and fills one result struct. Defined here once; mirrored once in
- * Python as ctypes Structures (generated/native.py: Options, Result).
- * tests/test_solver_interface.py compiles this header and compares every field's
- * offset and every struct's size with the ctypes mirror, and every library reports
- * its sizes (hitl_struct_size) when it is loaded.
- *
- * Plain C types only: the header needs neither SUNDIALS nor CasADi.
+ * The native driver's calling convention: a run takes one options struct and fills one
+ * result struct, mirrored in generated/native.py (tests/test_solver_interface.py compares
+ * every offset; every library reports its sizes, hitl_struct_size). Plain C types only.
  */
 #ifndef HITL_NATIVE_H
 #define HITL_NATIVE_H

@@ -1,17 +1,12 @@
 """Method ``native``: SUNDIALS CVODE (BDF) driven from C, one call from Python per run.
 
-The engine is the per-agent one (:mod:`generated.agents`, ``agents.c``) for every N: one
-kernel library per follower model with the graph, N, the switching times, the links'
-fade and the per-follower numbers as runtime data, so any graph (cyclic, signed,
-switching, fading) and mixed models are carried and a new graph compiles nothing. The
-closed loop's outputs of a run are evaluated from the symbolic closed loop by CasADi's
-virtual machine (nothing compiled).
+The engine is the per-agent one (:mod:`generated.agents`) for every N: a new graph
+compiles nothing.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -30,14 +25,6 @@ if TYPE_CHECKING:
     from synthesis.gains import Gains
 
 
-@dataclass(frozen=True)
-class PerAgent:
-    """The scenario and gains a per-agent build compiles its kernels from (:meth:`Native.prepare`)."""
-
-    scenario: Scenario
-    gains: Gains
-
-
 class Native(Solver):
     """CVODE from C: the per-agent engine (:mod:`generated.agents`)."""
 
@@ -45,39 +32,33 @@ class Native(Solver):
     form = "ode"
     summary = "BDF (SUNDIALS CVODE) driven from generated C"
 
-    def prepare(self, sc: Scenario, gains: Gains) -> Any:
-        """What the per-agent kernels need.
+    def prepare(self, sc: Scenario, gains: Gains) -> tuple[Scenario, Gains]:
+        """The scenario and gains the kernels are compiled from.
 
         Parameters
         ----------
         sc : Scenario
         gains : Gains
-
-        Returns
-        -------
-        PerAgent
         """
-        return PerAgent(sc, gains)
+        return sc, gains
 
     def build(self, cl: ClosedLoop, settings: CodegenSettings, prepared: Any = None) -> BuildPlan:
-        """The per-agent kernel libraries (:func:`generated.agents.build_models`).
-
-        Nothing of the closed loop is compiled: the driver brings its own Jacobians.
+        """The per-agent kernel libraries and problem (nothing of the closed loop is compiled).
 
         Parameters
         ----------
-        dyn, cl, settings, prepared
-            As :meth:`generated.solvers.Solver.build`.
+        cl : ClosedLoop
+        settings : CodegenSettings
+        prepared : (Scenario, Gains)
         """
-        if not isinstance(prepared, PerAgent):
+        if prepared is None:
             raise IntegrationError(
                 "method 'native' builds from the scenario: call "
                 "generated.api.build(sc, gains, method='native')"
             )
-        sc, gains = prepared.scenario, prepared.gains
+        sc, gains = prepared
         libs, model = agents.build_models(sc, gains, settings)
-        prob = agents.problem(sc, gains, model)
-        return BuildPlan(libraries=tuple(libs), data=prob)
+        return BuildPlan(libraries=tuple(libs), data=agents.problem(sc, gains, model))
 
     def check_built(self, built: Built) -> None:
         """The build must hold the kernel libraries.
@@ -93,7 +74,7 @@ class Native(Solver):
             )
 
     def linear_algebra(self, N: int, plan: Plan) -> str:
-        """The driver's Newton solves at N followers (the CasADi plan does not apply).
+        """The driver's Newton solves (the CasADi plan does not apply).
 
         Parameters
         ----------
@@ -119,7 +100,7 @@ class Native(Solver):
         Parameters
         ----------
         built, x0, t_out, settings, breakpoints, progress
-            As :meth:`generated.solvers.Solver.run` (:meth:`check_built` has passed).
+            As :meth:`generated.solvers.Solver.run`.
         """
         libs, prob = built.agents
         paths = [lib.path for lib in libs]
