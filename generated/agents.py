@@ -29,8 +29,8 @@ from generated.agent_kernels import kernel_key as kernel_key
 from generated.loaded import open_kernels
 from generated.schedule import schedule
 from generated.values import IntegratorSettings, Status, Trajectory, flag_reason, flag_status
+from symbolic.closed_loop import given_states, observer_gains
 from symbolic.closed_loop import make_layout as make_layout
-from symbolic.closed_loop import observer_gains
 from symbolic.parameters import agent_rows
 from synthesis.gains import Gains
 
@@ -502,16 +502,4 @@ def initial_state(sc: Scenario) -> np.ndarray:
             'initial.start = "given" with options.derivatives = "oracle", or the whole '
             "closed loop's x0",
         )
-    N = sc.N
-    return make_layout(sc.m, sc.n, N, False).pack(
-        {
-            "eta0": sc.leader.eta0,
-            "mu": sc.initial.mu,
-            "eta": sc.initial.eta,
-            "phi": sc.observer.phi0.reshape(N, 1),
-            "p": np.array([fo.p0 for fo in sc.followers]),
-            "q": np.array([fo.q0 for fo in sc.followers]),
-            "thetahat": sc.initial.theta_hat,
-            "ghat": sc.initial.ghat.reshape(N, 1),
-        }
-    )
+    return make_layout(sc.m, sc.n, sc.N, False).pack(given_states(sc))

@@ -684,6 +684,26 @@ def _v1_coefficients(play: ParamLayout, pv: Any, gains: Gains, gm: GraphMatrices
     return v1[:N], v1[N : 2 * N], v1[2 * N]
 
 
+def given_states(sc: Scenario) -> dict[str, np.ndarray]:
+    """The states the scenario gives at t = 0 (Table 2's), by layout block; no filter states.
+
+    Parameters
+    ----------
+    sc : Scenario
+    """
+    N = sc.N
+    return {
+        "eta0": sc.leader.eta0,
+        "mu": sc.initial.mu,
+        "eta": sc.initial.eta,
+        "phi": sc.observer.phi0.reshape(N, 1),
+        "p": np.array([fo.p0 for fo in sc.followers]),
+        "q": np.array([fo.q0 for fo in sc.followers]),
+        "thetahat": sc.initial.theta_hat,
+        "ghat": sc.initial.ghat.reshape(N, 1),
+    }
+
+
 def initial_state(sc: Scenario, lay: StateLayout, outputs: ca.Function) -> np.ndarray:
     """x(0) from the scenario.
 
@@ -702,16 +722,7 @@ def initial_state(sc: Scenario, lay: StateLayout, outputs: ca.Function) -> np.nd
         The closed loop's ``(t, x) -> outputs`` Function, used for η̇_i(0) and b_i(0).
     """
     m, n, N = sc.m, sc.n, sc.N
-    parts = {
-        "eta0": sc.leader.eta0,
-        "mu": sc.initial.mu,
-        "eta": sc.initial.eta,
-        "phi": sc.observer.phi0.reshape(N, 1),
-        "p": np.array([fo.p0 for fo in sc.followers]),
-        "q": np.array([fo.q0 for fo in sc.followers]),
-        "thetahat": sc.initial.theta_hat,
-        "ghat": sc.initial.ghat.reshape(N, 1),
-    }
+    parts = given_states(sc)
     filtered = "w" in lay.agent_offsets
     if filtered:
         parts["w"] = np.zeros((N, 2 * m))
