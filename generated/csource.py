@@ -32,8 +32,8 @@ def renamed(f: ca.Function, name: str, *, expand: bool = True, cse: bool = False
     cse : bool
         Eliminate common subexpressions of the SX result (no effect on MX).
     """
-    fs = f if f.is_a("SXFunction") else (_expanded(f) if expand else None)
-    if fs is not None:
+    fs = expanded(f) if expand else f
+    if fs.is_a("SXFunction"):
         args = fs.sx_in()
         opts = {"cse": True} if cse else {}
         return ca.Function(name, args, fs.call(args), fs.name_in(), fs.name_out(), opts)
@@ -41,12 +41,18 @@ def renamed(f: ca.Function, name: str, *, expand: bool = True, cse: bool = False
     return ca.Function(name, args, f.call(args), f.name_in(), f.name_out())
 
 
-def _expanded(f: ca.Function) -> ca.Function | None:
-    """``f.expand()``, or None where it cannot be expanded."""
+def expanded(f: ca.Function) -> ca.Function:
+    """An MX ``f`` as SX (the same operations in the same order: the same numbers, without
+    the MX virtual machine's per-node overhead); else ``f`` itself.
+
+    Parameters
+    ----------
+    f : casadi.Function
+    """
     try:
-        return f.expand()
+        return f.expand() if f.is_a("MXFunction") else f
     except RuntimeError:  # e.g. calls an external or a Linsol: keep MX
-        return None
+        return f
 
 
 def check_dyn_signature(f: ca.Function, what: str) -> None:

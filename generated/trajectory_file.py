@@ -18,6 +18,7 @@ import pandas as pd
 from core.errors import BuildError
 from core.memo import MEMO
 from core.scenario import Scenario
+from generated.csource import expanded
 from generated.values import Trajectory
 
 if TYPE_CHECKING:
@@ -64,19 +65,9 @@ def _mapped(f: ca.Function, K: int) -> tuple[ca.Function, Any, Any]:
     entry = _MAPS.get(key)
     if entry is None:
         shared = [nm == "p" for nm in f.name_in()]
-        F = _expanded(f).map(K, shared, [False] * f.n_out())
+        F = expanded(f).map(K, shared, [False] * f.n_out())
         entry = _MAPS[key] = (f, F, *F.buffer())
     return entry[1:]
-
-
-def _expanded(f: ca.Function) -> ca.Function:
-    """An MX ``f`` as SX: the same operations in the same order (the same numbers, bit for
-    bit) without the MX virtual machine's per-node overhead; else ``f`` itself (not MX, or a
-    call into a compiled library that does not expand)."""
-    try:
-        return f.expand() if f.is_a("MXFunction") else f
-    except RuntimeError:
-        return f
 
 
 def evaluate_outputs(built: Built, traj: Trajectory) -> dict[str, np.ndarray]:

@@ -191,7 +191,8 @@ def test_the_graph_as_data_is_the_graphs_own_loop(pair, name, tmp_path):
     # one structure serves every graph of N followers: the dense loop built for the paper's
     # graph, bound to another graph with switches, is that graph's own (sparse) loop, the
     # same numbers at every time (before, at, inside and after the switches) and state
-    from verify.lyapunov import _derivative_p, _expanded
+    from generated.csource import expanded
+    from verify.lyapunov import _derivative_p
 
     a, ga, *_ = pair
     b = api.load(PAPER, overrides=OTHER_GRAPHS[name], variant=name)
@@ -202,7 +203,7 @@ def test_the_graph_as_data_is_the_graphs_own_loop(pair, name, tmp_path):
     own = build_closed_loop(b, gb)
     np.testing.assert_array_equal(dense.x0, own.x0)
     V = [
-        _derivative_p(_expanded(c.parametric.outputs), _expanded(c.parametric.ode))
+        _derivative_p(expanded(c.parametric.outputs), expanded(c.parametric.ode))
         for c in (dense, own)
     ]
     rng = np.random.default_rng(7)

@@ -8,7 +8,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from core.scenario import load_scenario
-from generated.trajectory_file import _expanded, evaluate_outputs
+from generated.csource import expanded
+from generated.trajectory_file import evaluate_outputs
 from symbolic.closed_loop import build_closed_loop
 from verify.reference import hand_gains
 
@@ -27,7 +28,7 @@ def test_outputs_expanded_equal_the_mx_function_bit_for_bit():
         x[:, cl.layout.slices[("ghat", i)]] = rng.uniform(1.0, 2.0, (K, 1))
     built = SimpleNamespace(outputs_p=f, outputs=None, p=cl.p0)
     got = evaluate_outputs(built, SimpleNamespace(t=t, x=x))
-    assert _expanded(f).is_a("SXFunction")  # the path under test: expanded, then mapped
+    assert expanded(f).is_a("SXFunction")  # the path under test: expanded, then mapped
     # the MX Function mapped over the times, as the frame evaluated it before
     old = f.map(K, [nm == "p" for nm in f.name_in()], [False] * f.n_out())
     want = old(t.reshape(1, -1), x.T, cl.p0)

@@ -35,6 +35,7 @@ import numpy as np
 from core.errors import BuildError
 from core.memo import MEMO
 from core.scenario import Scenario
+from generated.csource import expanded
 from verify.bounds import VerifyConfig, VerifyError
 
 #: a structure's verify Functions are compiled to C from its this-many-th verification in one
@@ -253,14 +254,6 @@ def _remember(cache: Any, key: str, value: Any) -> Any:
     return value
 
 
-def _expanded(f: ca.Function) -> ca.Function:
-    """``f`` as SX when it expands (every block of the loop does), else ``f`` itself."""
-    try:
-        return f.expand()
-    except RuntimeError:  # e.g. a call CasADi cannot expand: the MX Function still works
-        return f
-
-
 #: what each name of :func:`evaluate_p` reads of the one Function ``"V"``: its outputs
 #: (V1, V̇1, V2, V̇2, χ) in that order
 VIEWS = {"V1": ("V", slice(0, 2)), "V2": ("V", slice(2, 5))}
@@ -314,7 +307,7 @@ def fast_functions(cl: Any, run: str = "") -> FastFunctions:
     par = cl.parametric
     entry = _FAST.get(par.structure_key)
     if entry is None:
-        outs_f, ode_f = _expanded(par.outputs), _expanded(par.ode)
+        outs_f, ode_f = expanded(par.outputs), expanded(par.ode)
         funs = {"V": _derivative_p(outs_f, ode_f), "outputs": outs_f}
         entry = FastFunctions(funs, key=par.structure_key)
     _remember(_FAST, par.structure_key, entry)
