@@ -375,14 +375,19 @@ def run(
     )
     result = native.Result(x_out=_dptr(X), x_stop=_dptr(x_stop))
     kry = ctypes.c_long(0)
-    libs[0].hitl_agents_run(
-        ctypes.byref(cp), _dptr(x), ctypes.byref(options), ctypes.byref(result), ctypes.byref(kry)
-    )
     try:
+        libs[0].hitl_agents_run(
+            ctypes.byref(cp),
+            _dptr(x),
+            ctypes.byref(options),
+            ctypes.byref(result),
+            ctypes.byref(kry),
+        )
         sundials_log = log.read_text(errors="replace")
     except OSError:
         sundials_log = ""
-    log.unlink(missing_ok=True)
+    finally:  # removed however the run ends (an interrupt included)
+        log.unlink(missing_ok=True)
     traj = _trajectory(result, sched.t_out, X, x_stop, sundials_log, wall0)
     traj.stats["krylov_iters"] = int(kry.value)
     if progress is not None:
